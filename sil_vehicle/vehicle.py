@@ -1,0 +1,185 @@
+"""The truth plant: one tilt-rotor (or fixed-rotor) vehicle advanced one physics tick at a time.
+
+`Vehicle` composes the pure dynamics in a short fixed sequence per tick (after ArduPilot's
+`Aircraft::update`): actuator targets -> faults -> motor and servo dynamics -> rotor wrench ->
+wind -> RK4 -> ground and crash checks. It holds no socket, clock or global random state: the
+random generator for gusts is injected, time is an integer count of microseconds.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from sil_vehicle.config import SimParams
+from sil_vehicle.dynamics.actuators import first_order_step, lag_factor
+from sil_vehicle.dynamics.environment import gust_coefficients, gust_step
+from sil_vehicle.dynamics.rigid_body import rk4_step
+from sil_vehicle.dynamics.rotors import body_wrench
+from sil_vehicle.faults import Faults, MotorFault
+from sil_vehicle.frames import quat_to_euler, tilt_from_vertical, wind_from_to_ned
+
+GROUND_DOWN_M = 0.0
+_NOISE_BLOCK = 1024
+
+
+@dataclass(frozen=True)
+class ActuatorCommand:
+    """What the vehicle is told: throttle 0..100 % per motor, tilt (rad) per servo."""
+    throttle_pct: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
+    tilt_rad: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
+
+
+@dataclass(frozen=True)
+class VehicleState:
+    t_us: int
+    x: tuple[float, ...]                      # rigid-body state, see dynamics.rigid_body
+    motor_pct: tuple[float, ...]              # throttle the motors actually produce (%)
+    tilt_rad: tuple[float, ...]               # servo angles actually reached (rad)
+    wind_ned_m_s: tuple[float, float, float]  # mean wind plus gust
+    armed: bool
+    landed: bool
+    crashed: bool
+    crash_reason: str
+
+    @property
+    def pos_ned_m(self) -> tuple[float, ...]:
+        return self.x[0:3]
+
+    @property
+    def vel_ned_m_s(self) -> tuple[float, ...]:
+        return self.x[3:6]
+
+    @property
+    def quat_wxyz(self) -> tuple[float, ...]:
+        return self.x[6:10]
+
+    @property
+    def rates_frd_rad_s(self) -> tuple[float, ...]:
+        return self.x[10:13]
+
+    @property
+    def euler_rad(self) -> tuple[float, float, float]:
+        return quat_to_euler(*self.x[6:10])
+
+
+def initial_state(yaw_rad: float = 0.0) -> tuple[float, ...]:
+    return (0.0, 0.0, GROUND_DOWN_M, 0.0, 0.0, 0.0, math.cos(yaw_rad / 2), 0.0, 0.0,
+            math.sin(yaw_rad / 2), 0.0, 0.0, 0.0)
+
+
+def faults_from_params(sim: SimParams) -> Faults:
+    return Faults(motors=tuple(
+        MotorFault(a, b, w, phi) for a, b, w, phi in zip(
+            sim.motor_effectiveness, sim.motor_tv_amplitude, sim.motor_tv_omega_rad_s,
+            sim.motor_tv_phase_rad)))
+
+
+class Vehicle:
+    def __init__(self, sim: SimParams, rng: np.random.Generator) -> None:
+        self.sim = sim
+        self.vp = vp = sim.vehicle
+        self._rng = rng
+        self._dt_us = sim.dt_us
+        self._dt = sim.dt_us * 1e-6
+        self._motor_factor = lag_factor(vp.motor_time_constant_s, self._dt)
+        self._motor_max = vp.motor_rate_limit_pct_s * self._dt
+        self._servo_factor = lag_factor(vp.servo_time_constant_s, self._dt)
+        self._servo_max = vp.servo_rate_limit_rad_s * self._dt
+        self._rb = (vp.mass_kg, vp.inertia_kg_m2, vp.gravity_m_s2, vp.drag_N_s2_m2)
+        self.faults = faults_from_params(sim)
+        self.command = ActuatorCommand()
+        self.armed = False
+        self._noise = np.empty((0, 3))
+        self._noise_i = 0
+        self.set_wind(sim.wind_speed_m_s, sim.wind_from_deg, sim.gusts_enabled,
+                      sim.gust_sigma_m_s, sim.gust_length_m)
+        self._gust = (0.0, 0.0, 0.0)
+        self.state = VehicleState(0, initial_state(), (0.0,) * 4, (0.0,) * 4, self._wind_mean,
+                                  False, True, False, "")
+
+    # --- settings that change while flying -------------------------------------------------
+    def set_wind(self, speed_m_s: float, from_deg: float, gusts: bool, sigma_m_s: float,
+                 length_m: float) -> None:
+        self.wind_speed_m_s, self.wind_from_deg = speed_m_s, from_deg
+        self.gusts_enabled, self.gust_sigma_m_s, self.gust_length_m = gusts, sigma_m_s, length_m
+        self._wind_mean = wind_from_to_ned(speed_m_s, from_deg)
+        self._gust_a, self._gust_b = gust_coefficients(sigma_m_s, length_m, speed_m_s, self._dt)
+        if not gusts:
+            self._gust = (0.0, 0.0, 0.0)
+
+    def set_armed(self, armed: bool) -> str | None:
+        """Arm or disarm; returns the reason if refused."""
+        if armed and self.state.crashed:
+            return "crashed"
+        if not armed and not self.state.landed and self.armed:
+            return "flying"
+        self.armed = armed
+        return None
+
+    def force_disarm(self) -> None:
+        self.armed = False
+
+    # --- one physics tick --------------------------------------------------------------------
+    def step(self) -> VehicleState:
+        s = self.state
+        vp = self.vp
+        t_us = s.t_us + self._dt_us
+        t_s = s.t_us * 1e-6
+        running = self.armed and not s.crashed
+        motors = []
+        for zeta, cmd, fault in zip(s.motor_pct, self.command.throttle_pct, self.faults.motors):
+            target = 0.0
+            if running:
+                target = min(max(cmd, vp.idle_pct), 100.0) * fault.factor(t_s)
+            motors.append(first_order_step(zeta, target, self._motor_factor, self._motor_max,
+                                           0.0, 100.0))
+        tilts = []
+        for alpha, cmd, fault in zip(s.tilt_rad, self.command.tilt_rad, self.faults.servos):
+            if fault.stuck:
+                tilts.append(fault.angle_rad)
+                continue
+            target = 0.0 if (vp.tilt_locked or not running) else cmd
+            tilts.append(first_order_step(alpha, target, self._servo_factor, self._servo_max,
+                                          vp.tilt_min_rad, vp.tilt_max_rad))
+        if vp.tilt_locked:
+            tilts = [0.0, 0.0, 0.0, 0.0]
+        wrench = body_wrench(motors, tilts, vp)
+        if self.gusts_enabled:
+            if self._noise_i >= len(self._noise):
+                self._noise = self._rng.standard_normal((_NOISE_BLOCK, 3))
+                self._noise_i = 0
+            self._gust = gust_step(self._gust, self._noise[self._noise_i], self._gust_a,
+                                   self._gust_b)
+            self._noise_i += 1
+        g = self._gust
+        m = self._wind_mean
+        wind = (m[0] + g[0], m[1] + g[1], m[2] + g[2])
+        x = s.x
+        landed, crashed, reason = s.landed, s.crashed, s.crash_reason
+        if landed and not self._lifts_off(x, wrench):
+            x = x[0:3] + (0.0, 0.0, 0.0) + x[6:10] + (0.0, 0.0, 0.0)
+        else:
+            x = rk4_step(x, self._dt, wrench, wind, *self._rb)
+            landed = False
+            if x[2] >= GROUND_DOWN_M:
+                if not crashed and x[5] > self.sim.crash_speed_m_s:
+                    crashed, reason = True, f"ground impact at {x[5]:.2f} m/s"
+                roll, pitch, yaw = quat_to_euler(*x[6:10])
+                q = x[6:10] if crashed else (math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2))
+                x = x[0:2] + (GROUND_DOWN_M, 0.0, 0.0, 0.0) + tuple(q) + (0.0, 0.0, 0.0)
+                landed = True
+            elif not crashed and tilt_from_vertical(*x[6:10]) > self.sim.crash_tilt_rad:
+                crashed, reason = True, "attitude past the crash limit"
+        self.state = VehicleState(t_us, x, tuple(motors), tuple(tilts), wind, self.armed,
+                                  landed, crashed, reason)
+        return self.state
+
+    def _lifts_off(self, x: tuple[float, ...], wrench: tuple[float, ...]) -> bool:
+        """On the ground: does the net vertical force point up?"""
+        qw, qx, qy, qz = x[6:10]
+        fdown = (2 * (qx * qz - qw * qy) * wrench[0] + 2 * (qy * qz + qw * qx) * wrench[1]
+                 + (1 - 2 * (qx * qx + qy * qy)) * wrench[2])
+        return fdown + self.vp.mass_kg * self.vp.gravity_m_s2 < 0.0
