@@ -253,6 +253,10 @@ def load_sim(path: Path | str, vehicle: Path | str | None = None) -> SimParams:
     for name in ("gcs", "offboard"):
         rates_sec = telemetry.section(name)
         rates = tuple((stream, _rate(rates_sec, stream, physics)) for stream in STREAMS)
+        if name == "offboard" and dict(rates)["ODOMETRY"] != control:
+            raise rates_sec.fail("ODOMETRY", dict(rates)["ODOMETRY"],
+                                 f"control_rate_hz ({control}): the offboard state stream "
+                                 "paces the control loop and the lockstep")
         rates_sec.done()
         lsec = link_secs.section(name)
         bind = parse_endpoint(lsec.str("bind"), lsec, "bind")

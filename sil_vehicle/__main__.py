@@ -1,0 +1,5 @@
+import sys
+
+from sil_vehicle.daemon import main
+
+sys.exit(main())

@@ -1,0 +1,277 @@
+"""The SIL vehicle daemon: the only loop. It wires the clock, the simulated autopilot (`Sitl`) and
+two UDP links (ground station, offboard) the way PX4 SITL does, and writes the logs.
+
+    python -m sil_vehicle [--sim params/sim/default.yaml] [--vehicle params/vehicle/quad.yaml] ...
+
+Lockstep: at every offboard ODOMETRY (stamp t) the vehicle waits for the SET_ACTUATOR_CONTROL_TARGET
+whose time_usec is t, then advances one period. Real time: it advances with the wall clock (times
+a speed-up factor), applying the latest valid target. See PROTOCOL.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import dataclasses
+import logging
+import signal
+import sys
+import time
+from pathlib import Path
+
+from sil_vehicle.clock import RealTimePacer
+from sil_vehicle.config import PARAMS_DIR, ConfigError, Endpoint, SimParams, load_sim, parse_endpoint
+from sil_vehicle.log import FlightLog, Tlog
+from sil_vehicle.mavlink.codec import Codec
+from sil_vehicle.sitl import LINKS, LOG_COLUMNS, Outgoing, Sitl
+from sil_vehicle.yamlcheck import Section
+
+log = logging.getLogger("sil_vehicle")
+
+MAX_PEERS = 16
+
+
+class _Protocol(asyncio.DatagramProtocol):
+    def __init__(self, daemon: "VehicleDaemon", link: str) -> None:
+        self.daemon, self.link = daemon, link
+
+    def datagram_received(self, data: bytes, addr) -> None:
+        try:
+            self.daemon.on_datagram(self.link, data, addr)
+        except Exception:  # a daemon never dies on traffic: log it and go on
+            log.exception("error while handling a datagram on %s from %s", self.link, addr)
+
+    def error_received(self, exc: Exception) -> None:
+        # ICMP port unreachable when nobody listens on a target: normal for a SITL
+        pass
+
+
+class VehicleDaemon:
+    def __init__(self, sim: SimParams, log_dir: Path | None, *,
+                 monotonic=time.monotonic, wall_us=lambda: time.time_ns() // 1000) -> None:
+        self.sim = sim
+        self.log_dir = log_dir
+        self.flight_log = None
+        self.tlog = None
+        if log_dir is not None:
+            meta = {"vehicle": sim.vehicle.name, "vehicle_file": sim.vehicle.file,
+                    "sim_file": sim.file, "seed": sim.seed, "physics_rate_hz": sim.physics_rate_hz,
+                    "clock": sim.clock_mode, "frames": "world NED, body FRD, quaternion wxyz"}
+            self.flight_log = FlightLog(log_dir / "flight.csv", LOG_COLUMNS, meta,
+                                        flush_every=max(1, sim.log_rate_hz))
+            self.tlog = Tlog(log_dir / "vehicle.tlog")
+        self.sitl = Sitl(sim, log_sink=self.flight_log)
+        self.codecs = {name: Codec(counters=self.sitl.counters[name]) for name in LINKS}
+        self.transports: dict[str, asyncio.DatagramTransport] = {}
+        self.peers: dict[str, list[tuple[str, int]]] = {name: [] for name in LINKS}
+        self._answered = asyncio.Event()
+        self._stop = asyncio.Event()
+        self._monotonic = monotonic
+        self._wall_us = wall_us
+        self.exit_reason = ""
+
+    # --- transport -------------------------------------------------------------------------
+    async def open(self) -> None:
+        loop = asyncio.get_running_loop()
+        for link in self.sim.links:
+            transport, _ = await loop.create_datagram_endpoint(
+                lambda name=link.name: _Protocol(self, name),
+                local_addr=(link.bind.host, link.bind.port))
+            self.transports[link.name] = transport
+            if link.bind.host not in ("127.0.0.1", "localhost", "::1"):
+                log.warning("link %s bound to %s: reachable from the network", link.name, link.bind)
+
+    def bound(self, link: str) -> tuple[str, int]:
+        return self.transports[link].get_extra_info("sockname")[:2]
+
+    def send(self, outgoing: list[Outgoing]) -> None:
+        for item in outgoing:
+            transport = self.transports.get(item.link)
+            if transport is None:
+                continue
+            data = self.codecs[item.link].encode(item.msg)
+            if self.tlog:
+                self.tlog.write(self._wall_us(), data)
+            if item.to is not None:
+                transport.sendto(data, item.to)
+                continue
+            target = self.sim.link(item.link).target
+            dests = [(target.host, target.port)] + self.peers[item.link]
+            for dest in dict.fromkeys(dests):
+                transport.sendto(data, dest)
+
+    def on_datagram(self, link: str, data: bytes, addr) -> None:
+        addr = tuple(addr[:2])
+        peers = self.peers[link]
+        if addr not in peers and len(peers) < MAX_PEERS:
+            peers.append(addr)
+        for msg in self.codecs[link].decode(data):
+            if self.tlog:
+                self.tlog.write(self._wall_us(), bytes(msg.get_msgbuf()))
+            self.send(self.sitl.handle(link, msg, addr))
+        if self.sitl.answered:
+            self._answered.set()
+
+    # --- loops -----------------------------------------------------------------------------
+    def stop(self, reason: str = "stopped") -> None:
+        self.exit_reason = self.exit_reason or reason
+        self._stop.set()
+        self._answered.set()
+
+    async def run(self, duration_s: float | None = None) -> None:
+        await self.open()
+        end_us = None if duration_s is None else int(duration_s * 1e6)
+        try:
+            self.send(self.sitl.telemetry_due())
+            if self.sim.clock_mode == "lockstep":
+                await self._lockstep(end_us)
+            else:
+                await self._realtime(end_us)
+        finally:
+            self.close()
+
+    async def _lockstep(self, end_us: int | None) -> None:
+        sitl = self.sitl
+        while not self._stop.is_set():
+            while not sitl.answered and not self._stop.is_set():
+                try:
+                    await asyncio.wait_for(self._answered.wait(), self.sim.resend_s)
+                except asyncio.TimeoutError:
+                    self.send(sitl.telemetry_due(everything=True))
+                self._answered.clear()
+            if self._stop.is_set():
+                break
+            for _ in range(sitl.lockstep_ticks()):
+                self.send(sitl.step())
+            if end_us is not None and sitl.t_us >= end_us:
+                self.stop("duration reached")
+            await asyncio.sleep(0)
+
+    async def _realtime(self, end_us: int | None) -> None:
+        sitl = self.sitl
+        pacer = RealTimePacer(self.sim.speed_up, self._monotonic)
+        pacer.start(sitl.t_us)
+        dt = self.sim.dt_us
+        while not self._stop.is_set():
+            due = pacer.due_us()
+            batch = 0
+            while sitl.t_us + dt <= due and batch < 200:
+                self.send(sitl.step())
+                batch += 1
+            if end_us is not None and sitl.t_us >= end_us:
+                self.stop("duration reached")
+                break
+            await asyncio.sleep(max(0.0, pacer.wait_s(sitl.t_us + dt)))
+
+    def close(self) -> None:
+        for transport in self.transports.values():
+            transport.close()
+        if self.flight_log:
+            self.flight_log.close()
+        if self.tlog:
+            self.tlog.close()
+
+
+# --- command line ------------------------------------------------------------------------------
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="trq-sil-vehicle",
+        description="SIL tilt-rotor (or fixed-rotor) vehicle speaking MAVLink 2 over UDP like a "
+                    "PX4 SITL autopilot (system 1, component 1). See sil_vehicle/PROTOCOL.md.")
+    p.add_argument("--sim", type=Path, default=PARAMS_DIR / "sim" / "default.yaml",
+                   help="simulation settings YAML (default: params/sim/default.yaml)")
+    p.add_argument("--vehicle", type=Path, default=None,
+                   help="airframe YAML, overriding the one the settings name "
+                        "(params/vehicle/trq.yaml or quad.yaml)")
+    p.add_argument("--mode", choices=("lockstep", "realtime"), default=None,
+                   help="clock mode (default: from the settings)")
+    p.add_argument("--speed-up", type=float, default=None,
+                   help="real time only: simulated seconds per wall second")
+    p.add_argument("--seed", type=int, default=None, help="random seed (gusts, sensor noise)")
+    p.add_argument("--gcs-bind", default=None, help="HOST:PORT the ground-station link listens on "
+                   "(default 127.0.0.1:18570)")
+    p.add_argument("--gcs-target", default=None, help="HOST:PORT telemetry is sent to "
+                   "(default 127.0.0.1:14550, QGroundControl)")
+    p.add_argument("--offboard-bind", default=None, help="HOST:PORT the offboard link listens on "
+                   "(default 127.0.0.1:14580)")
+    p.add_argument("--offboard-target", default=None, help="HOST:PORT of the offboard controller "
+                   "(default 127.0.0.1:14540)")
+    p.add_argument("--wind-speed", type=float, default=None, help="mean wind speed, m/s")
+    p.add_argument("--wind-dir", type=float, default=None,
+                   help="direction the wind blows from, deg clockwise from north")
+    p.add_argument("--log-dir", type=Path, default=None,
+                   help="directory for flight.csv and vehicle.tlog (default: logs/vehicle-<time>)")
+    p.add_argument("--no-log", action="store_true", help="write no logs")
+    p.add_argument("--duration", type=float, default=None,
+                   help="stop after this many simulated seconds (default: run until signalled)")
+    p.add_argument("-v", "--verbose", action="store_true", help="debug logging")
+    return p
+
+
+def apply_overrides(sim: SimParams, args: argparse.Namespace) -> SimParams:
+    changes: dict[str, object] = {}
+    if args.mode:
+        changes["clock_mode"] = args.mode
+    if args.speed_up is not None:
+        if not 0.01 <= args.speed_up <= 1000:
+            raise ConfigError(f"--speed-up: got {args.speed_up}, expected a number in [0.01, 1000]")
+        changes["speed_up"] = args.speed_up
+    if args.seed is not None:
+        if args.seed < 0:
+            raise ConfigError(f"--seed: got {args.seed}, expected an integer >= 0")
+        changes["seed"] = args.seed
+    if args.wind_speed is not None:
+        if not 0.0 <= args.wind_speed <= 40.0:
+            raise ConfigError(f"--wind-speed: got {args.wind_speed}, expected [0, 40] m/s")
+        changes["wind_speed_m_s"] = args.wind_speed
+    if args.wind_dir is not None:
+        changes["wind_from_deg"] = args.wind_dir
+    links = []
+    for link in sim.links:
+        updates = {}
+        for end in ("bind", "target"):
+            text = getattr(args, f"{link.name}_{end}")
+            if text is not None:
+                updates[end] = parse_endpoint(text, Section({}, "command line"),
+                                              f"--{link.name}-{end}")
+        links.append(dataclasses.replace(link, **updates))
+    changes["links"] = tuple(links)
+    return sim.with_changes(**changes)
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO,
+                        format="%(asctime)s %(name)s %(levelname)s %(message)s")
+    try:
+        sim = apply_overrides(load_sim(args.sim, args.vehicle), args)
+    except ConfigError as exc:
+        print(f"trq-sil-vehicle: {exc}", file=sys.stderr)
+        return 2
+    log_dir = None
+    if not args.no_log:
+        log_dir = args.log_dir or Path(sim.log_dir) / time.strftime("vehicle-%Y%m%d-%H%M%S")
+    daemon = VehicleDaemon(sim, log_dir)
+
+    async def _main() -> None:
+        loop = asyncio.get_running_loop()
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            loop.add_signal_handler(sig, daemon.stop, signal.Signals(sig).name)
+        await daemon.run(args.duration)
+
+    try:
+        asyncio.run(_main())
+    except OSError as exc:
+        print(f"trq-sil-vehicle: cannot open a link: {exc}", file=sys.stderr)
+        return 1
+    s = daemon.sitl.state
+    print(f"trq-sil-vehicle: {daemon.exit_reason or 'stopped'} at t={s.t_us / 1e6:.2f} s, "
+          f"{'crashed: ' + s.crash_reason if s.crashed else 'no crash'}, "
+          f"{daemon.sitl.targets_applied} targets applied"
+          + (f", logs in {log_dir}" if log_dir else ""))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,274 @@
+"""The MAVLink codec: bytes <-> typed messages, and every MAVLink integer scaling of the vehicle.
+
+pymavlink's generated `common` dialect packs and parses; framing of a UDP datagram, error
+counting and the conversion of physical quantities to MAVLink fields (degE7, mm, cm/s, cdeg,
+PWM microseconds, normalised actuator values) live here and nowhere else.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Iterable
+
+from pymavlink.dialects.v20 import common as mavlink
+
+from sil_vehicle.frames import ned_to_geodetic, quat_to_euler
+
+SYSTEM_ID = 1
+COMPONENT_ID = 1  # MAV_COMP_ID_AUTOPILOT1
+
+_V2_HEADER = 10
+_V1_HEADER = 6
+_SIGNATURE = 13
+
+
+@dataclass
+class RxCounters:
+    """What arrived on a link and what was dropped, by reason."""
+    datagrams: int = 0
+    messages: int = 0
+    bad_frames: int = 0          # garbage, truncated frames, bad checksums
+    mavlink1: int = 0
+    unknown_ids: int = 0
+    other_system: int = 0
+    rejected_targets: int = 0    # actuator targets with NaN, inf or out-of-range values
+    stale_targets: int = 0       # lockstep targets answering an older stamp
+
+    @property
+    def dropped(self) -> int:
+        return (self.bad_frames + self.unknown_ids + self.other_system + self.rejected_targets
+                + self.stale_targets)
+
+
+@dataclass
+class Codec:
+    """One per link: its own sequence numbers and receive counters."""
+    system_id: int = SYSTEM_ID
+    component_id: int = COMPONENT_ID
+    counters: RxCounters = field(default_factory=RxCounters)
+
+    def __post_init__(self) -> None:
+        self.mav = mavlink.MAVLink(None, srcSystem=self.system_id,
+                                   srcComponent=self.component_id)
+        self._rx = mavlink.MAVLink(None)
+
+    def encode(self, msg: mavlink.MAVLink_message) -> bytes:
+        data = msg.pack(self.mav)
+        self.mav.seq = (self.mav.seq + 1) % 256
+        return bytes(data)
+
+    def decode(self, datagram: bytes) -> list[mavlink.MAVLink_message]:
+        """All valid messages of one UDP datagram; anything else is counted and skipped.
+        Frames never span datagrams, so no state is carried from one to the next."""
+        c = self.counters
+        c.datagrams += 1
+        out = []
+        i, n = 0, len(datagram)
+        while i < n:
+            marker = datagram[i]
+            if marker == 0xFD and i + _V2_HEADER <= n:
+                length = _V2_HEADER + datagram[i + 1] + 2
+                if datagram[i + 2] & mavlink.MAVLINK_IFLAG_SIGNED:
+                    length += _SIGNATURE
+            elif marker == 0xFE and i + _V1_HEADER <= n:
+                length = _V1_HEADER + datagram[i + 1] + 2
+            else:
+                c.bad_frames += 1
+                i = _next_marker(datagram, i + 1)
+                continue
+            frame = datagram[i:i + length]
+            if len(frame) < length:
+                c.bad_frames += 1
+                break
+            try:
+                msg = self._rx.decode(bytearray(frame))
+            except Exception:  # pymavlink raises MAVError and, on odd payloads, others
+                c.bad_frames += 1
+                i = _next_marker(datagram, i + 1)
+                continue
+            i += length
+            if isinstance(msg, mavlink.MAVLink_unknown):
+                c.unknown_ids += 1
+                continue
+            if marker == 0xFE:
+                c.mavlink1 += 1
+            c.messages += 1
+            out.append(msg)
+        return out
+
+
+def _next_marker(data: bytes, start: int) -> int:
+    for j in range(start, len(data)):
+        if data[j] in (0xFD, 0xFE):
+            return j
+    return len(data)
+
+
+# --- scalings -----------------------------------------------------------------------------
+
+PWM_MIN_US, PWM_MAX_US, PWM_MID_US = 1000, 2000, 1500
+
+
+def throttle_to_pwm(throttle_pct: float) -> int:
+    return int(round(PWM_MIN_US + 10.0 * min(max(throttle_pct, 0.0), 100.0)))
+
+
+def tilt_to_pwm(tilt_rad: float, limit_rad: float) -> int:
+    norm = min(max(tilt_rad / limit_rad, -1.0), 1.0)
+    return int(round(PWM_MID_US + 500.0 * norm))
+
+
+def pwm_to_throttle(pwm_us: int) -> float:
+    return (pwm_us - PWM_MIN_US) / 10.0
+
+
+def pwm_to_tilt(pwm_us: int, limit_rad: float) -> float:
+    return (pwm_us - PWM_MID_US) / 500.0 * limit_rad
+
+
+@dataclass(frozen=True)
+class Target:
+    """A decoded SET_ACTUATOR_CONTROL_TARGET, in physical units."""
+    stamp_us: int
+    throttle_pct: tuple[float, float, float, float]
+    tilt_rad: tuple[float, float, float, float]
+
+
+def decode_target(msg: mavlink.MAVLink_message, tilt_limit_rad: float) -> Target | None:
+    """Group 0: controls[0..3] throttle 0..1 of motors 1..4, controls[4..7] tilt -1..1 of the
+    servo half-range. None if any value is not finite or out of range (the whole message)."""
+    if msg.group_mlx != 0:
+        return None
+    c = msg.controls
+    if len(c) != 8 or not all(math.isfinite(v) for v in c):
+        return None
+    if not all(0.0 <= v <= 1.0 for v in c[:4]) or not all(-1.0 <= v <= 1.0 for v in c[4:8]):
+        return None
+    return Target(int(msg.time_usec), tuple(100.0 * v for v in c[:4]),
+                  tuple(tilt_limit_rad * v for v in c[4:8]))
+
+
+# --- telemetry builders --------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class Measured:
+    """What the vehicle's sensors report (truth plus noise), SI units, NED / FRD."""
+    t_us: int
+    pos_ned_m: tuple[float, float, float]
+    vel_ned_m_s: tuple[float, float, float]
+    quat_wxyz: tuple[float, float, float, float]
+    rates_frd_rad_s: tuple[float, float, float]
+
+
+def heartbeat(armed: bool, crashed: bool, flying: bool) -> mavlink.MAVLink_message:
+    base = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+    if armed:
+        base |= mavlink.MAV_MODE_FLAG_SAFETY_ARMED
+    status = (mavlink.MAV_STATE_EMERGENCY if crashed else
+              mavlink.MAV_STATE_ACTIVE if (armed or flying) else mavlink.MAV_STATE_STANDBY)
+    return mavlink.MAVLink_heartbeat_message(
+        mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_GENERIC, base, 0, status, 3)
+
+
+def sys_status(load_permille: int, drop_rate_permille: int, errors_comm: int,
+               dropped_by_kind: Iterable[int]) -> mavlink.MAVLink_message:
+    sensors = (mavlink.MAV_SYS_STATUS_SENSOR_3D_GYRO | mavlink.MAV_SYS_STATUS_SENSOR_3D_ACCEL
+               | mavlink.MAV_SYS_STATUS_SENSOR_GPS | mavlink.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS)
+    e = [min(int(v), 65535) for v in dropped_by_kind][:4] + [0] * 4
+    return mavlink.MAVLink_sys_status_message(
+        sensors, sensors, sensors, min(load_permille, 1000), -1 & 0xFFFF, -1, -1,
+        min(drop_rate_permille, 10000), min(errors_comm, 65535), e[0], e[1], e[2], e[3])
+
+
+def odometry(m: Measured) -> mavlink.MAVLink_message:
+    """Pose in LOCAL_NED; child frame LOCAL_NED, so the velocity is NED too; rates are body FRD."""
+    nan21 = [math.nan] * 21
+    return mavlink.MAVLink_odometry_message(
+        m.t_us, mavlink.MAV_FRAME_LOCAL_NED, mavlink.MAV_FRAME_LOCAL_NED, *m.pos_ned_m,
+        list(m.quat_wxyz), *m.vel_ned_m_s, *m.rates_frd_rad_s, nan21, nan21, 0,
+        mavlink.MAV_ESTIMATOR_TYPE_NAIVE, 100)
+
+
+def attitude(m: Measured) -> mavlink.MAVLink_message:
+    roll, pitch, yaw = quat_to_euler(*m.quat_wxyz)
+    return mavlink.MAVLink_attitude_message(m.t_us // 1000, roll, pitch, yaw, *m.rates_frd_rad_s)
+
+
+def local_position_ned(m: Measured) -> mavlink.MAVLink_message:
+    return mavlink.MAVLink_local_position_ned_message(m.t_us // 1000, *m.pos_ned_m,
+                                                      *m.vel_ned_m_s)
+
+
+def _geo(m: Measured, home: tuple[float, float, float]) -> tuple[int, int, int]:
+    lat, lon, alt = ned_to_geodetic(*m.pos_ned_m, *home)
+    return int(round(lat * 1e7)), int(round(lon * 1e7)), int(round(alt * 1000.0))
+
+
+def _heading_cdeg(m: Measured) -> int:
+    yaw = quat_to_euler(*m.quat_wxyz)[2]
+    return int(round(math.degrees(yaw) % 360.0 * 100.0)) % 36000
+
+
+def global_position_int(m: Measured, home: tuple[float, float, float]) -> mavlink.MAVLink_message:
+    lat, lon, alt_mm = _geo(m, home)
+    vn, ve, vd = (int(round(v * 100.0)) for v in m.vel_ned_m_s)
+    return mavlink.MAVLink_global_position_int_message(
+        m.t_us // 1000, lat, lon, alt_mm, int(round(-m.pos_ned_m[2] * 1000.0)), vn, ve, vd,
+        _heading_cdeg(m))
+
+
+def gps_raw_int(m: Measured, home: tuple[float, float, float]) -> mavlink.MAVLink_message:
+    lat, lon, alt_mm = _geo(m, home)
+    vn, ve = m.vel_ned_m_s[0], m.vel_ned_m_s[1]
+    speed = math.hypot(vn, ve)
+    cog = int(round(math.degrees(math.atan2(ve, vn)) % 360.0 * 100.0)) % 36000 if speed > 0.2 else 65535
+    return mavlink.MAVLink_gps_raw_int_message(
+        m.t_us, mavlink.GPS_FIX_TYPE_3D_FIX, lat, lon, alt_mm, 80, 120,
+        int(round(speed * 100.0)), cog, 14)
+
+
+def home_position(home: tuple[float, float, float], t_us: int) -> mavlink.MAVLink_message:
+    lat, lon, alt = home
+    return mavlink.MAVLink_home_position_message(
+        int(round(lat * 1e7)), int(round(lon * 1e7)), int(round(alt * 1000.0)), 0.0, 0.0, 0.0,
+        [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, t_us)
+
+
+def servo_output_raw(t_us: int, motor_pct: Iterable[float], tilt_rad: Iterable[float],
+                     limit_rad: float) -> mavlink.MAVLink_message:
+    pwm = [throttle_to_pwm(v) for v in motor_pct] + [tilt_to_pwm(a, limit_rad) for a in tilt_rad]
+    return mavlink.MAVLink_servo_output_raw_message(t_us & 0xFFFFFFFF, 0, *pwm, *([0] * 8))
+
+
+def actuator_output_status(t_us: int, motor_pct: Iterable[float], tilt_rad: Iterable[float],
+                           limit_rad: float) -> mavlink.MAVLink_message:
+    values = [v / 100.0 for v in motor_pct] + [a / limit_rad for a in tilt_rad]
+    return mavlink.MAVLink_actuator_output_status_message(
+        t_us, len(values), values + [0.0] * (32 - len(values)))
+
+
+def statustext(severity: int, text: str) -> mavlink.MAVLink_message:
+    return mavlink.MAVLink_statustext_message(severity, text[:50].encode("ascii", "replace"))
+
+
+def command_ack(command: int, result: int, target_system: int,
+                target_component: int) -> mavlink.MAVLink_message:
+    return mavlink.MAVLink_command_ack_message(command, result, 0, 0, target_system,
+                                               target_component)
+
+
+def param_value(name: str, value: float, count: int, index: int) -> mavlink.MAVLink_message:
+    return mavlink.MAVLink_param_value_message(name.encode("ascii"), value,
+                                               mavlink.MAV_PARAM_TYPE_REAL32, count, index)
+
+
+def autopilot_version() -> mavlink.MAVLink_message:
+    caps = (mavlink.MAV_PROTOCOL_CAPABILITY_MAVLINK2 | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT
+            | mavlink.MAV_PROTOCOL_CAPABILITY_SET_ACTUATOR_TARGET)
+    return mavlink.MAVLink_autopilot_version_message(
+        caps, 0x00010000, 0, 0, 0, [0] * 8, [0] * 8, [0] * 8, 0, 0, 0x5452510001)
+
+
+def mission_count(target_system: int, target_component: int) -> mavlink.MAVLink_message:
+    return mavlink.MAVLink_mission_count_message(target_system, target_component, 0)

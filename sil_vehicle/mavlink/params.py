@@ -1,0 +1,124 @@
+"""The vehicle's parameters over the MAVLink parameter protocol: the settings a user changes
+while flying (wind, gusts, motor effectiveness and time-varying fault terms, motors off, stuck
+servos). Every value is a REAL32; a value outside its range is refused and nothing changes.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Callable
+
+from sil_vehicle.vehicle import Vehicle
+
+
+@dataclass(frozen=True)
+class Param:
+    name: str               # at most 16 characters
+    lo: float
+    hi: float
+    unit: str
+    doc: str
+    get: Callable[[Vehicle], float]
+    set: Callable[[Vehicle, float], None]
+
+
+def _wind(field: str) -> tuple[Callable[[Vehicle], float], Callable[[Vehicle, float], None]]:
+    keys = ("wind_speed_m_s", "wind_from_deg", "gusts_enabled", "gust_sigma_m_s", "gust_length_m")
+
+    def get(v: Vehicle) -> float:
+        return float(getattr(v, field))
+
+    def set_(v: Vehicle, value: float) -> None:
+        now = {k: getattr(v, k) for k in keys}
+        now[field] = bool(value) if field == "gusts_enabled" else value
+        v.set_wind(*(now[k] for k in keys))
+
+    return get, set_
+
+
+def _motor(i: int, field: str) -> tuple[Callable[[Vehicle], float], Callable[[Vehicle, float], None]]:
+    def get(v: Vehicle) -> float:
+        return float(getattr(v.faults.motors[i], field))
+
+    def set_(v: Vehicle, value: float) -> None:
+        v.faults = v.faults.with_motor(i, **{field: bool(value) if field == "off" else value})
+
+    return get, set_
+
+
+def _servo(i: int, field: str) -> tuple[Callable[[Vehicle], float], Callable[[Vehicle, float], None]]:
+    def get(v: Vehicle) -> float:
+        s = v.faults.servos[i]
+        return float(s.stuck) if field == "stuck" else math.degrees(s.angle_rad)
+
+    def set_(v: Vehicle, value: float) -> None:
+        if field == "stuck":
+            v.faults = v.faults.with_servo(i, stuck=bool(value))
+        else:
+            v.faults = v.faults.with_servo(i, angle_rad=math.radians(value))
+
+    return get, set_
+
+
+def build_params(vehicle: Vehicle) -> tuple[Param, ...]:
+    vp = vehicle.vp
+    out = [
+        Param("SIM_WIND_SPD", 0.0, 40.0, "m/s", "mean wind speed", *_wind("wind_speed_m_s")),
+        Param("SIM_WIND_DIR", -360.0, 360.0, "deg", "direction the wind blows from",
+              *_wind("wind_from_deg")),
+        Param("SIM_GUST_EN", 0.0, 1.0, "bool", "Dryden gusts on (1) or off (0)",
+              *_wind("gusts_enabled")),
+        Param("SIM_GUST_SIG", 0.0, 20.0, "m/s", "gust intensity (std. dev.)",
+              *_wind("gust_sigma_m_s")),
+        Param("SIM_GUST_LEN", 1.0, 2000.0, "m", "gust length scale", *_wind("gust_length_m")),
+    ]
+    for i in range(4):
+        n = i + 1
+        out += [
+            Param(f"SIM_MOT{n}_EFF", 0.0, 1.0, "", f"motor {n} effectiveness a",
+                  *_motor(i, "effectiveness")),
+            Param(f"SIM_MOT{n}_TVB", 0.0, 1.0, "", f"motor {n} time-varying amplitude b",
+                  *_motor(i, "amplitude")),
+            Param(f"SIM_MOT{n}_TVW", 0.0, 1000.0, "rad/s", f"motor {n} time-varying omega w",
+                  *_motor(i, "omega_rad_s")),
+            Param(f"SIM_MOT{n}_TVP", -10.0, 10.0, "rad", f"motor {n} time-varying phase phi",
+                  *_motor(i, "phase_rad")),
+            Param(f"SIM_MOT{n}_OFF", 0.0, 1.0, "bool", f"motor {n} off (1)", *_motor(i, "off")),
+        ]
+    for i in range(4):
+        n = i + 1
+        out += [
+            Param(f"SIM_SRV{n}_STK", 0.0, 1.0, "bool", f"tilt servo {n} stuck (1)",
+                  *_servo(i, "stuck")),
+            Param(f"SIM_SRV{n}_ANG", math.degrees(vp.tilt_min_rad), math.degrees(vp.tilt_max_rad),
+                  "deg", f"tilt servo {n} stuck angle", *_servo(i, "angle")),
+        ]
+    return tuple(out)
+
+
+class ParamTable:
+    def __init__(self, vehicle: Vehicle) -> None:
+        self.vehicle = vehicle
+        self.params = build_params(vehicle)
+        self._index = {p.name: i for i, p in enumerate(self.params)}
+
+    def __len__(self) -> int:
+        return len(self.params)
+
+    def index(self, name: str) -> int | None:
+        return self._index.get(name)
+
+    def value(self, index: int) -> float:
+        return self.params[index].get(self.vehicle)
+
+    def set(self, name: str, value: float) -> tuple[int | None, str | None]:
+        """(index, error). On an error nothing changes."""
+        i = self._index.get(name)
+        if i is None:
+            return None, f"unknown parameter {name}"
+        p = self.params[i]
+        if not math.isfinite(value) or not p.lo <= value <= p.hi:
+            return i, f"{name}={value:g} out of [{p.lo:g}, {p.hi:g}]"
+        p.set(self.vehicle, value)
+        return i, None

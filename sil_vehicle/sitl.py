@@ -1,0 +1,331 @@
+"""The autopilot side of the SIL vehicle, without sockets: it advances the plant tick by tick,
+decides which telemetry is due, answers commands and parameters, and applies actuator targets.
+
+The daemon moves bytes; everything that decides what the vehicle does or says is here, so that a
+test (or a campaign in one process) can drive it with messages and read back messages.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+from pymavlink.dialects.v20 import common as mavlink
+
+from sil_vehicle.config import STREAMS, SimParams
+from sil_vehicle.frames import euler_to_quat, quat_to_euler
+from sil_vehicle.mavlink import codec
+from sil_vehicle.mavlink.codec import Measured, RxCounters
+from sil_vehicle.mavlink.params import ParamTable
+from sil_vehicle.vehicle import ActuatorCommand, Vehicle, VehicleState
+
+LINKS = ("gcs", "offboard")
+FORCE_DISARM_MAGIC = 21196
+ANNOUNCE_EVERY_US = 1_000_000       # rejected-target STATUSTEXT at most once a simulated second
+
+_MSG_IDS = {name: getattr(mavlink, f"MAVLINK_MSG_ID_{name}") for name in STREAMS}
+_MSG_NAMES = {v: k for k, v in _MSG_IDS.items()}
+
+
+@dataclass(frozen=True)
+class Outgoing:
+    link: str                                  # "gcs" or "offboard"
+    msg: mavlink.MAVLink_message
+    to: tuple[str, int] | None = None          # None: the link's target and every known peer
+
+
+LOG_COLUMNS = (
+    ["t_us"] + [f"pos_{a}_m" for a in "ned"] + [f"vel_{a}_m_s" for a in "ned"]
+    + [f"q{a}" for a in "wxyz"] + ["roll_rad", "pitch_rad", "yaw_rad"]
+    + [f"rate_{a}_rad_s" for a in "pqr"]
+    + [f"cmd_throttle{i}_pct" for i in range(1, 5)] + [f"cmd_tilt{i}_rad" for i in range(1, 5)]
+    + [f"out_throttle{i}_pct" for i in range(1, 5)] + [f"out_tilt{i}_rad" for i in range(1, 5)]
+    + [f"motor{i}_factor" for i in range(1, 5)] + [f"servo{i}_stuck" for i in range(1, 5)]
+    + [f"wind_{a}_m_s" for a in "ned"] + ["armed", "landed", "crashed"])
+
+
+class Sitl:
+    def __init__(self, sim: SimParams, log_sink: Callable[[tuple], None] | None = None) -> None:
+        self.sim = sim
+        gust_seq, noise_seq = np.random.SeedSequence(sim.seed).spawn(2)
+        self.vehicle = Vehicle(sim, np.random.default_rng(gust_seq))
+        self._noise_rng = np.random.default_rng(noise_seq)
+        self.params = ParamTable(self.vehicle)
+        self.counters = {name: RxCounters() for name in LINKS}
+        self.periods = {link.name: {s: (sim.physics_rate_hz // hz if hz else 0)
+                                    for s, hz in link.rates_hz} for link in sim.links}
+        self.default_periods = {k: dict(v) for k, v in self.periods.items()}
+        self.home = (sim.home_lat_deg, sim.home_lon_deg, sim.home_alt_m)
+        self.tick = 0
+        self.log_sink = log_sink
+        self._log_period = sim.physics_rate_hz // sim.log_rate_hz if sim.log_rate_hz else 0
+        self._limit = sim.vehicle.tilt_limit_rad
+        self.lockstep_stamp_us: int | None = None   # latest ODOMETRY stamp on the offboard link
+        self.answered = False                        # has the target for that stamp arrived?
+        self.targets_applied = 0
+        self._last_announce_us = -ANNOUNCE_EVERY_US
+        self._measured: Measured | None = None
+        self._was_crashed = False
+
+    # --- time ------------------------------------------------------------------------------
+    @property
+    def state(self) -> VehicleState:
+        return self.vehicle.state
+
+    @property
+    def t_us(self) -> int:
+        return self.vehicle.state.t_us
+
+    def step(self) -> list[Outgoing]:
+        """Advance one physics tick; return the events and the telemetry due at the new time."""
+        state = self.vehicle.step()
+        self.tick += 1
+        self._measured = None
+        out: list[Outgoing] = []
+        if state.crashed and not self._was_crashed:
+            self._was_crashed = True
+            self.vehicle.force_disarm()
+            out += self.announce(mavlink.MAV_SEVERITY_CRITICAL, f"CRASH: {state.crash_reason}")
+        if self._log_period and self.tick % self._log_period == 0 and self.log_sink:
+            self.log_sink(self.log_row())
+        return out + self.telemetry_due()
+
+    def telemetry_due(self, everything: bool = False) -> list[Outgoing]:
+        """Streams whose period divides the current tick (or one of each enabled stream)."""
+        out = []
+        for link in LINKS:
+            for stream, period in self.periods[link].items():
+                if period and (everything or self.tick % period == 0):
+                    out.append(Outgoing(link, self.build(stream)))
+                    if link == "offboard" and stream == "ODOMETRY":
+                        if self.lockstep_stamp_us != self.t_us:
+                            self.answered = False
+                        self.lockstep_stamp_us = self.t_us
+        return out
+
+    def lockstep_ticks(self) -> int:
+        """Physics ticks in one lockstep period (the offboard ODOMETRY period)."""
+        return self.periods["offboard"]["ODOMETRY"]
+
+    # --- telemetry -------------------------------------------------------------------------
+    def measured(self) -> Measured:
+        if self._measured is None:
+            s, sim = self.vehicle.state, self.sim
+            n = self._noise_rng.standard_normal(12)
+            x = s.x
+            roll, pitch, yaw = quat_to_euler(*x[6:10])
+            q = euler_to_quat(roll + sim.noise_attitude_rad * n[6],
+                              pitch + sim.noise_attitude_rad * n[7],
+                              yaw + sim.noise_attitude_rad * n[8])
+            self._measured = Measured(
+                s.t_us,
+                tuple(x[i] + sim.noise_position_m * n[i] for i in range(3)),
+                tuple(x[3 + i] + sim.noise_velocity_m_s * n[3 + i] for i in range(3)),
+                q, tuple(x[10 + i] + sim.noise_rates_rad_s * n[9 + i] for i in range(3)))
+        return self._measured
+
+    def build(self, stream: str) -> mavlink.MAVLink_message:
+        s = self.vehicle.state
+        if stream == "HEARTBEAT":
+            return codec.heartbeat(self.vehicle.armed, s.crashed, not s.landed)
+        if stream == "SYS_STATUS":
+            total = RxCounters()
+            for c in self.counters.values():
+                for k, v in vars(c).items():
+                    setattr(total, k, getattr(total, k) + v)
+            rate = int(1000 * total.dropped / max(total.datagrams, 1))
+            return codec.sys_status(0, rate * 10, total.dropped,
+                                    (total.bad_frames, total.unknown_ids, total.other_system,
+                                     total.rejected_targets + total.stale_targets))
+        if stream == "HOME_POSITION":
+            return codec.home_position(self.home, s.t_us)
+        if stream in ("SERVO_OUTPUT_RAW", "ACTUATOR_OUTPUT_STATUS"):
+            fn = codec.servo_output_raw if stream == "SERVO_OUTPUT_RAW" else codec.actuator_output_status
+            return fn(s.t_us, s.motor_pct, s.tilt_rad, self._limit)
+        m = self.measured()
+        if stream == "ODOMETRY":
+            return codec.odometry(m)
+        if stream == "ATTITUDE":
+            return codec.attitude(m)
+        if stream == "LOCAL_POSITION_NED":
+            return codec.local_position_ned(m)
+        if stream == "GLOBAL_POSITION_INT":
+            return codec.global_position_int(m, self.home)
+        if stream == "GPS_RAW_INT":
+            return codec.gps_raw_int(m, self.home)
+        raise KeyError(stream)
+
+    def announce(self, severity: int, text: str) -> list[Outgoing]:
+        msg = codec.statustext(severity, text)
+        return [Outgoing(link, msg) for link in LINKS]
+
+    # --- incoming --------------------------------------------------------------------------
+    def handle(self, link: str, msg: mavlink.MAVLink_message,
+               sender: tuple[str, int] | None = None) -> list[Outgoing]:
+        """React to one decoded message; return the replies."""
+        counters = self.counters[link]
+        target = getattr(msg, "target_system", None)
+        if target not in (None, 0, codec.SYSTEM_ID):
+            counters.other_system += 1
+            return []
+        kind = msg.get_type()
+        if kind == "SET_ACTUATOR_CONTROL_TARGET":
+            return self._target(link, msg)
+        if kind == "COMMAND_LONG":
+            return self._command(link, msg, sender)
+        if kind == "COMMAND_INT":
+            return [Outgoing(link, codec.command_ack(msg.command, mavlink.MAV_RESULT_UNSUPPORTED,
+                                                     msg.get_srcSystem(), msg.get_srcComponent()),
+                             sender)]
+        if kind == "PARAM_REQUEST_LIST":
+            n = len(self.params)
+            return [Outgoing(link, codec.param_value(p.name, self.params.value(i), n, i), sender)
+                    for i, p in enumerate(self.params.params)]
+        if kind == "PARAM_REQUEST_READ":
+            name = msg.param_id if isinstance(msg.param_id, str) else msg.param_id.decode()
+            i = self.params.index(name) if msg.param_index < 0 else msg.param_index
+            if i is None or not 0 <= i < len(self.params):
+                return []
+            return [Outgoing(link, codec.param_value(self.params.params[i].name,
+                                                     self.params.value(i), len(self.params), i),
+                             sender)]
+        if kind == "PARAM_SET":
+            return self._param_set(link, msg, sender)
+        if kind == "MISSION_REQUEST_LIST":
+            return [Outgoing(link, codec.mission_count(msg.get_srcSystem(), msg.get_srcComponent()),
+                             sender)]
+        return []
+
+    def _target(self, link: str, msg: mavlink.MAVLink_message) -> list[Outgoing]:
+        counters = self.counters[link]
+        target = codec.decode_target(msg, self._limit)
+        if target is None:
+            counters.rejected_targets += 1
+            t = self.t_us
+            if t - self._last_announce_us >= ANNOUNCE_EVERY_US:
+                self._last_announce_us = t
+                return self.announce(mavlink.MAV_SEVERITY_WARNING,
+                                     f"actuator target rejected ({counters.rejected_targets})")
+            return []
+        if self.sim.clock_mode == "lockstep" and target.stamp_us != self.lockstep_stamp_us:
+            counters.stale_targets += 1
+            return []
+        self.vehicle.command = ActuatorCommand(target.throttle_pct, target.tilt_rad)
+        self.targets_applied += 1
+        if target.stamp_us == self.lockstep_stamp_us:
+            self.answered = True
+        return []
+
+    def _ack(self, link: str, msg, result: int, sender) -> Outgoing:
+        return Outgoing(link, codec.command_ack(msg.command, result, msg.get_srcSystem(),
+                                                msg.get_srcComponent()), sender)
+
+    def _command(self, link: str, msg, sender) -> list[Outgoing]:
+        cmd = msg.command
+        ok, denied = mavlink.MAV_RESULT_ACCEPTED, mavlink.MAV_RESULT_DENIED
+        if cmd == mavlink.MAV_CMD_COMPONENT_ARM_DISARM:
+            arm = msg.param1 == 1.0
+            if not arm and msg.param2 == FORCE_DISARM_MAGIC:
+                self.vehicle.force_disarm()
+                reason = None
+            else:
+                reason = self.vehicle.set_armed(arm)
+            if reason:
+                return [self._ack(link, msg, denied, sender)] + self.announce(
+                    mavlink.MAV_SEVERITY_WARNING, f"{'arming' if arm else 'disarming'} denied: {reason}")
+            return [self._ack(link, msg, ok, sender)] + self.announce(
+                mavlink.MAV_SEVERITY_INFO, "armed" if arm else "disarmed")
+        if cmd == mavlink.MAV_CMD_INJECT_FAILURE:
+            return self._inject(link, msg, sender)
+        if cmd == mavlink.MAV_CMD_SET_MESSAGE_INTERVAL:
+            name = _MSG_NAMES.get(int(msg.param1)) if math.isfinite(msg.param1) else None
+            interval = msg.param2
+            if name is None or not math.isfinite(interval):
+                return [self._ack(link, msg, mavlink.MAV_RESULT_UNSUPPORTED if name is None
+                                  else denied, sender)]
+            if name == "ODOMETRY" and link == "offboard" and self.sim.clock_mode == "lockstep":
+                return [self._ack(link, msg, denied, sender)]   # it is the lockstep period
+            if interval == -1:
+                period = 0
+            elif interval == 0:
+                period = self.default_periods[link][name]
+            elif interval > 0:
+                period = max(1, int(round(interval / self.sim.dt_us)))
+            else:
+                return [self._ack(link, msg, denied, sender)]
+            self.periods[link][name] = period
+            return [self._ack(link, msg, ok, sender)]
+        if cmd in (mavlink.MAV_CMD_REQUEST_MESSAGE, mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES):
+            wanted = (int(msg.param1) if cmd == mavlink.MAV_CMD_REQUEST_MESSAGE and
+                      math.isfinite(msg.param1) else mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION)
+            if wanted == mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION:
+                reply = codec.autopilot_version()
+            elif wanted in _MSG_NAMES:
+                reply = self.build(_MSG_NAMES[wanted])
+            else:
+                return [self._ack(link, msg, mavlink.MAV_RESULT_UNSUPPORTED, sender)]
+            return [self._ack(link, msg, ok, sender), Outgoing(link, reply, sender)]
+        return [self._ack(link, msg, mavlink.MAV_RESULT_UNSUPPORTED, sender)]
+
+    def _inject(self, link: str, msg, sender) -> list[Outgoing]:
+        """MAV_CMD_INJECT_FAILURE: param1 unit (motor 101 / servo 102), param2 type (OK 0,
+        OFF 1, STUCK 2), param3 instance (1..4, 0 = all); param4 the stuck angle in degrees
+        (NaN or absent: stuck where it is)."""
+        unit, kind, inst = msg.param1, msg.param2, msg.param3
+        denied = mavlink.MAV_RESULT_DENIED
+        if not all(math.isfinite(v) for v in (unit, kind, inst)) or not 0 <= inst <= 4 \
+                or inst != int(inst):
+            return [self._ack(link, msg, denied, sender)]
+        instances = range(4) if inst == 0 else [int(inst) - 1]
+        faults = self.vehicle.faults
+        if unit == mavlink.FAILURE_UNIT_SYSTEM_MOTOR and kind in (mavlink.FAILURE_TYPE_OK,
+                                                                 mavlink.FAILURE_TYPE_OFF):
+            for i in instances:
+                faults = faults.with_motor(i, off=(kind == mavlink.FAILURE_TYPE_OFF))
+        elif unit == mavlink.FAILURE_UNIT_SYSTEM_SERVO and kind in (mavlink.FAILURE_TYPE_OK,
+                                                                   mavlink.FAILURE_TYPE_STUCK):
+            vp = self.sim.vehicle
+            for i in instances:
+                if kind == mavlink.FAILURE_TYPE_OK:
+                    faults = faults.with_servo(i, stuck=False)
+                    continue
+                angle = self.vehicle.state.tilt_rad[i]
+                if math.isfinite(msg.param4):
+                    angle = math.radians(msg.param4)
+                    if not vp.tilt_min_rad <= angle <= vp.tilt_max_rad:
+                        return [self._ack(link, msg, denied, sender)]
+                faults = faults.with_servo(i, stuck=True, angle_rad=angle)
+        else:
+            return [self._ack(link, msg, mavlink.MAV_RESULT_UNSUPPORTED, sender)]
+        self.vehicle.faults = faults
+        return [self._ack(link, msg, mavlink.MAV_RESULT_ACCEPTED, sender)] + self.announce(
+            mavlink.MAV_SEVERITY_WARNING, f"faults: {faults.describe()}")
+
+    def _param_set(self, link: str, msg, sender) -> list[Outgoing]:
+        name = msg.param_id if isinstance(msg.param_id, str) else msg.param_id.decode()
+        i, error = self.params.set(name, float(msg.param_value))
+        out = []
+        if error:
+            out += self.announce(mavlink.MAV_SEVERITY_ERROR, f"param: {error}")
+        else:
+            out += self.announce(mavlink.MAV_SEVERITY_INFO,
+                                 f"{name} = {self.params.value(i):g}; faults: "
+                                 f"{self.vehicle.faults.describe()}")
+        if i is not None:
+            # the value now in force (unchanged after an error), as the protocol asks
+            out.insert(0, Outgoing(link, codec.param_value(name, self.params.value(i),
+                                                           len(self.params), i)))
+        return out
+
+    # --- log -------------------------------------------------------------------------------
+    def log_row(self) -> tuple:
+        s = self.vehicle.state
+        t_s = s.t_us * 1e-6
+        cmd = self.vehicle.command
+        return ((s.t_us,) + s.x[0:10] + tuple(quat_to_euler(*s.x[6:10])) + s.x[10:13]
+                + tuple(cmd.throttle_pct) + tuple(cmd.tilt_rad) + s.motor_pct + s.tilt_rad
+                + tuple(m.factor(t_s) for m in self.vehicle.faults.motors)
+                + tuple(float(sv.stuck) for sv in self.vehicle.faults.servos)
+                + s.wind_ned_m_s + (int(s.armed), int(s.landed), int(s.crashed)))
