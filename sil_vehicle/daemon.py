@@ -14,6 +14,7 @@ import argparse
 import asyncio
 import dataclasses
 import logging
+import math
 import signal
 import sys
 import time
@@ -21,6 +22,7 @@ from pathlib import Path
 
 from sil_vehicle.clock import RealTimePacer
 from sil_vehicle.config import PARAMS_DIR, ConfigError, Endpoint, SimParams, load_sim, parse_endpoint
+from sil_vehicle.faultscript import load_script
 from sil_vehicle.log import FlightLog, Tlog
 from sil_vehicle.mavlink.codec import Codec
 from sil_vehicle.sitl import LINKS, LOG_COLUMNS, Outgoing, Sitl
@@ -200,6 +202,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--wind-speed", type=float, default=None, help="mean wind speed, m/s")
     p.add_argument("--wind-dir", type=float, default=None,
                    help="direction the wind blows from, deg clockwise from north")
+    p.add_argument("--faults", type=Path, default=None,
+                   help="fault script YAML (params/faults/*.yaml) played in vehicle time")
     p.add_argument("--log-dir", type=Path, default=None,
                    help="directory for flight.csv and vehicle.tlog (default: logs/vehicle-<time>)")
     p.add_argument("--no-log", action="store_true", help="write no logs")
@@ -246,6 +250,11 @@ def main(argv: list[str] | None = None) -> int:
                         format="%(asctime)s %(name)s %(levelname)s %(message)s")
     try:
         sim = apply_overrides(load_sim(args.sim, args.vehicle), args)
+        events = ()
+        if args.faults is not None:
+            vp = sim.vehicle
+            events = load_script(args.faults, (math.degrees(vp.tilt_min_rad),
+                                               math.degrees(vp.tilt_max_rad)))
     except ConfigError as exc:
         print(f"trq-sil-vehicle: {exc}", file=sys.stderr)
         return 2
@@ -253,6 +262,7 @@ def main(argv: list[str] | None = None) -> int:
     if not args.no_log:
         log_dir = args.log_dir or Path(sim.log_dir) / time.strftime("vehicle-%Y%m%d-%H%M%S")
     daemon = VehicleDaemon(sim, log_dir)
+    daemon.sitl.schedule(events)
 
     async def _main() -> None:
         loop = asyncio.get_running_loop()

@@ -9,12 +9,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Callable
+from typing import Callable, Iterable
 
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
 from sil_vehicle.config import STREAMS, SimParams
+from sil_vehicle.faultscript import Event, ParamAction
 from sil_vehicle.frames import euler_to_quat, quat_to_euler
 from sil_vehicle.mavlink import codec
 from sil_vehicle.mavlink.codec import Measured, RxCounters
@@ -68,6 +69,8 @@ class Sitl:
         self._last_announce_us = -ANNOUNCE_EVERY_US
         self._measured: Measured | None = None
         self._was_crashed = False
+        self._events: list[Event] = []
+        self.events_played: list[tuple[int, str]] = []
 
     # --- time ------------------------------------------------------------------------------
     @property
@@ -80,10 +83,10 @@ class Sitl:
 
     def step(self) -> list[Outgoing]:
         """Advance one physics tick; return the events and the telemetry due at the new time."""
+        out: list[Outgoing] = self._play_events() if self._events else []
         state = self.vehicle.step()
         self.tick += 1
         self._measured = None
-        out: list[Outgoing] = []
         if state.crashed and not self._was_crashed:
             self._was_crashed = True
             self.vehicle.force_disarm()
@@ -270,15 +273,22 @@ class Sitl:
         return [self._ack(link, msg, mavlink.MAV_RESULT_UNSUPPORTED, sender)]
 
     def _inject(self, link: str, msg, sender) -> list[Outgoing]:
-        """MAV_CMD_INJECT_FAILURE: param1 unit (motor 101 / servo 102), param2 type (OK 0,
-        OFF 1, STUCK 2), param3 instance (1..4, 0 = all); param4 the stuck angle in degrees
-        (NaN or absent: stuck where it is)."""
-        unit, kind, inst = msg.param1, msg.param2, msg.param3
+        result = self.inject(msg.param1, msg.param2, msg.param3, msg.param4)
+        out = [self._ack(link, msg, result, sender)]
+        if result == mavlink.MAV_RESULT_ACCEPTED:
+            out += self.announce(mavlink.MAV_SEVERITY_WARNING,
+                                 f"faults: {self.vehicle.faults.describe()}")
+        return out
+
+    def inject(self, unit: float, kind: float, instance: float, angle_deg: float) -> int:
+        """MAV_CMD_INJECT_FAILURE: unit motor (101) / servo (102), type OK (0), OFF (1, motors),
+        STUCK (2, servos), instance 1..4 (0 = all), angle_deg the stuck angle (NaN: where it
+        is). Returns the MAV_RESULT; nothing changes unless it is ACCEPTED."""
         denied = mavlink.MAV_RESULT_DENIED
-        if not all(math.isfinite(v) for v in (unit, kind, inst)) or not 0 <= inst <= 4 \
-                or inst != int(inst):
-            return [self._ack(link, msg, denied, sender)]
-        instances = range(4) if inst == 0 else [int(inst) - 1]
+        if not all(math.isfinite(v) for v in (unit, kind, instance)) or not 0 <= instance <= 4 \
+                or instance != int(instance):
+            return denied
+        instances = range(4) if instance == 0 else [int(instance) - 1]
         faults = self.vehicle.faults
         if unit == mavlink.FAILURE_UNIT_SYSTEM_MOTOR and kind in (mavlink.FAILURE_TYPE_OK,
                                                                  mavlink.FAILURE_TYPE_OFF):
@@ -292,16 +302,36 @@ class Sitl:
                     faults = faults.with_servo(i, stuck=False)
                     continue
                 angle = self.vehicle.state.tilt_rad[i]
-                if math.isfinite(msg.param4):
-                    angle = math.radians(msg.param4)
+                if math.isfinite(angle_deg):
+                    angle = math.radians(angle_deg)
                     if not vp.tilt_min_rad <= angle <= vp.tilt_max_rad:
-                        return [self._ack(link, msg, denied, sender)]
+                        return denied
                 faults = faults.with_servo(i, stuck=True, angle_rad=angle)
         else:
-            return [self._ack(link, msg, mavlink.MAV_RESULT_UNSUPPORTED, sender)]
+            return mavlink.MAV_RESULT_UNSUPPORTED
         self.vehicle.faults = faults
-        return [self._ack(link, msg, mavlink.MAV_RESULT_ACCEPTED, sender)] + self.announce(
-            mavlink.MAV_SEVERITY_WARNING, f"faults: {faults.describe()}")
+        return mavlink.MAV_RESULT_ACCEPTED
+
+    # --- fault scripts played by the vehicle itself (deterministic timing) ----------------
+    def schedule(self, events: Iterable[Event]) -> None:
+        self._events = sorted(self._events + list(events), key=lambda e: e.at_us)
+
+    def _play_events(self) -> list[Outgoing]:
+        out: list[Outgoing] = []
+        while self._events and self._events[0].at_us <= self.t_us:
+            event = self._events.pop(0)
+            for action in event.actions:
+                if isinstance(action, ParamAction):
+                    _, error = self.params.set(action.name, action.value)
+                else:
+                    result = self.inject(action.unit, action.kind, action.instance,
+                                         action.angle_deg)
+                    error = None if result == mavlink.MAV_RESULT_ACCEPTED else f"result {result}"
+                if error:
+                    out += self.announce(mavlink.MAV_SEVERITY_ERROR, f"script: {error}")
+            self.events_played.append((self.t_us, event.text))
+            out += self.announce(mavlink.MAV_SEVERITY_WARNING, f"script: {event.text}")
+        return out
 
     def _param_set(self, link: str, msg, sender) -> list[Outgoing]:
         name = msg.param_id if isinstance(msg.param_id, str) else msg.param_id.decode()

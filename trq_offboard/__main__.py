@@ -1,0 +1,5 @@
+import sys
+
+from trq_offboard.daemon import main
+
+sys.exit(main())

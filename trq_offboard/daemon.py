@@ -1,0 +1,132 @@
+"""The offboard controller daemon.
+
+    python -m trq_offboard [--controller params/controller/trq_nmpc_eso.yaml]
+                           [--connect udpin:127.0.0.1:14540] [--log-dir DIR]
+
+It listens like a PX4 offboard API client, waits for the vehicle's heartbeat, arms, takes off,
+flies the reference of the controller file, lands, disarms and exits 0 with a one-line summary
+(1 when the flight could not be flown, 2 on a bad configuration). It knows the vehicle only
+through MAVLink (sil_vehicle/PROTOCOL.md): pointed at a real prototype it is the same program.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import logging
+import signal
+import sys
+import time
+from pathlib import Path
+
+from trq_offboard.config import PARAMS_DIR, ConfigError, load_controller
+from trq_offboard.link.udp import Connection, MavlinkUdp
+from trq_offboard.link.wire import tilt_half_range
+from trq_offboard.log import ControllerLog, Tlog
+from trq_offboard.loop import FlightError, OffboardFlight
+
+log = logging.getLogger("trq_offboard")
+
+
+def resolve_controller(text: str) -> Path:
+    """A path, or the name of a file in params/controller/ (trq_nmpc_eso, trq_nmpc, quad_nmpc)."""
+    path = Path(text)
+    if path.suffix in (".yaml", ".yml") or path.exists():
+        return path
+    return PARAMS_DIR / "controller" / f"{text}.yaml"
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="trq-offboard",
+        description="Offboard NMPC + ESO controller of the tilt-rotor quadcopter, over MAVLink 2.")
+    p.add_argument("--controller", default="trq_nmpc_eso",
+                   help="controller YAML or its name in params/controller/ "
+                        "(trq_nmpc_eso, trq_nmpc, quad_nmpc); default trq_nmpc_eso")
+    p.add_argument("--connect", default="udpin:127.0.0.1:14540",
+                   help="udpin:HOST:PORT (listen, PX4 offboard port, default) or udpout:HOST:PORT")
+    p.add_argument("--reference", default=None,
+                   choices=("hover", "step", "circle", "helix", "figure8"),
+                   help="override the reference kind of the controller file")
+    p.add_argument("--log-dir", type=Path, default=None,
+                   help="directory for controller.csv and offboard.tlog "
+                        "(default: logs/offboard-<time>)")
+    p.add_argument("--no-log", action="store_true", help="write no logs")
+    p.add_argument("--connect-timeout", type=float, default=30.0,
+                   help="seconds to wait for the vehicle's heartbeat")
+    p.add_argument("-v", "--verbose", action="store_true", help="debug logging")
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO,
+                        format="%(asctime)s %(name)s %(levelname)s %(message)s")
+    try:
+        cfg = load_controller(resolve_controller(args.controller))
+        if args.reference:
+            import dataclasses
+            cfg = dataclasses.replace(cfg, reference=dataclasses.replace(cfg.reference,
+                                                                         kind=args.reference))
+        connection = Connection.parse(args.connect)
+    except (ConfigError, ValueError) as exc:
+        print(f"trq-offboard: {exc}", file=sys.stderr)
+        return 2
+
+    # building the NMPC takes a moment: do it before listening
+    from trq_offboard.controller import Controller
+    from trq_offboard.reference import Reference
+    controller = Controller(cfg)
+
+    log_dir = None if args.no_log else (
+        args.log_dir or Path("logs") / time.strftime(f"offboard-{cfg.name}-%Y%m%d-%H%M%S"))
+    clog = tlog = None
+    if log_dir is not None:
+        clog = ControllerLog(log_dir / "controller.csv",
+                             {"controller": cfg.name, "controller_file": cfg.file,
+                              "vehicle_file": cfg.vehicle.file, "connect": args.connect,
+                              "frames": "world NED, body FRD"})
+        tlog = Tlog(log_dir / "offboard.tlog")
+
+    link = MavlinkUdp(connection, on_message=lambda msg: None)
+    if tlog:
+        link.on_frame = tlog
+    flight = OffboardFlight(
+        link, controller, lambda state: Reference(cfg.reference, state.pos_ned_m,
+                                                  state.euler_rad[2]),
+        name=cfg.name, tilt_limit_rad=tilt_half_range(cfg.vehicle.tilt_min_rad, cfg.vehicle.tilt_max_rad), record=clog,
+        connect_timeout_s=args.connect_timeout)
+
+    async def _main() -> int:
+        await link.open()
+        task = asyncio.current_task()
+        loop = asyncio.get_running_loop()
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            loop.add_signal_handler(sig, task.cancel)
+        try:
+            summary = await flight.run()
+        except FlightError as exc:
+            print(f"trq-offboard: {exc}", file=sys.stderr)
+            return 1
+        except asyncio.CancelledError:
+            print("trq-offboard: interrupted", file=sys.stderr)
+            return 130
+        finally:
+            link.close()
+        print(f"trq-offboard: {summary.line()}" + (f"; logs in {log_dir}" if log_dir else ""))
+        return 0 if summary.disarmed else 1
+
+    try:
+        return asyncio.run(_main())
+    except OSError as exc:
+        print(f"trq-offboard: cannot open {args.connect}: {exc}", file=sys.stderr)
+        return 1
+    finally:
+        if clog:
+            clog.close()
+        if tlog:
+            tlog.close()
+
+
+if __name__ == "__main__":
+    sys.exit(main())

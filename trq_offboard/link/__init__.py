@@ -1,0 +1,2 @@
+"""The controller's side of the wire: MAVLink messages in and out (wire), and the UDP endpoint
+(udp). Nothing here knows about the simulator; see sil_vehicle/PROTOCOL.md for the contract."""

@@ -1,0 +1,100 @@
+"""MAVLink messages of the offboard link, converted to and from the controller's records.
+
+Every MAVLink scaling the controller needs lives here: ODOMETRY to `StateEstimate`,
+ACTUATOR_OUTPUT_STATUS / SERVO_OUTPUT_RAW to the applied `ActuatorCommand`, and the
+`ActuatorCommand` to SET_ACTUATOR_CONTROL_TARGET (group 0: throttles 0..1, tilts -1..1 of the
+servo half-range). A target that would carry a NaN or an out-of-range value is never built.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from pymavlink.dialects.v20 import common as mavlink
+
+from trq_offboard.records import ActuatorCommand, StateEstimate
+
+VEHICLE_SYSTEM = 1
+VEHICLE_COMPONENT = 1
+FORCE_DISARM = 21196
+
+
+@dataclass(frozen=True)
+class Odometry:
+    stamp_us: int
+    state: StateEstimate
+
+
+def tilt_half_range(tilt_min_rad: float, tilt_max_rad: float) -> float:
+    """The angle a normalised tilt of 1 stands for (PROTOCOL.md: max(|min|, max))."""
+    return max(abs(tilt_min_rad), abs(tilt_max_rad))
+
+
+def quat_to_euler(w: float, x: float, y: float, z: float) -> tuple[float, float, float]:
+    roll = math.atan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y))
+    pitch = math.asin(max(-1.0, min(1.0, 2.0 * (w * y - z * x))))
+    yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+    return roll, pitch, yaw
+
+
+def parse_odometry(msg) -> Odometry | None:
+    """ODOMETRY in LOCAL_NED with NED velocity (child frame LOCAL_NED). None if unusable."""
+    if msg.frame_id != mavlink.MAV_FRAME_LOCAL_NED or msg.child_frame_id != mavlink.MAV_FRAME_LOCAL_NED:
+        return None
+    values = (msg.x, msg.y, msg.z, msg.vx, msg.vy, msg.vz, *msg.q, msg.rollspeed,
+              msg.pitchspeed, msg.yawspeed)
+    if not all(math.isfinite(v) for v in values):
+        return None
+    n = math.sqrt(sum(v * v for v in msg.q))
+    if not 0.9 < n < 1.1:
+        return None
+    q = [v / n for v in msg.q]
+    return Odometry(int(msg.time_usec), StateEstimate(
+        (msg.x, msg.y, msg.z), (msg.vx, msg.vy, msg.vz), quat_to_euler(*q),
+        (msg.rollspeed, msg.pitchspeed, msg.yawspeed)))
+
+
+def parse_actuator_outputs(msg, tilt_limit_rad: float) -> ActuatorCommand | None:
+    """The outputs the vehicle actually produced (after lag, rate limits and faults)."""
+    kind = msg.get_type()
+    if kind == "ACTUATOR_OUTPUT_STATUS":
+        a = msg.actuator
+        if msg.active < 8 or not all(math.isfinite(v) for v in a[:8]):
+            return None
+        return ActuatorCommand(tuple(100.0 * v for v in a[:4]),
+                               tuple(tilt_limit_rad * v for v in a[4:8]))
+    if kind == "SERVO_OUTPUT_RAW":
+        pwm = [msg.servo1_raw, msg.servo2_raw, msg.servo3_raw, msg.servo4_raw, msg.servo5_raw,
+               msg.servo6_raw, msg.servo7_raw, msg.servo8_raw]
+        return ActuatorCommand(tuple((p - 1000) / 10.0 for p in pwm[:4]),
+                               tuple((p - 1500) / 500.0 * tilt_limit_rad for p in pwm[4:]))
+    return None
+
+
+def actuator_target(stamp_us: int, cmd: ActuatorCommand, tilt_limit_rad: float):
+    """SET_ACTUATOR_CONTROL_TARGET for the vehicle. Raises ValueError on a non-finite value: the
+    caller must never get that far (the controller clips), this is the last check."""
+    throttles = [min(max(v / 100.0, 0.0), 1.0) for v in cmd.throttle_pct]
+    tilts = [min(max(v / tilt_limit_rad, -1.0), 1.0) for v in cmd.tilt_rad]
+    controls = throttles + tilts
+    if not all(math.isfinite(v) for v in controls):
+        raise ValueError(f"non-finite actuator command {cmd}")
+    return mavlink.MAVLink_set_actuator_control_target_message(
+        stamp_us, 0, VEHICLE_SYSTEM, VEHICLE_COMPONENT, controls)
+
+
+def arm_command(arm: bool, force: bool = False):
+    return mavlink.MAVLink_command_long_message(
+        VEHICLE_SYSTEM, VEHICLE_COMPONENT, mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 0,
+        1.0 if arm else 0.0, float(FORCE_DISARM) if force else 0.0, 0, 0, 0, 0, 0)
+
+
+def heartbeat():
+    return mavlink.MAVLink_heartbeat_message(
+        mavlink.MAV_TYPE_ONBOARD_CONTROLLER, mavlink.MAV_AUTOPILOT_INVALID, 0, 0,
+        mavlink.MAV_STATE_ACTIVE, 3)
+
+
+def is_armed(heartbeat_msg) -> bool:
+    return bool(heartbeat_msg.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)

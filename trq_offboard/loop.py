@@ -1,0 +1,248 @@
+"""The offboard flight: connect, arm, take off, fly the reference, land, disarm.
+
+`OffboardFlight` is driven by the vehicle's telemetry. Every new ODOMETRY (stamp t) is answered
+once by a SET_ACTUATOR_CONTROL_TARGET stamped t: that is the whole lockstep handshake, and in real
+time it is simply an event-driven controller. A repeated stamp (the vehicle resending in lockstep)
+gets the same target again; an older stamp is stale and ignored: no command is ever computed from
+an old state. The NMPC solve runs in a worker thread, off the event loop.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+from pymavlink.dialects.v20 import common as mavlink
+
+from trq_offboard.link import wire
+from trq_offboard.link.udp import MavlinkUdp
+from trq_offboard.records import ActuatorCommand, ReferenceSample, StateEstimate, StepInfo
+
+log = logging.getLogger("trq_offboard")
+
+TOUCHDOWN_ALT_M = 0.05
+TOUCHDOWN_SPEED_M_S = 0.15
+IDLE_STEPS_BEFORE_DISARM = 10
+
+
+class FlightError(RuntimeError):
+    """The flight could not be flown (no vehicle, arming refused, telemetry lost for good)."""
+
+
+@dataclass
+class StepRecord:
+    t_s: float
+    stamp_us: int
+    state: StateEstimate
+    ref: ReferenceSample
+    cmd: ActuatorCommand
+    applied: ActuatorCommand | None
+    info: StepInfo | None
+
+
+@dataclass
+class FlightSummary:
+    controller: str
+    steps: int = 0
+    flight_s: float = 0.0
+    rmse_pos_m: float = math.nan
+    max_pos_err_m: float = math.nan
+    rmse_yaw_deg: float = math.nan
+    solve_ms_p50: float = math.nan
+    solve_ms_p99: float = math.nan
+    fallbacks: int = 0
+    landed: bool = False
+    disarmed: bool = False
+    errors: list[str] = field(default_factory=list)
+
+    def line(self) -> str:
+        return (f"{self.controller}: {self.flight_s:.1f} s, {self.steps} steps, position RMSE "
+                f"{self.rmse_pos_m:.3f} m (max {self.max_pos_err_m:.3f} m), yaw RMSE "
+                f"{self.rmse_yaw_deg:.2f} deg, solve p50 {self.solve_ms_p50:.1f} ms p99 "
+                f"{self.solve_ms_p99:.1f} ms, {self.fallbacks} fallbacks, "
+                f"{'landed' if self.landed else 'NOT landed'}, "
+                f"{'disarmed' if self.disarmed else 'armed'}")
+
+
+class OffboardFlight:
+    def __init__(self, link: MavlinkUdp, controller, make_reference: Callable, *,
+                 name: str, tilt_limit_rad: float, record: Callable[[StepRecord], None] | None = None,
+                 connect_timeout_s: float = 30.0, telemetry_timeout_s: float = 2.0,
+                 ack_timeout_s: float = 1.0) -> None:
+        self.link = link
+        self.controller = controller
+        self.make_reference = make_reference
+        self.name = name
+        self.tilt_limit = tilt_limit_rad
+        self.record = record
+        self.connect_timeout_s = connect_timeout_s
+        self.telemetry_timeout_s = telemetry_timeout_s
+        self.ack_timeout_s = ack_timeout_s
+        self.heartbeat = None
+        self.odometry: wire.Odometry | None = None
+        self.applied: ActuatorCommand | None = None
+        self._new_odometry = asyncio.Event()
+        self._heartbeat_seen = asyncio.Event()
+        self._acks: dict[int, asyncio.Future] = {}
+        self._answered_stamp: int | None = None
+        self._last_target = None
+        self._have_output_status = False    # prefer ACTUATOR_OUTPUT_STATUS (full resolution)
+        self.summary = FlightSummary(name)
+        self._errors: list[np.ndarray] = []
+        self._yaw_errors: list[float] = []
+        self._solve_ms: list[float] = []
+        link.on_message = self.on_message
+
+    # --- incoming --------------------------------------------------------------------------
+    def on_message(self, msg) -> None:
+        kind = msg.get_type()
+        if kind == "ODOMETRY":
+            odo = wire.parse_odometry(msg)
+            if odo is None:
+                return
+            if self._answered_stamp is not None and odo.stamp_us == self._answered_stamp \
+                    and self._last_target is not None:
+                self.link.send(self._last_target)      # lockstep resend: same answer again
+                return
+            if self.odometry is None or odo.stamp_us > self.odometry.stamp_us:
+                self.odometry = odo
+                self._new_odometry.set()
+        elif kind in ("ACTUATOR_OUTPUT_STATUS", "SERVO_OUTPUT_RAW"):
+            if kind == "SERVO_OUTPUT_RAW" and self._have_output_status:
+                return
+            applied = wire.parse_actuator_outputs(msg, self.tilt_limit)
+            if applied is not None:
+                self.applied = applied
+                self._have_output_status |= kind == "ACTUATOR_OUTPUT_STATUS"
+        elif kind == "HEARTBEAT":
+            self.heartbeat = msg
+            self._heartbeat_seen.set()
+        elif kind == "COMMAND_ACK":
+            fut = self._acks.get(msg.command)
+            if fut is not None and not fut.done():
+                fut.set_result(msg.result)
+        elif kind == "STATUSTEXT":
+            text = msg.text if isinstance(msg.text, str) else msg.text.decode(errors="replace")
+            log.info("vehicle: %s", text)
+
+    async def _next_odometry(self) -> wire.Odometry:
+        """The newest state not yet answered; waits for it."""
+        while True:
+            odo = self.odometry
+            if odo is not None and odo.stamp_us != self._answered_stamp:
+                return odo
+            self._new_odometry.clear()
+            try:
+                await asyncio.wait_for(self._new_odometry.wait(), self.telemetry_timeout_s)
+            except asyncio.TimeoutError:
+                log.warning("no telemetry for %.1f s: not commanding", self.telemetry_timeout_s)
+
+    async def _command(self, msg, command_id: int, retries: int = 3) -> int:
+        for _ in range(retries):
+            fut = asyncio.get_running_loop().create_future()
+            self._acks[command_id] = fut
+            self.link.send(msg)
+            try:
+                return await asyncio.wait_for(fut, self.ack_timeout_s)
+            except asyncio.TimeoutError:
+                continue
+        raise FlightError(f"no COMMAND_ACK for command {command_id} after {retries} tries")
+
+    def _answer(self, stamp_us: int, cmd: ActuatorCommand) -> None:
+        self._last_target = wire.actuator_target(stamp_us, cmd, self.tilt_limit)
+        self._answered_stamp = stamp_us
+        self.link.send(self._last_target)
+
+    async def _heartbeats(self) -> None:
+        while True:
+            self.link.send(wire.heartbeat())
+            await asyncio.sleep(1.0)
+
+    # --- the flight ------------------------------------------------------------------------
+    async def run(self) -> FlightSummary:
+        beat = asyncio.create_task(self._heartbeats())
+        try:
+            return await self._fly()
+        finally:
+            beat.cancel()
+
+    async def _fly(self) -> FlightSummary:
+        loop = asyncio.get_running_loop()
+        try:
+            await asyncio.wait_for(self._heartbeat_seen.wait(), self.connect_timeout_s)
+        except asyncio.TimeoutError:
+            raise FlightError(f"no vehicle heartbeat within {self.connect_timeout_s:.0f} s on "
+                              f"{self.link.connection.mode}:{self.link.connection.host}:"
+                              f"{self.link.connection.port}") from None
+        first = await self._next_odometry()
+        t0 = first.stamp_us
+        reference = self.make_reference(first.state)
+        self.controller.reset(0.0, first.state)
+        if not wire.is_armed(self.heartbeat):
+            result = await self._command(wire.arm_command(True),
+                                         mavlink.MAV_CMD_COMPONENT_ARM_DISARM)
+            if result != mavlink.MAV_RESULT_ACCEPTED:
+                raise FlightError(f"arming refused (MAV_RESULT {result})")
+        ground_z = first.state.pos_ned_m[2]
+        while True:
+            odo = await self._next_odometry()
+            t = (odo.stamp_us - t0) * 1e-6
+            if reference.done(t) and self._touched_down(odo.state, ground_z):
+                break
+            ref = reference.sample(t)
+            applied = self.applied
+            wall0 = time.perf_counter()
+            cmd, info = await loop.run_in_executor(None, self.controller.step, t, odo.state,
+                                                   applied, ref)
+            self._answer(odo.stamp_us, cmd)
+            self._account(t, odo, ref, cmd, applied, info, time.perf_counter() - wall0)
+            if reference.done(t) and not getattr(reference, "lands", True):
+                break
+        self.summary.landed = True
+        # idle, then disarm (the vehicle refuses a disarm in flight)
+        idle = ActuatorCommand((0.0,) * 4, (0.0,) * 4)
+        for _ in range(IDLE_STEPS_BEFORE_DISARM):
+            odo = await self._next_odometry()
+            self._answer(odo.stamp_us, idle)
+        result = await self._command(wire.arm_command(False), mavlink.MAV_CMD_COMPONENT_ARM_DISARM)
+        self.summary.disarmed = result == mavlink.MAV_RESULT_ACCEPTED
+        odo = await self._next_odometry()
+        self._answer(odo.stamp_us, idle)
+        self._finish(t)
+        return self.summary
+
+    @staticmethod
+    def _touched_down(state: StateEstimate, ground_z: float) -> bool:
+        return (abs(state.pos_ned_m[2] - ground_z) < TOUCHDOWN_ALT_M
+                and abs(state.vel_ned_m_s[2]) < TOUCHDOWN_SPEED_M_S)
+
+    def _account(self, t, odo, ref, cmd, applied, info, wall_s) -> None:
+        err = np.subtract(odo.state.pos_ned_m, ref.pos_ned_m)
+        self._errors.append(err)
+        yaw_err = (odo.state.euler_rad[2] - ref.yaw_rad + math.pi) % (2 * math.pi) - math.pi
+        self._yaw_errors.append(math.degrees(yaw_err))
+        if info is not None:
+            self._solve_ms.append(info.solve.solve_time_s * 1e3)
+            if info.source.value != "nmpc":
+                self.summary.fallbacks += 1
+        self.summary.steps += 1
+        if self.record:
+            self.record(StepRecord(t, odo.stamp_us, odo.state, ref, cmd, applied, info))
+
+    def _finish(self, t_end: float) -> None:
+        s = self.summary
+        s.flight_s = t_end
+        if self._errors:
+            e = np.asarray(self._errors)
+            norms = np.linalg.norm(e, axis=1)
+            s.rmse_pos_m = float(np.sqrt(np.mean(norms ** 2)))
+            s.max_pos_err_m = float(norms.max())
+            s.rmse_yaw_deg = float(np.sqrt(np.mean(np.square(self._yaw_errors))))
+        if self._solve_ms:
+            s.solve_ms_p50 = float(np.percentile(self._solve_ms, 50))
+            s.solve_ms_p99 = float(np.percentile(self._solve_ms, 99))
