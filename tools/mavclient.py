@@ -1,0 +1,161 @@
+"""A small blocking MAVLink client for the tools (fault injection, monitoring, tests).
+
+    client = MavClient("udpout:127.0.0.1:18570")    # the vehicle's ground-station port
+    client.param_set("SIM_MOT1_EFF", 0.5)           # waits for the PARAM_VALUE that confirms it
+    client.command(mavlink.MAV_CMD_INJECT_FAILURE, 101, 1, 1)   # waits for COMMAND_ACK
+
+`udpout:HOST:PORT` sends to the vehicle from an ephemeral port (the vehicle answers any peer),
+so it works beside a ground station that holds 14550; `udpin:HOST:PORT` listens instead.
+Every wait has a timeout and raises `NoAnswer` with what was expected.
+"""
+
+from __future__ import annotations
+
+import math
+import socket
+import time
+from typing import Callable
+
+from pymavlink.dialects.v20 import common as mavlink
+
+
+class NoAnswer(RuntimeError):
+    """The vehicle did not answer as expected in time."""
+
+
+class MavClient:
+    def __init__(self, connect: str = "udpout:127.0.0.1:18570", *, system_id: int = 255,
+                 component_id: int = 190, target_system: int = 1, target_component: int = 1) -> None:
+        mode, _, rest = connect.partition(":")
+        host, _, port = rest.rpartition(":")
+        if mode not in ("udpin", "udpout") or not port.isdigit():
+            raise ValueError(f"connection {connect!r}: expected udpin:HOST:PORT or udpout:HOST:PORT")
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        if mode == "udpin":
+            self.sock.bind((host, int(port)))
+            self.peer = None
+        else:
+            self.sock.bind(("0.0.0.0", 0))
+            self.peer = (host, int(port))
+        self.mav = mavlink.MAVLink(None, srcSystem=system_id, srcComponent=component_id)
+        self.target = (target_system, target_component)
+        self.vehicle_time_us = 0
+        self.last: dict[str, object] = {}
+        self.statustexts: list[str] = []
+        self.on_message: Callable[[object], None] | None = None
+
+    def close(self) -> None:
+        self.sock.close()
+
+    def __enter__(self) -> "MavClient":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    # --- raw I/O ---------------------------------------------------------------------------
+    def send(self, msg) -> None:
+        if self.peer is None:
+            raise NoAnswer("udpin: no vehicle has sent anything yet, nowhere to send to")
+        data = msg.pack(self.mav)
+        self.mav.seq = (self.mav.seq + 1) % 256
+        self.sock.sendto(data, self.peer)
+
+    def poll(self, timeout_s: float) -> list:
+        """Messages of the datagrams that arrive within `timeout_s` (at least one wait)."""
+        self.sock.settimeout(max(timeout_s, 1e-3))
+        try:
+            data, addr = self.sock.recvfrom(65535)
+        except (socket.timeout, ConnectionRefusedError):
+            return []
+        if self.peer is None:
+            self.peer = addr[:2]
+        rx = mavlink.MAVLink(None)
+        rx.robust_parsing = True
+        out = []
+        for msg in rx.parse_buffer(data) or []:
+            if isinstance(msg, mavlink.MAVLink_bad_data):
+                continue
+            kind = msg.get_type()
+            self.last[kind] = msg
+            if kind == "ODOMETRY":
+                self.vehicle_time_us = max(self.vehicle_time_us, int(msg.time_usec))
+            elif kind in _BOOT_MS_STAMPED:
+                self.vehicle_time_us = max(self.vehicle_time_us, int(msg.time_boot_ms) * 1000)
+            if kind == "STATUSTEXT":
+                text = msg.text if isinstance(msg.text, str) else msg.text.decode(errors="replace")
+                self.statustexts.append(text)
+            if self.on_message:
+                self.on_message(msg)
+            out.append(msg)
+        return out
+
+    def wait(self, predicate: Callable[[object], bool], timeout_s: float, what: str):
+        end = time.monotonic() + timeout_s
+        while (left := end - time.monotonic()) > 0:
+            for msg in self.poll(min(left, 0.2)):
+                if predicate(msg):
+                    return msg
+        raise NoAnswer(f"no {what} within {timeout_s:g} s")
+
+    def hello(self, timeout_s: float = 5.0):
+        """Make the vehicle know this peer and wait for its heartbeat."""
+        if self.peer is not None:
+            self.send(mavlink.MAVLink_heartbeat_message(
+                mavlink.MAV_TYPE_GCS, mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 0, 3))
+        return self.wait(lambda m: m.get_type() == "HEARTBEAT" and m.get_srcSystem() == 1,
+                         timeout_s, "HEARTBEAT from the vehicle")
+
+    # --- protocol helpers ------------------------------------------------------------------
+    def command(self, command: int, *params: float, timeout_s: float = 1.0,
+                retries: int = 3) -> int:
+        """COMMAND_LONG; returns the MAV_RESULT of its COMMAND_ACK."""
+        p = list(params) + [0.0] * (7 - len(params))
+        for attempt in range(retries):
+            self.send(mavlink.MAVLink_command_long_message(*self.target, command, attempt, *p))
+            try:
+                ack = self.wait(lambda m: m.get_type() == "COMMAND_ACK" and m.command == command,
+                                timeout_s, f"COMMAND_ACK for command {command}")
+                return ack.result
+            except NoAnswer:
+                continue
+        raise NoAnswer(f"no COMMAND_ACK for command {command} after {retries} tries")
+
+    def param_set(self, name: str, value: float, timeout_s: float = 1.0, retries: int = 3) -> float:
+        """PARAM_SET; returns the value the vehicle confirms. Raises NoAnswer if it never
+        confirms the value asked for (a refused value is confirmed unchanged)."""
+        for _ in range(retries):
+            self.send(mavlink.MAVLink_param_set_message(*self.target, name.encode(), value,
+                                                        mavlink.MAV_PARAM_TYPE_REAL32))
+            try:
+                reply = self.wait(lambda m: m.get_type() == "PARAM_VALUE"
+                                  and _name(m.param_id) == name, timeout_s,
+                                  f"PARAM_VALUE {name}")
+            except NoAnswer:
+                continue
+            if not math.isclose(reply.param_value, value, rel_tol=1e-6, abs_tol=1e-6):
+                raise NoAnswer(f"{name}: the vehicle kept {reply.param_value:g}, refused {value:g}"
+                               + (f" ({self.statustexts[-1]})" if self.statustexts else ""))
+            return reply.param_value
+        raise NoAnswer(f"no PARAM_VALUE for {name} after {retries} tries")
+
+    def params(self, timeout_s: float = 3.0) -> dict[str, float]:
+        self.send(mavlink.MAVLink_param_request_list_message(*self.target))
+        values: dict[str, float] = {}
+        count = None
+        end = time.monotonic() + timeout_s
+        while time.monotonic() < end and (count is None or len(values) < count):
+            for m in self.poll(0.2):
+                if m.get_type() == "PARAM_VALUE":
+                    values[_name(m.param_id)] = m.param_value
+                    count = m.param_count
+        if count is None or len(values) < count:
+            raise NoAnswer(f"got {len(values)} of {count} parameters in {timeout_s:g} s")
+        return values
+
+
+_BOOT_MS_STAMPED = ("ATTITUDE", "LOCAL_POSITION_NED", "GLOBAL_POSITION_INT")
+
+
+def _name(param_id) -> str:
+    return param_id if isinstance(param_id, str) else param_id.decode(errors="replace")
