@@ -202,6 +202,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--wind-speed", type=float, default=None, help="mean wind speed, m/s")
     p.add_argument("--wind-dir", type=float, default=None,
                    help="direction the wind blows from, deg clockwise from north")
+    p.add_argument("--gusts", action="store_true", help="turn Dryden gusts on")
     p.add_argument("--faults", type=Path, default=None,
                    help="fault script YAML (params/faults/*.yaml) played in vehicle time")
     p.add_argument("--log-dir", type=Path, default=None,
@@ -230,7 +231,11 @@ def apply_overrides(sim: SimParams, args: argparse.Namespace) -> SimParams:
             raise ConfigError(f"--wind-speed: got {args.wind_speed}, expected [0, 40] m/s")
         changes["wind_speed_m_s"] = args.wind_speed
     if args.wind_dir is not None:
+        if not -360.0 <= args.wind_dir <= 360.0:
+            raise ConfigError(f"--wind-dir: got {args.wind_dir}, expected [-360, 360] deg")
         changes["wind_from_deg"] = args.wind_dir
+    if args.gusts:
+        changes["gusts_enabled"] = True
     links = []
     for link in sim.links:
         updates = {}

@@ -1,0 +1,146 @@
+"""Flight metrics of a scenario run, from the two logs: the vehicle's truth (flight.csv) and the
+controller's steps (controller.csv). Pure functions of arrays, so they can be tested on synthetic
+logs with known answers.
+
+Errors are truth minus reference at the controller's steps (the stamps of both logs are the
+vehicle's microseconds). A run's metrics cover the flight from the first step to touchdown or to
+the crash, whichever comes first:
+
+    rmse_pos_m, max_pos_err_m      norm of the 3-D position error
+    rmse_pos_after_fault_m         the same from the fault onset on
+    rmse_yaw_deg, max_yaw_err_deg  yaw error, wrapped to +-180 deg
+    recovery_s                     from the onset to the last time the position error exceeded
+                                   the recovery threshold (0 if it never did; None if crashed)
+    solve_ms_p50, solve_ms_p99     controller solve time per step
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class RunMetrics:
+    controller: str
+    vehicle: str
+    crashed: bool
+    flight_s: float
+    rmse_pos_m: float
+    max_pos_err_m: float
+    rmse_pos_after_fault_m: float | None
+    rmse_yaw_deg: float
+    max_yaw_err_deg: float
+    recovery_s: float | None
+    solve_ms_p50: float
+    solve_ms_p99: float
+
+    def as_dict(self) -> dict:
+        return {k: (None if isinstance(v, float) and not math.isfinite(v) else v)
+                for k, v in asdict(self).items()}
+
+
+def read_csv(path: Path) -> tuple[dict[str, str], dict[str, np.ndarray]]:
+    """(metadata, columns) of a log with '# key: value' header lines. Text columns stay text."""
+    meta: dict[str, str] = {}
+    with open(path, encoding="ascii") as f:
+        line = f.readline()
+        while line.startswith("#"):
+            key, _, value = line[2:].rstrip("\n").partition(": ")
+            meta[key] = value
+            line = f.readline()
+        names = line.rstrip("\n").split(",")
+        rows = [r.rstrip("\n").split(",") for r in f if r.strip()]
+    cols: dict[str, np.ndarray] = {}
+    for i, name in enumerate(names):
+        raw = [r[i] for r in rows if len(r) == len(names)]
+        try:
+            cols[name] = np.array(raw, dtype=float)
+        except ValueError:
+            cols[name] = np.array(raw, dtype=object)
+    return meta, cols
+
+
+def wrap_deg(a: np.ndarray) -> np.ndarray:
+    return (np.asarray(a) + 180.0) % 360.0 - 180.0
+
+
+def compute(controller: str, vehicle: str, truth: dict[str, np.ndarray],
+            steps: dict[str, np.ndarray], fault_onset_us: int | None,
+            recovery_threshold_m: float = 0.1) -> RunMetrics:
+    """Metrics of one run; `truth` and `steps` as read by read_csv."""
+    t_truth = truth["t_us"].astype(np.int64)
+    crashed_rows = np.flatnonzero(truth["crashed"] > 0.5)
+    crash_us = int(t_truth[crashed_rows[0]]) if len(crashed_rows) else None
+    stamps = steps["stamp_us"].astype(np.int64)
+    index = {int(t): i for i, t in enumerate(t_truth)}
+    keep = np.array([int(s) in index for s in stamps], dtype=bool)
+    if crash_us is not None:
+        keep &= stamps < crash_us
+    phase = steps.get("phase")
+    if phase is not None:
+        keep &= np.array([p != "landed" for p in phase], dtype=bool)
+    rows = np.array([index[int(s)] for s in stamps[keep]], dtype=np.int64)
+    pos = np.column_stack([truth[f"pos_{a}_m"][rows] for a in "ned"])
+    ref = np.column_stack([steps[f"ref_pos_{a}_m"][keep] for a in "ned"])
+    err = np.linalg.norm(pos - ref, axis=1)
+    yaw_err = wrap_deg(np.degrees(truth["yaw_rad"][rows] - steps["ref_yaw_rad"][keep]))
+    t_us = stamps[keep]
+
+    def rms(x: np.ndarray) -> float:
+        return float(np.sqrt(np.mean(np.square(x)))) if len(x) else math.nan
+
+    after = None
+    recovery = None
+    if fault_onset_us is not None:
+        sel = t_us >= fault_onset_us
+        after = rms(err[sel]) if sel.any() else math.nan
+        if crash_us is None and sel.any():
+            over = np.flatnonzero(sel & (err > recovery_threshold_m))
+            recovery = 0.0 if len(over) == 0 else float((t_us[over[-1]] - fault_onset_us) * 1e-6)
+    solve = steps["solve_ms"][np.isfinite(steps["solve_ms"])]
+    flight_end = crash_us if crash_us is not None else (int(stamps[-1]) if len(stamps) else 0)
+    return RunMetrics(
+        controller=controller, vehicle=vehicle, crashed=crash_us is not None,
+        flight_s=float((flight_end - (int(stamps[0]) if len(stamps) else 0)) * 1e-6),
+        rmse_pos_m=rms(err), max_pos_err_m=float(err.max()) if len(err) else math.nan,
+        rmse_pos_after_fault_m=after, rmse_yaw_deg=rms(yaw_err),
+        max_yaw_err_deg=float(np.abs(yaw_err).max()) if len(yaw_err) else math.nan,
+        recovery_s=recovery,
+        solve_ms_p50=float(np.percentile(solve, 50)) if len(solve) else math.nan,
+        solve_ms_p99=float(np.percentile(solve, 99)) if len(solve) else math.nan)
+
+
+def true_disturbance(truth: dict[str, np.ndarray], vehicle_params) -> np.ndarray:
+    """The disturbance the observer should see, per truth row (n x 6): what the real outputs,
+    wind and faults do minus what the nominal model predicts from the commands, as NED
+    acceleration (m/s^2) and body angular acceleration (rad/s^2). Uses the simulator's own
+    pure dynamics (tools may import it; the controller never does)."""
+    from sil_vehicle.dynamics.environment import drag_force_ned
+    from sil_vehicle.dynamics.rotors import body_wrench
+    from sil_vehicle.frames import quat_to_dcm
+
+    vp = vehicle_params
+    n = len(truth["t_us"])
+    out = np.zeros((n, 6))
+    ixx, iyy, izz = vp.inertia_kg_m2
+    for k in range(n):
+        q = [truth[f"q{a}"][k] for a in "wxyz"]
+        rot = np.array(quat_to_dcm(*q))
+        vel = [truth[f"vel_{a}_m_s"][k] for a in "ned"]
+        wind = [truth[f"wind_{a}_m_s"][k] for a in "ned"]
+        out_thr = [truth[f"out_throttle{i}_pct"][k] for i in range(1, 5)]
+        out_tilt = [truth[f"out_tilt{i}_rad"][k] for i in range(1, 5)]
+        cmd_thr = [max(truth[f"cmd_throttle{i}_pct"][k], vp.idle_pct) for i in range(1, 5)]
+        cmd_tilt = [0.0 if vp.tilt_locked else truth[f"cmd_tilt{i}_rad"][k] for i in range(1, 5)]
+        real = np.array(body_wrench(out_thr, out_tilt, vp))
+        nominal = np.array(body_wrench(cmd_thr, cmd_tilt, vp))
+        drag_real = np.array(drag_force_ned(vel, wind, vp.drag_N_s2_m2))
+        drag_nominal = np.array(drag_force_ned(vel, (0.0, 0.0, 0.0), vp.drag_N_s2_m2))
+        out[k, 0:3] = (rot @ (real[0:3] - nominal[0:3]) + drag_real - drag_nominal) / vp.mass_kg
+        dm = real[3:6] - nominal[3:6]
+        out[k, 3:6] = (dm[0] / ixx, dm[1] / iyy, dm[2] / izz)
+    return out

@@ -1,0 +1,177 @@
+"""Report of a scenario: the metrics table (Markdown) and the figures in the manner of the paper.
+
+    trajectories.png   3-D trajectories of every controller against the reference (paper Fig. 4,
+                       and Fig. 7 for a time-varying fault)
+    observer.png       the observer's disturbance estimate against the true disturbance (Fig. 5)
+    errors.png         position and attitude errors over time, fault onset marked (Fig. 6)
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+import metrics as metrics_mod
+
+COLUMNS = [("controller", "controller", "{}"), ("vehicle", "vehicle", "{}"),
+           ("crashed", "crashed", "{}"), ("flight_s", "flight s", "{:.1f}"),
+           ("rmse_pos_m", "pos RMSE m", "{:.3f}"), ("max_pos_err_m", "max pos err m", "{:.3f}"),
+           ("rmse_pos_after_fault_m", "pos RMSE after fault m", "{:.3f}"),
+           ("rmse_yaw_deg", "yaw RMSE deg", "{:.2f}"), ("max_yaw_err_deg", "max yaw err deg", "{:.2f}"),
+           ("recovery_s", "recovery s", "{:.2f}"), ("solve_ms_p50", "solve p50 ms", "{:.1f}"),
+           ("solve_ms_p99", "solve p99 ms", "{:.1f}")]
+
+
+def _fmt(value, fmt: str) -> str:
+    if value is None or (isinstance(value, float) and not math.isfinite(value)):
+        return "-"
+    return fmt.format(value)
+
+
+def table(results: list[dict]) -> str:
+    head = "| " + " | ".join(h for _, h, _ in COLUMNS) + " |"
+    rule = "|" + "---|" * len(COLUMNS)
+    rows = ["| " + " | ".join(_fmt(r.get(k), f) for k, _, f in COLUMNS) + " |" for r in results]
+    return "\n".join([head, rule] + rows)
+
+
+def markdown(scenario, results: list[dict], failures: list[str], figures: list[Path]) -> str:
+    lines = [f"# Scenario `{scenario.name}`", "", scenario.description, "",
+             f"Seed {scenario.seed}; wind {scenario.wind_speed_m_s:g} m/s from "
+             f"{scenario.wind_from_deg:g} deg{' with gusts' if scenario.gusts else ''}; faults: "
+             f"`{scenario.faults.name if scenario.faults else 'none'}`; reference: "
+             f"{scenario.reference.get('kind', 'from the controller files')}; recovery threshold "
+             f"{scenario.recovery_threshold_m:g} m.", "", table(results), ""]
+    if scenario.targets or scenario.better:
+        lines += ["## Targets", ""]
+        for name, targets in scenario.targets.items():
+            for key, want in targets.items():
+                op = "=" if isinstance(want, bool) else "<="
+                lines.append(f"- `{name}`: {key} {op} {want}")
+        for better, worse, metric in scenario.better:
+            lines.append(f"- `{better}` better than `{worse}` on {metric}")
+        lines += ["", "**All met.**" if not failures else "**Missed:**", ""]
+        lines += [f"- {f}" for f in failures]
+        lines.append("")
+    for fig in figures:
+        lines += [f"![{fig.stem}]({fig.name})", ""]
+    return "\n".join(lines)
+
+
+def figures(scenario, runs, out: Path) -> list[Path]:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    data = []
+    for r in runs:
+        try:
+            _, truth = metrics_mod.read_csv(r.out / "flight.csv")
+            _, steps = metrics_mod.read_csv(r.out / "controller.csv")
+        except (OSError, ValueError):
+            continue
+        if len(steps.get("stamp_us", [])) == 0:
+            continue
+        data.append((r.controller, truth, steps))
+    if not data:
+        return []
+    onset_s = None
+    if scenario.faults:
+        from sil_vehicle.faultscript import load_script
+        events = load_script(scenario.faults)
+        onset_s = events[0].at_us * 1e-6 if events else None
+    made = []
+
+    # --- trajectories (Fig. 4 / Fig. 7) ---
+    fig = plt.figure(figsize=(8, 6.5))
+    ax = fig.add_subplot(projection="3d")
+    _, _, steps0 = data[0]
+    ax.plot(steps0["ref_pos_e_m"], steps0["ref_pos_n_m"], -steps0["ref_pos_d_m"], "k--",
+            lw=1.2, label="reference")
+    for name, truth, _ in data:
+        ax.plot(truth["pos_e_m"], truth["pos_n_m"], -truth["pos_d_m"], lw=1.0, label=name)
+        crash = np.flatnonzero(truth["crashed"] > 0.5)
+        if len(crash):
+            k = crash[0]
+            ax.scatter([truth["pos_e_m"][k]], [truth["pos_n_m"][k]], [-truth["pos_d_m"][k]],
+                       marker="x", s=60, color="red")
+    ax.set_xlabel("east m")
+    ax.set_ylabel("north m")
+    ax.set_zlabel("up m")
+    ax.set_title(f"{scenario.name}: trajectories")
+    ax.legend(loc="upper left", fontsize=8)
+    path = out / "trajectories.png"
+    fig.savefig(path, dpi=110, bbox_inches="tight")
+    plt.close(fig)
+    made.append(path)
+
+    # --- errors over time (Fig. 6) ---
+    fig, axes = plt.subplots(3, 1, figsize=(9, 8), sharex=True)
+    for name, truth, steps in data:
+        index = {int(t): i for i, t in enumerate(truth["t_us"].astype(np.int64))}
+        stamps = steps["stamp_us"].astype(np.int64)
+        keep = np.array([int(s) in index for s in stamps])
+        rows = np.array([index[int(s)] for s in stamps[keep]], dtype=np.int64)
+        t = stamps[keep] * 1e-6
+        pos = np.column_stack([truth[f"pos_{a}_m"][rows] for a in "ned"])
+        ref = np.column_stack([steps[f"ref_pos_{a}_m"][keep] for a in "ned"])
+        axes[0].plot(t, np.linalg.norm(pos - ref, axis=1), lw=1, label=name)
+        yaw_err = metrics_mod.wrap_deg(np.degrees(truth["yaw_rad"][rows] - steps["ref_yaw_rad"][keep]))
+        axes[1].plot(t, yaw_err, lw=1, label=name)
+        tilt = np.degrees(np.hypot(truth["roll_rad"][rows], truth["pitch_rad"][rows]))
+        axes[2].plot(t, tilt, lw=1, label=name)
+    axes[0].set_ylabel("position error m")
+    axes[0].set_yscale("log")
+    axes[1].set_ylabel("yaw error deg")
+    axes[2].set_ylabel("roll/pitch tilt deg")
+    axes[2].set_xlabel("vehicle time s")
+    for a in axes:
+        if onset_s is not None:
+            a.axvline(onset_s, color="red", ls=":", lw=1)
+        a.grid(alpha=0.3)
+    axes[0].legend(fontsize=8)
+    axes[0].set_title(f"{scenario.name}: errors (fault onset dotted)")
+    path = out / "errors.png"
+    fig.savefig(path, dpi=110, bbox_inches="tight")
+    plt.close(fig)
+    made.append(path)
+
+    # --- observer (Fig. 5) ---
+    observed = [(n, tr, st) for n, tr, st in data
+                if np.isfinite(st["d_acc_n_m_s2"]).any() and np.nanmax(np.abs(st["d_acc_n_m_s2"])) > 0]
+    if observed:
+        from sil_vehicle.config import load_vehicle
+        name, truth, steps = observed[0]
+        meta, _ = metrics_mod.read_csv(next(r.out for r in runs if r.controller == name) / "flight.csv")
+        vp = load_vehicle(meta["vehicle_file"])
+        index = {int(t): i for i, t in enumerate(truth["t_us"].astype(np.int64))}
+        stamps = steps["stamp_us"].astype(np.int64)
+        keep = np.array([int(s) in index for s in stamps])
+        rows = np.array([index[int(s)] for s in stamps[keep]], dtype=np.int64)
+        sub = {k: v[rows] for k, v in truth.items()}
+        true_d = metrics_mod.true_disturbance(sub, vp)
+        t = stamps[keep] * 1e-6
+        est = np.column_stack([steps[c][keep] for c in
+                               ("d_acc_n_m_s2", "d_acc_e_m_s2", "d_acc_d_m_s2",
+                                "d_ang_p_rad_s2", "d_ang_q_rad_s2", "d_ang_r_rad_s2")])
+        labels = ["north m/s²", "east m/s²", "down m/s²", "roll rad/s²", "pitch rad/s²", "yaw rad/s²"]
+        fig, axes = plt.subplots(3, 2, figsize=(11, 8), sharex=True)
+        for j in range(6):
+            a = axes[j % 3, j // 3]
+            a.plot(t, true_d[:, j], "k-", lw=1, label="true (plant - nominal model)")
+            a.plot(t, est[:, j], "C1-", lw=1, label="observer estimate")
+            a.set_ylabel(labels[j])
+            if onset_s is not None:
+                a.axvline(onset_s, color="red", ls=":", lw=1)
+            a.grid(alpha=0.3)
+        axes[0, 0].legend(fontsize=8)
+        axes[2, 0].set_xlabel("vehicle time s")
+        axes[2, 1].set_xlabel("vehicle time s")
+        fig.suptitle(f"{scenario.name}: disturbance seen by the observer of {name}")
+        path = out / "observer.png"
+        fig.savefig(path, dpi=110, bbox_inches="tight")
+        plt.close(fig)
+        made.append(path)
+    return made

@@ -1,0 +1,364 @@
+#!/usr/bin/env python3
+"""Run a scenario: the SIL vehicle and the offboard controller as separate processes over UDP,
+once per controller under the same wind, faults and seed; then metrics, report and figures.
+
+    python tools/run_scenario.py params/scenarios/paper_fault50.yaml --out out/paper_fault50
+    python tools/run_scenario.py SCENARIO.yaml --out DIR [--realtime] [--jobs N] [--only NAME]
+
+Writes DIR/metrics.json, DIR/report.md, DIR/*.png and, per controller, DIR/<controller>/ with
+flight.csv and vehicle.tlog (the vehicle), controller.csv and offboard.tlog (the controller) and
+the processes' output. Lockstep by default (deterministic, faster than real time); --realtime flies
+against the wall clock. Run i's vehicle sends its ground-station telemetry to UDP 14550 + i, so
+QGroundControl on 14550 shows the first flight. Exit status: 0 when every run finished and every
+target of the scenario is met, 1 otherwise, 2 on a bad scenario file.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "tools"))
+
+import metrics as metrics_mod  # noqa: E402
+from sil_vehicle.config import load_vehicle  # noqa: E402
+from sil_vehicle.faultscript import load_script  # noqa: E402
+from sil_vehicle.yamlcheck import ConfigError, Section, load_yaml  # noqa: E402
+
+TARGET_KEYS = {"crashed": bool, "rmse_pos_m": float, "rmse_pos_after_fault_m": float,
+               "max_pos_err_m": float, "max_yaw_err_deg": float, "rmse_yaw_deg": float,
+               "recovery_s": float}
+
+
+@dataclass(frozen=True)
+class Scenario:
+    name: str
+    file: Path
+    description: str
+    seed: int
+    wind_speed_m_s: float
+    wind_from_deg: float
+    gusts: bool
+    faults: Path | None
+    reference: dict
+    controllers: tuple[str, ...]
+    recovery_threshold_m: float
+    timeout_s: float
+    targets: dict[str, dict[str, object]]
+    better: tuple[tuple[str, str, str], ...]     # (better, worse, metric)
+
+
+def load_scenario(path: Path) -> Scenario:
+    path = Path(path)
+    top = Section(load_yaml(path), path)
+    name = top.str("name")
+    description = top.str("description")
+    seed = top.int("seed", 0, 2**31)
+    wind = top.section("wind")
+    speed = wind.float("speed_m_s", 0.0, 40.0)
+    direction = wind.float("direction_deg", -360.0, 360.0)
+    gusts = wind.bool("gusts")
+    wind.done()
+    faults_ref = top.raw("faults")
+    faults = None
+    if faults_ref is not None:
+        if not isinstance(faults_ref, str):
+            raise top.fail("faults", faults_ref, "a fault script file name or null")
+        faults = (path.parent / faults_ref).resolve()
+        load_script(faults)     # fail now, with the script's own message, if it is bad
+    reference = top.raw("reference")
+    if not isinstance(reference, dict):
+        raise top.fail("reference", reference, "a mapping of reference settings")
+    controllers = top.raw("controllers")
+    if not isinstance(controllers, list) or not controllers or \
+            not all(isinstance(c, str) for c in controllers):
+        raise top.fail("controllers", controllers, "a non-empty list of controller names")
+    for c in controllers:
+        if not (ROOT / "params" / "controller" / f"{c}.yaml").exists():
+            raise top.fail("controllers", c, "a file name in params/controller/ without .yaml")
+    threshold = top.float("recovery_threshold_m", 0.001, 100.0)
+    timeout = top.float("timeout_s", 1.0, 36000.0)
+    targets: dict[str, dict[str, object]] = {}
+    tsec = top.section("targets", default={})
+    for c in controllers:
+        if not tsec.has(c):
+            continue
+        csec = tsec.section(c)
+        t = {}
+        for key, kind in TARGET_KEYS.items():
+            if csec.has(key):
+                t[key] = csec.bool(key) if kind is bool else csec.float(key, 0.0, 1e6)
+        csec.done()
+        targets[c] = t
+    tsec.done()
+    better = []
+    for i, item in enumerate(top.raw("better", default=[])):
+        b = Section(item, path, f"better[{i}].")
+        better.append((b.str("better", tuple(controllers)), b.str("worse", tuple(controllers)),
+                       b.str("metric", tuple(k for k, v in TARGET_KEYS.items() if v is float))))
+        b.done()
+    top.done()
+    return Scenario(name, path, description, seed, speed, direction, gusts, faults, reference,
+                    tuple(controllers), threshold, timeout, targets, tuple(better))
+
+
+def free_ports(n: int) -> list[int]:
+    socks = []
+    for _ in range(n):
+        s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        s.bind(("127.0.0.1", 0))
+        socks.append(s)
+    ports = [s.getsockname()[1] for s in socks]
+    for s in socks:
+        s.close()
+    return ports
+
+
+def _yaml_dump(data: dict) -> str:
+    import yaml
+    return yaml.safe_dump(data, sort_keys=False)
+
+
+@dataclass
+class Run:
+    controller: str
+    index: int
+    out: Path
+    status: str = "pending"
+    t_s: float = 0.0
+    wall_s: float = 0.0
+    returncode: int | None = None
+    summary: str = ""
+
+
+def prepare(scenario: Scenario, controller: str, out: Path) -> tuple[Path, Path, Path, int]:
+    """Write the run's controller and sim overlays; return (controller yaml, sim yaml, vehicle
+    file, control rate)."""
+    from trq_offboard.config import load_controller
+
+    base = ROOT / "params" / "controller" / f"{controller}.yaml"
+    cfg = load_controller(base)
+    out.mkdir(parents=True, exist_ok=True)
+    overlay = {"extends": str(base), "vehicle": str(Path(cfg.vehicle.file).resolve()),
+               "observer": {"file": str(Path(cfg.eso.file).resolve()) if cfg.eso else
+                            str(ROOT / "params" / "controller" / "eso.yaml")},
+               "reference": scenario.reference}
+    ctrl_yaml = out / "controller.yaml"
+    ctrl_yaml.write_text(f"# written by run_scenario.py for {scenario.name}\n" + _yaml_dump(overlay))
+    load_controller(ctrl_yaml)          # the overlay must be valid before anything starts
+    rate = cfg.control_rate_hz
+    sim_yaml = out / "sim.yaml"
+    sim_yaml.write_text(_yaml_dump({
+        "extends": str(ROOT / "params" / "sim" / "default.yaml"),
+        "control_rate_hz": rate, "telemetry": {"offboard": {"ODOMETRY": rate}}}))
+    return ctrl_yaml, sim_yaml, Path(cfg.vehicle.file).resolve(), rate
+
+
+def fly(scenario: Scenario, run: Run, realtime: bool, lock: threading.Lock) -> None:
+    ctrl_yaml, sim_yaml, vehicle_file, _ = prepare(scenario, run.controller, run.out)
+    p_vehicle, p_ctrl, p_gcs = free_ports(3)
+    vcmd = [sys.executable, "-m", "sil_vehicle", "--sim", str(sim_yaml), "--vehicle",
+            str(vehicle_file), "--seed", str(scenario.seed), "--wind-speed",
+            str(scenario.wind_speed_m_s), "--wind-dir", str(scenario.wind_from_deg),
+            "--offboard-bind", f"127.0.0.1:{p_vehicle}", "--offboard-target",
+            f"127.0.0.1:{p_ctrl}", "--gcs-bind", f"127.0.0.1:{p_gcs}", "--gcs-target",
+            f"127.0.0.1:{14550 + run.index}", "--log-dir", str(run.out),
+            "--mode", "realtime" if realtime else "lockstep"]
+    if scenario.gusts:
+        vcmd.append("--gusts")
+    if scenario.faults:
+        vcmd += ["--faults", str(scenario.faults)]
+    ccmd = [sys.executable, "-m", "trq_offboard", "--controller", str(ctrl_yaml), "--connect",
+            f"udpin:127.0.0.1:{p_ctrl}", "--log-dir", str(run.out)]
+    env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    (run.out / "command.txt").write_text(" ".join(vcmd) + "\n" + " ".join(ccmd) + "\n")
+    wall0 = time.monotonic()
+    with open(run.out / "vehicle.out", "w") as vout, open(run.out / "controller.out", "w") as cout:
+        vehicle = subprocess.Popen(vcmd, stdout=vout, stderr=subprocess.STDOUT, env=env, cwd=ROOT)
+        controller = subprocess.Popen(ccmd, stdout=cout, stderr=subprocess.STDOUT, env=env,
+                                      cwd=ROOT)
+        run.status = "flying"
+        try:
+            while controller.poll() is None:
+                run.wall_s = time.monotonic() - wall0
+                run.t_s = _last_time(run.out / "controller.csv")
+                if run.wall_s > scenario.timeout_s:
+                    run.status = "timeout"
+                    controller.send_signal(signal.SIGINT)
+                    try:
+                        controller.wait(10)
+                    except subprocess.TimeoutExpired:
+                        controller.kill()
+                    break
+                if vehicle.poll() is not None:
+                    run.status = "vehicle died"
+                    controller.send_signal(signal.SIGINT)
+                    controller.wait(10)
+                    break
+                time.sleep(0.5)
+        finally:
+            for proc in (controller, vehicle):
+                if proc.poll() is None:
+                    proc.send_signal(signal.SIGINT)
+                    try:
+                        proc.wait(10)
+                    except subprocess.TimeoutExpired:
+                        proc.kill()
+                        proc.wait()
+    run.returncode = controller.returncode
+    run.wall_s = time.monotonic() - wall0
+    run.t_s = _last_time(run.out / "controller.csv")
+    if run.status == "flying":
+        run.status = "done" if controller.returncode == 0 else f"exit {controller.returncode}"
+    lines = (run.out / "controller.out").read_text(errors="replace").strip().splitlines()
+    run.summary = next((ln for ln in reversed(lines) if ln.startswith("trq-offboard:")), "")
+
+
+def _last_time(path: Path) -> float:
+    try:
+        with open(path, "rb") as f:
+            f.seek(0, os.SEEK_END)
+            size = f.tell()
+            f.seek(max(0, size - 4096))
+            tail = f.read().decode(errors="replace").strip().splitlines()
+        return float(tail[-1].split(",")[0]) if tail and not tail[-1].startswith(("#", "t_s")) else 0.0
+    except (OSError, ValueError, IndexError):
+        return 0.0
+
+
+def progress(runs: list[Run], stop: threading.Event, stream=sys.stdout) -> None:
+    while not stop.wait(2.0):
+        parts = []
+        for r in runs:
+            rtf = r.t_s / r.wall_s if r.wall_s > 0 else 0.0
+            parts.append(f"{r.controller}: {r.status} t={r.t_s:5.1f} s ({rtf:4.1f}x)")
+        print("  " + " | ".join(parts), file=stream, flush=True)
+
+
+def evaluate(scenario: Scenario, runs: list[Run]) -> tuple[list[dict], list[str]]:
+    onset = None
+    if scenario.faults:
+        events = load_script(scenario.faults)
+        onset = events[0].at_us if events else None
+    results, failures = [], []
+    for r in runs:
+        try:
+            _, truth = metrics_mod.read_csv(r.out / "flight.csv")
+            _, steps = metrics_mod.read_csv(r.out / "controller.csv")
+            vehicle = Path(load_vehicle(prepare_vehicle_file(r)).file).stem
+            m = metrics_mod.compute(r.controller, vehicle, truth, steps, onset,
+                                    scenario.recovery_threshold_m).as_dict()
+        except (OSError, KeyError, ValueError, IndexError) as exc:
+            m = {"controller": r.controller, "error": f"no usable logs: {exc}"}
+            failures.append(f"{r.controller}: no usable logs ({exc})")
+        m["status"] = r.status
+        m["wall_s"] = round(r.wall_s, 2)
+        results.append(m)
+    by_name = {m["controller"]: m for m in results}
+    for name, targets in scenario.targets.items():
+        m = by_name.get(name, {})
+        for key, want in targets.items():
+            got = m.get(key)
+            ok = (got == want) if isinstance(want, bool) else (got is not None and got <= want)
+            if not ok:
+                failures.append(f"{name}: {key} = {got} (target {'=' if isinstance(want, bool) else '<='} {want})")
+    for better, worse, metric in scenario.better:
+        a, b = by_name.get(better, {}).get(metric), by_name.get(worse, {}).get(metric)
+        if a is None or b is None or not a < b:
+            failures.append(f"{better} not better than {worse} on {metric} ({a} vs {b})")
+    return results, failures
+
+
+def prepare_vehicle_file(run: Run) -> Path:
+    for line in (run.out / "flight.csv").open():
+        if line.startswith("# vehicle_file: "):
+            return Path(line.split(": ", 1)[1].strip())
+    raise KeyError("vehicle_file")
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("scenario", type=Path)
+    ap.add_argument("--out", type=Path, required=True, help="output directory")
+    ap.add_argument("--realtime", action="store_true", help="fly against the wall clock")
+    ap.add_argument("--jobs", type=int, default=None,
+                    help="flights in parallel (default: the number of CPUs, at most the runs)")
+    ap.add_argument("--only", action="append", default=None,
+                    help="fly only this controller (repeatable)")
+    ap.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
+    args = ap.parse_args(argv)
+    try:
+        scenario = load_scenario(args.scenario)
+    except ConfigError as exc:
+        print(f"run_scenario: {exc}", file=sys.stderr)
+        return 2
+    names = [c for c in scenario.controllers if not args.only or c in args.only]
+    if not names:
+        print(f"run_scenario: --only {args.only} matches none of {scenario.controllers}",
+              file=sys.stderr)
+        return 2
+    args.out.mkdir(parents=True, exist_ok=True)
+    runs = [Run(c, i, args.out / c) for i, c in enumerate(names)]
+    jobs = max(1, min(args.jobs or os.cpu_count() or 1, len(runs)))
+    print(f"run_scenario: {scenario.name}: {scenario.description}")
+    print(f"  {len(runs)} flight(s) {'in real time' if args.realtime else 'in lockstep'}, "
+          f"{jobs} at a time, seed {scenario.seed}, wind {scenario.wind_speed_m_s:g} m/s from "
+          f"{scenario.wind_from_deg:g} deg{' with gusts' if scenario.gusts else ''}, faults "
+          f"{scenario.faults.name if scenario.faults else 'none'}")
+    lock = threading.Lock()
+    stop = threading.Event()
+    reporter = threading.Thread(target=progress, args=(runs, stop), daemon=True)
+    reporter.start()
+    pending = list(runs)
+    active: list[threading.Thread] = []
+    interrupted = False
+    try:
+        while pending or active:
+            active = [t for t in active if t.is_alive()]
+            while pending and len(active) < jobs:
+                run = pending.pop(0)
+                t = threading.Thread(target=fly, args=(scenario, run, args.realtime, lock))
+                t.start()
+                active.append(t)
+            time.sleep(0.2)
+    except KeyboardInterrupt:
+        interrupted = True
+        print("run_scenario: interrupted, stopping the flights", file=sys.stderr)
+        for t in active:
+            t.join()
+    finally:
+        stop.set()
+    for r in runs:
+        print(f"  {r.controller}: {r.status}, {r.t_s:.1f} s simulated in {r.wall_s:.1f} s wall. "
+              f"{r.summary}")
+    results, failures = evaluate(scenario, runs)
+    doc = {"scenario": scenario.name, "runs": results}
+    (args.out / "metrics.json").write_text(json.dumps(doc, indent=2) + "\n")
+    import report
+    figures = [] if args.no_figures else report.figures(scenario, runs, args.out)
+    text = report.markdown(scenario, results, failures, figures)
+    (args.out / "report.md").write_text(text)
+    print()
+    print(report.table(results))
+    print()
+    for f in failures:
+        print(f"  TARGET MISSED: {f}")
+    print(f"run_scenario: metrics {args.out / 'metrics.json'}, report {args.out / 'report.md'}"
+          + (f", figures {', '.join(str(p) for p in figures)}" if figures else ""))
+    return 1 if (failures or interrupted or any(r.status != "done" for r in runs)) else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
