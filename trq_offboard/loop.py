@@ -198,10 +198,10 @@ class OffboardFlight:
             applied = self.applied
             wall0 = time.perf_counter()
             cmd, info = await loop.run_in_executor(None, self.controller.step, t, odo.state,
-                                                   applied, ref)
+                                                   applied, reference)
             self._answer(odo.stamp_us, cmd)
             self._account(t, odo, ref, cmd, applied, info, time.perf_counter() - wall0)
-            if reference.done(t) and not getattr(reference, "lands", True):
+            if reference.done(t) and not getattr(getattr(reference, "cfg", None), "land", True):
                 break
         self.summary.landed = True
         # idle, then disarm (the vehicle refuses a disarm in flight)
