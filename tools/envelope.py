@@ -1,0 +1,143 @@
+#!/usr/bin/env python3
+"""The physical envelope: for an airframe, a motor fault and a wind, the hover trim and the force
+and torque margin the actuators have left (an allocation problem under the actuator limits,
+solved with CasADi + IPOPT on the simulator's own rotor model).
+
+    python tools/envelope.py [--vehicle params/vehicle/trq.yaml] [--motor 1 --eff 0.5]
+                             [--wind 8 --wind-dir 0] [--json PATH]
+
+The trim holds position at constant yaw: roll and pitch are free (a fixed-rotor quadcopter must
+lean into the wind), throttles within idle..100 %, tilts within the servo range. The margins are,
+for each body axis and sign, how much more force (N) or torque (N m) the actuators can add while
+every other component of the wrench keeps its trim value. A negative or missing margin means the
+vehicle cannot hold that axis: any reference asking for it cannot be tracked by any controller.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from pathlib import Path
+
+import casadi as ca
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+from sil_vehicle.config import VehicleParams, load_vehicle  # noqa: E402
+from sil_vehicle.frames import wind_from_to_ned  # noqa: E402
+
+AXES = ("Fx", "Fy", "Fz", "Mx", "My", "Mz")
+
+
+def wrench_expr(alpha, zeta, factors, vp: VehicleParams):
+    """Body FRD wrench (6) as a CasADi expression (thrust curve without the idle clamp: the
+    throttle is kept above idle, where the curve is positive)."""
+    f_total = ca.MX.zeros(3)
+    m_total = ca.MX.zeros(3)
+    for i, rotor in enumerate(vp.rotors):
+        z = zeta[i] * factors[i]
+        f = vp.thrust_N.c2 * z ** 2 + vp.thrust_N.c1 * z + vp.thrust_N.c0
+        tau = (vp.torque_Nm.c2 * z ** 2 + vp.torque_Nm.c1 * z + vp.torque_Nm.c0) * rotor.spin
+        ax, ay, _ = rotor.tilt_axis_frd
+        n = ca.vertcat(-ay * ca.sin(alpha[i]), ax * ca.sin(alpha[i]), -ca.cos(alpha[i]))
+        r = ca.DM(rotor.position_frd_m)
+        f_total += f * n
+        m_total += ca.cross(r, f * n) - tau * n
+    return ca.vertcat(f_total, m_total)
+
+
+def analyse(vp: VehicleParams, factors: list[float], wind_speed: float, wind_from_deg: float,
+            max_tilt_deg: float = 35.0) -> dict:
+    n_tilt = 0 if vp.tilt_locked else 4
+    alpha = ca.MX.sym("alpha", 4) if n_tilt else ca.MX.zeros(4)
+    zeta = ca.MX.sym("zeta", 4)
+    roll, pitch = ca.MX.sym("roll"), ca.MX.sym("pitch")
+    w = wrench_expr(alpha, zeta, factors, vp)
+    wind = wind_from_to_ned(wind_speed, wind_from_deg)
+    drag_ned = [vp.drag_N_s2_m2 * math.hypot(*wind) * c for c in wind]   # at rest in the wind
+    # required body force: the rotors cancel gravity and drag, expressed in the body frame
+    need_ned = ca.vertcat(-drag_ned[0], -drag_ned[1], -vp.mass_kg * vp.gravity_m_s2)
+    cr, sr, cp, sp = ca.cos(roll), ca.sin(roll), ca.cos(pitch), ca.sin(pitch)
+    rot_t = ca.vertcat(ca.horzcat(cp, 0, -sp), ca.horzcat(sr * sp, cr, sr * cp),
+                       ca.horzcat(cr * sp, -sr, cr * cp))           # world->body at yaw 0
+    need = ca.vertcat(rot_t @ need_ned, ca.MX.zeros(3))
+    x = ca.vertcat(*([alpha] if n_tilt else []), zeta, roll, pitch)
+    lo_tilt, hi_tilt = vp.tilt_min_rad, vp.tilt_max_rad
+    mt = math.radians(max_tilt_deg)
+    lbx = [lo_tilt] * n_tilt + [vp.idle_pct] * 4 + [-mt, -mt]
+    ubx = [hi_tilt] * n_tilt + [100.0] * 4 + [mt, mt]
+    x0 = [0.0] * n_tilt + [vp.hover_throttle_pct] * 4 + [0.0, 0.0]
+    opts = {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes"}
+    # 1) the trim: the wrench as close as possible to the need, then the smallest effort
+    resid = w - need
+    lsq = ca.nlpsol("lsq", "ipopt", {"x": x, "f": ca.sumsqr(resid) * 1e3
+                                     + 1e-6 * ca.sumsqr(zeta - vp.hover_throttle_pct)}, opts)
+    sol = lsq(x0=x0, lbx=lbx, ubx=ubx)
+    xt = np.array(sol["x"]).ravel()
+    residual = np.array(ca.Function("r", [x], [resid])(xt)).ravel()
+    feasible = bool(np.max(np.abs(residual)) < 1e-3)
+    out = {"vehicle": vp.name, "motor_factors": factors, "wind_m_s": wind_speed,
+           "wind_from_deg": wind_from_deg, "feasible": feasible,
+           "residual": dict(zip(AXES, residual.round(4).tolist())),
+           "trim": {"tilt_deg": np.degrees(xt[:n_tilt]).round(2).tolist(),
+                    "throttle_pct": xt[n_tilt:n_tilt + 4].round(2).tolist(),
+                    "roll_deg": round(math.degrees(xt[-2]), 2),
+                    "pitch_deg": round(math.degrees(xt[-1]), 2)},
+           "margin": {}}
+    if not feasible:
+        return out
+    # 2) margins: push one axis at a time with the rest of the wrench held at the trim
+    trim_w = np.array(ca.Function("w", [x], [w])(xt)).ravel()
+    u_only = ca.vertcat(*([alpha] if n_tilt else []), zeta)
+    w_u = ca.substitute(w, ca.vertcat(roll, pitch), ca.DM(xt[-2:]))
+    for j, axis in enumerate(AXES):
+        others = [k for k in range(6) if k != j]
+        for sign in (+1, -1):
+            nlp = {"x": u_only, "f": -sign * w_u[j],
+                   "g": ca.vertcat(*[w_u[k] - trim_w[k] for k in others])}
+            solver = ca.nlpsol("m", "ipopt", nlp, opts)
+            r = solver(x0=xt[:-2], lbx=lbx[:-2], ubx=ubx[:-2], lbg=0, ubg=0)
+            ok = solver.stats()["success"]
+            value = float(-r["f"]) * sign if ok else math.nan
+            out["margin"][f"{'+' if sign > 0 else '-'}{axis}"] = (
+                round(sign * (value - trim_w[j]), 4) if ok else None)
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--vehicle", type=Path, default=ROOT / "params/vehicle/trq.yaml")
+    ap.add_argument("--motor", type=int, default=None, help="faulty motor 1..4")
+    ap.add_argument("--eff", type=float, default=1.0, help="its effectiveness 0..1")
+    ap.add_argument("--wind", type=float, default=0.0, help="wind speed m/s")
+    ap.add_argument("--wind-dir", type=float, default=0.0, help="wind from, deg")
+    ap.add_argument("--json", type=Path, default=None)
+    args = ap.parse_args(argv)
+    vp = load_vehicle(args.vehicle)
+    factors = [1.0] * 4
+    if args.motor is not None:
+        if not 1 <= args.motor <= 4 or not 0.0 <= args.eff <= 1.0:
+            print("envelope: --motor 1..4 and --eff 0..1", file=sys.stderr)
+            return 2
+        factors[args.motor - 1] = args.eff
+    out = analyse(vp, factors, args.wind, args.wind_dir)
+    print(f"envelope of {vp.name}: motor factors {factors}, wind {args.wind:g} m/s from "
+          f"{args.wind_dir:g} deg")
+    t = out["trim"]
+    print(f"  trim {'feasible' if out['feasible'] else 'INFEASIBLE'}: throttle "
+          f"{t['throttle_pct']} %, tilt {t['tilt_deg']} deg, roll {t['roll_deg']} deg, "
+          f"pitch {t['pitch_deg']} deg; wrench residual {out['residual']}")
+    for key, value in out["margin"].items():
+        unit = "N" if key[1] == "F" else "N m"
+        print(f"  margin {key}: {'none' if value is None else f'{value:.3f} {unit}'}")
+    if args.json:
+        args.json.write_text(json.dumps(out, indent=2) + "\n")
+    return 0 if out["feasible"] else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
