@@ -1,0 +1,96 @@
+"""Strict loading of params/ YAML by trq_offboard.config (independent of sil_vehicle)."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import pytest
+import yaml
+
+from trq_offboard.config import ConfigError, load_controller, load_eso, load_vehicle_model
+
+PARAMS = Path(__file__).resolve().parents[2] / "params"
+
+
+def test_shipped_files_load():
+    trq = load_vehicle_model(PARAMS / "vehicle/trq.yaml")
+    quad = load_vehicle_model(PARAMS / "vehicle/quad.yaml")
+    assert not trq.tilt_locked and quad.tilt_locked and quad.mass_kg == trq.mass_kg
+    assert trq.hover_throttle_pct == pytest.approx(76.82, abs=0.01)
+    assert trq.tilt_max_rad == pytest.approx(math.radians(30))
+    for name, obs in (("trq_nmpc_eso", "nonlinear"), ("trq_nmpc", "none"),
+                      ("quad_nmpc", "none")):
+        cfg = load_controller(PARAMS / f"controller/{name}.yaml")
+        assert cfg.name == name and cfg.observer == obs
+        assert cfg.horizon_steps == 20 and cfg.step_s == 0.05 and cfg.control_rate_hz == 50
+        assert (cfg.eso is None) == (obs == "none")
+    assert load_controller(PARAMS / "controller/quad_nmpc.yaml").vehicle.tilt_locked
+    assert load_eso(PARAMS / "controller/eso.yaml").substeps >= 1
+
+
+def _write(tmp_path: Path, name: str, data: dict) -> Path:
+    p = tmp_path / name
+    p.write_text(yaml.safe_dump(data))
+    return p
+
+
+def _vehicle_dict() -> dict:
+    return yaml.safe_load((PARAMS / "vehicle/trq.yaml").read_text())
+
+
+def test_unknown_key_names_file_and_key(tmp_path):
+    d = _vehicle_dict()
+    d["motor"]["idle_pcnt"] = 10.0
+    p = _write(tmp_path, "v.yaml", d)
+    with pytest.raises(ConfigError, match=r"v\.yaml.*motor\.idle_pcnt"):
+        load_vehicle_model(p)
+
+
+def test_missing_key(tmp_path):
+    d = _vehicle_dict()
+    del d["drag"]["quadratic_N_s2_m2"]
+    with pytest.raises(ConfigError, match=r"drag\.quadratic_N_s2_m2' is missing"):
+        load_vehicle_model(_write(tmp_path, "v.yaml", d))
+
+
+def test_out_of_range_names_value_and_range(tmp_path):
+    d = _vehicle_dict()
+    d["tilt"]["max_deg"] = 120.0
+    with pytest.raises(ConfigError, match=r"tilt\.max_deg.*120.*\[0, 90\]"):
+        load_vehicle_model(_write(tmp_path, "v.yaml", d))
+    d = _vehicle_dict()
+    d["mass_kg"] = True
+    with pytest.raises(ConfigError, match="mass_kg"):
+        load_vehicle_model(_write(tmp_path, "v.yaml", d))
+
+
+def test_extends_merges_and_detects_cycles(tmp_path):
+    base = _write(tmp_path, "base.yaml", _vehicle_dict())
+    child = _write(tmp_path, "child.yaml", {"extends": "base.yaml", "mass_kg": 2.0,
+                                             "tilt": {"locked": True}})
+    vm = load_vehicle_model(child)
+    assert vm.mass_kg == 2.0 and vm.tilt_locked and vm.tilt_max_rad == pytest.approx(
+        math.radians(30))
+    _write(tmp_path, "a.yaml", {"extends": "b.yaml"})
+    _write(tmp_path, "b.yaml", {"extends": "a.yaml"})
+    with pytest.raises(ConfigError, match="cycle"):
+        load_vehicle_model(tmp_path / "a.yaml")
+    assert base.exists()
+
+
+def test_controller_file_errors(tmp_path):
+    src = yaml.safe_load((PARAMS / "controller/nmpc.yaml").read_text())
+    src["vehicle"] = str(PARAMS / "vehicle/trq.yaml")
+    src["observer"]["file"] = str(PARAMS / "controller/eso.yaml")
+    ok = _write(tmp_path, "c.yaml", src)
+    assert load_controller(ok).horizon_steps == 20
+    bad = dict(src, horizon={"steps": 20, "step_s": 0.01})       # shorter than a control period
+    with pytest.raises(ConfigError, match=r"horizon\.step_s"):
+        load_controller(_write(tmp_path, "c2.yaml", bad))
+    bad = dict(src, weights=dict(src["weights"], position=[1.0, 2.0]))
+    with pytest.raises(ConfigError, match=r"weights\.position.*list of 3"):
+        load_controller(_write(tmp_path, "c3.yaml", bad))
+    bad = dict(src, solver=dict(src["solver"], kind="acados"))
+    with pytest.raises(ConfigError, match=r"solver\.kind"):
+        load_controller(_write(tmp_path, "c4.yaml", bad))

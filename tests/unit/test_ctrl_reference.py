@@ -1,0 +1,56 @@
+"""Reference trajectories: continuity, velocity = d position / dt, phases and done(t)."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from trq_offboard.config import load_controller
+from trq_offboard.reference import LAND_BELOW_M, Reference
+
+CFG = load_controller(Path(__file__).resolve().parents[2] / "params/controller/trq_nmpc.yaml")
+
+
+@pytest.mark.parametrize("kind", ["hover", "circle", "helix", "figure8", "step"])
+def test_plan_is_smooth_and_consistent(kind):
+    rc = replace(CFG.reference, kind=kind)
+    start = np.array([1.0, -2.0, 0.0])
+    ref = Reference(rc, start, 0.3, t0_s=5.0)
+    s0 = ref.sample(5.0)
+    np.testing.assert_allclose(s0.pos_ned_m, start, atol=1e-12)
+    assert s0.phase == "takeoff" and s0.yaw_rad == 0.3
+    np.testing.assert_allclose(ref.sample(ref.t1).pos_ned_m, start + [0, 0, -rc.altitude_m],
+                               atol=1e-12)
+    ts = np.arange(5.0, ref.end_time_s + 2.0, 0.01)
+    pos = np.array([ref.sample(t).pos_ned_m for t in ts])
+    vel = np.array([ref.sample(t).vel_ned_m_s for t in ts])
+    fd = np.gradient(pos, ts, axis=0)
+    jumps = np.linalg.norm(np.diff(pos, axis=0), axis=1)
+    if kind != "step":
+        assert jumps.max() < 0.02                                  # continuous
+        np.testing.assert_allclose(vel[1:-1], fd[1:-1], atol=2e-3)  # velocity consistent
+    speed = np.linalg.norm(vel, axis=1)
+    assert speed.max() < 1.0                                       # gentle
+    acc = np.gradient(vel, ts, axis=0)
+    assert np.linalg.norm(acc, axis=1).max() < 1.0
+    # landing ends below the start point and then holds
+    np.testing.assert_allclose(pos[-1], [pos[-1][0], pos[-1][1], start[2] + LAND_BELOW_M])
+    assert not ref.done(ref.end_time_s - 0.01) and ref.done(ref.end_time_s)
+    assert ref.sample(ref.end_time_s + 1).phase == "landed"
+
+
+def test_no_landing_holds_forever():
+    ref = Reference(replace(CFG.reference, kind="circle", land=False), [0, 0, 0])
+    end = ref.sample(ref.t4 + 100.0)
+    assert end.phase == "hold" and ref.done(ref.t4) and not ref.done(ref.t4 - 0.01)
+    np.testing.assert_allclose(end.vel_ned_m_s, 0.0)
+
+
+def test_pure_function_of_time():
+    ref = Reference(CFG.reference, [0, 0, 0])
+    a = [ref.sample(t) for t in (3.0, 12.5, 20.0)]
+    b = [ref.sample(t) for t in (20.0, 12.5, 3.0)][::-1]
+    assert a == b

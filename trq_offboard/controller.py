@@ -1,0 +1,184 @@
+"""The controller core: observer + NMPC + allocation, one object per controller config.
+
+    ctl = Controller.from_yaml("params/controller/trq_nmpc_eso.yaml")   # build once (~2 s)
+    ctl.reset(t_s, state)                       # take over (ground or flying) without a jump
+    cmd, info = ctl.step(t_s, state, applied, reference)   # once per control period
+
+`reference` is anything with `sample(t_s) -> ReferenceSample` (reference.Reference, or
+reference.ConstantReference for a fixed target); the NMPC samples it at t_s + k h, k = 0..N.
+`applied` is the ActuatorCommand the vehicle has been flying since the previous step (None:
+the one this controller returned last).
+
+Per step: (1) the observer (if any) is advanced one control period with the measurement and
+the applied command and gives d; (2) the NMPC is solved from the measured state with d held
+over the horizon, warm-started from the previous plan shifted by the elapsed time (first step:
+the allocation's hover trim, rolled out through the model); (3) on a solver failure the previous
+plan shifted in time is flown while it lasts, then the allocation's hover command; (4) the
+command is clipped to the actuator limits as a last line of defence (counted) and is always
+finite. `step` never prints, sleeps or reads a clock (the solver measures its own wall time).
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from trq_offboard.allocation import Allocator
+from trq_offboard.config import ControllerConfig, load_controller
+from trq_offboard.eso import ExtendedStateObserver
+from trq_offboard.model import PredictionModel
+from trq_offboard.nmpc.solver import Solver, make_solver
+from trq_offboard.records import (ActuatorCommand, CommandSource, ReferenceSample, SolveInfo,
+                                  SolveStatus, StateEstimate, StepInfo)
+
+__all__ = ["Controller"]
+
+
+def _wrap(a: float) -> float:
+    return (a + math.pi) % (2.0 * math.pi) - math.pi
+
+
+class Controller:
+    def __init__(self, cfg: ControllerConfig, solver: Solver | None = None) -> None:
+        self.cfg = cfg
+        vm = cfg.vehicle
+        self.model = PredictionModel(vm)
+        self.allocator = Allocator(vm)
+        self.hover_command = self.allocator.hover()
+        self.u_trim = self.allocator.command_vector(self.hover_command)
+        self.solver = solver if solver is not None else make_solver(cfg, self.model, self.u_trim)
+        self.eso = (ExtendedStateObserver(cfg.eso, cfg.control_dt_s)
+                    if cfg.eso is not None else None)
+        self.N, self.h = cfg.horizon_steps, cfg.step_s
+        self._rollout = self.model.discrete(self.h, 1)
+        self._u_lo = np.array(([vm.tilt_min_rad] * 4 if self.model.tilting else [])
+                              + [vm.idle_pct] * 4)
+        self._u_hi = np.array(([vm.tilt_max_rad] * 4 if self.model.tilting else []) + [100.0] * 4)
+        self._plan: tuple[np.ndarray, np.ndarray] | None = None
+        self._plan_t = 0.0
+        self._last_t: float | None = None
+        self._last_u = self.u_trim.copy()
+        self.clip_count = 0
+        self.failures = 0
+
+    @classmethod
+    def from_yaml(cls, path: Path | str) -> "Controller":
+        return cls(load_controller(path))
+
+    # --- lifecycle ------------------------------------------------------------------------------
+    def reset(self, t_s: float, state: StateEstimate,
+              applied: ActuatorCommand | None = None) -> None:
+        """Initialise observer and plan from the measured state (and the command being flown,
+        default the hover trim), so the controller takes over without a jump."""
+        x = state.as_vector()
+        self._last_u = (self.allocator.command_vector(applied) if applied is not None
+                        else self.u_trim.copy())
+        self._last_u = np.clip(self._last_u, self._u_lo, self._u_hi)
+        if self.eso is not None:
+            eta_dot = np.asarray(self._euler_rate(x)).ravel()
+            self.eso.reset(np.concatenate([x[0:3], x[6:9]]), np.concatenate([x[3:6], eta_dot]))
+        self._plan = None
+        self._last_t = float(t_s)
+        self.clip_count = 0
+        self.failures = 0
+
+    def _euler_rate(self, x: np.ndarray) -> np.ndarray:
+        return np.asarray(self.model.f(x, self._last_u, np.zeros(6))).ravel()[6:9]
+
+    # --- one control step -----------------------------------------------------------------------
+    def step(self, t_s: float, state: StateEstimate, applied: ActuatorCommand | None,
+             reference) -> tuple[ActuatorCommand, StepInfo]:
+        if self._last_t is None:
+            self.reset(t_s, state, applied)
+        x = state.as_vector()
+        if not np.all(np.isfinite(x)):
+            return self._emergency(t_s, "non-finite state")
+        u_applied = (np.clip(self.allocator.command_vector(applied), self._u_lo, self._u_hi)
+                     if applied is not None else self._last_u)
+        d = np.zeros(6)
+        out_err = 0.0
+        if self.eso is not None:
+            y = np.concatenate([x[0:3], x[6:9]])
+            if t_s > self._last_t:
+                acc = np.asarray(self.model.accel(x, u_applied)).ravel()
+                eta_acc = np.asarray(self.model.euler_accel(x, u_applied, np.zeros(6))).ravel()
+                self.eso.update(y, np.concatenate([acc[0:3], eta_acc]))
+            d = self.eso.disturbance(x[6:9])
+            out_err = self.eso.output_error(y)
+        self._last_t = float(t_s)
+
+        x_ref = self._reference_states(t_s, x, reference)
+        guess = self._guess(t_s, x, d)
+        u_plan, x_plan, info = self.solver.solve(x, x_ref, d, u_applied, guess)
+        if info.status is SolveStatus.OK and np.all(np.isfinite(u_plan)) \
+                and np.all(np.isfinite(x_plan)):
+            self._plan, self._plan_t = (u_plan, x_plan), float(t_s)
+            u, source = u_plan[0], CommandSource.NMPC
+        else:
+            self.failures += 1
+            if info.status is SolveStatus.OK:      # finite-status but non-finite plan
+                info = SolveInfo(SolveStatus.FAILED, info.iterations, info.solve_time_s,
+                                 float("nan"), "non-finite plan")
+            u, source = self._fallback(t_s)
+        return self._finish(u, source, info, d, out_err)
+
+    # --- helpers --------------------------------------------------------------------------------
+    def _reference_states(self, t_s: float, x: np.ndarray, reference) -> np.ndarray:
+        xr = np.zeros((self.N + 1, 12))
+        yaw = x[8]
+        for k in range(self.N + 1):
+            s: ReferenceSample = reference.sample(t_s + k * self.h)
+            xr[k, 0:3] = s.pos_ned_m
+            xr[k, 3:6] = s.vel_ned_m_s
+            xr[k, 8] = yaw + _wrap(s.yaw_rad - yaw)       # unwrapped next to the measured yaw
+        return xr
+
+    def _guess(self, t_s: float, x: np.ndarray, d: np.ndarray):
+        N, h = self.N, self.h
+        if self._plan is not None:
+            u_old, x_old = self._plan
+            elapsed = t_s - self._plan_t
+            times = elapsed + h * np.arange(N + 1)
+            if elapsed < N * h:
+                idx = np.minimum((times[:N] / h + 1e-9).astype(int), N - 1)
+                u = u_old[idx]
+                grid = h * np.arange(N + 1)
+                xg = np.column_stack([np.interp(times, grid, x_old[:, j]) for j in range(12)])
+                xg[:, 8] += x[8] - xg[0, 8]          # keep yaw next to the measured one
+                xg[0] = x
+                return u, xg
+        u = np.tile(self.u_trim, (N, 1))
+        xs = [x]
+        for k in range(N):
+            nxt = np.asarray(self._rollout(xs[-1], u[k], d)).ravel()
+            xs.append(nxt if np.all(np.isfinite(nxt)) else xs[-1])
+        return u, np.array(xs)
+
+    def _fallback(self, t_s: float) -> tuple[np.ndarray, CommandSource]:
+        if self._plan is not None:
+            elapsed = t_s - self._plan_t
+            k = int(elapsed / self.h + 1e-9)
+            if k < self.N:
+                return self._plan[0][k], CommandSource.SHIFTED_PLAN
+        return self.u_trim.copy(), CommandSource.HOVER
+
+    def _finish(self, u, source, info, d, out_err) -> tuple[ActuatorCommand, StepInfo]:
+        u = np.asarray(u, float).copy()
+        bad = ~np.isfinite(u)
+        u[bad] = self.u_trim[bad]
+        clipped_u = np.clip(u, self._u_lo, self._u_hi)
+        n_clip = int(np.sum(bad) + np.sum(np.abs(clipped_u - u) > 1e-9))
+        self.clip_count += n_clip
+        self._last_u = clipped_u
+        cmd = self.allocator.command_of(clipped_u)
+        info = StepInfo(source, info, tuple(float(v) for v in d), out_err, n_clip,
+                        self.clip_count, self.failures)
+        return cmd, info
+
+    def _emergency(self, t_s, why) -> tuple[ActuatorCommand, StepInfo]:
+        self.failures += 1
+        u, source = self._fallback(t_s)
+        info = SolveInfo(SolveStatus.FAILED, 0, 0.0, float("nan"), why)
+        return self._finish(u, source, info, np.zeros(6), 0.0)

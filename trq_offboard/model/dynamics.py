@@ -1,0 +1,129 @@
+"""Rigid-body dynamics of the TRQ with the rotor wrench of its tilted rotors (CasADi).
+
+    dp/dt     = v
+    dv/dt     = (R(eta) F_B - k |v| v) / m + g e_z + d[0:3]       (NED; drag on ground velocity)
+    deta/dt   = W(eta) omega                                     (ZYX Euler kinematics)
+    domega/dt = I^-1 (tau_B - omega x I omega) + d[3:6]          (body FRD)
+
+Rotor i (arm axis a_i, position l a_i, spin s_i = +1 ccw) tilted by alpha_i about its arm has the
+thrust direction n_i = (-a_y sin alpha, a_x sin alpha, -cos alpha); it adds F_i n_i to the force
+and l a_i x F_i n_i - s_i tau_i n_i to the torque. F and tau are the quadratic curves of the YAML
+in throttle percent, *without* the plant's clamp at zero (smooth for the NLP): the NMPC keeps the
+throttle above idle, where the thrust curve is positive. (The torque curve is negative between
+idle, 10 %, and 11.1 %, by at most 6e-4 N m; the plant clamps it there. The NMPC never goes near
+idle in practice; the consistency test uses throttles above 12 %.)
+
+The wind is unknown to the model: its effect, the actuator lags and the faults are what the
+generalised disturbance d stands for (estimated by the ESO).
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+
+from trq_offboard.config import VehicleModel
+
+NX, ND = 12, 6
+
+
+def rotation_ned_frd(roll, pitch, yaw):
+    """R (3x3 SX/MX/DM) taking body FRD vectors to world NED, ZYX Euler angles."""
+    cr, sr = ca.cos(roll), ca.sin(roll)
+    cp, sp = ca.cos(pitch), ca.sin(pitch)
+    cy, sy = ca.cos(yaw), ca.sin(yaw)
+    return ca.vertcat(
+        ca.horzcat(cp * cy, sr * sp * cy - cr * sy, cr * sp * cy + sr * sy),
+        ca.horzcat(cp * sy, sr * sp * sy + cr * cy, cr * sp * sy - sr * cy),
+        ca.horzcat(-sp, sr * cp, cr * cp))
+
+
+def euler_rate_matrix(roll, pitch):
+    """W with deta/dt = W omega (ZYX); singular at pitch = +-90 deg."""
+    cr, sr = ca.cos(roll), ca.sin(roll)
+    cp, tp = ca.cos(pitch), ca.tan(pitch)
+    return ca.vertcat(ca.horzcat(1, sr * tp, cr * tp),
+                      ca.horzcat(0, cr, -sr),
+                      ca.horzcat(0, sr / cp, cr / cp))
+
+
+class PredictionModel:
+    """Symbolic model of one airframe, built once; all members are casadi Functions.
+
+    f(x, u, d) -> dx/dt (12)             wrench(u) -> [F_B (N), tau_B (N m)] body FRD (6)
+    accel(x, u) -> [dv/dt, domega/dt] without d (the ESO's b0)
+    euler_accel(x, u, d) -> d^2 eta / dt^2 (3)
+    discrete(dt, substeps) -> F(x, u, d) -> x_next   (RK4, input and d held)
+    """
+
+    def __init__(self, vehicle: VehicleModel) -> None:
+        self.vehicle = vm = vehicle
+        self.nx, self.nd = NX, ND
+        self.nu = vm.n_inputs
+        self.tilting = not vm.tilt_locked
+        x = ca.SX.sym("x", NX)
+        u = ca.SX.sym("u", self.nu)
+        d = ca.SX.sym("d", ND)
+        w = self._wrench(u)
+        self.wrench = ca.Function("wrench", [u], [w], ["u"], ["wrench_frd"])
+        acc = self._accel(x, w)
+        self.accel = ca.Function("accel", [x, u], [acc], ["x", "u"], ["acc"])
+        W = euler_rate_matrix(x[6], x[7])
+        xdot = ca.vertcat(x[3:6], acc[0:3] + d[0:3], W @ x[9:12], acc[3:6] + d[3:6])
+        self._x, self._u, self._d, self._xdot = x, u, d, xdot
+        self.f = ca.Function("f", [x, u, d], [xdot], ["x", "u", "d"], ["xdot"])
+        eta_dot = W @ x[9:12]
+        # d/dt (W(eta) omega) = dW/deta * eta_dot * omega + W omega_dot
+        eta_acc = ca.jtimes(eta_dot, x, xdot)
+        self.euler_accel = ca.Function("euler_accel", [x, u, d], [eta_acc],
+                                       ["x", "u", "d"], ["eta_ddot"])
+
+    # --- inputs -------------------------------------------------------------------------------
+    def split(self, u):
+        """(alpha (4), zeta (4)) of an input vector; tilts are 0 for a locked airframe."""
+        if self.tilting:
+            return u[0:4], u[4:8]
+        return ca.DM.zeros(4) if isinstance(u, ca.DM) else 0 * u[0:4], u[0:4]
+
+    def _wrench(self, u):
+        vm = self.vehicle
+        alpha, zeta = self.split(u)
+        force = ca.SX.zeros(3)
+        torque = ca.SX.zeros(3)
+        th, tq = vm.thrust_N, vm.torque_Nm
+        for i, rotor in enumerate(vm.rotors):
+            ax, ay, _ = rotor.arm_frd
+            z = zeta[i]
+            f_i = (th.c2 * z + th.c1) * z + th.c0
+            tau_i = (tq.c2 * z + tq.c1) * z + tq.c0
+            n = ca.vertcat(-ay * ca.sin(alpha[i]), ax * ca.sin(alpha[i]), -ca.cos(alpha[i]))
+            r = ca.DM(rotor.position_frd_m)
+            force += f_i * n
+            torque += ca.cross(r, f_i * n) - rotor.spin * tau_i * n
+        return ca.vertcat(force, torque)
+
+    def _accel(self, x, wrench):
+        vm = self.vehicle
+        v, omega = x[3:6], x[9:12]
+        R = rotation_ned_frd(x[6], x[7], x[8])
+        speed = ca.sqrt(ca.sumsqr(v) + 1e-12)   # smooth |v| (the offset is 1e-6 m/s)
+        acc_lin = (R @ wrench[0:3] - vm.drag_N_s2_m2 * speed * v) / vm.mass_kg \
+            + ca.vertcat(0, 0, vm.gravity_m_s2)
+        ixx, iyy, izz = vm.inertia_kg_m2
+        acc_ang = ca.vertcat((wrench[3] - (izz - iyy) * omega[1] * omega[2]) / ixx,
+                             (wrench[4] - (ixx - izz) * omega[2] * omega[0]) / iyy,
+                             (wrench[5] - (iyy - ixx) * omega[0] * omega[1]) / izz)
+        return ca.vertcat(acc_lin, acc_ang)
+
+    # --- discretisation -------------------------------------------------------------------------
+    def discrete(self, dt_s: float, substeps: int = 1) -> ca.Function:
+        """RK4 with `substeps` equal steps over dt_s; u and d are held (zero-order hold)."""
+        x, u, d = self._x, self._u, self._d
+        h = dt_s / substeps
+        xk = x
+        for _ in range(substeps):
+            k1 = self.f(xk, u, d)
+            k2 = self.f(xk + 0.5 * h * k1, u, d)
+            k3 = self.f(xk + 0.5 * h * k2, u, d)
+            k4 = self.f(xk + h * k3, u, d)
+            xk = xk + h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+        return ca.Function("F", [x, u, d], [xk], ["x", "u", "d"], ["x_next"])

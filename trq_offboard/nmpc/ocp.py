@@ -1,0 +1,182 @@
+"""The NMPC optimal control problem (paper eq. 5-8) as one CasADi NLP, built once.
+
+Formulation (multiple shooting, N steps of h seconds, RK4 per step, d held over the horizon).
+For the tilt-rotor the tilt angles are carried as four extra states and the servo *rates* are
+inputs, so that every constraint is local to one stage (the banded structure that structured QP
+solvers such as HPIPM exploit):
+
+    stage state   s_k = [x_k (12), a_k (4)]     a_k: tilt commanded over the previous step (rad)
+    stage input   v_k = [w_k (4), c_k (4)]      w_k: tilt rate (rad/s), c_k = zeta_k / 100
+    a_{k+1} = a_k + h w_k
+    x_{k+1} = F(x_k, [a_{k+1}, 100 c_k], d)     the tilt applied over step k is a_{k+1}
+    s_0 = [x_meas, alpha_prev]                  fixed by equal bounds (no constraint row)
+
+so the plan's input k is u_k = [a_{k+1}, zeta_k] in the paper's order [alpha, zeta]. The fixed-rotor
+quadcopter has s_k = x_k and v_k = c_k (4 scaled throttles).
+
+Cost (scaled inputs: tilt in rad, throttle as a fraction about the hover trim)
+    sum_{k<N} (x_k - xr_k)' Q (x_k - xr_k) + (u_k - u_trim)' R (u_k - u_trim) + w_rate |w_k|^2
+    + (x_N - xr_N)' c_N Q (x_N - xr_N)
+Bounds  idle <= zeta <= 100 %; tilt limits on a_k (k >= 1); |w_k| <= servo rate, and
+        |w_0| <= servo rate * control period / h (the first command against the applied one);
+        |roll|, |pitch| <= bound and |p|, |q|, |r| <= bound on x_k (k >= 1).
+The paper's output-error term (y_hat - y)' (y_hat - y): d is held constant over the horizon and
+the prediction model already contains it, so over the horizon the observer's output prediction
+and the model's coincide; what remains is the observer's current output error, a constant that
+does not move the minimiser. The controller evaluates and reports it (StepInfo.output_error).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+
+from trq_offboard.config import ControllerConfig
+from trq_offboard.model import PredictionModel
+
+__all__ = ["Ocp"]
+
+_BIG = 1e20
+
+
+@dataclass
+class Ocp:
+    """Symbolic NLP {x: w, p: p, f: cost, g: gaps} with bounds and index maps."""
+    nlp: dict
+    lbg: np.ndarray
+    ubg: np.ndarray
+    lbw: np.ndarray                    # s_0 rows are filled per solve
+    ubw: np.ndarray
+    n_steps: int
+    step_s: float
+    nx: int                            # model state (12)
+    nu: int                            # model input (8 TRQ, 4 quad)
+    ns: int                            # stage state (16 TRQ, 12 quad)
+    nv: int                            # stage input (8 TRQ, 4 quad)
+    tilting: bool
+    s_index: np.ndarray                # (N+1, ns) positions of s_k in w
+    v_index: np.ndarray                # (N, nv) positions of v_k in w
+    cost_fn: ca.Function               # cost(w, p)
+    n_params: int
+
+    @staticmethod
+    def build(cfg: ControllerConfig, model: PredictionModel) -> "Ocp":
+        vm = cfg.vehicle
+        N, h = cfg.horizon_steps, cfg.step_s
+        nx, nu = model.nx, model.nu
+        tilting = model.tilting
+        ns, nv = (nx + 4, 8) if tilting else (nx, 4)
+        F = model.discrete(h, 1)
+        wts = cfg.weights
+        Q = np.array([*wts.position, *wts.velocity, *wts.euler, *wts.rates])
+        R = np.array(([wts.tilt] * 4 if tilting else []) + [wts.throttle] * 4)
+
+        ss = [ca.SX.sym(f"s{k}", ns) for k in range(N + 1)]
+        vs = [ca.SX.sym(f"v{k}", nv) for k in range(N)]
+        x_ref = ca.SX.sym("x_ref", nx, N + 1)
+        u_trim = ca.SX.sym("u_trim", nu)         # scaled: [alpha, zeta / 100]
+        d = ca.SX.sym("d", 6)
+        p = ca.vertcat(ca.vec(x_ref), u_trim, d)
+
+        slo, shi = np.full(ns, -_BIG), np.full(ns, _BIG)
+        tb = math.radians(cfg.max_tilt_deg)
+        slo[6:8], shi[6:8] = -tb, tb
+        slo[9:12], shi[9:12] = -cfg.max_rate_rad_s, cfg.max_rate_rad_s
+        if tilting:
+            slo[12:16], shi[12:16] = vm.tilt_min_rad, vm.tilt_max_rad
+        rate = vm.servo_rate_limit_rad_s
+        c_lo, c_hi = [vm.idle_pct / 100.0] * 4, [1.0] * 4
+        vlo = np.array(([-rate] * 4 if tilting else []) + c_lo)
+        vhi = np.array(([rate] * 4 if tilting else []) + c_hi)
+        rate0 = min(rate, rate * cfg.control_dt_s / h)
+        v0lo = np.array(([-rate0] * 4 if tilting else []) + c_lo)
+        v0hi = np.array(([rate0] * 4 if tilting else []) + c_hi)
+
+        w, lbw, ubw, s_index, v_index = [], [], [], [], []
+        pos = 0
+        cost = 0
+        gaps = []
+        for k in range(N + 1):
+            w.append(ss[k])
+            s_index.append(np.arange(pos, pos + ns))
+            pos += ns
+            lbw.append(slo)
+            ubw.append(shi)
+            xk = ss[k][0:nx]
+            ex = xk - x_ref[:, k]
+            if k == N:
+                cost += wts.terminal_factor * ca.dot(Q * ex, ex)
+                break
+            w.append(vs[k])
+            v_index.append(np.arange(pos, pos + nv))
+            pos += nv
+            lbw.append(v0lo if k == 0 else vlo)
+            ubw.append(v0hi if k == 0 else vhi)
+            if tilting:
+                a_next = ss[k][nx:nx + 4] + h * vs[k][0:4]
+                u_scaled = ca.vertcat(a_next, vs[k][4:8])
+                u_phys = ca.vertcat(a_next, 100.0 * vs[k][4:8])
+                cost += wts.tilt_rate * ca.sumsqr(vs[k][0:4])
+            else:
+                u_scaled = vs[k]
+                u_phys = 100.0 * vs[k]
+            eu = u_scaled - u_trim
+            cost += ca.dot(Q * ex, ex) + ca.dot(R * eu, eu)
+            x_next = F(xk, u_phys, d)
+            gap = ca.vertcat(x_next, a_next) if tilting else x_next
+            gaps.append(gap - ss[k + 1])
+        wv = ca.vertcat(*w)
+        g = ca.vertcat(*gaps)
+        nlp = {"x": wv, "p": p, "f": cost, "g": g}
+        zeros = np.zeros(g.shape[0])
+        return Ocp(nlp, zeros, zeros.copy(), np.concatenate(lbw), np.concatenate(ubw), N, h,
+                   nx, nu, ns, nv, tilting, np.array(s_index), np.array(v_index),
+                   ca.Function("cost", [wv, p], [cost]), int(p.shape[0]))
+
+    # --- packing (all NumPy) ------------------------------------------------------------------
+    def params(self, x_ref, u_trim, d) -> np.ndarray:
+        """p from the reference states (N+1, 12), the trim input (physical) and d (6)."""
+        scale = self.u_scale
+        return np.concatenate([np.asarray(x_ref, float).reshape(self.n_steps + 1, self.nx)
+                               .reshape(-1), np.asarray(u_trim, float) / scale,
+                               np.asarray(d, float).reshape(6)])
+
+    @property
+    def u_scale(self) -> np.ndarray:
+        return np.array(([1.0] * 4 if self.tilting else []) + [100.0] * 4)
+
+    def bounds(self, x0, alpha_prev) -> tuple[np.ndarray, np.ndarray]:
+        lbw, ubw = self.lbw.copy(), self.ubw.copy()
+        s0 = np.concatenate([x0, alpha_prev]) if self.tilting else np.asarray(x0, float)
+        lbw[self.s_index[0]] = s0
+        ubw[self.s_index[0]] = s0
+        return lbw, ubw
+
+    def pack(self, x_plan, u_plan, alpha_prev) -> np.ndarray:
+        """w from physical plans x (N+1, 12), u (N, nu) and the previously applied tilt."""
+        w = np.zeros(self.lbw.size)
+        x_plan = np.asarray(x_plan, float)
+        u_plan = np.asarray(u_plan, float)
+        if self.tilting:
+            tilts = np.vstack([np.asarray(alpha_prev, float).reshape(1, 4), u_plan[:, 0:4]])
+            w[self.s_index] = np.hstack([x_plan, tilts])
+            rates = np.diff(tilts, axis=0) / self.step_s
+            w[self.v_index] = np.hstack([rates, u_plan[:, 4:8] / 100.0])
+        else:
+            w[self.s_index] = x_plan
+            w[self.v_index] = u_plan / 100.0
+        return w
+
+    def unpack(self, w) -> tuple[np.ndarray, np.ndarray]:
+        """(u_plan (N, nu) physical [alpha, zeta], x_plan (N+1, 12)) of w."""
+        w = np.asarray(w, float).reshape(-1)
+        s = w[self.s_index]
+        v = w[self.v_index]
+        if self.tilting:
+            u = np.hstack([s[1:, self.nx:self.nx + 4], 100.0 * v[:, 4:8]])
+        else:
+            u = 100.0 * v
+        return u, s[:, 0:self.nx]

@@ -1,0 +1,78 @@
+"""Typed records exchanged across the controller's module boundaries (frozen, units in names)."""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass
+
+import numpy as np
+
+Vec3 = tuple[float, float, float]
+Vec4 = tuple[float, float, float, float]
+
+
+@dataclass(frozen=True)
+class StateEstimate:
+    """Measured vehicle state handed to the controller (from telemetry)."""
+    pos_ned_m: Vec3
+    vel_ned_m_s: Vec3
+    euler_rad: Vec3                    # roll, pitch, yaw (ZYX), rad
+    rates_frd_rad_s: Vec3              # p, q, r body FRD
+
+    def as_vector(self) -> np.ndarray:
+        """The model state x (12)."""
+        return np.array([*self.pos_ned_m, *self.vel_ned_m_s, *self.euler_rad,
+                         *self.rates_frd_rad_s], dtype=float)
+
+    @staticmethod
+    def from_vector(x) -> "StateEstimate":
+        x = [float(v) for v in np.asarray(x, dtype=float).reshape(-1)]
+        return StateEstimate(tuple(x[0:3]), tuple(x[3:6]), tuple(x[6:9]), tuple(x[9:12]))
+
+
+@dataclass(frozen=True)
+class ActuatorCommand:
+    """What the controller commands: throttle 0..100 % per motor, tilt (rad) per servo,
+    in PX4 quad X order (motor 1 front right, 2 rear left, 3 front left, 4 rear right)."""
+    throttle_pct: Vec4
+    tilt_rad: Vec4
+
+
+@dataclass(frozen=True)
+class ReferenceSample:
+    """Where the vehicle should be at one instant."""
+    pos_ned_m: Vec3
+    vel_ned_m_s: Vec3
+    yaw_rad: float
+    phase: str = "hover"
+
+
+class SolveStatus(enum.Enum):
+    OK = "ok"                          # converged (or the iteration budget gave a usable step)
+    FAILED = "failed"                  # no usable solution; the plan must not be used
+
+
+@dataclass(frozen=True)
+class SolveInfo:
+    status: SolveStatus
+    iterations: int
+    solve_time_s: float                # wall time of the solve (perf_counter), a measurement
+    cost: float                        # objective value of the returned plan (nan if failed)
+    message: str = ""
+
+
+class CommandSource(enum.Enum):
+    NMPC = "nmpc"                      # first input of this step's solution
+    SHIFTED_PLAN = "shifted_plan"      # the solver failed: previous plan, shifted in time
+    HOVER = "hover"                    # no usable plan: the allocation's hover command
+
+
+@dataclass(frozen=True)
+class StepInfo:
+    source: CommandSource
+    solve: SolveInfo
+    disturbance: tuple[float, ...]     # d (6) used in the prediction model
+    output_error: float                # (y_hat - y)^T (y_hat - y) of the observer (0 if none)
+    clipped: int                       # actuator values clipped by the last line of defence
+    clip_count_total: int
+    failures_total: int
