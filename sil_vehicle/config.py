@@ -231,7 +231,7 @@ def _rate(sec: Section, key: str, physics_hz: int) -> int:
 def load_sim(path: Path | str, vehicle: Path | str | None = None) -> SimParams:
     """Load simulation settings; `vehicle` overrides the airframe file the settings name."""
     path = Path(path)
-    top = Section(load_with_extends(path), path)
+    top = Section(load_with_extends(path, path_keys=("vehicle",)), path)
     vehicle_ref = top.str("vehicle")
     vehicle_path = Path(vehicle) if vehicle is not None else (path.parent / vehicle_ref)
     vparams = load_vehicle(vehicle_path)

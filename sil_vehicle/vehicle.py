@@ -149,7 +149,7 @@ class Vehicle:
         wrench = body_wrench(motors, tilts, vp)
         if self.gusts_enabled:
             if self._noise_i >= len(self._noise):
-                self._noise = self._rng.standard_normal((_NOISE_BLOCK, 3))
+                self._noise = self._rng.standard_normal((_NOISE_BLOCK, 3)).tolist()  # plain floats
                 self._noise_i = 0
             self._gust = gust_step(self._gust, self._noise[self._noise_i], self._gust_a,
                                    self._gust_b)

@@ -44,10 +44,12 @@ def merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
-def load_with_extends(path: Path) -> dict[str, Any]:
-    """Load a file; an `extends: OTHER.yaml` key (relative to the file) supplies the defaults."""
+def load_with_extends(path: Path, path_keys: tuple[str, ...] = ()) -> dict[str, Any]:
+    """Load a file; an `extends: OTHER.yaml` key (relative to the file) supplies the defaults.
+    Top-level `path_keys` holding a relative path are made absolute against the folder of the
+    file that names them, so an inherited path still points where its author meant."""
     path = Path(path)
-    data = load_yaml(path)
+    data = _absolute(load_yaml(path), path, path_keys)
     seen = [path.resolve()]
     while "extends" in data:
         ref = data.pop("extends")
@@ -57,7 +59,15 @@ def load_with_extends(path: Path) -> dict[str, Any]:
         if base_path in seen:
             raise ConfigError(f"{path}: key 'extends': cycle through {base_path}")
         seen.append(base_path)
-        data = merge(load_yaml(base_path), data)
+        data = merge(_absolute(load_yaml(base_path), base_path, path_keys), data)
+    return data
+
+
+def _absolute(data: dict[str, Any], file: Path, keys: tuple[str, ...]) -> dict[str, Any]:
+    for key in keys:
+        value = data.get(key)
+        if isinstance(value, str) and not Path(value).is_absolute():
+            data[key] = str((Path(file).resolve().parent / value).resolve())
     return data
 
 

@@ -268,13 +268,17 @@ def evaluate(scenario: Scenario, runs: list[Run]) -> tuple[list[dict], list[str]
         results.append(m)
     by_name = {m["controller"]: m for m in results}
     for name, targets in scenario.targets.items():
-        m = by_name.get(name, {})
+        if name not in by_name:
+            continue                       # not flown (--only)
+        m = by_name[name]
         for key, want in targets.items():
             got = m.get(key)
             ok = (got == want) if isinstance(want, bool) else (got is not None and got <= want)
             if not ok:
                 failures.append(f"{name}: {key} = {got} (target {'=' if isinstance(want, bool) else '<='} {want})")
     for better, worse, metric in scenario.better:
+        if better not in by_name or worse not in by_name:
+            continue
         a, b = by_name.get(better, {}).get(metric), by_name.get(worse, {}).get(metric)
         if a is None or b is None or not a < b:
             failures.append(f"{better} not better than {worse} on {metric} ({a} vs {b})")

@@ -102,8 +102,11 @@ class Controller:
         if self.eso is not None:
             y = np.concatenate([x[0:3], x[6:9]])
             if t_s > self._last_t:
-                acc = np.asarray(self.model.accel(x, u_applied)).ravel()
-                eta_acc = np.asarray(self.model.euler_accel(x, u_applied, np.zeros(6))).ravel()
+                # the input that acted since the last sample: the previous command, or what the
+                # vehicle reports it produced (observer.input in the controller file)
+                u_obs = u_applied if self.cfg.observer_input == "outputs" else self._last_u
+                acc = np.asarray(self.model.accel(x, u_obs)).ravel()
+                eta_acc = np.asarray(self.model.euler_accel(x, u_obs, np.zeros(6))).ravel()
                 self.eso.update(y, np.concatenate([acc[0:3], eta_acc]))
             d = self.eso.disturbance(x[6:9])
             out_err = self.eso.output_error(y)

@@ -264,8 +264,8 @@ def param_value(name: str, value: float, count: int, index: int) -> mavlink.MAVL
 
 
 def autopilot_version() -> mavlink.MAVLink_message:
-    caps = (mavlink.MAV_PROTOCOL_CAPABILITY_MAVLINK2 | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT
-            | mavlink.MAV_PROTOCOL_CAPABILITY_SET_ACTUATOR_TARGET)
+    # (MAV_PROTOCOL_CAPABILITY_SET_ACTUATOR_TARGET, bit 1024, is deprecated: now RESERVED3)
+    caps = mavlink.MAV_PROTOCOL_CAPABILITY_MAVLINK2 | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT
     return mavlink.MAVLink_autopilot_version_message(
         caps, 0x00010000, 0, 0, 0, [0] * 8, [0] * 8, [0] * 8, 0, 0, 0x5452510001)
 

@@ -1,0 +1,71 @@
+"""Shared fixtures of the test suite: paths to the parameter files (from this file, never from the
+working directory), loaded parameter records, and a free UDP port finder."""
+
+from __future__ import annotations
+
+import socket
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+if str(ROOT) not in sys.path:          # the package is importable even when not installed
+    sys.path.insert(0, str(ROOT))
+
+PARAMS = ROOT / "params"
+SIM_DEFAULT = PARAMS / "sim" / "default.yaml"
+TRQ_YAML = PARAMS / "vehicle" / "trq.yaml"
+QUAD_YAML = PARAMS / "vehicle" / "quad.yaml"
+
+
+def free_udp_port() -> int:
+    """A UDP port on 127.0.0.1 that nobody was bound to a moment ago."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.fixture
+def free_port():
+    """Call it to get a fresh free UDP port on 127.0.0.1."""
+    return free_udp_port
+
+
+@pytest.fixture(scope="session")
+def root() -> Path:
+    return ROOT
+
+
+@pytest.fixture(scope="session")
+def sim_default_path() -> Path:
+    return SIM_DEFAULT
+
+
+@pytest.fixture(scope="session")
+def trq_path() -> Path:
+    return TRQ_YAML
+
+
+@pytest.fixture(scope="session")
+def quad_path() -> Path:
+    return QUAD_YAML
+
+
+@pytest.fixture(scope="session")
+def sim():
+    """The default simulation settings (trq, lockstep, 1 kHz physics); frozen, so shared."""
+    from sil_vehicle.config import load_sim
+    return load_sim(SIM_DEFAULT)
+
+
+@pytest.fixture(scope="session")
+def trq():
+    from sil_vehicle.config import load_vehicle
+    return load_vehicle(TRQ_YAML)
+
+
+@pytest.fixture(scope="session")
+def quad():
+    from sil_vehicle.config import load_vehicle
+    return load_vehicle(QUAD_YAML)

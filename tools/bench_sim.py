@@ -1,0 +1,217 @@
+#!/usr/bin/env python3
+"""Benchmark of the SIL vehicle: how fast the plant and the daemon run on this machine.
+
+    python tools/bench_sim.py [--steps 20000] [--sim-seconds 20] [--json out/bench_sim.json]
+
+(1) Vehicle.step: physics ticks per second, armed, in the air at (a hair above) the hover
+    throttle, median of 5 runs;
+(2) Sitl.step: the same with telemetry due at the default rates, every message encoded to bytes
+    (the daemon's work per tick, without sockets), median of 5 runs;
+(3) the daemon (`python -m sil_vehicle`, a subprocess) in lockstep with a trivial responder that
+    answers every ODOMETRY with a target, control rate 100 Hz: the real-time factor (simulated
+    seconds per wall second, from the first ODOMETRY to the last), median of 3 runs.
+The target is 20x real time. Numbers are measured, never estimated.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import os
+import platform
+import socket
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import yaml
+from pymavlink.dialects.v20 import common as mavlink
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+from sil_vehicle.config import PARAMS_DIR, load_sim  # noqa: E402
+from sil_vehicle.mavlink.codec import Codec  # noqa: E402
+from sil_vehicle.sitl import LINKS, Sitl  # noqa: E402
+from sil_vehicle.vehicle import ActuatorCommand, Vehicle  # noqa: E402
+
+TARGET_RTF = 20.0
+SIM_DEFAULT = PARAMS_DIR / "sim" / "default.yaml"
+VEHICLE = PARAMS_DIR / "vehicle" / "trq.yaml"
+
+
+def free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def airborne(vehicle: Vehicle, throttle_pct: float) -> None:
+    """Armed, 50 m up, motors at the given throttle: every tick runs the full RK4."""
+    x = list(vehicle.state.x)
+    x[2] = -50.0
+    vehicle.state = dataclasses.replace(vehicle.state, x=tuple(x), landed=False,
+                                        motor_pct=(throttle_pct,) * 4)
+    vehicle.armed = True
+    vehicle.command = ActuatorCommand((throttle_pct,) * 4, (0.05, -0.05, 0.05, -0.05))
+
+
+def bench_vehicle(steps: int, runs: int = 5) -> float:
+    sim = load_sim(SIM_DEFAULT)
+    rates = []
+    for _ in range(runs):
+        v = Vehicle(sim, np.random.default_rng(0))
+        airborne(v, sim.vehicle.hover_throttle_pct + 0.5)
+        t0 = time.perf_counter()
+        for _ in range(steps):
+            v.step()
+        rates.append(steps / (time.perf_counter() - t0))
+    return statistics.median(rates)
+
+
+def bench_sitl(steps: int, runs: int = 5) -> tuple[float, float]:
+    """(steps/s, messages encoded per simulated second)."""
+    sim = load_sim(SIM_DEFAULT).with_changes(clock_mode="realtime")
+    rates, per_s = [], 0.0
+    for _ in range(runs):
+        s = Sitl(sim)
+        airborne(s.vehicle, sim.vehicle.hover_throttle_pct + 0.5)
+        codecs = {name: Codec() for name in LINKS}
+        n_msgs = 0
+        t0 = time.perf_counter()
+        for _ in range(steps):
+            for item in s.step():
+                codecs[item.link].encode(item.msg)
+                n_msgs += 1
+        rates.append(steps / (time.perf_counter() - t0))
+        per_s = n_msgs / (steps * sim.dt_us * 1e-6)
+    return statistics.median(rates), per_s
+
+
+def lockstep_run(sim_yaml: Path, sim_seconds: float, log_dir: Path) -> float:
+    """One daemon run answered by a trivial responder; returns the real-time factor."""
+    trim = load_sim(sim_yaml).vehicle.hover_throttle_pct
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    sock.bind(("127.0.0.1", 0))
+    sock.settimeout(0.05)             # short: the loop must notice the exit promptly
+    off_port = free_port()
+    cmd = [sys.executable, "-m", "sil_vehicle", "--sim", str(sim_yaml), "--mode", "lockstep",
+           "--offboard-bind", f"127.0.0.1:{off_port}",
+           "--offboard-target", f"127.0.0.1:{sock.getsockname()[1]}",
+           "--gcs-bind", f"127.0.0.1:{free_port()}", "--gcs-target", "127.0.0.1:9",
+           "--log-dir", str(log_dir), "--duration", str(sim_seconds)]
+    env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    proc = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL)
+    mav = mavlink.MAVLink(None, srcSystem=255, srcComponent=190)
+    rx = mavlink.MAVLink(None)
+    dest = ("127.0.0.1", off_port)
+    answered: set[int] = set()
+    wall0 = wall_end = None
+    end_us = int(round(sim_seconds * 1e6))
+    zeta = (trim + 0.5) / 100.0                  # climbs slowly: airborne, full RK4 every tick
+    try:
+        while proc.poll() is None:
+            try:
+                data, _ = sock.recvfrom(65535)
+            except socket.timeout:
+                continue
+            for msg in rx.parse_buffer(data) or []:
+                if msg.get_type() != "ODOMETRY" or msg.time_usec in answered:
+                    continue
+                answered.add(msg.time_usec)
+                if msg.time_usec >= end_us and wall_end is None:
+                    wall_end = time.perf_counter()      # the last stamp: simulation done
+                out = b""
+                if wall0 is None:
+                    wall0 = time.perf_counter()
+                    out += bytes(mavlink.MAVLink_command_long_message(
+                        1, 1, mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0,
+                        0).pack(mav))
+                out += bytes(mavlink.MAVLink_set_actuator_control_target_message(
+                    msg.time_usec, 0, 1, 1, [zeta] * 4 + [0.0] * 4).pack(mav))
+                sock.sendto(out, dest)
+        proc.wait(timeout=30)
+        if wall_end is None:
+            wall_end = time.perf_counter()
+        wall = wall_end - wall0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        sock.close()
+    if proc.returncode != 0:
+        raise RuntimeError(f"the vehicle exited with {proc.returncode}")
+    return sim_seconds / wall
+
+
+def bench_lockstep(sim_seconds: float, runs: int = 3) -> float:
+    with tempfile.TemporaryDirectory(prefix="bench_sim_") as tmp:
+        sim_yaml = Path(tmp) / "bench_100hz.yaml"
+        # `vehicle:` absolute: a relative one inherited through `extends:` would be resolved
+        # against this temporary file's folder
+        sim_yaml.write_text(yaml.safe_dump({
+            "extends": str(SIM_DEFAULT), "vehicle": str(VEHICLE), "control_rate_hz": 100,
+            "telemetry": {"offboard": {"ODOMETRY": 100}}}), encoding="utf-8")
+        rtfs = [lockstep_run(sim_yaml, sim_seconds, Path(tmp) / f"run{i}") for i in range(runs)]
+    return statistics.median(rtfs)
+
+
+def machine() -> dict[str, object]:
+    return {"platform": platform.platform(), "processor": platform.processor() or
+            platform.machine(), "cpu_count": os.cpu_count(),
+            "python": platform.python_version(), "implementation": platform.python_implementation()}
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--steps", type=int, default=20_000, help="ticks per run of (1) and (2)")
+    ap.add_argument("--sim-seconds", type=float, default=20.0,
+                    help="simulated seconds per daemon run of (3)")
+    ap.add_argument("--json", type=Path, default=None, help="also write the numbers here")
+    args = ap.parse_args(argv)
+
+    sim = load_sim(SIM_DEFAULT)
+    physics_hz = sim.physics_rate_hz
+    vehicle_sps = bench_vehicle(args.steps)
+    sitl_sps, msgs_per_s = bench_sitl(args.steps)
+    rtf = bench_lockstep(args.sim_seconds)
+    result = {
+        "machine": machine(),
+        "physics_rate_hz": physics_hz,
+        "vehicle_step_per_s": round(vehicle_sps, 1),
+        "vehicle_step_rtf_bound": round(vehicle_sps / physics_hz, 2),
+        "sitl_step_with_telemetry_per_s": round(sitl_sps, 1),
+        "sitl_messages_per_sim_s": round(msgs_per_s, 1),
+        "sitl_step_rtf_bound": round(sitl_sps / physics_hz, 2),
+        "lockstep_rtf_100hz": round(rtf, 2),
+        "lockstep_sim_seconds": args.sim_seconds,
+        "target_rtf": TARGET_RTF,
+        "lockstep_rtf_over_target": round(rtf / TARGET_RTF, 2),
+        "runs": {"vehicle": 5, "sitl": 5, "lockstep": 3, "steps": args.steps},
+    }
+    m = result["machine"]
+    print(f"machine: {m['platform']}, {m['processor']}, {m['cpu_count']} CPUs, "
+          f"{m['implementation']} {m['python']}")
+    print(f"(1) Vehicle.step                 {vehicle_sps:10.0f} steps/s  "
+          f"(bound {vehicle_sps / physics_hz:.1f}x real time at {physics_hz} Hz; median of 5 x "
+          f"{args.steps})")
+    print(f"(2) Sitl.step + encoding         {sitl_sps:10.0f} steps/s  "
+          f"(bound {sitl_sps / physics_hz:.1f}x; {msgs_per_s:.0f} messages per simulated s)")
+    print(f"(3) daemon lockstep, 100 Hz       {rtf:10.1f}x real time "
+          f"({args.sim_seconds:g} simulated s, median of 3; target {TARGET_RTF:g}x: "
+          f"{rtf / TARGET_RTF:.2f} of it, {'met' if rtf >= TARGET_RTF else 'NOT met'})")
+    if args.json:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(result, indent=2) + "\n", encoding="utf-8")
+        print(f"written to {args.json}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
