@@ -389,7 +389,7 @@ class ControllerConfig:
     max_rate_rad_s: float                 # body-rate state bound
     solver: SolverConfig
     reference: ReferenceConfig
-    observer_input: str = "commanded"     # commanded | outputs: the u in the observer's b0(u)
+    applied_input: str = "commanded"      # commanded | outputs: what the controller takes as applied
 
     @property
     def control_dt_s(self) -> float:
@@ -439,8 +439,8 @@ def _controller(k: _Keys, path: Path) -> ControllerConfig:
     ok = k.sub("observer")
     observer = ok.text("kind", ("none", "nonlinear", "linear"))
     eso_file = ok.text("file")
-    observer_input = ok.text("input", ("commanded", "outputs"))
     ok.close()
+    applied_input = k.text("applied_input", ("commanded", "outputs"))
     eso = None
     if observer != "none":
         base = load_eso(path.parent / eso_file)
@@ -461,7 +461,7 @@ def _controller(k: _Keys, path: Path) -> ControllerConfig:
     if step_s < 1.0 / rate - 1e-12:
         raise k.error("horizon.step_s", step_s, f"at least one control period ({1.0 / rate:g} s)")
     return ControllerConfig(str(path), name, vehicle, observer, eso, rate, steps, step_s,
-                            weights, max_tilt, max_rate, solver, reference, observer_input)
+                            weights, max_tilt, max_rate, solver, reference, applied_input)
 
 
 def load_controller(path: Path | str) -> ControllerConfig:

@@ -95,18 +95,18 @@ class Controller:
         x = state.as_vector()
         if not np.all(np.isfinite(x)):
             return self._emergency(t_s, "non-finite state")
+        # the input that acted since the last step: the previous command, or what the vehicle
+        # reports it produced (applied_input in the controller file)
         u_applied = (np.clip(self.allocator.command_vector(applied), self._u_lo, self._u_hi)
-                     if applied is not None else self._last_u)
+                     if applied is not None and self.cfg.applied_input == "outputs"
+                     else self._last_u)
         d = np.zeros(6)
         out_err = 0.0
         if self.eso is not None:
             y = np.concatenate([x[0:3], x[6:9]])
             if t_s > self._last_t:
-                # the input that acted since the last sample: the previous command, or what the
-                # vehicle reports it produced (observer.input in the controller file)
-                u_obs = u_applied if self.cfg.observer_input == "outputs" else self._last_u
-                acc = np.asarray(self.model.accel(x, u_obs)).ravel()
-                eta_acc = np.asarray(self.model.euler_accel(x, u_obs, np.zeros(6))).ravel()
+                acc = np.asarray(self.model.accel(x, u_applied)).ravel()
+                eta_acc = np.asarray(self.model.euler_accel(x, u_applied, np.zeros(6))).ravel()
                 self.eso.update(y, np.concatenate([acc[0:3], eta_acc]))
             d = self.eso.disturbance(x[6:9])
             out_err = self.eso.output_error(y)

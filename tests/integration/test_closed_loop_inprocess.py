@@ -153,15 +153,18 @@ class _FailingSolver:
 
 def test_solver_failure_falls_back_and_stays_finite():
     base, rc = controller("trq_nmpc", **SHORT_HELIX)
-    # solve calls 200..259 fail: the last good plan covers N h = 1 s = 50 control steps
-    ctl = Controller(base.cfg, solver=_FailingSolver(base.solver, 200, 260))
+    cfg = base.cfg
+    # the last good plan covers N h seconds: that many control steps of shifted plan, then hover
+    plan = round(cfg.horizon_steps * cfg.step_s * cfg.control_rate_hz)
+    first, last = 2 * cfg.control_rate_hz, 2 * cfg.control_rate_hz + plan + 10
+    ctl = Controller(cfg, solver=_FailingSolver(base.solver, first, last))
     f = fly(ctl, rc, seconds=8.0)
     assert not f.crashed
     assert np.all(np.isfinite(f.cmds))
-    assert all(s is CommandSource.SHIFTED_PLAN for s in f.sources[199:247])
-    assert all(s is CommandSource.HOVER for s in f.sources[249:259])
-    assert f.sources[259] is CommandSource.NMPC
-    assert np.max(np.abs(f.pos[260:] - f.ref[260:])) < 0.3
+    assert all(s is CommandSource.SHIFTED_PLAN for s in f.sources[first - 1:first + plan - 3])
+    assert all(s is CommandSource.HOVER for s in f.sources[first + plan - 1:last - 1])
+    assert f.sources[last - 1] is CommandSource.NMPC
+    assert np.max(np.abs(f.pos[last:] - f.ref[last:])) < 0.3
     ctl2 = Controller(base.cfg, solver=_FailingSolver(base.solver, 150, 153, nan=True))
     f2 = fly(ctl2, rc, seconds=4.0)
     assert np.all(np.isfinite(f2.cmds)) and not f2.crashed

@@ -64,12 +64,12 @@ def test_quad_equals_trq_but_locked(trq, quad):
 
 def test_default_sim(sim):
     assert sim.physics_rate_hz == 1000 and sim.dt_us == 1000
-    assert sim.control_rate_hz == 50 and sim.ticks_per_control == 20
+    assert sim.control_rate_hz == 100 and sim.ticks_per_control == 10
     assert sim.clock_mode == "lockstep"
     assert sim.vehicle.name == "trq"
     assert [link.name for link in sim.links] == ["gcs", "offboard"]
     off = sim.link("offboard")
-    assert off.rate("ODOMETRY") == 50 and str(off.bind) == "127.0.0.1:14580"
+    assert off.rate("ODOMETRY") == sim.control_rate_hz and str(off.bind) == "127.0.0.1:14580"
     assert [s for s, _ in off.rates_hz] == list(STREAMS)
     for link in sim.links:
         for _, hz in link.rates_hz:

@@ -23,7 +23,7 @@ def test_shipped_files_load():
                       ("quad_nmpc", "none")):
         cfg = load_controller(PARAMS / f"controller/{name}.yaml")
         assert cfg.name == name and cfg.observer == obs
-        assert cfg.horizon_steps == 20 and cfg.step_s == 0.05 and cfg.control_rate_hz == 50
+        assert cfg.horizon_steps == 20 and cfg.step_s == 0.05 and cfg.control_rate_hz == 100
         assert (cfg.eso is None) == (obs == "none")
     assert load_controller(PARAMS / "controller/quad_nmpc.yaml").vehicle.tilt_locked
     assert load_eso(PARAMS / "controller/eso.yaml").substeps >= 1
@@ -85,7 +85,7 @@ def test_controller_file_errors(tmp_path):
     src["observer"]["file"] = str(PARAMS / "controller/eso.yaml")
     ok = _write(tmp_path, "c.yaml", src)
     assert load_controller(ok).horizon_steps == 20
-    bad = dict(src, horizon={"steps": 20, "step_s": 0.01})       # shorter than a control period
+    bad = dict(src, horizon={"steps": 20, "step_s": 0.005})      # shorter than a control period
     with pytest.raises(ConfigError, match=r"horizon\.step_s"):
         load_controller(_write(tmp_path, "c2.yaml", bad))
     bad = dict(src, weights=dict(src["weights"], position=[1.0, 2.0]))

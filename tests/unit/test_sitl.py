@@ -288,7 +288,7 @@ def test_lockstep_odometry_interval_denied(sitl):
     out = sitl.handle("offboard", command(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL,
                                           mavlink.MAVLINK_MSG_ID_ODOMETRY, 10_000))
     assert ack(out) == mavlink.MAV_RESULT_DENIED
-    assert sitl.lockstep_ticks() == 20
+    assert sitl.lockstep_ticks() == sitl.sim.physics_rate_hz // sitl.sim.control_rate_hz
 
 
 # --- arming and crash -------------------------------------------------------------------------
@@ -343,10 +343,11 @@ def test_lockstep_stamps(sitl):
     assert sitl.handle("offboard", target(0, [0.3] * 4)) == []
     assert sitl.answered and sitl.targets_applied == 1
     out = []
-    for _ in range(20):
+    for _ in range(sitl.lockstep_ticks()):
         out += sitl.step()
     (odo,) = of(out, "ODOMETRY", "offboard")
-    assert odo.time_usec == 20_000 == sitl.lockstep_stamp_us and not sitl.answered
+    period_us = 1_000_000 // sitl.sim.control_rate_hz
+    assert odo.time_usec == period_us == sitl.lockstep_stamp_us and not sitl.answered
 
 
 def test_lockstep_stale_target_not_applied(sitl):
