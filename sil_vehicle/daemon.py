@@ -66,7 +66,7 @@ class VehicleDaemon:
         self.codecs = {name: Codec(counters=self.sitl.counters[name]) for name in LINKS}
         self.transports: dict[str, asyncio.DatagramTransport] = {}
         self.peers: dict[str, list[tuple[str, int]]] = {name: [] for name in LINKS}
-        self._answered = asyncio.Event()
+        self._answer: asyncio.Future | None = None   # resolved when the lockstep target arrives
         self._stop = asyncio.Event()
         self._monotonic = monotonic
         self._wall_us = wall_us
@@ -111,14 +111,15 @@ class VehicleDaemon:
             if self.tlog:
                 self.tlog.write(self._wall_us(), bytes(msg.get_msgbuf()))
             self.send(self.sitl.handle(link, msg, addr))
-        if self.sitl.answered:
-            self._answered.set()
+        if self.sitl.answered and self._answer is not None and not self._answer.done():
+            self._answer.set_result(True)
 
     # --- loops -----------------------------------------------------------------------------
     def stop(self, reason: str = "stopped") -> None:
         self.exit_reason = self.exit_reason or reason
         self._stop.set()
-        self._answered.set()
+        if self._answer is not None and not self._answer.done():
+            self._answer.set_result(False)
 
     async def run(self, duration_s: float | None = None) -> None:
         await self.open()
@@ -134,13 +135,17 @@ class VehicleDaemon:
 
     async def _lockstep(self, end_us: int | None) -> None:
         sitl = self.sitl
+        loop = asyncio.get_running_loop()
         while not self._stop.is_set():
             while not sitl.answered and not self._stop.is_set():
+                # a bare future (no task per wait): this exchange runs hundreds of times a second
+                self._answer = loop.create_future()
                 try:
-                    await asyncio.wait_for(self._answered.wait(), self.sim.resend_s)
+                    await asyncio.wait_for(self._answer, self.sim.resend_s)
                 except asyncio.TimeoutError:
                     self.send(sitl.telemetry_due(everything=True))
-                self._answered.clear()
+                finally:
+                    self._answer = None
             if self._stop.is_set():
                 break
             for _ in range(sitl.lockstep_ticks()):

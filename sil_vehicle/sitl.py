@@ -70,6 +70,8 @@ class Sitl:
         self._measured: Measured | None = None
         self._was_crashed = False
         self._events: list[Event] = []
+        self._gcd_key: tuple = ()
+        self._gcd = 1
         self.events_played: list[tuple[int, str]] = []
 
     # --- time ------------------------------------------------------------------------------
@@ -97,6 +99,8 @@ class Sitl:
 
     def telemetry_due(self, everything: bool = False) -> list[Outgoing]:
         """Streams whose period divides the current tick (or one of each enabled stream)."""
+        if not everything and self.tick % self._period_gcd():
+            return []                   # most ticks: nothing is due (cheap test first)
         out = []
         for link in LINKS:
             for stream, period in self.periods[link].items():
@@ -107,6 +111,13 @@ class Sitl:
                             self.answered = False
                         self.lockstep_stamp_us = self.t_us
         return out
+
+    def _period_gcd(self) -> int:
+        key = tuple(p for link in LINKS for p in self.periods[link].values())
+        if key != self._gcd_key:
+            self._gcd_key = key
+            self._gcd = math.gcd(*(p for p in key if p)) or 1
+        return self._gcd
 
     def lockstep_ticks(self) -> int:
         """Physics ticks in one lockstep period (the offboard ODOMETRY period)."""

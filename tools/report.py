@@ -117,6 +117,7 @@ def figures(scenario, runs, out: Path) -> list[Path]:
         t = stamps[keep] * 1e-6
         pos = np.column_stack([truth[f"pos_{a}_m"][rows] for a in "ned"])
         ref = np.column_stack([steps[f"ref_pos_{a}_m"][keep] for a in "ned"])
+        ref[:, 2] = np.minimum(ref[:, 2], metrics_mod.GROUND_DOWN_M)   # as the metrics do
         axes[0].plot(t, np.linalg.norm(pos - ref, axis=1), lw=1, label=name)
         yaw_err = metrics_mod.wrap_deg(np.degrees(truth["yaw_rad"][rows] - steps["ref_yaw_rad"][keep]))
         axes[1].plot(t, yaw_err, lw=1, label=name)
