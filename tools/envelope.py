@@ -74,8 +74,10 @@ def analyse(vp: VehicleParams, factors: list[float], wind_speed: float, wind_fro
     opts = {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes"}
     # 1) the trim: the wrench as close as possible to the need, then the smallest effort
     resid = w - need
-    lsq = ca.nlpsol("lsq", "ipopt", {"x": x, "f": ca.sumsqr(resid) * 1e3
-                                     + 1e-6 * ca.sumsqr(zeta - vp.hover_throttle_pct)}, opts)
+    # effort: throttle away from the healthy hover (1 % ~ 0.01 rad), tilts, and body attitude
+    effort = (1e-4 * ca.sumsqr(zeta - vp.hover_throttle_pct) + ca.sumsqr(roll) + ca.sumsqr(pitch)
+              + (ca.sumsqr(alpha) if n_tilt else 0))
+    lsq = ca.nlpsol("lsq", "ipopt", {"x": x, "f": ca.sumsqr(resid) * 1e4 + 1e-3 * effort}, opts)
     sol = lsq(x0=x0, lbx=lbx, ubx=ubx)
     xt = np.array(sol["x"]).ravel()
     residual = np.array(ca.Function("r", [x], [resid])(xt)).ravel()
@@ -94,8 +96,13 @@ def analyse(vp: VehicleParams, factors: list[float], wind_speed: float, wind_fro
     trim_w = np.array(ca.Function("w", [x], [w])(xt)).ravel()
     u_only = ca.vertcat(*([alpha] if n_tilt else []), zeta)
     w_u = ca.substitute(w, ca.vertcat(roll, pitch), ca.DM(xt[-2:]))
+    # a fixed-rotor airframe has no body Fx, Fy at all: those axes are not actuated
+    actuated = [2, 3, 4, 5] if vp.tilt_locked else list(range(6))
     for j, axis in enumerate(AXES):
-        others = [k for k in range(6) if k != j]
+        if j not in actuated:
+            out["margin"][f"+{axis}"] = out["margin"][f"-{axis}"] = None
+            continue
+        others = [k for k in actuated if k != j]
         for sign in (+1, -1):
             nlp = {"x": u_only, "f": -sign * w_u[j],
                    "g": ca.vertcat(*[w_u[k] - trim_w[k] for k in others])}
@@ -133,7 +140,7 @@ def main(argv: list[str] | None = None) -> int:
           f"pitch {t['pitch_deg']} deg; wrench residual {out['residual']}")
     for key, value in out["margin"].items():
         unit = "N" if key[1] == "F" else "N m"
-        print(f"  margin {key}: {'none' if value is None else f'{value:.3f} {unit}'}")
+        print(f"  margin {key}: {'none (not actuated or not reachable)' if value is None else f'{value:.3f} {unit}'}")
     if args.json:
         args.json.write_text(json.dumps(out, indent=2) + "\n")
     return 0 if out["feasible"] else 1

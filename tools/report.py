@@ -37,7 +37,29 @@ def table(results: list[dict]) -> str:
     return "\n".join([head, rule] + rows)
 
 
-def markdown(scenario, results: list[dict], failures: list[str], figures: list[Path]) -> str:
+def envelope_text(envelopes: list[dict]) -> list[str]:
+    lines = ["## The physical envelope", "",
+             "Hover trim and the wrench margin left at it, under this wind and the worst motor "
+             "effectiveness of the fault script (`tools/envelope.py`): how much more force (N) "
+             "or torque (N m) the actuators can add on each body axis while the rest of the "
+             "wrench keeps its trim value.", ""]
+    for e in envelopes:
+        t = e["trim"]
+        head = (f"- `{e['vehicle']}`, motor factors {e['motor_factors']}: trim "
+                f"{'feasible' if e['feasible'] else '**infeasible**'}, throttle "
+                f"{t['throttle_pct']} %, tilt {t['tilt_deg']} deg, roll {t['roll_deg']} deg, "
+                f"pitch {t['pitch_deg']} deg")
+        if not e["feasible"]:
+            head += f"; wrench it cannot produce: {e['residual']}"
+        lines.append(head)
+        if e["margin"]:
+            lines.append("  - margins: " + ", ".join(
+                f"{k} {'none' if v is None else f'{v:.2f}'}" for k, v in e["margin"].items()))
+    return lines + [""]
+
+
+def markdown(scenario, results: list[dict], failures: list[str], figures: list[Path],
+             envelopes: list[dict] | None = None) -> str:
     lines = [f"# Scenario `{scenario.name}`", "", scenario.description, "",
              f"Seed {scenario.seed}; wind {scenario.wind_speed_m_s:g} m/s from "
              f"{scenario.wind_from_deg:g} deg{' with gusts' if scenario.gusts else ''}; faults: "
@@ -55,6 +77,8 @@ def markdown(scenario, results: list[dict], failures: list[str], figures: list[P
         lines += ["", "**All met.**" if not failures else "**Missed:**", ""]
         lines += [f"- {f}" for f in failures]
         lines.append("")
+    if envelopes:
+        lines += envelope_text(envelopes)
     for fig in figures:
         lines += [f"![{fig.stem}]({fig.name})", ""]
     return "\n".join(lines)

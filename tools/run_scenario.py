@@ -285,6 +285,49 @@ def evaluate(scenario: Scenario, runs: list[Run]) -> tuple[list[dict], list[str]
     return results, failures
 
 
+def worst_motor_factors(scenario: Scenario) -> list[float]:
+    """The smallest effectiveness each motor reaches in the fault script (a - b for a
+    time-varying fault, 0 for a motor switched off)."""
+    from sil_vehicle.faultscript import InjectAction, ParamAction
+    factors = [1.0] * 4
+    if scenario.faults is None:
+        return factors
+    eff, tvb = [1.0] * 4, [0.0] * 4
+    for event in load_script(scenario.faults):
+        for a in event.actions:
+            if isinstance(a, ParamAction) and a.name.startswith("SIM_MOT"):
+                i = int(a.name[7]) - 1
+                if a.name.endswith("_EFF"):
+                    eff[i] = a.value
+                elif a.name.endswith("_TVB"):
+                    tvb[i] = a.value
+            elif isinstance(a, InjectAction) and a.unit == 101 and a.kind == 1:
+                eff[a.instance - 1], tvb[a.instance - 1] = 0.0, 0.0
+            for i in range(4):
+                factors[i] = min(factors[i], max(0.0, eff[i] - tvb[i]))
+    return factors
+
+
+def envelope_of(scenario: Scenario, runs: list[Run]) -> list[dict]:
+    """The hover trim and wrench margins of each airframe flown, under the scenario's wind and
+    its worst fault (tools/envelope.py)."""
+    import envelope
+    out = []
+    seen = set()
+    factors = worst_motor_factors(scenario)
+    for r in runs:
+        try:
+            vehicle_file = prepare_vehicle_file(r)
+        except (OSError, KeyError):
+            continue
+        if vehicle_file in seen:
+            continue
+        seen.add(vehicle_file)
+        out.append(envelope.analyse(load_vehicle(vehicle_file), factors,
+                                    scenario.wind_speed_m_s, scenario.wind_from_deg))
+    return out
+
+
 def prepare_vehicle_file(run: Run) -> Path:
     for line in (run.out / "flight.csv").open():
         if line.startswith("# vehicle_file: "):
@@ -352,7 +395,10 @@ def main(argv: list[str] | None = None) -> int:
     (args.out / "metrics.json").write_text(json.dumps(doc, indent=2) + "\n")
     import report
     figures = [] if args.no_figures else report.figures(scenario, runs, args.out)
-    text = report.markdown(scenario, results, failures, figures)
+    envelopes = envelope_of(scenario, runs)
+    doc["envelope"] = envelopes
+    (args.out / "metrics.json").write_text(json.dumps(doc, indent=2) + "\n")
+    text = report.markdown(scenario, results, failures, figures, envelopes)
     (args.out / "report.md").write_text(text)
     print()
     print(report.table(results))
