@@ -174,6 +174,7 @@ class SimParams:
     clock_mode: str              # "lockstep" | "realtime"
     speed_up: float
     resend_s: float
+    free_run_after_s: float
     links: tuple[LinkParams, ...]
     wind_speed_m_s: float
     wind_from_deg: float
@@ -246,6 +247,7 @@ def load_sim(path: Path | str, vehicle: Path | str | None = None) -> SimParams:
     mode = clock.str("mode", ("lockstep", "realtime"))
     speed_up = clock.float("speed_up", 0.01, 1000.0)
     resend = clock.float("resend_s", 0.01, 60.0)
+    free_run = clock.float("free_run_after_s", 0.05, 3600.0)
     clock.done()
     telemetry = top.section("telemetry")
     link_secs = top.section("links")
@@ -302,7 +304,8 @@ def load_sim(path: Path | str, vehicle: Path | str | None = None) -> SimParams:
     top.done()
     return SimParams(
         file=str(path), vehicle=vparams, physics_rate_hz=physics, control_rate_hz=control,
-        seed=seed, clock_mode=mode, speed_up=speed_up, resend_s=resend, links=tuple(links),
+        seed=seed, clock_mode=mode, speed_up=speed_up, resend_s=resend,
+        free_run_after_s=free_run, links=tuple(links),
         wind_speed_m_s=wspeed, wind_from_deg=wdir, gusts_enabled=genabled,
         gust_sigma_m_s=gsigma, gust_length_m=glength, noise_position_m=n_pos,
         noise_velocity_m_s=n_vel, noise_attitude_rad=n_att, noise_rates_rad_s=n_rate,

@@ -71,6 +71,7 @@ class VehicleDaemon:
         self._monotonic = monotonic
         self._wall_us = wall_us
         self.exit_reason = ""
+        self.free_runs = 0
 
     # --- transport -------------------------------------------------------------------------
     async def open(self) -> None:
@@ -134,20 +135,37 @@ class VehicleDaemon:
             self.close()
 
     async def _lockstep(self, end_us: int | None) -> None:
+        """Wait for the answer to the latest stamp, then advance one period. With no answer
+        for `free_run_after_s` of wall time, time runs on in real time (so that the vehicle's
+        offboard failsafe can act on a dead controller) until an answer arrives again."""
         sitl = self.sitl
         loop = asyncio.get_running_loop()
+        period_s = sitl.lockstep_ticks() * self.sim.dt_us * 1e-6 / self.sim.speed_up
+        free_run = False
         while not self._stop.is_set():
+            waited = 0.0
             while not sitl.answered and not self._stop.is_set():
                 # a bare future (no task per wait): this exchange runs hundreds of times a second
                 self._answer = loop.create_future()
+                wall0 = self._monotonic()
                 try:
-                    await asyncio.wait_for(self._answer, self.sim.resend_s)
+                    await asyncio.wait_for(self._answer, period_s if free_run else self.sim.resend_s)
                 except asyncio.TimeoutError:
+                    waited += self._monotonic() - wall0
+                    if free_run:
+                        break              # no controller: one period in real time
                     self.send(sitl.telemetry_due(everything=True))
+                    if waited >= self.sim.free_run_after_s:
+                        free_run = True
+                        self.free_runs += 1
+                        self.send(sitl.announce(6, "no offboard answer: time runs in real time"))
                 finally:
                     self._answer = None
             if self._stop.is_set():
                 break
+            if free_run and sitl.answered:
+                free_run = False           # the controller is back: lockstep again
+                self.send(sitl.announce(6, "offboard answers again: lockstep"))
             for _ in range(sitl.lockstep_ticks()):
                 self.send(sitl.step())
             if end_us is not None and sitl.t_us >= end_us:

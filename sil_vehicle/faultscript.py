@@ -114,8 +114,8 @@ def parse_event(sec: Section, tilt_range_deg: tuple[float, float] = (-90.0, 90.0
                         InjectAction(MOTOR, TYPE_OK, n), InjectAction(SERVO, TYPE_OK, n)]
         text.append("all faults cleared")
     else:
-        raise ConfigError(f"{sec.file}: key '{sec.prefix}': an event needs one of motor, servo, "
-                          "wind, clear")
+        raise ConfigError(f"{sec.file}: key '{sec.prefix.rstrip('.')}': an event needs one of "
+                          "motor, servo, wind, clear")
     sec.done()
     return Event(int(round(at_s * 1e6)), tuple(actions), ", ".join(text))
 

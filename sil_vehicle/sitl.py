@@ -19,10 +19,16 @@ from sil_vehicle.faultscript import Event, ParamAction
 from sil_vehicle.frames import euler_to_quat, quat_to_euler
 from sil_vehicle.mavlink import codec
 from sil_vehicle.mavlink.codec import Measured, RxCounters
-from sil_vehicle.mavlink.params import ParamTable
+from sil_vehicle.failsafe import FailsafeLander
+from sil_vehicle.mavlink.params import Param, ParamTable
 from sil_vehicle.vehicle import ActuatorCommand, Vehicle, VehicleState
 
 LINKS = ("gcs", "offboard")
+
+# Modes, with PX4's custom_mode encoding so that ground stations name them (main << 16 | sub << 24)
+MODE_OFFBOARD = 6 << 16
+MODE_AUTO_LAND = (4 << 16) | (6 << 24)
+MODE_NAMES = {MODE_OFFBOARD: "OFFBOARD", MODE_AUTO_LAND: "AUTO.LAND (failsafe)"}
 FORCE_DISARM_MAGIC = 21196
 ANNOUNCE_EVERY_US = 1_000_000       # rejected-target STATUSTEXT at most once a simulated second
 
@@ -53,7 +59,14 @@ class Sitl:
         gust_seq, noise_seq = np.random.SeedSequence(sim.seed).spawn(2)
         self.vehicle = Vehicle(sim, np.random.default_rng(gust_seq))
         self._noise_rng = np.random.default_rng(noise_seq)
-        self.params = ParamTable(self.vehicle)
+        self.offboard_loss_s = 0.5
+        self.params = ParamTable(self.vehicle, (
+            Param("COM_OF_LOSS_T", 0.05, 10.0, "s", "offboard loss time before the failsafe",
+                  lambda v: self.offboard_loss_s,
+                  lambda v, value: setattr(self, "offboard_loss_s", value)),))
+        self.mode = MODE_OFFBOARD
+        self.lander = FailsafeLander(sim.vehicle)
+        self._last_target_us = 0
         self.counters = {name: RxCounters() for name in LINKS}
         self.periods = {link.name: {s: (sim.physics_rate_hz // hz if hz else 0)
                                     for s, hz in link.rates_hz} for link in sim.links}
@@ -66,6 +79,8 @@ class Sitl:
         self.lockstep_stamp_us: int | None = None   # latest ODOMETRY stamp on the offboard link
         self.answered = False                        # has the target for that stamp arrived?
         self.targets_applied = 0
+        self.targets_ignored = 0
+        self.failsafes = 0
         self._last_announce_us = -ANNOUNCE_EVERY_US
         self._measured: Measured | None = None
         self._was_crashed = False
@@ -86,6 +101,7 @@ class Sitl:
     def step(self) -> list[Outgoing]:
         """Advance one physics tick; return the events and the telemetry due at the new time."""
         out: list[Outgoing] = self._play_events() if self._events else []
+        out += self._failsafe()
         state = self.vehicle.step()
         self.tick += 1
         self._measured = None
@@ -96,6 +112,26 @@ class Sitl:
         if self._log_period and self.tick % self._log_period == 0 and self.log_sink:
             self.log_sink(self.log_row())
         return out + self.telemetry_due()
+
+    def _failsafe(self) -> list[Outgoing]:
+        """Offboard loss: no valid target for COM_OF_LOSS_T while armed -> the vehicle's own
+        controller holds attitude and altitude, lands and disarms (PX4's offboard failsafe)."""
+        v, s = self.vehicle, self.vehicle.state
+        if not v.armed or s.crashed:
+            return []
+        if self.mode == MODE_OFFBOARD:
+            if s.landed or s.t_us - self._last_target_us <= self.offboard_loss_s * 1e6:
+                return []
+            self.mode = MODE_AUTO_LAND
+            self.lander.engage(s)
+            self.failsafes += 1
+            return self.announce(mavlink.MAV_SEVERITY_CRITICAL,
+                                 "offboard lost: failsafe, holding then landing")
+        if s.landed and s.t_us - self.lander.engaged_us > 1_000_000:
+            v.force_disarm()
+            return self.announce(mavlink.MAV_SEVERITY_WARNING, "failsafe: landed, disarmed")
+        v.command = self.lander.update(s, self.sim.dt_us * 1e-6)
+        return []
 
     def telemetry_due(self, everything: bool = False) -> list[Outgoing]:
         """Streams whose period divides the current tick (or one of each enabled stream)."""
@@ -143,7 +179,8 @@ class Sitl:
     def build(self, stream: str) -> mavlink.MAVLink_message:
         s = self.vehicle.state
         if stream == "HEARTBEAT":
-            return codec.heartbeat(self.vehicle.armed, s.crashed, not s.landed)
+            return codec.heartbeat(self.vehicle.armed, s.crashed, not s.landed, self.mode,
+                                   failsafe=self.mode != MODE_OFFBOARD)
         if stream == "SYS_STATUS":
             total = RxCounters()
             for c in self.counters.values():
@@ -226,6 +263,12 @@ class Sitl:
         if self.sim.clock_mode == "lockstep" and target.stamp_us != self.lockstep_stamp_us:
             counters.stale_targets += 1
             return []
+        self._last_target_us = self.t_us
+        if target.stamp_us == self.lockstep_stamp_us:
+            self.answered = True
+        if self.mode != MODE_OFFBOARD:
+            self.targets_ignored += 1        # the failsafe flies until offboard is asked back
+            return []
         self.vehicle.command = ActuatorCommand(target.throttle_pct, target.tilt_rad)
         self.targets_applied += 1
         if target.stamp_us == self.lockstep_stamp_us:
@@ -246,6 +289,9 @@ class Sitl:
                 reason = None
             else:
                 reason = self.vehicle.set_armed(arm)
+                if arm and reason is None:
+                    self._last_target_us = self.t_us      # the stream has its grace time
+                    self.mode = MODE_OFFBOARD
             if reason:
                 return [self._ack(link, msg, denied, sender)] + self.announce(
                     mavlink.MAV_SEVERITY_WARNING, f"{'arming' if arm else 'disarming'} denied: {reason}")
@@ -253,6 +299,8 @@ class Sitl:
                 mavlink.MAV_SEVERITY_INFO, "armed" if arm else "disarmed")
         if cmd == mavlink.MAV_CMD_INJECT_FAILURE:
             return self._inject(link, msg, sender)
+        if cmd == mavlink.MAV_CMD_DO_SET_MODE:
+            return self._set_mode(link, msg, sender)
         if cmd == mavlink.MAV_CMD_SET_MESSAGE_INTERVAL:
             name = _MSG_NAMES.get(int(msg.param1)) if math.isfinite(msg.param1) else None
             interval = msg.param2
@@ -281,6 +329,30 @@ class Sitl:
             else:
                 return [self._ack(link, msg, mavlink.MAV_RESULT_UNSUPPORTED, sender)]
             return [self._ack(link, msg, ok, sender), Outgoing(link, reply, sender)]
+        return [self._ack(link, msg, mavlink.MAV_RESULT_UNSUPPORTED, sender)]
+
+    def _set_mode(self, link: str, msg, sender) -> list[Outgoing]:
+        """MAV_CMD_DO_SET_MODE, p1 base mode (CUSTOM_MODE_ENABLED), p2 PX4 main mode: 6
+        OFFBOARD, 4 AUTO (p3 sub mode 6: LAND). Offboard is granted only while a valid target
+        stream is arriving (as PX4 asks), so control returns after a failsafe only on request."""
+        main = int(msg.param2) if math.isfinite(msg.param2) else -1
+        sub = int(msg.param3) if math.isfinite(msg.param3) else -1
+        if main == 6:
+            fresh = self.t_us - self._last_target_us <= self.offboard_loss_s * 1e6
+            if not fresh:
+                return [self._ack(link, msg, mavlink.MAV_RESULT_TEMPORARILY_REJECTED, sender)]
+            changed = self.mode != MODE_OFFBOARD
+            self.mode = MODE_OFFBOARD
+            out = [self._ack(link, msg, mavlink.MAV_RESULT_ACCEPTED, sender)]
+            if changed:
+                out += self.announce(mavlink.MAV_SEVERITY_INFO, "mode OFFBOARD: offboard control")
+            return out
+        if main == 4 and sub == 6:
+            if self.mode != MODE_AUTO_LAND and self.vehicle.armed:
+                self.mode = MODE_AUTO_LAND
+                self.lander.engage(self.vehicle.state)
+            return [self._ack(link, msg, mavlink.MAV_RESULT_ACCEPTED, sender)] + self.announce(
+                mavlink.MAV_SEVERITY_INFO, "mode AUTO.LAND")
         return [self._ack(link, msg, mavlink.MAV_RESULT_UNSUPPORTED, sender)]
 
     def _inject(self, link: str, msg, sender) -> list[Outgoing]:

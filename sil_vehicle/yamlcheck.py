@@ -155,7 +155,7 @@ class Section:
     def done(self) -> None:
         """Fail on any key that was not read: a typo must never be silently ignored."""
         if self._data:
-            key = sorted(self._data)[0]
+            key = sorted(self._data, key=str)[0]     # YAML keys need not be strings
             raise ConfigError(f"{self.file}: unknown key '{self._name(key)}' "
                               f"(value {self._data[key]!r})")
 

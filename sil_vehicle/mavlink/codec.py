@@ -161,14 +161,16 @@ class Measured:
     rates_frd_rad_s: tuple[float, float, float]
 
 
-def heartbeat(armed: bool, crashed: bool, flying: bool) -> mavlink.MAVLink_message:
+def heartbeat(armed: bool, crashed: bool, flying: bool, custom_mode: int = 0,
+              failsafe: bool = False) -> mavlink.MAVLink_message:
     base = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
     if armed:
         base |= mavlink.MAV_MODE_FLAG_SAFETY_ARMED
     status = (mavlink.MAV_STATE_EMERGENCY if crashed else
+              mavlink.MAV_STATE_CRITICAL if failsafe and armed else
               mavlink.MAV_STATE_ACTIVE if (armed or flying) else mavlink.MAV_STATE_STANDBY)
     return mavlink.MAVLink_heartbeat_message(
-        mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_GENERIC, base, 0, status, 3)
+        mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_GENERIC, base, custom_mode, status, 3)
 
 
 def sys_status(load_permille: int, drop_rate_permille: int, errors_comm: int,

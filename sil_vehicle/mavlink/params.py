@@ -98,9 +98,9 @@ def build_params(vehicle: Vehicle) -> tuple[Param, ...]:
 
 
 class ParamTable:
-    def __init__(self, vehicle: Vehicle) -> None:
+    def __init__(self, vehicle: Vehicle, extra: tuple[Param, ...] = ()) -> None:
         self.vehicle = vehicle
-        self.params = build_params(vehicle)
+        self.params = build_params(vehicle) + tuple(extra)
         self._index = {p.name: i for i, p in enumerate(self.params)}
 
     def __len__(self) -> int:

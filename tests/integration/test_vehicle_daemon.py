@@ -146,7 +146,7 @@ def test_realtime_daemon(tmp_path):
                 return len(values) == m.param_count
             return False
         last = gcs.wait_for(collect, 3.0, "the whole parameter list")
-        assert last.param_count == 33 and sorted(values) == list(range(33))
+        assert last.param_count == 34 and sorted(values) == list(range(34))
         assert {v.param_id for v in values.values()} >= {"SIM_WIND_SPD", "SIM_MOT1_OFF"}
 
         # motor 1 off, armed, fed 60 % on the offboard link (on the ground: 4 x 3.27 N < m g)

@@ -14,7 +14,7 @@ from sil_vehicle.sitl import FORCE_DISARM_MAGIC, Sitl
 
 _CLIENT = mavlink.MAVLink(None, srcSystem=255, srcComponent=190)
 LIMIT_DEG = 30.0
-N_PARAMS = 5 + 4 * 5 + 4 * 2
+N_PARAMS = 5 + 4 * 5 + 4 * 2 + 1   # wind, motors, servos, COM_OF_LOSS_T
 
 
 def wire(msg):
