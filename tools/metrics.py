@@ -140,8 +140,12 @@ def true_disturbance(truth: dict[str, np.ndarray], vehicle_params) -> np.ndarray
         wind = [truth[f"wind_{a}_m_s"][k] for a in "ned"]
         out_thr = [truth[f"out_throttle{i}_pct"][k] for i in range(1, 5)]
         out_tilt = [truth[f"out_tilt{i}_rad"][k] for i in range(1, 5)]
-        cmd_thr = [max(truth[f"cmd_throttle{i}_pct"][k], vp.idle_pct) for i in range(1, 5)]
-        cmd_tilt = [0.0 if vp.tilt_locked else truth[f"cmd_tilt{i}_rad"][k] for i in range(1, 5)]
+        armed = truth["armed"][k] > 0.5
+        # what the commands would give on the nominal vehicle (disarmed: motors stopped)
+        cmd_thr = [max(truth[f"cmd_throttle{i}_pct"][k], vp.idle_pct) if armed else 0.0
+                   for i in range(1, 5)]
+        cmd_tilt = [0.0 if (vp.tilt_locked or not armed) else truth[f"cmd_tilt{i}_rad"][k]
+                    for i in range(1, 5)]
         real = np.array(body_wrench(out_thr, out_tilt, vp))
         nominal = np.array(body_wrench(cmd_thr, cmd_tilt, vp))
         drag_real = np.array(drag_force_ned(vel, wind, vp.drag_N_s2_m2))

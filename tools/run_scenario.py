@@ -352,6 +352,18 @@ def main(argv: list[str] | None = None) -> int:
         print(f"run_scenario: {exc}", file=sys.stderr)
         return 2
     names = [c for c in scenario.controllers if not args.only or c in args.only]
+    try:    # every run's settings must be valid before anything starts
+        from trq_offboard.config import ConfigError as ControllerConfigError
+        from trq_offboard.config import load_controller
+        for c in names:
+            vp = load_vehicle(load_controller(ROOT / "params" / "controller" / f"{c}.yaml")
+                              .vehicle.file)
+            if scenario.faults:
+                load_script(scenario.faults, (math.degrees(vp.tilt_min_rad),
+                                              math.degrees(vp.tilt_max_rad)))
+    except (ConfigError, ControllerConfigError) as exc:
+        print(f"run_scenario: {exc}", file=sys.stderr)
+        return 2
     if not names:
         print(f"run_scenario: --only {args.only} matches none of {scenario.controllers}",
               file=sys.stderr)

@@ -1,0 +1,114 @@
+"""End to end over UDP: tools/run_scenario.py flies params/scenarios/smoke.yaml (the vehicle and
+the controller as separate processes, in lockstep) and writes metrics, report, figures and logs
+that the rest of the toolchain (and pymavlink) can read. About 15-30 s."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import subprocess
+import sys
+
+import pytest
+
+from conftest import PARAMS, ROOT
+
+ENV = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+FIGURES = ("trajectories.png", "errors.png", "observer.png")
+
+
+def run_scenario(*args: str, cwd, timeout: float):
+    return subprocess.run([sys.executable, str(ROOT / "tools" / "run_scenario.py"), *args],
+                          cwd=cwd, env=ENV, capture_output=True, text=True, timeout=timeout)
+
+
+@pytest.fixture(scope="module")
+def smoke(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("scenario")
+    out = tmp / "smoke"
+    r = run_scenario(str(PARAMS / "scenarios" / "smoke.yaml"), "--out", str(out), cwd=tmp,
+                     timeout=240)
+    return r, out
+
+
+def test_smoke_run_succeeds(smoke):
+    r, out = smoke
+    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
+    assert "TARGET MISSED" not in r.stdout
+
+
+def test_smoke_metrics(smoke):
+    _, out = smoke
+    doc = json.loads((out / "metrics.json").read_text())
+    assert doc["scenario"] == "smoke"
+    (run,) = doc["runs"]
+    assert run["controller"] == "trq_nmpc_eso" and run["vehicle"] == "trq"
+    assert run["status"] == "done" and run["crashed"] is False
+    assert math.isfinite(run["rmse_pos_m"]) and 0.0 < run["rmse_pos_m"] < 0.1
+    assert run["max_pos_err_m"] >= run["rmse_pos_m"]
+    assert run["rmse_pos_after_fault_m"] is not None and run["recovery_s"] is not None
+    assert run["flight_s"] > 4.0                         # past the fault at 4 s
+    for key in ("solve_ms_p50", "solve_ms_p99"):
+        assert isinstance(run[key], float) and run[key] > 0.0
+    assert run["solve_ms_p99"] >= run["solve_ms_p50"]
+
+
+def test_smoke_report_and_figures(smoke):
+    _, out = smoke
+    report = (out / "report.md").read_text()
+    assert "# Scenario `smoke`" in report
+    assert "| controller | vehicle | crashed |" in report and "| trq_nmpc_eso | trq |" in report
+    for name in FIGURES:
+        assert f"({name})" in report
+        path = out / name
+        assert path.exists() and path.stat().st_size > 1000
+        assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_smoke_logs(smoke):
+    from pymavlink import mavutil
+
+    _, out = smoke
+    run_dir = out / "trq_nmpc_eso"
+    for name in ("flight.csv", "vehicle.tlog", "controller.csv", "offboard.tlog"):
+        assert (run_dir / name).stat().st_size > 0, name
+    counts = {}
+    for name in ("vehicle.tlog", "offboard.tlog"):
+        log = mavutil.mavlink_connection(str(run_dir / name))
+        try:
+            seen: dict[str, int] = {}
+            while (msg := log.recv_match()) is not None:
+                seen[msg.get_type()] = seen.get(msg.get_type(), 0) + 1
+        finally:
+            log.close()
+        counts[name] = seen
+    for seen in counts.values():
+        assert seen.get("ODOMETRY", 0) > 100, seen
+        assert seen.get("SET_ACTUATOR_CONTROL_TARGET", 0) > 100, seen
+        assert seen.get("BAD_DATA", 0) == 0, seen
+
+
+def test_scenario_with_unknown_key_exits_2(tmp_path):
+    bad = tmp_path / "typo.yaml"
+    text = (PARAMS / "scenarios" / "smoke.yaml").read_text()
+    bad.write_text(text.replace("recovery_threshold_m:", "recovery_treshold_m:"))
+    # the fault script is named relative to the scenario file: point it at the real one
+    bad.write_text(bad.read_text().replace("../faults/motor1_smoke.yaml",
+                                           str(PARAMS / "faults" / "motor1_smoke.yaml")))
+    r = run_scenario(str(bad), "--out", str(tmp_path / "out"), cwd=tmp_path, timeout=60)
+    assert r.returncode == 2
+    # the misspelt key leaves the real one missing, which is reported first
+    assert "typo.yaml" in r.stderr and "recovery_threshold_m" in r.stderr
+    assert not (tmp_path / "out").exists()               # nothing was flown
+
+
+def test_scenario_with_extra_key_exits_2(tmp_path):
+    bad = tmp_path / "extra.yaml"
+    bad.write_text((PARAMS / "scenarios" / "smoke.yaml").read_text()
+                   .replace("../faults/motor1_smoke.yaml",
+                            str(PARAMS / "faults" / "motor1_smoke.yaml"))
+                   + "colour: blue\n")
+    r = run_scenario(str(bad), "--out", str(tmp_path / "out"), cwd=tmp_path, timeout=60)
+    assert r.returncode == 2
+    assert "extra.yaml" in r.stderr and "unknown key 'colour'" in r.stderr

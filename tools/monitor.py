@@ -1,0 +1,304 @@
+#!/usr/bin/env python3
+"""A live terminal view of a running SIL vehicle (or any vehicle speaking sil_vehicle/PROTOCOL.md)
+from its ground-station port.
+
+    monitor.py                                   udpout:127.0.0.1:18570, about 5 frames a second
+    monitor.py --once                            one snapshot, no escape codes (tests, logs)
+    monitor.py --duration 30 --vehicle params/vehicle/quad.yaml
+
+Shows the vehicle time, armed / on the ground / crashed (HEARTBEAT), position and velocity NED
+(LOCAL_POSITION_NED), attitude in degrees (ATTITUDE), the eight actuator outputs
+(SERVO_OUTPUT_RAW: throttle % = (pwm - 1000) / 10 for motors 1-4, tilt deg = (pwm - 1500) / 500 x
+half-range for servos 1-4, the half-range read from the vehicle YAML), the active faults and the
+wind (the SIM_* parameters, read at start and again whenever a STATUSTEXT mentions faults, a
+script or a SIM_ parameter), link statistics (messages per second by type, datagrams, the
+vehicle's SYS_STATUS drop rate and error counts) and the last five STATUSTEXTs.
+
+It says hello (a GCS heartbeat, once a second) so the vehicle adds it as a peer. Plain ANSI
+(clear screen and home), no curses. Exit status 0; 1 if no heartbeat within --timeout; 2 on bad
+arguments or a bad vehicle file.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+from collections import deque
+from pathlib import Path
+
+from pymavlink.dialects.v20 import common as mavlink
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "tools"))
+
+from mavclient import MavClient, NoAnswer  # noqa: E402
+from sil_vehicle.config import load_vehicle  # noqa: E402
+from sil_vehicle.yamlcheck import ConfigError  # noqa: E402
+
+CLEAR_HOME = "\x1b[2J\x1b[H"
+RATE_WINDOW_S = 2.0
+FAULT_WORDS = ("fault", "script", "SIM_")
+STATES = {v: k.removeprefix("MAV_STATE_") for k, v in vars(mavlink).items()
+          if k.startswith("MAV_STATE_") and isinstance(v, int)}
+SEVERITIES = ("EMERGENCY", "ALERT", "CRITICAL", "ERROR", "WARNING", "NOTICE", "INFO", "DEBUG")
+
+
+def throttle_pct(pwm: int) -> float:
+    """Motor output of SERVO_OUTPUT_RAW (1000 stopped, 2000 full) in percent."""
+    return (pwm - 1000) / 10.0
+
+
+def tilt_deg(pwm: int, half_range_deg: float) -> float:
+    """Tilt servo output of SERVO_OUTPUT_RAW (1500 centre, +-500 the half-range) in degrees."""
+    return (pwm - 1500) / 500.0 * half_range_deg
+
+
+class Monitor:
+    """What the vehicle has said, kept up to date by `on_message`; `render()` draws it."""
+
+    def __init__(self, client: MavClient, half_range_deg: float, connect: str) -> None:
+        self.client = client
+        self.half_range_deg = half_range_deg
+        self.connect = connect
+        self.params: dict[str, float] = {}
+        self.param_count: int | None = None
+        self.texts: deque[str] = deque(maxlen=5)
+        self.arrivals: deque[tuple[float, str]] = deque()
+        self.datagrams: deque[float] = deque()
+        self.datagrams_total = 0
+        self.messages_total = 0
+        self.last_heartbeat = time.monotonic()
+        self.refresh_wanted = False
+        self.started = time.monotonic()
+        client.on_message = self.on_message
+
+    # --- input -----------------------------------------------------------------------------
+    def on_message(self, msg) -> None:
+        now = time.monotonic()
+        kind = msg.get_type()
+        self.messages_total += 1
+        self.arrivals.append((now, kind))
+        if kind == "HEARTBEAT" and msg.get_srcSystem() == 1:
+            self.last_heartbeat = now
+        elif kind == "PARAM_VALUE":
+            name = msg.param_id if isinstance(msg.param_id, str) else msg.param_id.decode()
+            self.params[name] = float(msg.param_value)
+            self.param_count = msg.param_count
+        elif kind == "STATUSTEXT":
+            text = msg.text if isinstance(msg.text, str) else msg.text.decode(errors="replace")
+            severity = SEVERITIES[msg.severity] if msg.severity < len(SEVERITIES) else "?"
+            self.texts.append(f"{severity:<8} {text}")
+            if any(w.lower() in text.lower() for w in FAULT_WORDS):
+                self.refresh_wanted = True
+
+    def poll(self, duration_s: float) -> None:
+        """Read whatever arrives for `duration_s` of wall time."""
+        end = time.monotonic() + duration_s
+        while (left := end - time.monotonic()) > 0:
+            if self.client.poll(min(left, 0.05)):    # one datagram of valid frames
+                self.datagrams_total += 1
+                self.datagrams.append(time.monotonic())
+
+    def request_params(self) -> None:
+        self.refresh_wanted = False
+        self.client.send(mavlink.MAVLink_param_request_list_message(*self.client.target))
+
+    def params_complete(self) -> bool:
+        return self.param_count is not None and len(self.params) >= self.param_count
+
+    def hello(self) -> None:
+        self.client.send(mavlink.MAVLink_heartbeat_message(
+            mavlink.MAV_TYPE_GCS, mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 0, 3))
+
+    # --- output ----------------------------------------------------------------------------
+    def rates(self) -> tuple[dict[str, float], float]:
+        now = time.monotonic()
+        while self.arrivals and self.arrivals[0][0] < now - RATE_WINDOW_S:
+            self.arrivals.popleft()
+        while self.datagrams and self.datagrams[0] < now - RATE_WINDOW_S:
+            self.datagrams.popleft()
+        window = min(RATE_WINDOW_S, max(now - self.started, 1e-3))
+        counts: dict[str, int] = {}
+        for _, kind in self.arrivals:
+            counts[kind] = counts.get(kind, 0) + 1
+        return {k: n / window for k, n in sorted(counts.items())}, len(self.datagrams) / window
+
+    def faults(self) -> list[str]:
+        p = self.params
+        out = []
+        for n in range(1, 5):
+            eff, tvb = p.get(f"SIM_MOT{n}_EFF", 1.0), p.get(f"SIM_MOT{n}_TVB", 0.0)
+            parts = []
+            if p.get(f"SIM_MOT{n}_OFF", 0.0) >= 0.5:
+                parts.append("OFF")
+            if tvb != 0.0:
+                w, phi = p.get(f"SIM_MOT{n}_TVW", 0.0), p.get(f"SIM_MOT{n}_TVP", 0.0)
+                parts.append(f"effectiveness {eff:g} - {tvb:g} sin({w:g} t + {phi:g})")
+            elif eff != 1.0:
+                parts.append(f"effectiveness {eff:g}")
+            if parts:
+                out.append(f"motor {n}: " + ", ".join(parts))
+        for n in range(1, 5):
+            if p.get(f"SIM_SRV{n}_STK", 0.0) >= 0.5:
+                out.append(f"servo {n}: stuck at {p.get(f'SIM_SRV{n}_ANG', math.nan):.1f} deg")
+        return out
+
+    def render(self) -> str:
+        c = self.client
+        last = c.last
+        lines = [f"trq-ftc monitor  {self.connect}  vehicle time "
+                 f"{c.vehicle_time_us / 1e6:8.2f} s"]
+        hb = last.get("HEARTBEAT")
+        silent = time.monotonic() - self.last_heartbeat
+        if hb is None:
+            lines.append("state       no heartbeat yet")
+        else:
+            armed = bool(hb.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
+            status = STATES.get(hb.system_status, str(hb.system_status))
+            where = {"STANDBY": "on the ground", "ACTIVE": "active (armed or flying)",
+                     "EMERGENCY": "CRASHED"}.get(status, status.lower())
+            lines.append(f"state       {'ARMED' if armed else 'disarmed'}, {where} "
+                         f"(system_status {status})"
+                         + (f"   LINK LOST: no heartbeat for {silent:.1f} s" if silent > 3.0
+                            else ""))
+        pos = last.get("LOCAL_POSITION_NED")
+        if pos is None:
+            lines.append("position    (no LOCAL_POSITION_NED yet)")
+        else:
+            lines.append(f"position    NED m    n {pos.x:+8.3f}  e {pos.y:+8.3f}  d {pos.z:+8.3f}"
+                         f"   (altitude {-pos.z:.2f} m)")
+            lines.append(f"velocity    NED m/s  n {pos.vx:+8.3f}  e {pos.vy:+8.3f}  "
+                         f"d {pos.vz:+8.3f}")
+        att = last.get("ATTITUDE")
+        if att is None:
+            lines.append("attitude    (no ATTITUDE yet)")
+        else:
+            lines.append(f"attitude    deg      roll {math.degrees(att.roll):+7.2f}  pitch "
+                         f"{math.degrees(att.pitch):+7.2f}  yaw {math.degrees(att.yaw):+7.2f}")
+            lines.append(f"rates       deg/s    p {math.degrees(att.rollspeed):+7.1f}  q "
+                         f"{math.degrees(att.pitchspeed):+7.1f}  r "
+                         f"{math.degrees(att.yawspeed):+7.1f}")
+        raw = last.get("SERVO_OUTPUT_RAW")
+        if raw is None:
+            lines.append("outputs     (no SERVO_OUTPUT_RAW yet)")
+        else:
+            pwm = [getattr(raw, f"servo{i}_raw") for i in range(1, 9)]
+            head = "".join(f"{f'M{i}':>8}" for i in range(1, 5)) + \
+                "".join(f"{f'S{i}':>8}" for i in range(1, 5))
+            motors = "".join(f"{throttle_pct(v):7.1f}%" for v in pwm[:4])
+            servos = "".join(f"{tilt_deg(v, self.half_range_deg):+6.1f}dg" for v in pwm[4:])
+            lines.append(f"outputs   {head}")
+            lines.append(f"  (% / deg){motors}{servos}")
+        faults = self.faults()
+        known = self.params_complete()
+        lines.append("faults      " + ("; ".join(faults) if faults else
+                                       "none" if known else "(parameters not read yet)"))
+        p = self.params
+        if "SIM_WIND_SPD" in p:
+            gusts = p.get("SIM_GUST_EN", 0.0) >= 0.5
+            lines.append(f"wind        {p['SIM_WIND_SPD']:g} m/s from "
+                         f"{p.get('SIM_WIND_DIR', 0.0):g} deg, gusts "
+                         + (f"on (sigma {p.get('SIM_GUST_SIG', math.nan):g} m/s, length "
+                            f"{p.get('SIM_GUST_LEN', math.nan):g} m)" if gusts else "off"))
+        else:
+            lines.append("wind        (parameters not read yet)")
+        rates, dgram_rate = self.rates()
+        lines.append(f"link        {dgram_rate:.1f} datagrams/s ({self.datagrams_total} total), "
+                     f"{self.messages_total} messages")
+        lines.append("  msgs/s    " + "  ".join(f"{k} {v:.1f}" for k, v in rates.items()))
+        st = last.get("SYS_STATUS")
+        if st is not None:
+            lines.append(f"  vehicle   drop rate {st.drop_rate_comm / 100:.2f} %, errors_comm "
+                         f"{st.errors_comm}, bad frames {st.errors_count1}, unknown ids "
+                         f"{st.errors_count2}, other system {st.errors_count3}, rejected/stale "
+                         f"targets {st.errors_count4}")
+        lines.append("statustext  " + ("(none yet)" if not self.texts else ""))
+        lines += [f"  {t}" for t in self.texts]
+        return "\n".join(lines) + "\n"
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0],
+                                formatter_class=argparse.RawDescriptionHelpFormatter,
+                                epilog="\n".join(__doc__.splitlines()[2:]))
+    p.add_argument("--connect", default="udpout:127.0.0.1:18570",
+                   help="the vehicle's ground-station port (default udpout:127.0.0.1:18570)")
+    p.add_argument("--vehicle", type=Path, default=ROOT / "params" / "vehicle" / "trq.yaml",
+                   help="airframe YAML, for the tilt servos' half-range")
+    p.add_argument("--once", action="store_true", help="print one snapshot and exit")
+    p.add_argument("--duration", type=float, default=None, help="stop after S seconds")
+    p.add_argument("--timeout", type=float, default=5.0,
+                   help="seconds to wait for the first heartbeat (default 5)")
+    p.add_argument("--rate", type=float, default=5.0, help="frames per second (default 5)")
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    if args.rate <= 0 or args.timeout <= 0 or (args.duration is not None and args.duration < 0):
+        print("monitor: --rate and --timeout must be positive, --duration not negative",
+              file=sys.stderr)
+        return 2
+    try:
+        vp = load_vehicle(args.vehicle)
+        client = MavClient(args.connect)
+    except (ConfigError, ValueError) as exc:
+        print(f"monitor: {exc}", file=sys.stderr)
+        return 2
+    half_range = math.degrees(vp.tilt_limit_rad)       # max(|tilt.min_deg|, tilt.max_deg)
+    with client:
+        mon = Monitor(client, half_range, args.connect)
+        try:
+            client.hello(args.timeout)
+        except NoAnswer:
+            print(f"monitor: no heartbeat from the vehicle at {args.connect} within "
+                  f"{args.timeout:g} s (is it running? is that its ground-station port?)",
+                  file=sys.stderr)
+            return 1
+        mon.request_params()
+        if args.once:
+            # a second of traffic: every gcs stream (SYS_STATUS is 1 Hz) and the parameters
+            end = time.monotonic() + max(args.timeout, 1.2)
+            first = time.monotonic()
+            wanted = ("LOCAL_POSITION_NED", "ATTITUDE", "SERVO_OUTPUT_RAW", "SYS_STATUS")
+            asked = time.monotonic()
+            while time.monotonic() < end:
+                mon.poll(0.1)
+                complete = mon.params_complete() and all(k in client.last for k in wanted)
+                if complete and time.monotonic() - first >= 1.2:
+                    break
+                if not mon.params_complete() and time.monotonic() - asked > 1.0:
+                    mon.request_params()          # a lost datagram: ask again
+                    asked = time.monotonic()
+            sys.stdout.write(mon.render())
+            return 0
+        period = 1.0 / args.rate
+        stop_at = None if args.duration is None else time.monotonic() + args.duration
+        next_hello = time.monotonic() + 1.0
+        last_request = time.monotonic()
+        try:
+            while stop_at is None or time.monotonic() < stop_at:
+                mon.poll(period if stop_at is None else max(0.0, min(period,
+                                                                     stop_at - time.monotonic())))
+                now = time.monotonic()
+                if now >= next_hello:
+                    mon.hello()
+                    next_hello = now + 1.0
+                # on a fault STATUSTEXT at most twice a second; while incomplete (a lost
+                # datagram, or a vehicle without SIM_* parameters) every 2 s
+                if (mon.refresh_wanted and now - last_request > 0.5) or \
+                        (not mon.params_complete() and now - last_request > 2.0):
+                    mon.request_params()
+                    last_request = now
+                sys.stdout.write(CLEAR_HOME + mon.render())
+                sys.stdout.flush()
+        except KeyboardInterrupt:
+            pass
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
