@@ -12,6 +12,7 @@ import math
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
+from sil_vehicle.impair import ImpairParams
 from sil_vehicle.yamlcheck import ConfigError, Section, load_with_extends
 
 __all__ = ["ConfigError", "VehicleParams", "SimParams", "RotorParams", "load_vehicle", "load_sim",
@@ -159,6 +160,7 @@ class LinkParams:
     bind: Endpoint
     target: Endpoint
     rates_hz: tuple[tuple[str, int], ...]    # (stream, Hz), Hz divides the physics rate or is 0
+    impair: ImpairParams = ImpairParams()    # a bad link on purpose (tests, lossy scenarios)
 
     def rate(self, stream: str) -> int:
         return dict(self.rates_hz)[stream]
@@ -263,8 +265,18 @@ def load_sim(path: Path | str, vehicle: Path | str | None = None) -> SimParams:
         lsec = link_secs.section(name)
         bind = parse_endpoint(lsec.str("bind"), lsec, "bind")
         target = parse_endpoint(lsec.str("target"), lsec, "target")
+        impair = ImpairParams()
+        if lsec.has("impair"):
+            isec = lsec.section("impair")
+            impair = ImpairParams(
+                isec.float("loss", 0.0, 1.0, default=0.0),
+                isec.float("delay_ms", 0.0, 10_000.0, default=0.0),
+                isec.float("jitter_ms", 0.0, 10_000.0, default=0.0),
+                isec.float("duplicate", 0.0, 1.0, default=0.0),
+                isec.float("reorder", 0.0, 1.0, default=0.0))
+            isec.done()
         lsec.done()
-        links.append(LinkParams(name, bind, target, rates))
+        links.append(LinkParams(name, bind, target, rates, impair))
     telemetry.done()
     link_secs.done()
     wind = top.section("wind")

@@ -20,6 +20,7 @@ from sil_vehicle.frames import euler_to_quat, quat_to_euler
 from sil_vehicle.mavlink import codec
 from sil_vehicle.mavlink.codec import Measured, RxCounters
 from sil_vehicle.failsafe import FailsafeLander
+from sil_vehicle.impair import Impairment
 from sil_vehicle.mavlink.params import Param, ParamTable
 from sil_vehicle.vehicle import ActuatorCommand, Vehicle, VehicleState
 
@@ -56,7 +57,7 @@ LOG_COLUMNS = (
 class Sitl:
     def __init__(self, sim: SimParams, log_sink: Callable[[tuple], None] | None = None) -> None:
         self.sim = sim
-        gust_seq, noise_seq = np.random.SeedSequence(sim.seed).spawn(2)
+        gust_seq, noise_seq, link_seq = np.random.SeedSequence(sim.seed).spawn(3)
         self.vehicle = Vehicle(sim, np.random.default_rng(gust_seq))
         self._noise_rng = np.random.default_rng(noise_seq)
         self.offboard_loss_s = 0.5
@@ -67,7 +68,17 @@ class Sitl:
         self.mode = MODE_OFFBOARD
         self.lander = FailsafeLander(sim.vehicle)
         self._last_target_us = 0
+        self._newest_target_us = -1
         self.counters = {name: RxCounters() for name in LINKS}
+        # a bad link on purpose: per link, one impairment each way (seeded, simulated time)
+        link_rngs = iter(np.random.default_rng(s) for s in link_seq.spawn(2 * len(LINKS)))
+        self._down: dict[str, Impairment] = {}
+        self._up: dict[str, Impairment] = {}
+        for link in sim.links:
+            down_rng, up_rng = next(link_rngs), next(link_rngs)
+            if link.impair.active:
+                self._down[link.name] = Impairment(link.impair, down_rng)
+                self._up[link.name] = Impairment(link.impair, up_rng)
         self.periods = {link.name: {s: (sim.physics_rate_hz // hz if hz else 0)
                                     for s, hz in link.rates_hz} for link in sim.links}
         self.default_periods = {k: dict(v) for k, v in self.periods.items()}
@@ -111,7 +122,33 @@ class Sitl:
             out += self.announce(mavlink.MAV_SEVERITY_CRITICAL, f"CRASH: {state.crash_reason}")
         if self._log_period and self.tick % self._log_period == 0 and self.log_sink:
             self.log_sink(self.log_row())
-        return out + self.telemetry_due()
+        replies: list[Outgoing] = []
+        for link, up in self._up.items():            # what arrived late is handled now
+            for msg, sender in up.due(self.t_us):
+                replies += self._handle(link, msg, sender)
+        return self._deliver(out + replies + self._due_streams())
+
+    def _deliver(self, out: list[Outgoing]) -> list[Outgoing]:
+        """Pass outgoing messages through the impaired links, and note the lockstep stamp of
+        each offboard ODOMETRY that actually leaves."""
+        if self._down:
+            kept = []
+            for item in out:
+                down = self._down.get(item.link)
+                if down is None:
+                    kept.append(item)
+                else:
+                    down.offer(self.t_us, item)
+            for down in self._down.values():
+                kept += down.due(self.t_us)
+            out = kept
+        for item in out:
+            if item.link == "offboard" and item.msg.get_type() == "ODOMETRY":
+                stamp = int(item.msg.time_usec)
+                if stamp != self.lockstep_stamp_us:
+                    self.lockstep_stamp_us = stamp
+                    self.answered = False
+        return out
 
     def _failsafe(self) -> list[Outgoing]:
         """Offboard loss: no valid target for COM_OF_LOSS_T while armed -> the vehicle's own
@@ -134,6 +171,11 @@ class Sitl:
         return []
 
     def telemetry_due(self, everything: bool = False) -> list[Outgoing]:
+        """The telemetry due now (or one of each enabled stream), through the link: what the
+        daemon sends first (t = 0) and again when a lockstep answer is late."""
+        return self._deliver(self._due_streams(everything))
+
+    def _due_streams(self, everything: bool = False) -> list[Outgoing]:
         """Streams whose period divides the current tick (or one of each enabled stream)."""
         if not everything and self.tick % self._period_gcd():
             return []                   # most ticks: nothing is due (cheap test first)
@@ -142,11 +184,8 @@ class Sitl:
             for stream, period in self.periods[link].items():
                 if period and (everything or self.tick % period == 0):
                     out.append(Outgoing(link, self.build(stream)))
-                    if link == "offboard" and stream == "ODOMETRY":
-                        if self.lockstep_stamp_us != self.t_us:
-                            self.answered = False
-                        self.lockstep_stamp_us = self.t_us
         return out
+
 
     def _period_gcd(self) -> int:
         key = tuple(p for link in LINKS for p in self.periods[link].values())
@@ -215,7 +254,23 @@ class Sitl:
     # --- incoming --------------------------------------------------------------------------
     def handle(self, link: str, msg: mavlink.MAVLink_message,
                sender: tuple[str, int] | None = None) -> list[Outgoing]:
-        """React to one decoded message; return the replies."""
+        """React to one decoded message; return the replies. On an impaired link the message
+        may be lost or handled later; an answer to the lockstep stamp counts as an answer
+        either way (the vehicle knows what its own link did to it)."""
+        up = self._up.get(link)
+        if up is None:
+            return self._deliver(self._handle(link, msg, sender))
+        if msg.get_type() == "SET_ACTUATOR_CONTROL_TARGET" \
+                and int(msg.time_usec) == self.lockstep_stamp_us:
+            self.answered = True
+        if up.offer(self.t_us, (msg, sender)):
+            return self._deliver([r for m, s in up.due(self.t_us)
+                                  for r in self._handle(link, m, s)])
+        self.counters[link].impaired_lost += 1
+        return []
+
+    def _handle(self, link: str, msg: mavlink.MAVLink_message,
+                sender: tuple[str, int] | None = None) -> list[Outgoing]:
         counters = self.counters[link]
         target = getattr(msg, "target_system", None)
         if target not in (None, 0, codec.SYSTEM_ID):
@@ -260,9 +315,14 @@ class Sitl:
                 return self.announce(mavlink.MAV_SEVERITY_WARNING,
                                      f"actuator target rejected ({counters.rejected_targets})")
             return []
-        if self.sim.clock_mode == "lockstep" and target.stamp_us != self.lockstep_stamp_us:
+        if target.stamp_us < self._newest_target_us:
+            counters.stale_targets += 1          # older than one already applied
+            return []
+        if self.sim.clock_mode == "lockstep" and link not in self._up \
+                and target.stamp_us != self.lockstep_stamp_us:
             counters.stale_targets += 1
             return []
+        self._newest_target_us = target.stamp_us
         self._last_target_us = self.t_us
         if target.stamp_us == self.lockstep_stamp_us:
             self.answered = True
@@ -271,8 +331,6 @@ class Sitl:
             return []
         self.vehicle.command = ActuatorCommand(target.throttle_pct, target.tilt_rad)
         self.targets_applied += 1
-        if target.stamp_us == self.lockstep_stamp_us:
-            self.answered = True
         return []
 
     def _ack(self, link: str, msg, result: int, sender) -> Outgoing:

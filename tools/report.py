@@ -65,7 +65,9 @@ def markdown(scenario, results: list[dict], failures: list[str], figures: list[P
              f"{scenario.wind_from_deg:g} deg{' with gusts' if scenario.gusts else ''}; faults: "
              f"`{scenario.faults.name if scenario.faults else 'none'}`; reference: "
              f"{scenario.reference.get('kind', 'from the controller files')}; recovery threshold "
-             f"{scenario.recovery_threshold_m:g} m.", "", table(results), ""]
+             f"{scenario.recovery_threshold_m:g} m."
+             + (f" Offboard link impaired: {scenario.offboard_impair}."
+                if scenario.offboard_impair else ""), "", table(results), ""]
     if scenario.targets or scenario.better:
         lines += ["## Targets", ""]
         for name, targets in scenario.targets.items():

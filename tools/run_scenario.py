@@ -58,6 +58,7 @@ class Scenario:
     timeout_s: float
     targets: dict[str, dict[str, object]]
     better: tuple[tuple[str, str, str], ...]     # (better, worse, metric)
+    offboard_impair: dict[str, float]            # links.offboard.impair of the vehicle
 
 
 def load_scenario(path: Path) -> Scenario:
@@ -88,6 +89,14 @@ def load_scenario(path: Path) -> Scenario:
     for c in controllers:
         if not (ROOT / "params" / "controller" / f"{c}.yaml").exists():
             raise top.fail("controllers", c, "a file name in params/controller/ without .yaml")
+    impair: dict[str, float] = {}
+    if top.has("offboard_link"):
+        isec = top.section("offboard_link")
+        for key, hi in (("loss", 1.0), ("delay_ms", 10_000.0), ("jitter_ms", 10_000.0),
+                        ("duplicate", 1.0), ("reorder", 1.0)):
+            if isec.has(key):
+                impair[key] = isec.float(key, 0.0, hi)
+        isec.done()
     threshold = top.float("recovery_threshold_m", 0.001, 100.0)
     timeout = top.float("timeout_s", 1.0, 36000.0)
     targets: dict[str, dict[str, object]] = {}
@@ -111,7 +120,7 @@ def load_scenario(path: Path) -> Scenario:
         b.done()
     top.done()
     return Scenario(name, path, description, seed, speed, direction, gusts, faults, reference,
-                    tuple(controllers), threshold, timeout, targets, tuple(better))
+                    tuple(controllers), threshold, timeout, targets, tuple(better), impair)
 
 
 def free_ports(n: int) -> list[int]:
@@ -160,9 +169,11 @@ def prepare(scenario: Scenario, controller: str, out: Path) -> tuple[Path, Path,
     load_controller(ctrl_yaml)          # the overlay must be valid before anything starts
     rate = cfg.control_rate_hz
     sim_yaml = out / "sim.yaml"
-    sim_yaml.write_text(_yaml_dump({
-        "extends": str(ROOT / "params" / "sim" / "default.yaml"),
-        "control_rate_hz": rate, "telemetry": {"offboard": {"ODOMETRY": rate}}}))
+    sim_overlay = {"extends": str(ROOT / "params" / "sim" / "default.yaml"),
+                   "control_rate_hz": rate, "telemetry": {"offboard": {"ODOMETRY": rate}}}
+    if scenario.offboard_impair:
+        sim_overlay["links"] = {"offboard": {"impair": dict(scenario.offboard_impair)}}
+    sim_yaml.write_text(_yaml_dump(sim_overlay))
     return ctrl_yaml, sim_yaml, Path(cfg.vehicle.file).resolve(), rate
 
 

@@ -350,13 +350,15 @@ class Weights:
 
 @dataclass(frozen=True)
 class SolverConfig:
-    kind: str                             # "sqp" (fast default) | "ipopt" (reference)
-    hessian: str                          # sqp: "gauss_newton" | "exact"
+    kind: str                             # "rti" (default) | "sqp" | "ipopt" (reference)
+    hessian: str                          # rti, sqp: "gauss_newton" | "exact"
     max_iterations: int
     tolerance: float                      # stop when the step's inf-norm is below this
     qp_solver: str                        # casadi conic plugin for "sqp"
     regularization: float                 # Levenberg term added to the SQP Hessian
     ipopt_max_iterations: int
+    codegen: str = "auto"                 # rti: "auto" (compile and cache C when a compiler is
+                                          # found, else interpreted with a warning) | "off"
 
 
 @dataclass(frozen=True)
@@ -407,13 +409,14 @@ def _weights(k: _Keys) -> Weights:
 
 
 def _solver(k: _Keys) -> SolverConfig:
-    s = SolverConfig(k.text("kind", ("sqp", "ipopt")),
+    s = SolverConfig(k.text("kind", ("rti", "sqp", "ipopt")),
                      k.text("hessian", ("gauss_newton", "exact")),
                      k.integer("max_iterations", 1, 100),
                      k.number("tolerance", 0.0, 1.0),
                      k.text("qp_solver", ("qrqp", "osqp", "qpoases", "hpipm", "daqp", "proxqp")),
                      k.number("regularization", 0.0, 1e3),
-                     k.integer("ipopt_max_iterations", 1, 10_000))
+                     k.integer("ipopt_max_iterations", 1, 10_000),
+                     k.text("codegen", ("auto", "off"), default="auto"))
     k.close()
     return s
 

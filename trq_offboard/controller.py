@@ -107,7 +107,8 @@ class Controller:
             if t_s > self._last_t:
                 acc = np.asarray(self.model.accel(x, u_applied)).ravel()
                 eta_acc = np.asarray(self.model.euler_accel(x, u_applied, np.zeros(6))).ravel()
-                self.eso.update(y, np.concatenate([acc[0:3], eta_acc]))
+                # the true time since the last sample: samples can be lost or skipped
+                self.eso.update(y, np.concatenate([acc[0:3], eta_acc]), t_s - self._last_t)
             d = self.eso.disturbance(x[6:9])
             out_err = self.eso.output_error(y)
         self._last_t = float(t_s)

@@ -84,16 +84,19 @@ class ExtendedStateObserver:
             return e
         return fal(e, self.alpha[i], self.delta)
 
-    def update(self, y: np.ndarray, b0: np.ndarray) -> None:
-        """Advance one control period with the measured output y (6) held and b0 (6) held."""
+    def update(self, y: np.ndarray, b0: np.ndarray, dt_s: float | None = None) -> None:
+        """Advance by dt_s (default one control period) to the measured output y (6), with
+        b0 (6) held. A longer gap (a lost or skipped sample) is integrated over its true
+        length, with proportionally more substeps so that each stays as short."""
         z1, z2, z3 = self.z
         y = np.asarray(y, float)
         b0 = np.asarray(b0, float)
-        h = self.h
+        dt = self.dt if dt_s is None else float(dt_s)
+        n = max(1, int(math.ceil(self.cfg.substeps * dt / self.dt - 1e-9)))
+        h = dt / n
         b1, b2, b3 = self.beta
         step = y - self._y_prev
         step[3:6] = _wrap(step[3:6])
-        n = self.cfg.substeps
         for i in range(n):
             e = self._y_prev + ((i + 1) / n) * step - z1
             e[3:6] = _wrap(e[3:6])

@@ -73,7 +73,7 @@ class OffboardFlight:
     def __init__(self, link: MavlinkUdp, controller, make_reference: Callable, *,
                  name: str, tilt_limit_rad: float, record: Callable[[StepRecord], None] | None = None,
                  connect_timeout_s: float = 30.0, telemetry_timeout_s: float = 2.0,
-                 ack_timeout_s: float = 1.0) -> None:
+                 telemetry_lost_s: float = 10.0, ack_timeout_s: float = 1.0) -> None:
         self.link = link
         self.controller = controller
         self.make_reference = make_reference
@@ -82,6 +82,7 @@ class OffboardFlight:
         self.record = record
         self.connect_timeout_s = connect_timeout_s
         self.telemetry_timeout_s = telemetry_timeout_s
+        self.telemetry_lost_s = telemetry_lost_s
         self.ack_timeout_s = ack_timeout_s
         self.heartbeat = None
         self.odometry: wire.Odometry | None = None
@@ -131,16 +132,22 @@ class OffboardFlight:
             log.info("vehicle: %s", text)
 
     async def _next_odometry(self) -> wire.Odometry:
-        """The newest state not yet answered; waits for it."""
+        """The newest state not yet answered; waits for it (FlightError once the telemetry has
+        been silent for telemetry_lost_s: the vehicle is gone)."""
+        silent_s = 0.0
         while True:
             odo = self.odometry
             if odo is not None and odo.stamp_us != self._answered_stamp:
                 return odo
+            if silent_s >= self.telemetry_lost_s:
+                raise FlightError(f"no new ODOMETRY for {silent_s:g} s: telemetry lost")
             self._new_odometry.clear()
+            wait_s = min(self.telemetry_timeout_s, self.telemetry_lost_s - silent_s)
             try:
-                await asyncio.wait_for(self._new_odometry.wait(), self.telemetry_timeout_s)
+                await asyncio.wait_for(self._new_odometry.wait(), wait_s)
             except asyncio.TimeoutError:
-                log.warning("no telemetry for %.1f s: not commanding", self.telemetry_timeout_s)
+                silent_s += wait_s
+                log.warning("no telemetry for %.1f s: not commanding", silent_s)
 
     async def _command(self, msg, command_id: int, retries: int = 3) -> int:
         for _ in range(retries):
@@ -176,7 +183,7 @@ class OffboardFlight:
         try:
             await asyncio.wait_for(self._heartbeat_seen.wait(), self.connect_timeout_s)
         except asyncio.TimeoutError:
-            raise FlightError(f"no vehicle heartbeat within {self.connect_timeout_s:.0f} s on "
+            raise FlightError(f"no vehicle heartbeat within {self.connect_timeout_s:g} s on "
                               f"{self.link.connection.mode}:{self.link.connection.host}:"
                               f"{self.link.connection.port}") from None
         first = await self._next_odometry()
@@ -203,6 +210,10 @@ class OffboardFlight:
             self._account(t, odo, ref, cmd, applied, info, time.perf_counter() - wall0)
             if reference.done(t) and not getattr(getattr(reference, "cfg", None), "land", True):
                 break
+        if not self._touched_down(odo.state, ground_z):
+            # a plan without landing ends in the air: never idle the motors or disarm there
+            self._finish(t)
+            return self.summary
         self.summary.landed = True
         # idle, then disarm (the vehicle refuses a disarm in flight)
         idle = ActuatorCommand((0.0,) * 4, (0.0,) * 4)

@@ -34,6 +34,7 @@ class RxCounters:
     other_system: int = 0
     rejected_targets: int = 0    # actuator targets with NaN, inf or out-of-range values
     stale_targets: int = 0       # lockstep targets answering an older stamp
+    impaired_lost: int = 0       # lost on purpose by a link impairment (not an error)
 
     @property
     def dropped(self) -> int:

@@ -29,8 +29,8 @@ class Connection:
     def parse(text: str) -> "Connection":
         mode, _, rest = text.partition(":")
         host, _, port = rest.rpartition(":")
-        if mode not in ("udpin", "udpout") or not host or not port.isdigit() \
-                or not 0 <= int(port) <= 65535:
+        if mode not in ("udpin", "udpout") or not host or not port.isascii() \
+                or not port.isdigit() or not 1 <= int(port) <= 65535:
             raise ValueError(f"connection {text!r}: expected udpin:HOST:PORT or udpout:HOST:PORT")
         return Connection(mode, host, int(port))
 

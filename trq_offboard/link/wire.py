@@ -75,11 +75,12 @@ def parse_actuator_outputs(msg, tilt_limit_rad: float) -> ActuatorCommand | None
 def actuator_target(stamp_us: int, cmd: ActuatorCommand, tilt_limit_rad: float):
     """SET_ACTUATOR_CONTROL_TARGET for the vehicle. Raises ValueError on a non-finite value: the
     caller must never get that far (the controller clips), this is the last check."""
+    # check before clipping: min/max would turn an infinity into a limit (and may hide a NaN)
+    if not all(math.isfinite(v) for v in (*cmd.throttle_pct, *cmd.tilt_rad)):
+        raise ValueError(f"non-finite actuator command {cmd}")
     throttles = [min(max(v / 100.0, 0.0), 1.0) for v in cmd.throttle_pct]
     tilts = [min(max(v / tilt_limit_rad, -1.0), 1.0) for v in cmd.tilt_rad]
     controls = throttles + tilts
-    if not all(math.isfinite(v) for v in controls):
-        raise ValueError(f"non-finite actuator command {cmd}")
     return mavlink.MAVLink_set_actuator_control_target_message(
         stamp_us, 0, VEHICLE_SYSTEM, VEHICLE_COMPONENT, controls)
 

@@ -1,0 +1,129 @@
+"""Architecture boundaries, read from the source with `ast` (nothing here imports the packages'
+modules except the two argparse builders):
+
+- the wire is the only coupling: trq_offboard never imports sil_vehicle, and the reverse;
+- one clock: the simulator's core never reads the wall clock, sleeps, or uses unseeded randomness
+  (only daemon.py, clock.py and log.py may touch the wall clock);
+- every command-line option of both daemons has a help text.
+"""
+
+from __future__ import annotations
+
+import argparse
+import ast
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+WALL_CLOCK_ALLOWED = {"daemon.py", "clock.py", "log.py"}
+BANNED_TIME = {"time", "monotonic", "sleep", "perf_counter", "time_ns", "monotonic_ns"}
+# numpy's seeded generator API; anything else under np.random is global, unseeded state
+SEEDED_NUMPY = {"default_rng", "SeedSequence", "Generator", "PCG64", "BitGenerator"}
+
+
+def sources(package: str) -> list[Path]:
+    files = sorted((ROOT / package).rglob("*.py"))
+    assert len(files) >= 5, f"{package}: found only {files}"
+    return files
+
+
+def parse(path: Path) -> ast.Module:
+    return ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
+
+
+def imported_modules(tree: ast.Module) -> list[str]:
+    names = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            names += [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom) and node.level == 0:
+            names.append(node.module or "")
+    return names
+
+
+@pytest.mark.parametrize("package, forbidden", [("trq_offboard", "sil_vehicle"),
+                                                ("sil_vehicle", "trq_offboard")])
+def test_the_daemons_do_not_import_each_other(package, forbidden):
+    offenders = [f"{path.relative_to(ROOT)}: import {name}"
+                 for path in sources(package)
+                 for name in imported_modules(parse(path))
+                 if name.split(".")[0] == forbidden]
+    assert not offenders, offenders
+
+
+def clock_and_random_uses(tree: ast.Module) -> list[str]:
+    """Calls of time.time/monotonic/sleep (however imported) and any use of `random`."""
+    found = []
+    time_aliases, random_aliases, numpy_aliases = set(), set(), set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            for a in node.names:
+                top, alias = a.name.split(".")[0], a.asname or a.name.split(".")[0]
+                if top == "time":
+                    time_aliases.add(alias)
+                elif top == "random":
+                    found.append(f"line {node.lineno}: import {a.name}")
+                elif top == "numpy":
+                    numpy_aliases.add(alias)
+        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+            top = node.module.split(".")[0]
+            if top == "random" or node.module == "numpy.random" and any(
+                    a.name not in SEEDED_NUMPY for a in node.names):
+                found.append(f"line {node.lineno}: from {node.module} import ...")
+            elif top == "time" and any(a.name in BANNED_TIME for a in node.names):
+                found.append(f"line {node.lineno}: from time import "
+                             + ", ".join(a.name for a in node.names))
+    for node in ast.walk(tree):
+        if not isinstance(node, ast.Attribute):
+            continue
+        base = node.value
+        if isinstance(base, ast.Name) and base.id in time_aliases and node.attr in BANNED_TIME:
+            found.append(f"line {node.lineno}: {base.id}.{node.attr}")
+        if isinstance(base, ast.Attribute) and base.attr == "random" \
+                and isinstance(base.value, ast.Name) and base.value.id in numpy_aliases \
+                and node.attr not in SEEDED_NUMPY:
+            found.append(f"line {node.lineno}: {base.value.id}.random.{node.attr}")
+    return found
+
+
+def test_checker_sees_what_it_must():
+    """The checker itself: it must flag each banned form, and not the seeded ones."""
+    bad = ("import time\ntime.time()\n", "import time as t\nt.sleep(1)\n",
+           "from time import monotonic\n", "import random\n", "from random import random\n",
+           "import numpy as np\nnp.random.rand(3)\n", "from numpy.random import randn\n")
+    for text in bad:
+        assert clock_and_random_uses(ast.parse(text)), text
+    good = ("import numpy as np\nnp.random.default_rng(np.random.SeedSequence(1))\n",
+            "from dataclasses import field\nx = 'time.time()'\n")
+    for text in good:
+        assert not clock_and_random_uses(ast.parse(text)), text
+
+
+def test_simulator_core_has_no_wall_clock_sleep_or_unseeded_random():
+    core = [p for p in sources("sil_vehicle")
+            if not (p.parent == ROOT / "sil_vehicle" and p.name in WALL_CLOCK_ALLOWED)]
+    assert any(p.name == "vehicle.py" for p in core) and any(p.name == "sitl.py" for p in core)
+    offenders = [f"{p.relative_to(ROOT)} {use}" for p in core
+                 for use in clock_and_random_uses(parse(p))]
+    assert not offenders, offenders
+
+
+def build_parsers() -> dict[str, argparse.ArgumentParser]:
+    from sil_vehicle.daemon import build_parser as vehicle_parser
+    from trq_offboard.daemon import build_parser as offboard_parser
+    return {"sil_vehicle": vehicle_parser(), "trq_offboard": offboard_parser()}
+
+
+@pytest.mark.parametrize("name", ["sil_vehicle", "trq_offboard"])
+def test_every_option_has_a_help_text(name):
+    parser = build_parsers()[name]
+    options = [a for a in parser._actions if a.option_strings]
+    assert len(options) >= 5
+    missing = [a.option_strings for a in options
+               if a.help is None or a.help == argparse.SUPPRESS or len(a.help.strip()) < 5]
+    assert not missing, f"{name}: options without help: {missing}"
+    text = parser.format_help()
+    for a in options:
+        long = [s for s in a.option_strings if s.startswith("--")]
+        assert all(s in text for s in long), f"{name}: {long} not in --help"

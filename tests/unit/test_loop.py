@@ -1,0 +1,276 @@
+"""The offboard flight loop (trq_offboard/loop.py) without sockets or an NMPC: a fake link records
+what the loop sends, a fake controller returns a fixed command, a fake reference says when the
+plan is over, and the test plays the vehicle by calling `flight.on_message` with pymavlink
+messages from a coroutine (the lockstep handshake of sil_vehicle/PROTOCOL.md)."""
+
+from __future__ import annotations
+
+import asyncio
+import math
+from types import SimpleNamespace
+
+import pytest
+from pymavlink.dialects.v20 import common as mavlink
+
+from trq_offboard.link.udp import Connection
+from trq_offboard.loop import IDLE_STEPS_BEFORE_DISARM, FlightError, OffboardFlight
+from trq_offboard.records import (ActuatorCommand, CommandSource, ReferenceSample, SolveInfo,
+                                  SolveStatus, StepInfo)
+
+LIMIT = math.radians(30.0)
+CMD = ActuatorCommand((60.0, 61.0, 62.0, 63.0), (0.1, -0.1, 0.05, 0.0))
+WAIT_S = 2.0                      # deadline of every wait for the loop (normally milliseconds)
+ARM = mavlink.MAV_CMD_COMPONENT_ARM_DISARM
+
+
+class FakeLink:
+    def __init__(self) -> None:
+        self.connection = Connection("udpin", "127.0.0.1", 14540)
+        self.on_message = None
+        self.sent: list = []
+
+    def send(self, msg) -> bool:
+        self.sent.append(msg)
+        return True
+
+    def of_type(self, kind: str) -> list:
+        return [m for m in self.sent if m.get_type() == kind]
+
+    def targets(self, stamp: int | None = None) -> list:
+        return [m for m in self.of_type("SET_ACTUATOR_CONTROL_TARGET")
+                if stamp is None or m.time_usec == stamp]
+
+    def commands(self, param1: float | None = None) -> list:
+        return [m for m in self.of_type("COMMAND_LONG")
+                if m.command == ARM and (param1 is None or m.param1 == param1)]
+
+
+class FakeController:
+    def __init__(self) -> None:
+        self.steps: list[tuple[float, object]] = []
+        self.resets: list[float] = []
+
+    def reset(self, t_s, state, applied=None) -> None:
+        self.resets.append(t_s)
+
+    def step(self, t_s, state, applied, reference):
+        self.steps.append((t_s, state))
+        info = StepInfo(CommandSource.NMPC, SolveInfo(SolveStatus.OK, 1, 1e-3, 0.0),
+                        (0.0,) * 6, 0.0, 0, 0, 0)
+        return CMD, info
+
+
+class FakeReference:
+    def __init__(self, done_at_s: float, land: bool = True) -> None:
+        self.done_at_s = done_at_s
+        self.cfg = SimpleNamespace(land=land)
+
+    def sample(self, t_s):
+        return ReferenceSample((0.0, 0.0, -1.0), (0.0, 0.0, 0.0), 0.0, "hold")
+
+    def done(self, t_s) -> bool:
+        return t_s >= self.done_at_s
+
+
+def heartbeat(armed: bool = False):
+    mode = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | (
+        mavlink.MAV_MODE_FLAG_SAFETY_ARMED if armed else 0)
+    return mavlink.MAVLink_heartbeat_message(mavlink.MAV_TYPE_QUADROTOR,
+                                             mavlink.MAV_AUTOPILOT_GENERIC, mode, 0,
+                                             mavlink.MAV_STATE_STANDBY, 3)
+
+
+def odometry(stamp_us: int, down_m: float = 0.0):
+    nan21 = [math.nan] * 21
+    return mavlink.MAVLink_odometry_message(
+        stamp_us, mavlink.MAV_FRAME_LOCAL_NED, mavlink.MAV_FRAME_LOCAL_NED, 0.0, 0.0, down_m,
+        [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, nan21, nan21, 0, 0, 100)
+
+
+def ack(result: int):
+    return mavlink.MAVLink_command_ack_message(ARM, result)
+
+
+def make_flight(reference: FakeReference | None = None, **kw):
+    link, ctl = FakeLink(), FakeController()
+    ref = reference or FakeReference(done_at_s=1e9)
+    kw.setdefault("connect_timeout_s", 1.0)
+    kw.setdefault("ack_timeout_s", 0.5)
+    flight = OffboardFlight(link, ctl, lambda state: ref, name="fake", tilt_limit_rad=LIMIT,
+                            **kw)
+    assert link.on_message == flight.on_message     # the loop takes over the link's callback
+    return flight, link, ctl
+
+
+async def until(predicate, what: str) -> None:
+    loop = asyncio.get_running_loop()
+    deadline = loop.time() + WAIT_S
+    while not predicate():
+        assert loop.time() < deadline, f"timed out waiting for {what}"
+        await asyncio.sleep(0.002)
+
+
+async def settle() -> None:
+    """Give the loop (and its worker thread) time to do whatever it would do."""
+    await asyncio.sleep(0.05)
+
+
+async def take_off(flight, link) -> None:
+    """Heartbeat, first ODOMETRY (stamp 0), arm accepted, stamp 0 answered."""
+    flight.on_message(heartbeat())
+    flight.on_message(odometry(0))
+    await until(lambda: link.commands(1.0), "the ARM command")
+    flight.on_message(ack(mavlink.MAV_RESULT_ACCEPTED))
+    await until(lambda: link.targets(0), "the target of stamp 0")
+
+
+def test_arms_then_answers_each_stamp_once_and_lands():
+    async def scenario():
+        flight, link, ctl = make_flight(FakeReference(done_at_s=0.03))
+        task = asyncio.create_task(flight.run())
+        flight.on_message(heartbeat())
+        await settle()
+        assert not link.commands(), "armed before any state was known"
+        flight.on_message(odometry(0))
+        await until(lambda: link.commands(1.0), "the ARM command")
+        arm = link.commands(1.0)[0]
+        assert (arm.target_system, arm.target_component) == (1, 1)
+        await settle()
+        assert not link.targets(), "commanded before the vehicle accepted to arm"
+        flight.on_message(ack(mavlink.MAV_RESULT_ACCEPTED))
+        await until(lambda: link.targets(0), "the target of stamp 0")
+
+        # one new stamp, one target with that stamp, computed from that state
+        flight.on_message(odometry(10_000, down_m=-0.5))
+        await until(lambda: link.targets(10_000), "the target of stamp 10000")
+        await settle()
+        assert len(link.targets(10_000)) == 1 and len(link.targets()) == 2
+        assert [t for t, _ in ctl.steps] == pytest.approx([0.0, 0.01])
+        assert ctl.steps[-1][1].pos_ned_m[2] == pytest.approx(-0.5)
+        first = link.targets(10_000)[0]
+        assert list(first.controls) == pytest.approx(
+            [0.60, 0.61, 0.62, 0.63] + [v / LIMIT for v in CMD.tilt_rad])
+
+        # lockstep resend of the same stamp: the same answer again, nothing recomputed
+        flight.on_message(odometry(10_000, down_m=-0.5))
+        await settle()
+        again = link.targets(10_000)
+        assert len(again) == 2 and list(again[1].controls) == list(first.controls)
+        assert len(ctl.steps) == 2
+
+        # an older stamp is stale: no command from an old state
+        flight.on_message(odometry(5_000, down_m=-0.4))
+        await settle()
+        assert not link.targets(5_000) and len(ctl.steps) == 2
+
+        flight.on_message(odometry(20_000, down_m=-0.3))
+        await until(lambda: link.targets(20_000), "the target of stamp 20000")
+        assert len(ctl.steps) == 3
+
+        # the plan is over (t >= 0.03 s) and the vehicle is on the ground: idle, then disarm
+        stamp = 30_000
+        while not link.commands(0.0):
+            flight.on_message(odometry(stamp, down_m=0.0))
+            await until(lambda: link.targets(stamp) or link.commands(0.0), f"answer to {stamp}")
+            stamp += 10_000
+        assert len(ctl.steps) == 3, "a command was computed after touchdown"
+        idle = [m for m in link.targets() if m.time_usec >= 30_000]
+        assert len(idle) == IDLE_STEPS_BEFORE_DISARM
+        assert all(list(m.controls) == [0.0] * 8 for m in idle)
+        flight.on_message(ack(mavlink.MAV_RESULT_ACCEPTED))
+        flight.on_message(odometry(stamp, down_m=0.0))
+        summary = await asyncio.wait_for(task, WAIT_S)
+        assert summary.landed and summary.disarmed
+        assert summary.steps == 3 and summary.controller == "fake"
+        assert "landed" in summary.line() and "disarmed" in summary.line()
+        assert list(link.targets(stamp)[0].controls) == [0.0] * 8
+        # every stamp was answered by targets with that stamp only, never two different ones
+        by_stamp: dict[int, set] = {}
+        for m in link.targets():
+            by_stamp.setdefault(m.time_usec, set()).add(tuple(m.controls))
+        assert all(len(v) == 1 for v in by_stamp.values())
+        assert link.of_type("HEARTBEAT"), "the controller sends its own heartbeat"
+
+    asyncio.run(scenario())
+
+
+def test_already_armed_vehicle_is_not_armed_again():
+    async def scenario():
+        flight, link, ctl = make_flight()
+        task = asyncio.create_task(flight.run())
+        flight.on_message(heartbeat(armed=True))
+        flight.on_message(odometry(0))
+        await until(lambda: link.targets(0), "the target of stamp 0")
+        assert not link.commands()
+        task.cancel()
+        with pytest.raises(asyncio.CancelledError):
+            await task
+
+    asyncio.run(scenario())
+
+
+def test_no_heartbeat_is_a_flight_error_naming_the_connection():
+    async def scenario():
+        flight, link, _ = make_flight(connect_timeout_s=0.1)
+        flight.on_message(odometry(0))            # telemetry alone is not a vehicle
+        with pytest.raises(FlightError, match=r"heartbeat.*0\.1 s.*udpin:127\.0\.0\.1:14540"):
+            await asyncio.wait_for(flight.run(), WAIT_S)
+        assert not link.commands() and not link.targets()
+
+    asyncio.run(scenario())
+
+
+def test_arming_denied_is_a_flight_error():
+    async def scenario():
+        flight, link, ctl = make_flight()
+        task = asyncio.create_task(flight.run())
+        flight.on_message(heartbeat())
+        flight.on_message(odometry(0))
+        await until(lambda: link.commands(1.0), "the ARM command")
+        flight.on_message(ack(mavlink.MAV_RESULT_DENIED))
+        with pytest.raises(FlightError, match="arming refused"):
+            await asyncio.wait_for(task, WAIT_S)
+        assert not link.targets() and not ctl.steps
+
+    asyncio.run(scenario())
+
+
+def test_unanswered_arm_command_is_retried_then_a_flight_error():
+    async def scenario():
+        flight, link, _ = make_flight(ack_timeout_s=0.05)
+        task = asyncio.create_task(flight.run())
+        flight.on_message(heartbeat())
+        flight.on_message(odometry(0))
+        with pytest.raises(FlightError, match="no COMMAND_ACK"):
+            await asyncio.wait_for(task, WAIT_S)
+        assert len(link.commands(1.0)) == 3
+
+    asyncio.run(scenario())
+
+
+def test_telemetry_lost_for_good_is_a_flight_error():
+    async def scenario():
+        flight, link, _ = make_flight(telemetry_timeout_s=0.05, telemetry_lost_s=0.2)
+        task = asyncio.create_task(flight.run())
+        await take_off(flight, link)
+        # the vehicle stops talking: the loop must give up, not wait forever
+        with pytest.raises(FlightError, match="telemetry lost"):
+            await asyncio.wait_for(task, WAIT_S)
+
+    asyncio.run(scenario())
+
+
+def test_plan_without_landing_never_idles_the_motors_in_the_air():
+    async def scenario():
+        flight, link, ctl = make_flight(FakeReference(done_at_s=0.02, land=False))
+        task = asyncio.create_task(flight.run())
+        await take_off(flight, link)
+        for stamp in (10_000, 20_000):
+            flight.on_message(odometry(stamp, down_m=-1.0))       # hovering 1 m up
+            await until(lambda: link.targets(stamp), f"the target of stamp {stamp}")
+        summary = await asyncio.wait_for(task, WAIT_S)
+        assert not summary.landed and not summary.disarmed
+        assert all(list(m.controls) != [0.0] * 8 for m in link.targets())
+        assert not link.commands(0.0), "disarm commanded in flight"
+
+    asyncio.run(scenario())
