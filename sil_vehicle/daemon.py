@@ -155,7 +155,9 @@ class VehicleDaemon:
                     if free_run:
                         break              # no controller: one period in real time
                     self.send(sitl.telemetry_due(everything=True))
-                    if waited >= self.sim.free_run_after_s:
+                    # only a controller that was there and went away: before the first
+                    # answer the vehicle waits (a controller may take seconds to build)
+                    if waited >= self.sim.free_run_after_s and sitl.had_offboard:
                         free_run = True
                         self.free_runs += 1
                         self.send(sitl.announce(6, "no offboard answer: time runs in real time"))

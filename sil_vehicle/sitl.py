@@ -194,6 +194,11 @@ class Sitl:
             self._gcd = math.gcd(*(p for p in key if p)) or 1
         return self._gcd
 
+    @property
+    def had_offboard(self) -> bool:
+        """Has any valid actuator target arrived yet?"""
+        return self._newest_target_us >= 0
+
     def lockstep_ticks(self) -> int:
         """Physics ticks in one lockstep period (the offboard ODOMETRY period)."""
         return self.periods["offboard"]["ODOMETRY"]

@@ -37,6 +37,8 @@ from sil_vehicle.config import load_vehicle  # noqa: E402
 from sil_vehicle.faultscript import load_script  # noqa: E402
 from sil_vehicle.yamlcheck import ConfigError, Section, load_yaml  # noqa: E402
 
+REALTIME_LATENCY_S = 0.005    # about one NMPC step: what a command waits in real time
+
 TARGET_KEYS = {"crashed": bool, "rmse_pos_m": float, "rmse_pos_after_fault_m": float,
                "max_pos_err_m": float, "max_yaw_err_deg": float, "rmse_yaw_deg": float,
                "recovery_s": float}
@@ -191,8 +193,12 @@ def fly(scenario: Scenario, run: Run, realtime: bool, lock: threading.Lock) -> N
         vcmd.append("--gusts")
     if scenario.faults:
         vcmd += ["--faults", str(scenario.faults)]
+    # how long a command takes to act: the link's delay, plus in real time about a solve
+    delay_s = scenario.offboard_impair.get("delay_ms", 0.0) * 1e-3 + (REALTIME_LATENCY_S
+                                                                       if realtime else 0.0)
     ccmd = [sys.executable, "-m", "trq_offboard", "--controller", str(ctrl_yaml), "--connect",
-            f"udpin:127.0.0.1:{p_ctrl}", "--log-dir", str(run.out)]
+            f"udpin:127.0.0.1:{p_ctrl}", "--log-dir", str(run.out),
+            "--applied-delay-s", f"{delay_s:g}"]
     env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
     (run.out / "command.txt").write_text(" ".join(vcmd) + "\n" + " ".join(ccmd) + "\n")
     wall0 = time.monotonic()

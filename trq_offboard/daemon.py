@@ -52,6 +52,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help="directory for controller.csv and offboard.tlog "
                         "(default: logs/offboard-<time>)")
     p.add_argument("--no-log", action="store_true", help="write no logs")
+    p.add_argument("--applied-delay-s", type=float, default=None,
+                   help="how long a command takes to act after the state it answers was "
+                        "measured (the observer's b0): 0 in lockstep (the default of the "
+                        "controller file), about the solve time plus the link latency in real "
+                        "time")
     p.add_argument("--connect-timeout", type=float, default=30.0,
                    help="seconds to wait for the vehicle's heartbeat")
     p.add_argument("-v", "--verbose", action="store_true", help="debug logging")
@@ -68,6 +73,12 @@ def main(argv: list[str] | None = None) -> int:
             import dataclasses
             cfg = dataclasses.replace(cfg, reference=dataclasses.replace(cfg.reference,
                                                                          kind=args.reference))
+        if args.applied_delay_s is not None:
+            if not 0.0 <= args.applied_delay_s <= 1.0:
+                raise ValueError(f"--applied-delay-s: got {args.applied_delay_s}, expected "
+                                 "a number of seconds in [0, 1]")
+            import dataclasses
+            cfg = dataclasses.replace(cfg, applied_delay_s=args.applied_delay_s)
         connection = Connection.parse(args.connect)
     except (ConfigError, ValueError) as exc:
         print(f"trq-offboard: {exc}", file=sys.stderr)
