@@ -392,6 +392,7 @@ class ControllerConfig:
     solver: SolverConfig
     reference: ReferenceConfig
     applied_input: str = "commanded"      # commanded | outputs: what the controller takes as applied
+    applied_delay_s: float = 0.0          # how long a command takes to act (observer's b0)
 
     @property
     def control_dt_s(self) -> float:
@@ -444,6 +445,7 @@ def _controller(k: _Keys, path: Path) -> ControllerConfig:
     eso_file = ok.text("file")
     ok.close()
     applied_input = k.text("applied_input", ("commanded", "outputs"))
+    applied_delay = k.number("applied_delay_s", 0.0, 1.0)
     eso = None
     if observer != "none":
         base = load_eso(path.parent / eso_file)
@@ -464,7 +466,8 @@ def _controller(k: _Keys, path: Path) -> ControllerConfig:
     if step_s < 1.0 / rate - 1e-12:
         raise k.error("horizon.step_s", step_s, f"at least one control period ({1.0 / rate:g} s)")
     return ControllerConfig(str(path), name, vehicle, observer, eso, rate, steps, step_s,
-                            weights, max_tilt, max_rate, solver, reference, applied_input)
+                            weights, max_tilt, max_rate, solver, reference, applied_input,
+                            applied_delay)
 
 
 def load_controller(path: Path | str) -> ControllerConfig:

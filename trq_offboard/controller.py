@@ -3,6 +3,7 @@
     ctl = Controller.from_yaml("params/controller/trq_nmpc_eso.yaml")   # build once (~2 s)
     ctl.reset(t_s, state)                       # take over (ground or flying) without a jump
     cmd, info = ctl.step(t_s, state, applied, reference)   # once per control period
+    ctl.prepare(reference)                      # after sending cmd: the RTI's preparation phase
 
 `reference` is anything with `sample(t_s) -> ReferenceSample` (reference.Reference, or
 reference.ConstantReference for a fixed target); the NMPC samples it at t_s + k h, k = 0..N.
@@ -16,10 +17,16 @@ the allocation's hover trim, rolled out through the model); (3) on a solver fail
 plan shifted in time is flown while it lasts, then the allocation's hover command; (4) the
 command is clipped to the actuator limits as a last line of defence (counted) and is always
 finite. `step` never prints, sleeps or reads a clock (the solver measures its own wall time).
+
+`prepare` (optional, for solvers with a preparation phase such as the real-time iteration): called
+after the command of `step` has been sent, it linearises the NMPC at the plan expected one control
+period later, so that the next `step` only embeds the measured state and solves a QP. Without it
+the solver prepares inside `step` (same result, longer latency).
 """
 
 from __future__ import annotations
 
+import collections
 import math
 from pathlib import Path
 
@@ -59,7 +66,10 @@ class Controller:
         self._plan: tuple[np.ndarray, np.ndarray] | None = None
         self._plan_t = 0.0
         self._last_t: float | None = None
+        self._last_d = np.zeros(6)
         self._last_u = self.u_trim.copy()
+        self._prev_u = self.u_trim.copy()
+        self._sent: collections.deque = collections.deque(maxlen=32)   # (t_s, u) of commands
         self.clip_count = 0
         self.failures = 0
 
@@ -76,13 +86,44 @@ class Controller:
         self._last_u = (self.allocator.command_vector(applied) if applied is not None
                         else self.u_trim.copy())
         self._last_u = np.clip(self._last_u, self._u_lo, self._u_hi)
+        self._prev_u = self._last_u.copy()
+        self._sent = collections.deque([(float(t_s), self._last_u.copy())], maxlen=32)
         if self.eso is not None:
             eta_dot = np.asarray(self._euler_rate(x)).ravel()
             self.eso.reset(np.concatenate([x[0:3], x[6:9]]), np.concatenate([x[3:6], eta_dot]))
         self._plan = None
         self._last_t = float(t_s)
+        self._last_d = np.zeros(6)
+        discard = getattr(self.solver, "discard", None)
+        if discard is not None:
+            discard()
         self.clip_count = 0
         self.failures = 0
+
+    def _b0(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """The observer's b0(u): the nominal model's accelerations (NED, Euler) under u."""
+        acc = np.asarray(self.model.accel(x, u)).ravel()
+        eta_acc = np.asarray(self.model.euler_accel(x, u, np.zeros(6))).ravel()
+        return np.concatenate([acc[0:3], eta_acc])
+
+    def _b0_delayed(self, x: np.ndarray, t0: float, t1: float) -> np.ndarray:
+        """b0 averaged over [t0, t1] with each command acting applied_delay_s after it was sent
+        (the time of the state it answered): the commands that were really in effect."""
+        delay = self.cfg.applied_delay_s
+        if delay <= 0.0 or not self._sent:
+            return self._b0(x, self._last_u)
+        total = np.zeros(6)
+        # the command in effect at tau is the newest one with t_sent + delay <= tau
+        acts = [(ts + delay, u) for ts, u in self._sent]
+        for i, (start, u) in enumerate(acts):
+            end = acts[i + 1][0] if i + 1 < len(acts) else math.inf
+            lo, hi = max(start, t0), min(end, t1)
+            if hi > lo:
+                total += (hi - lo) * self._b0(x, u)
+        covered = max(0.0, min(t1, math.inf) - max(t0, acts[0][0]))
+        if covered < t1 - t0:        # before the oldest remembered command: the oldest one
+            total += (t1 - t0 - covered) * self._b0(x, acts[0][1])
+        return total / (t1 - t0)
 
     def _euler_rate(self, x: np.ndarray) -> np.ndarray:
         return np.asarray(self.model.f(x, self._last_u, np.zeros(6))).ravel()[6:9]
@@ -105,13 +146,16 @@ class Controller:
         if self.eso is not None:
             y = np.concatenate([x[0:3], x[6:9]])
             if t_s > self._last_t:
-                acc = np.asarray(self.model.accel(x, u_applied)).ravel()
-                eta_acc = np.asarray(self.model.euler_accel(x, u_applied, np.zeros(6))).ravel()
-                # the true time since the last sample: samples can be lost or skipped
-                self.eso.update(y, np.concatenate([acc[0:3], eta_acc]), t_s - self._last_t)
+                dt = t_s - self._last_t         # the true gap: samples can be lost or skipped
+                if self.cfg.applied_input == "outputs" and applied is not None:
+                    b0 = self._b0(x, u_applied)
+                else:
+                    b0 = self._b0_delayed(x, self._last_t, t_s)
+                self.eso.update(y, b0, dt)
             d = self.eso.disturbance(x[6:9])
             out_err = self.eso.output_error(y)
         self._last_t = float(t_s)
+        self._last_d = d
 
         x_ref = self._reference_states(t_s, x, reference)
         guess = self._guess(t_s, x, d)
@@ -127,6 +171,23 @@ class Controller:
                                  float("nan"), "non-finite plan")
             u, source = self._fallback(t_s)
         return self._finish(u, source, info, d, out_err)
+
+    def prepare(self, reference) -> None:
+        """Preparation phase for the next step (t + one control period): the solver linearises
+        at the current plan shifted by one period, with the current disturbance estimate. A
+        no-op for solvers without one and before the first plan."""
+        prep = getattr(self.solver, "prepare", None)
+        if prep is None or self._plan is None or self._last_t is None:
+            return
+        t_next = self._last_t + self.cfg.control_dt_s
+        elapsed = t_next - self._plan_t
+        if elapsed >= self.N * self.h:
+            return
+        x_old = self._plan[1]
+        grid = self.h * np.arange(self.N + 1)
+        x_pred = np.array([np.interp(elapsed, grid, x_old[:, j]) for j in range(12)])
+        x_ref = self._reference_states(t_next, x_pred, reference)
+        prep(x_ref, self._last_d, self._last_u, self._guess(t_next, x_pred, self._last_d))
 
     # --- helpers --------------------------------------------------------------------------------
     def _reference_states(self, t_s: float, x: np.ndarray, reference) -> np.ndarray:
@@ -175,7 +236,9 @@ class Controller:
         clipped_u = np.clip(u, self._u_lo, self._u_hi)
         n_clip = int(np.sum(bad) + np.sum(np.abs(clipped_u - u) > 1e-9))
         self.clip_count += n_clip
+        self._prev_u = self._last_u
         self._last_u = clipped_u
+        self._sent.append((self._last_t, clipped_u.copy()))   # sent for the state at _last_t
         cmd = self.allocator.command_of(clipped_u)
         info = StepInfo(source, info, tuple(float(v) for v in d), out_err, n_clip,
                         self.clip_count, self.failures)
