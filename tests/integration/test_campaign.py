@@ -1,0 +1,329 @@
+"""Fault campaigns on Dask (tools/campaign.py) and the in-process flight they are made of
+(tools/inprocess.py).
+
+- the smoke campaign runs on a LocalCluster of 2 workers and writes flights.csv, report.md and
+  the heat maps; deleting one result and running again flies that flight only;
+- a flight that cannot be flown (an invalid reference) is recorded with its error, skipped on a
+  rerun (not lost, not retried) unless --retry-failed; --max-flights stops early and the rest
+  follows on the next run;
+- a bad campaign file is refused with its file name and the key;
+- the in-process flight (Sitl + OffboardFlight over an in-memory MAVLink link) gives the same
+  flight as the two daemons over UDP in lockstep: bit-identical truth log, the same metrics.
+
+About 80 s on two cores.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+from conftest import PARAMS, ROOT
+
+pytest.importorskip("distributed")
+
+TOOLS = ROOT / "tools"
+if str(TOOLS) not in sys.path:
+    sys.path.insert(0, str(TOOLS))
+
+ENV = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+SMOKE = PARAMS / "campaigns" / "smoke.yaml"
+
+
+def run_campaign(*args: str, timeout: float = 180.0) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, str(TOOLS / "campaign.py"), *map(str, args)],
+                          cwd=ROOT, env=ENV, capture_output=True, text=True, timeout=timeout)
+
+
+def flight_files(out: Path) -> dict[str, float]:
+    return {p.stem: p.stat().st_mtime_ns for p in (out / "flights").glob("*.json")}
+
+
+# --- the smoke campaign on 2 workers, and resuming it ------------------------------------------
+
+@pytest.fixture(scope="module")
+def smoke(tmp_path_factory):
+    out = tmp_path_factory.mktemp("campaign") / "smoke"
+    r = run_campaign(SMOKE, "--out", out, "--workers", "2")
+    return r, out
+
+
+def test_smoke_campaign_runs_on_two_workers(smoke):
+    r, out = smoke
+    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
+    assert "2 worker(s)" in r.stderr
+    assert "flights/hour" in r.stdout
+    assert "8/8 flights, 0 failed" in r.stderr           # the progress bar's last line
+    import campaign
+    plan = campaign.load_campaign(SMOKE)
+    assert len(plan.flights) == 8
+    assert set(flight_files(out)) == {f["id"] for f in plan.flights}
+
+
+def test_smoke_campaign_csv_has_inputs_and_scenario_metrics(smoke):
+    import csv
+
+    _, out = smoke
+    with open(out / "flights.csv") as f:
+        rows = list(csv.DictReader(f))
+    assert len(rows) == 8
+    for key in ("id", "controller", "fault_motor", "fault_effectiveness", "fault_at_s",
+                "severity", "wind_speed_m_s", "wind_direction_deg", "traj_kind", "seed",
+                "crashed", "flight_s", "rmse_pos_m", "max_pos_err_m", "rmse_pos_after_fault_m",
+                "rmse_yaw_deg", "max_yaw_err_deg", "recovery_s", "solve_ms_p50", "solve_ms_p99",
+                "status", "success"):
+        assert key in rows[0], key
+    assert {r["controller"] for r in rows} == {"trq_nmpc_eso", "quad_nmpc"}
+    for r in rows:
+        assert r["status"] == "done" and r["crashed"] == "False", r
+        assert 0.0 < float(r["rmse_pos_m"]) < 2.0
+        assert float(r["flight_s"]) > 2.0                     # past the onset at 1.5 s
+    eso = [r for r in rows if r["controller"] == "trq_nmpc_eso"]
+    assert all(r["success"] == "True" for r in eso)          # the observer copes with 40 %
+    # every controller in a cell flies with the same seed (same noise and gusts)
+    cells = {}
+    for r in rows:
+        cells.setdefault((r["fault_effectiveness"], r["wind_speed_m_s"]), set()).add(r["seed"])
+    assert all(len(s) == 1 for s in cells.values())
+
+
+def test_smoke_campaign_report_and_heat_maps(smoke):
+    _, out = smoke
+    text = (out / "report.md").read_text()
+    assert "# Campaign `smoke`" in text
+    assert "8 of 8 flights flown" in text and "flights/hour" in text
+    assert "## `trq_nmpc_eso`" in text and "## `quad_nmpc`" in text
+    assert "Where each controller stops coping" in text
+    for name in ("success.png", "rmse.png"):
+        assert f"({name})" in text
+        data = (out / name).read_bytes()
+        assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 5000
+
+
+def test_resume_flies_only_the_missing_flight(smoke):
+    r0, out = smoke
+    assert r0.returncode == 0
+    before = flight_files(out)
+    victim = sorted(before)[3]
+    (out / "flights" / f"{victim}.json").unlink()
+    r = run_campaign(SMOKE, "--out", out, "--workers", "1", "--no-figures")
+    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
+    assert "8 flights, 7 already done, 1 to fly" in r.stderr
+    assert json.loads((out / "last_run.json").read_text())["flown"] == 1
+    after = flight_files(out)
+    assert set(after) == set(before)
+    assert [k for k in before if after[k] != before[k]] == [victim]   # nothing else flown again
+    assert json.loads((out / "flights" / f"{victim}.json").read_text())["status"] == "done"
+    # and with everything done, nothing is flown at all (no cluster is even started)
+    r = run_campaign(SMOKE, "--out", out, "--no-figures")
+    assert r.returncode == 0 and "8 already done, 0 to fly" in r.stderr
+    assert flight_files(out) == after
+
+
+# --- failures, limits and bad files -----------------------------------------------------------
+
+BAD_REFERENCE = """\
+name: bad_reference
+description: a reference whose ramps are longer than half its manoeuvre (the loader refuses it)
+seed: 1
+controllers: [trq_nmpc_eso]
+success_rmse_m: 0.1
+recovery_threshold_m: 0.1
+timeout_s: 10
+grid:
+  fault: {motor: [1, 2, 3], effectiveness: 0.5, at_s: 1.0}
+  trajectory: {kind: hover, altitude_m: 0.5, duration_s: 1.0, ramp_s: 0.9}
+"""
+
+
+def test_failed_flights_are_recorded_and_max_flights_resumes(tmp_path):
+    path = tmp_path / "bad_reference.yaml"
+    path.write_text(BAD_REFERENCE)
+    out = tmp_path / "out"
+    r = run_campaign(path, "--out", out, "--workers", "1", "--max-flights", "2", "--no-figures")
+    assert r.returncode == 1                                  # incomplete, with failures
+    assert "2/2 flights, 2 failed" in r.stderr
+    files = flight_files(out)
+    assert len(files) == 2
+    for name in files:
+        rec = json.loads((out / "flights" / f"{name}.json").read_text())
+        assert rec["status"] == "failed"
+        assert "Traceback" in rec["error"] and "ramp_s" in rec["error"]
+        assert rec["spec"]["trajectory"]["ramp_s"] == 0.9
+    # the rest follows; the failed ones are kept, not flown again
+    r = run_campaign(path, "--out", out, "--workers", "1", "--no-figures")
+    assert "3 flights, 2 already done, 1 to fly" in r.stderr
+    assert len(flight_files(out)) == 3
+    report = (out / "report.md").read_text()
+    assert "3 failed" in report and "## Failed flights" in report and "ramp_s" in report
+    with open(out / "flights.csv") as f:
+        assert sum("ramp_s" in line for line in list(f)[1:]) == 3    # each row names the key
+    r = run_campaign(path, "--out", out, "--workers", "1", "--no-figures", "--retry-failed")
+    assert "3 flights, 0 already done, 3 to fly" in r.stderr
+
+
+@pytest.mark.parametrize("edit, key, words", [
+    (lambda t: t.replace("effectiveness: [1.0, 0.6]", "efectiveness: [1.0, 0.6]"),
+     "grid.fault.efectiveness", "unknown key"),
+    (lambda t: t.replace("effectiveness: [1.0, 0.6]", "effectiveness: [1.0, 1.6]"),
+     "grid.fault.effectiveness[1]", "[0.0, 1.0]"),
+    (lambda t: t.replace("[trq_nmpc_eso, quad_nmpc]", "[trq_nmpc_eso, quad_nmcp]"),
+     "controllers[1]", "quad_nmcp"),
+    (lambda t: t.replace("success_rmse_m: 0.1 ", "success_rmse: 0.1 "),
+     "success_rmse_m", "missing key"),
+    (lambda t: t.replace("kind: hover", "kind: hoover"), "grid.trajectory.kind", "helix"),
+    (lambda t: t.replace("at_s: 1.5", "onset_s: 1.5"), "grid.fault.onset_s", "unknown key"),
+])
+def test_bad_campaign_names_file_and_key(tmp_path, edit, key, words):
+    import campaign
+    from sil_vehicle.yamlcheck import ConfigError
+
+    bad = tmp_path / "typo.yaml"
+    text = SMOKE.read_text()
+    bad.write_text(edit(text))
+    assert bad.read_text() != text
+    with pytest.raises(ConfigError) as err:
+        campaign.load_campaign(bad)
+    msg = str(err.value)
+    assert str(bad) in msg and f"'{key}'" in msg and words in msg, msg
+
+
+def test_bad_campaign_exits_2_before_flying(tmp_path):
+    bad = tmp_path / "extra.yaml"
+    bad.write_text(SMOKE.read_text() + "colour: blue\n")
+    r = run_campaign(bad, "--out", tmp_path / "out", timeout=60)
+    assert r.returncode == 2
+    assert "extra.yaml" in r.stderr and "unknown key 'colour'" in r.stderr
+    assert not (tmp_path / "out").exists()
+
+
+def test_sampled_campaign_is_seeded(tmp_path):
+    import campaign
+
+    text = SMOKE.read_text().split("grid:")[0] + (
+        "sample:\n  n: 5\n  seed: 3\n"
+        "  fault: {motor: [1, 2, 3, 4], effectiveness: {uniform: [0.3, 1.0]}, at_s: 2.0}\n"
+        "  wind: {speed_m_s: {uniform: [0.0, 8.0]}, direction_deg: [0.0, 90.0], gusts: [true]}\n")
+    path = tmp_path / "sample.yaml"
+    path.write_text(text)
+    a, b = campaign.load_campaign(path), campaign.load_campaign(path)
+    assert len(a.flights) == 10 and a.flights == b.flights
+    effs = {f["fault"]["effectiveness"] for f in a.flights}
+    assert len(effs) == 5 and all(0.3 <= e <= 1.0 for e in effs)
+    path.write_text(text.replace("seed: 3", "seed: 4"))
+    assert campaign.load_campaign(path).flights != a.flights
+
+
+# --- the in-process flight against the daemons over UDP ---------------------------------------
+
+def _udp_lockstep_flight(out: Path, scenario) -> None:
+    """The two daemons over UDP, set up as run_scenario.py does, with the controller listening
+    before the vehicle starts (and the vehicle never free-running on wall time): the ideal
+    lockstep flight, with which the in-process flight must agree."""
+    import run_scenario
+
+    c = scenario.controllers[0]
+    ctrl_yaml, sim_yaml, vehicle_file, _ = run_scenario.prepare(scenario, c, out)
+    sim_yaml.write_text(sim_yaml.read_text() + "clock: {mode: lockstep, speed_up: 1.0, "
+                        "resend_s: 0.5, free_run_after_s: 3600.0}\n")
+    p_vehicle, p_ctrl, p_gcs, p_gcs_target = run_scenario.free_ports(4)
+    ctrl = subprocess.Popen(
+        [sys.executable, "-m", "trq_offboard", "--controller", str(ctrl_yaml), "--connect",
+         f"udpin:127.0.0.1:{p_ctrl}", "--log-dir", str(out)],
+        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=ENV, cwd=ROOT)
+    vehicle = None
+    try:
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline:           # the controller's socket is bound
+            with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+                try:
+                    s.bind(("127.0.0.1", p_ctrl))
+                except OSError:
+                    break
+            time.sleep(0.1)
+        vehicle = subprocess.Popen(
+            [sys.executable, "-m", "sil_vehicle", "--sim", str(sim_yaml), "--vehicle",
+             str(vehicle_file), "--seed", str(scenario.seed), "--wind-speed",
+             str(scenario.wind_speed_m_s), "--wind-dir", str(scenario.wind_from_deg),
+             "--offboard-bind", f"127.0.0.1:{p_vehicle}", "--offboard-target",
+             f"127.0.0.1:{p_ctrl}", "--gcs-bind", f"127.0.0.1:{p_gcs}", "--gcs-target",
+             f"127.0.0.1:{p_gcs_target}", "--log-dir", str(out), "--mode", "lockstep",
+             "--faults", str(scenario.faults)],
+            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=ENV, cwd=ROOT)
+        assert ctrl.wait(120) == 0
+    finally:
+        for proc in (ctrl, vehicle):
+            if proc is not None and proc.poll() is None:
+                proc.send_signal(signal.SIGINT)
+                try:
+                    proc.wait(10)
+                except subprocess.TimeoutExpired:
+                    proc.kill()
+                    proc.wait()
+
+
+def test_inprocess_flight_reproduces_the_udp_flight(tmp_path):
+    import inprocess
+    import metrics
+    import run_scenario
+    from sil_vehicle.faultscript import load_script
+    from trq_offboard.config import load_controller
+
+    sc = run_scenario.load_scenario(PARAMS / "scenarios" / "smoke.yaml")
+    c = sc.controllers[0]
+    # the UDP flight (two processes taking turns: about one core) flies alongside
+    errors: list[BaseException] = []
+
+    def udp_flight():
+        try:
+            _udp_lockstep_flight(tmp_path / "udp", sc)
+        except BaseException as exc:  # re-raised in the test's thread
+            errors.append(exc)
+
+    udp_thread = threading.Thread(target=udp_flight)
+    udp_thread.start()
+
+    cfg = load_controller(inprocess.controller_file(c))
+    sim = inprocess.sim_params(cfg.vehicle.file, cfg.control_rate_hz, seed=sc.seed,
+                               wind_speed_m_s=sc.wind_speed_m_s, wind_from_deg=sc.wind_from_deg,
+                               gusts=sc.gusts)
+    events = load_script(sc.faults, (math.degrees(sim.vehicle.tilt_min_rad),
+                                     math.degrees(sim.vehicle.tilt_max_rad)))
+    res = inprocess.fly_inprocess(c, sim, events, out_dir=tmp_path / "inprocess",
+                                  reference=sc.reference, timeout_s=sc.timeout_s, name=c)
+    udp_thread.join(180)
+    assert not udp_thread.is_alive() and not errors, errors
+    assert res.status == "done", res.summary
+    assert res.messages[0] > 900 and res.messages[1] > 2000      # the link carried the traffic
+
+    onset = events[0].at_us
+    udp = tmp_path / "udp"
+    m_udp = inprocess.flight_metrics(udp, c, onset, sc.recovery_threshold_m)
+    m_in = inprocess.flight_metrics(res.out_dir, c, onset, sc.recovery_threshold_m)
+    for key in ("crashed", "flight_s", "rmse_pos_m", "max_pos_err_m", "rmse_pos_after_fault_m",
+                "rmse_yaw_deg", "max_yaw_err_deg", "recovery_s"):
+        a, b = m_udp[key], m_in[key]
+        assert (a == b) if isinstance(a, bool) or a is None else math.isclose(a, b, rel_tol=1e-9,
+                                                                             abs_tol=1e-12), \
+            (key, a, b)
+    assert m_in["crashed"] is False and m_in["rmse_pos_m"] < 0.1
+    # lockstep is deterministic: the truth is bit-identical over every controller step
+    _, steps = metrics.read_csv(udp / "controller.csv")
+    last = int(steps["stamp_us"][-1])
+
+    def truth_rows(path):
+        rows = [ln for ln in open(path) if not ln.startswith("#")][1:]
+        return [ln for ln in rows if int(ln.split(",", 1)[0]) <= last]
+
+    a, b = truth_rows(udp / "flight.csv"), truth_rows(res.flight_csv)
+    assert len(a) > 800 and a == b

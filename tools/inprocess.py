@@ -1,0 +1,428 @@
+#!/usr/bin/env python3
+"""One lockstep flight in ONE process: the SIL vehicle's autopilot core (`sil_vehicle.sitl.Sitl`)
+and the offboard controller's flight loop (`trq_offboard.loop.OffboardFlight`), joined by an
+in-memory link that carries the same MAVLink 2 bytes the two daemons exchange over UDP.
+
+    python tools/inprocess.py params/scenarios/smoke.yaml --out out/smoke_inprocess
+    python tools/inprocess.py SCENARIO.yaml --out DIR [--only CONTROLLER]
+
+Nothing here is a second implementation of either side: the vehicle is `Sitl` (the code the
+vehicle daemon drives), the controller is `Controller` + `Reference` driven by `OffboardFlight`
+(the code the controller daemon drives). What replaces the sockets:
+
+- controller -> vehicle: `OffboardFlight` calls `link.send(msg)`; the message is packed to bytes
+  with pymavlink (system 255, component 191, as `MavlinkUdp`), decoded by the vehicle's own
+  `Codec` for the offboard link and handed to `sitl.handle('offboard', msg, sender)`;
+- vehicle -> controller: every `Outgoing` of the offboard link is encoded by that `Codec` and
+  parsed back by a fresh pymavlink parser (as `MavlinkUdp` parses a datagram), then delivered to
+  `flight.on_message` as a separate event-loop callback (as a datagram would be);
+- the clock: a 'vehicle' task advances `sitl.lockstep_ticks()` physics ticks each time
+  `sitl.answered` becomes true (PROTOCOL.md, lockstep handshake). The controller always answers,
+  so the daemon's wall-clock resend and free-run never happen here.
+
+The ground-station link's messages are still built every tick (they consume the same sensor
+noise draws as in the daemon) but are not encoded: nobody listens.
+
+The flight ends when `OffboardFlight.run()` returns (landed and disarmed), or `crash_grace_s`
+simulated seconds after a crash, or at `timeout_s` of simulated time. It writes `flight.csv`
+(`sil_vehicle.log.FlightLog`, columns `sil_vehicle.sitl.LOG_COLUMNS`) and `controller.csv`
+(`trq_offboard.log.ControllerLog`) in `out_dir`, so `tools/metrics.py` computes the same metrics
+as for a scenario run. The controller's solve goes through `run_in_executor`, on an executor
+that runs it inline by default (one thread per flight; `inline_solve=False`: a worker thread,
+as in the daemon).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import concurrent.futures
+import dataclasses
+import hashlib
+import json
+import math
+import os
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterable
+
+ROOT = Path(__file__).resolve().parent.parent
+for _p in (str(ROOT), str(ROOT / "tools")):
+    if _p not in sys.path:
+        sys.path.insert(0, _p)
+
+from pymavlink.dialects.v20 import common as mavlink  # noqa: E402
+
+PARAMS = ROOT / "params"
+SIM_DEFAULT = PARAMS / "sim" / "default.yaml"
+SENDER = ("in-process", 0)          # the controller's 'address' as the vehicle sees it
+
+
+# --- the in-memory link ----------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class _Connection:
+    """What `OffboardFlight` prints about its link in an error message."""
+    mode: str = "inprocess"
+    host: str = "memory"
+    port: int = 0
+
+
+class _InlineExecutor(concurrent.futures.ThreadPoolExecutor):
+    """`run_in_executor` on this executor calls the function at once in the loop's thread (the
+    vehicle waits for the answer anyway): no thread hand-off per control step."""
+
+    def submit(self, fn, /, *args, **kwargs):
+        fut: concurrent.futures.Future = concurrent.futures.Future()
+        try:
+            fut.set_result(fn(*args, **kwargs))
+        except BaseException as exc:  # handed to the awaiting coroutine, as a thread would
+            fut.set_exception(exc)
+        return fut
+
+
+class InMemoryLink:
+    """The controller's end of the link (`.send`, `.connection`, `.on_message`), wired to the
+    vehicle's `Sitl` through MAVLink bytes."""
+
+    def __init__(self, sitl, codec, on_answer) -> None:
+        self.connection = _Connection()
+        self.on_message = lambda msg: None
+        self.on_frame = None
+        self._sitl = sitl
+        self._codec = codec                     # the vehicle's codec of the offboard link
+        self._on_answer = on_answer
+        # the controller's packer: the system and component MavlinkUdp uses
+        self._tx = mavlink.MAVLink(None, srcSystem=255, srcComponent=191)
+        self.sent = 0
+        self.received = 0
+        self.bytes = 0
+
+    # controller -> vehicle
+    def send(self, msg) -> bool:
+        data = bytes(msg.pack(self._tx))
+        self._tx.seq = (self._tx.seq + 1) % 256
+        self.sent += 1
+        self.bytes += len(data)
+        for decoded in self._codec.decode(data):
+            self.deliver(self._sitl.handle("offboard", decoded, SENDER))
+        if self._sitl.answered:
+            self._on_answer()
+        return True
+
+    # vehicle -> controller
+    def deliver(self, outgoing: Iterable) -> None:
+        loop = asyncio.get_running_loop()
+        for item in outgoing:
+            if item.link != "offboard":
+                continue
+            data = self._codec.encode(item.msg)
+            self.bytes += len(data)
+            loop.call_soon(self._receive, data)
+
+    def _receive(self, data: bytes) -> None:
+        rx = mavlink.MAVLink(None)              # a fresh parse per 'datagram', as MavlinkUdp
+        rx.robust_parsing = True
+        for msg in rx.parse_buffer(data) or []:
+            if isinstance(msg, mavlink.MAVLink_bad_data) or msg.get_type() == "UNKNOWN":
+                continue
+            if msg.get_srcSystem() != 1:
+                continue
+            self.received += 1
+            self.on_message(msg)
+
+
+# --- configuration, as tools/run_scenario.py prepares it ------------------------------------------
+
+def _yaml_dump(data: dict) -> str:
+    import yaml
+    return yaml.safe_dump(data, sort_keys=False)
+
+
+def controller_file(name_or_path: str | Path) -> Path:
+    """A path to a controller YAML, or a name in params/controller/."""
+    p = Path(name_or_path)
+    if p.suffix in (".yaml", ".yml") or p.exists():
+        return p.resolve()
+    return PARAMS / "controller" / f"{name_or_path}.yaml"
+
+
+def prepare_controller(controller: str | Path, reference: dict | None, out_dir: Path) -> Path:
+    """Write the flight's controller overlay (the base file with `reference` over it) exactly as
+    run_scenario.prepare does, and return its path. Raises ConfigError if it is invalid."""
+    from trq_offboard.config import load_controller
+
+    base = controller_file(controller)
+    cfg = load_controller(base)
+    overlay = {"extends": str(base), "vehicle": str(Path(cfg.vehicle.file).resolve()),
+               "observer": {"file": str(Path(cfg.eso.file).resolve()) if cfg.eso else
+                            str(PARAMS / "controller" / "eso.yaml")}}
+    if reference:
+        overlay["reference"] = dict(reference)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    path = out_dir / "controller.yaml"
+    path.write_text("# written by tools/inprocess.py\n" + _yaml_dump(overlay))
+    load_controller(path)
+    return path
+
+
+def sim_params(vehicle_file: Path | str, control_rate_hz: int, *, seed: int,
+               wind_speed_m_s: float = 0.0, wind_from_deg: float = 0.0, gusts: bool = False,
+               gust_sigma_m_s: float | None = None, sim_file: Path | str = SIM_DEFAULT):
+    """The vehicle's settings as run_scenario.py gives them to the daemon: the default sim file,
+    the control rate (and offboard ODOMETRY rate) of the controller, its airframe, the seed and
+    the wind (the daemon's --seed, --wind-speed, --wind-dir, --gusts)."""
+    from sil_vehicle.config import load_sim
+
+    sim = load_sim(sim_file, vehicle_file)
+    links = []
+    for link in sim.links:
+        if link.name == "offboard":
+            rates = tuple((s, control_rate_hz if s == "ODOMETRY" else hz)
+                          for s, hz in link.rates_hz)
+            link = dataclasses.replace(link, rates_hz=rates)
+        links.append(link)
+    if sim.physics_rate_hz % control_rate_hz:
+        from sil_vehicle.yamlcheck import ConfigError
+        raise ConfigError(f"control_rate_hz {control_rate_hz} does not divide the physics rate "
+                          f"{sim.physics_rate_hz}")
+    changes = dict(control_rate_hz=control_rate_hz, links=tuple(links), seed=int(seed),
+                   wind_speed_m_s=float(wind_speed_m_s), wind_from_deg=float(wind_from_deg))
+    if gusts:
+        changes["gusts_enabled"] = True
+    if gust_sigma_m_s is not None:
+        changes["gust_sigma_m_s"] = float(gust_sigma_m_s)
+    return sim.with_changes(**changes)
+
+
+# --- controllers are built once per process ---------------------------------------------------
+
+_CONTROLLERS: dict[str, object] = {}
+
+
+def build_controller(cfg):
+    """A `Controller` for `cfg`, reused across flights of this process (building the NMPC takes
+    a second or two). Reuse is safe: `OffboardFlight` calls `reset()` at take-over, which clears
+    the plan, the observer and the counters; the SQP's multipliers (used only by the exact
+    Hessian) are zeroed here as well."""
+    from trq_offboard.controller import Controller
+
+    key = repr(dataclasses.replace(cfg, file="", reference=None))
+    ctl = _CONTROLLERS.get(key)
+    if ctl is None:
+        ctl = _CONTROLLERS[key] = Controller(cfg)
+    lam = getattr(ctl.solver, "_lam", None)
+    if lam is not None:
+        lam[:] = 0.0
+    return ctl
+
+
+# --- one flight ------------------------------------------------------------------------------
+
+@dataclass
+class FlightResult:
+    status: str              # done | crashed | timeout | not landed | failed: ...
+    sim_s: float             # simulated time at the end
+    wall_s: float
+    steps: int               # controller steps recorded
+    summary: str             # OffboardFlight's summary line (or why there is none)
+    out_dir: Path
+    flight_csv: Path
+    controller_csv: Path
+    messages: tuple[int, int, int]   # (controller -> vehicle, vehicle -> controller, bytes)
+
+
+async def _fly(sitl, flight, link, *, timeout_us: int, crash_grace_us: int) -> tuple[str, str]:
+    answered = asyncio.Event()
+    link._on_answer = answered.set
+    loop = asyncio.get_running_loop()
+    flight_task = loop.create_task(flight.run())
+    ticks = sitl.lockstep_ticks()
+    ended = ""
+
+    async def vehicle() -> None:
+        nonlocal ended
+        link.deliver(sitl.telemetry_due())          # as the daemon does before its loop
+        crash_us = None
+        while True:
+            await answered.wait()
+            answered.clear()
+            if not sitl.answered:                   # an answer for an older stamp: keep waiting
+                continue
+            for _ in range(ticks):
+                link.deliver(sitl.step())
+            if sitl.state.crashed and crash_us is None:
+                crash_us = sitl.t_us
+            if crash_us is not None and sitl.t_us - crash_us >= crash_grace_us:
+                ended = "crashed"
+                return
+            if sitl.t_us >= timeout_us:
+                ended = "timeout"
+                return
+            await asyncio.sleep(0)
+
+    vehicle_task = loop.create_task(vehicle())
+    try:
+        done, _ = await asyncio.wait({flight_task, vehicle_task},
+                                     return_when=asyncio.FIRST_COMPLETED)
+        if flight_task in done:
+            summary = flight_task.result()           # raises FlightError if it could not fly
+            status = "done" if summary.disarmed else ("not landed" if not summary.landed
+                                                      else "not disarmed")
+            if sitl.state.crashed:
+                status = "crashed"
+            return status, summary.line()
+        vehicle_task.result()
+        return ended, f"{flight.name}: stopped by the campaign ({ended}) at " \
+                      f"t={sitl.t_us * 1e-6:.2f} s, {flight.summary.steps} steps"
+    finally:
+        for task in (flight_task, vehicle_task):
+            if not task.done():
+                task.cancel()
+        await asyncio.gather(flight_task, vehicle_task, return_exceptions=True)
+
+
+def fly_inprocess(controller, sim, fault_events=(), seed: int | None = None, *,
+                  out_dir: Path, reference: dict | None = None, timeout_s: float = 600.0,
+                  crash_grace_s: float = 1.0, inline_solve: bool = True,
+                  name: str | None = None) -> FlightResult:
+    """Fly one lockstep flight in this process and write out_dir/flight.csv and controller.csv.
+
+    controller: a ControllerConfig, or a controller YAML path / name in params/controller/
+        (then `reference`, a mapping of reference settings, is laid over it as
+        run_scenario.py does);
+    sim: the vehicle's SimParams (see `sim_params`); `seed` replaces its seed if given;
+    fault_events: sil_vehicle.faultscript Events, played by the vehicle in its own time.
+    """
+    from sil_vehicle.log import FlightLog
+    from sil_vehicle.mavlink.codec import Codec
+    from sil_vehicle.sitl import LOG_COLUMNS, Sitl
+    from trq_offboard.config import ControllerConfig, load_controller
+    from trq_offboard.link.wire import tilt_half_range
+    from trq_offboard.log import ControllerLog
+    from trq_offboard.loop import OffboardFlight
+    from trq_offboard.reference import Reference
+
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    if isinstance(controller, ControllerConfig):
+        cfg = controller
+        if reference:
+            raise ValueError("reference: give it in the ControllerConfig")
+    else:
+        cfg = load_controller(prepare_controller(controller, reference, out_dir))
+    if seed is not None:
+        sim = sim.with_changes(seed=int(seed))
+    if sim.control_rate_hz != cfg.control_rate_hz:
+        raise ValueError(f"sim control_rate_hz {sim.control_rate_hz} != controller's "
+                         f"{cfg.control_rate_hz}")
+    wall0 = time.perf_counter()
+    ctl = build_controller(cfg)
+    meta = {"vehicle": sim.vehicle.name, "vehicle_file": sim.vehicle.file, "sim_file": sim.file,
+            "seed": sim.seed, "physics_rate_hz": sim.physics_rate_hz, "clock": sim.clock_mode,
+            "frames": "world NED, body FRD, quaternion wxyz", "link": "in-process MAVLink bytes"}
+    flight_log = FlightLog(out_dir / "flight.csv", LOG_COLUMNS, meta,
+                           flush_every=max(1, sim.log_rate_hz))
+    clog = ControllerLog(out_dir / "controller.csv",
+                         {"controller": cfg.name, "controller_file": cfg.file,
+                          "vehicle_file": cfg.vehicle.file, "connect": "in-process",
+                          "frames": "world NED, body FRD"})
+    try:
+        sitl = Sitl(sim, log_sink=flight_log)
+        sitl.schedule(fault_events)
+        link = InMemoryLink(sitl, Codec(counters=sitl.counters["offboard"]), lambda: None)
+        flight = OffboardFlight(
+            link, ctl, lambda state: Reference(cfg.reference, state.pos_ned_m, state.euler_rad[2]),
+            name=name or cfg.name,
+            tilt_limit_rad=tilt_half_range(cfg.vehicle.tilt_min_rad, cfg.vehicle.tilt_max_rad),
+            record=clog)
+
+        async def main() -> tuple[str, str]:
+            if inline_solve:
+                asyncio.get_running_loop().set_default_executor(_InlineExecutor(max_workers=1))
+            return await _fly(sitl, flight, link, timeout_us=int(round(timeout_s * 1e6)),
+                              crash_grace_us=int(round(crash_grace_s * 1e6)))
+
+        status, summary = asyncio.run(main())
+    finally:
+        flight_log.close()
+        clog.close()
+    return FlightResult(status, sitl.t_us * 1e-6, time.perf_counter() - wall0,
+                        flight.summary.steps, summary, out_dir, out_dir / "flight.csv",
+                        out_dir / "controller.csv", (link.sent, link.received, link.bytes))
+
+
+def flight_metrics(log_dir: Path, controller: str, fault_onset_us: int | None,
+                   recovery_threshold_m: float) -> dict:
+    """The scenario runner's metrics (tools/metrics.py) of a flight, from the two logs in
+    log_dir (flight.csv and controller.csv, in process or from the daemons)."""
+    import metrics as metrics_mod
+    from sil_vehicle.config import load_vehicle
+
+    meta, truth = metrics_mod.read_csv(Path(log_dir) / "flight.csv")
+    _, steps = metrics_mod.read_csv(Path(log_dir) / "controller.csv")
+    vehicle = Path(load_vehicle(meta["vehicle_file"]).file).stem
+    return metrics_mod.compute(controller, vehicle, truth, steps, fault_onset_us,
+                               recovery_threshold_m).as_dict()
+
+
+def fingerprint(path: Path) -> str:
+    """sha256 of a file's bytes (short): to see whether two logs are bit-identical."""
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()[:16]
+
+
+# --- command line: a scenario file, flown in process ----------------------------------------------
+
+def main(argv: list[str] | None = None) -> int:
+    import argparse
+
+    import run_scenario
+    from sil_vehicle.faultscript import load_script
+    from sil_vehicle.yamlcheck import ConfigError
+    from trq_offboard.config import load_controller
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("scenario", type=Path, help="a scenario file (params/scenarios/*.yaml)")
+    ap.add_argument("--out", type=Path, required=True, help="output directory")
+    ap.add_argument("--only", action="append", default=None,
+                    help="fly only this controller (repeatable)")
+    ap.add_argument("--thread", action="store_true",
+                    help="solve in a worker thread (as the daemon) instead of inline")
+    args = ap.parse_args(argv)
+    try:
+        sc = run_scenario.load_scenario(args.scenario)
+        events = load_script(sc.faults) if sc.faults else ()
+    except ConfigError as exc:
+        print(f"inprocess: {exc}", file=sys.stderr)
+        return 2
+    onset = events[0].at_us if events else None
+    runs = []
+    for c in sc.controllers:
+        if args.only and c not in args.only:
+            continue
+        cfg = load_controller(controller_file(c))
+        sim = sim_params(cfg.vehicle.file, cfg.control_rate_hz, seed=sc.seed,
+                         wind_speed_m_s=sc.wind_speed_m_s, wind_from_deg=sc.wind_from_deg,
+                         gusts=sc.gusts)
+        vp = sim.vehicle        # the daemon checks stuck angles against the airframe's range
+        ev = load_script(sc.faults, (math.degrees(vp.tilt_min_rad),
+                                     math.degrees(vp.tilt_max_rad))) if sc.faults else ()
+        res = fly_inprocess(c, sim, ev, out_dir=args.out / c, reference=sc.reference,
+                            timeout_s=sc.timeout_s, inline_solve=not args.thread, name=c)
+        m = flight_metrics(res.out_dir, c, onset, sc.recovery_threshold_m)
+        m.update(status=res.status, wall_s=round(res.wall_s, 2), sim_s=round(res.sim_s, 3),
+                 flight_csv_sha=fingerprint(res.flight_csv))
+        print(f"  {c}: {res.status}, {res.sim_s:.2f} s simulated in {res.wall_s:.1f} s wall "
+              f"({res.sim_s / max(res.wall_s, 1e-9):.1f}x). {res.summary}")
+        runs.append(m)
+    args.out.mkdir(parents=True, exist_ok=True)
+    (args.out / "metrics.json").write_text(json.dumps({"scenario": sc.name, "runs": runs},
+                                                      indent=2) + "\n")
+    import report
+    print(report.table(runs))
+    return 0 if all(r["status"] == "done" for r in runs) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
