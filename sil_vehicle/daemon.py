@@ -25,6 +25,7 @@ from sil_vehicle.config import PARAMS_DIR, ConfigError, Endpoint, SimParams, loa
 from sil_vehicle.faultscript import load_script
 from sil_vehicle.log import FlightLog, Tlog
 from sil_vehicle.mavlink.codec import Codec
+from sil_vehicle.mavlink.signing import SignatureCheck, SigningKeyError, load_key, sign_outgoing
 from sil_vehicle.sitl import LINKS, LOG_COLUMNS, Outgoing, Sitl
 from sil_vehicle.yamlcheck import Section
 
@@ -50,7 +51,8 @@ class _Protocol(asyncio.DatagramProtocol):
 
 class VehicleDaemon:
     def __init__(self, sim: SimParams, log_dir: Path | None, *,
-                 monotonic=time.monotonic, wall_us=lambda: time.time_ns() // 1000) -> None:
+                 monotonic=time.monotonic, wall_us=lambda: time.time_ns() // 1000,
+                 signing_key: bytes | None = None, allow_unsigned_gcs: bool = False) -> None:
         self.sim = sim
         self.log_dir = log_dir
         self.flight_log = None
@@ -64,6 +66,13 @@ class VehicleDaemon:
             self.tlog = Tlog(log_dir / "vehicle.tlog")
         self.sitl = Sitl(sim, log_sink=self.flight_log)
         self.codecs = {name: Codec(counters=self.sitl.counters[name]) for name in LINKS}
+        self.signed = signing_key is not None
+        if signing_key is not None:
+            for link_id, name in enumerate(LINKS):
+                codec = self.codecs[name]
+                codec.check = SignatureCheck(
+                    signing_key, allow_unsigned_read_only=allow_unsigned_gcs and name == "gcs")
+                sign_outgoing(codec.mav, signing_key, link_id)
         self.transports: dict[str, asyncio.DatagramTransport] = {}
         self.peers: dict[str, list[tuple[str, int]]] = {name: [] for name in LINKS}
         self._answer: asyncio.Future | None = None   # resolved when the lockstep target arrives
@@ -81,8 +90,10 @@ class VehicleDaemon:
                 lambda name=link.name: _Protocol(self, name),
                 local_addr=(link.bind.host, link.bind.port))
             self.transports[link.name] = transport
-            if link.bind.host not in ("127.0.0.1", "localhost", "::1"):
-                log.warning("link %s bound to %s: reachable from the network", link.name, link.bind)
+            if link.bind.host not in ("127.0.0.1", "localhost", "::1") and not self.signed:
+                log.warning("link %s bound to %s without a signing key: anyone on the network "
+                            "can command the vehicle (use --signing-key-file)", link.name,
+                            link.bind)
 
     def bound(self, link: str) -> tuple[str, int]:
         return self.transports[link].get_extra_info("sockname")[:2]
@@ -227,6 +238,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--wind-speed", type=float, default=None, help="mean wind speed, m/s")
     p.add_argument("--wind-dir", type=float, default=None,
                    help="direction the wind blows from, deg clockwise from north")
+    p.add_argument("--signing-key-file", type=Path, default=None,
+                   help="MAVLink 2 signing: a file with the 32-byte secret as 64 hex characters; "
+                        "then only correctly signed, fresh messages are obeyed")
+    p.add_argument("--allow-unsigned-gcs", action="store_true",
+                   help="with a key: still serve unsigned read-only requests (heartbeat, "
+                        "parameter reads) on the ground-station link")
     p.add_argument("--gusts", action="store_true", help="turn Dryden gusts on")
     p.add_argument("--faults", type=Path, default=None,
                    help="fault script YAML (params/faults/*.yaml) played in vehicle time")
@@ -285,13 +302,15 @@ def main(argv: list[str] | None = None) -> int:
             vp = sim.vehicle
             events = load_script(args.faults, (math.degrees(vp.tilt_min_rad),
                                                math.degrees(vp.tilt_max_rad)))
-    except ConfigError as exc:
+        key = load_key(args.signing_key_file) if args.signing_key_file else None
+    except (ConfigError, SigningKeyError) as exc:
         print(f"trq-sil-vehicle: {exc}", file=sys.stderr)
         return 2
     log_dir = None
     if not args.no_log:
         log_dir = args.log_dir or Path(sim.log_dir) / time.strftime("vehicle-%Y%m%d-%H%M%S")
-    daemon = VehicleDaemon(sim, log_dir)
+    daemon = VehicleDaemon(sim, log_dir, signing_key=key,
+                           allow_unsigned_gcs=args.allow_unsigned_gcs)
     daemon.sitl.schedule(events)
 
     async def _main() -> None:
@@ -308,7 +327,10 @@ def main(argv: list[str] | None = None) -> int:
     s = daemon.sitl.state
     print(f"trq-sil-vehicle: {daemon.exit_reason or 'stopped'} at t={s.t_us / 1e6:.2f} s, "
           f"{'crashed: ' + s.crash_reason if s.crashed else 'no crash'}, "
-          f"{daemon.sitl.targets_applied} targets applied"
+          f"{daemon.sitl.targets_applied} targets applied, "
+          f"dropped {sum(c.dropped for c in daemon.sitl.counters.values())} messages "
+          f"({sum(c.unauthenticated for c in daemon.sitl.counters.values())} unauthenticated, "
+          f"{sum(c.bad_frames for c in daemon.sitl.counters.values())} malformed)"
           + (f", logs in {log_dir}" if log_dir else ""))
     return 0
 

@@ -33,6 +33,7 @@ sys.path.insert(0, str(ROOT / "tools"))
 from mavclient import MavClient, NoAnswer  # noqa: E402
 from sil_vehicle.faultscript import (MOTOR, SERVO, TYPE_OFF, TYPE_OK, TYPE_STUCK,  # noqa: E402
                                      Event, InjectAction, ParamAction, load_script)
+from sil_vehicle.mavlink.signing import SigningKeyError, load_key  # noqa: E402
 from sil_vehicle.yamlcheck import ConfigError  # noqa: E402
 
 RESULTS = {v.name.removeprefix("MAV_RESULT_"): k for k, v in mavlink.enums["MAV_RESULT"].items()}
@@ -132,6 +133,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--connect", default="udpout:127.0.0.1:18570",
                    help="the vehicle's ground-station port (default udpout:127.0.0.1:18570)")
     p.add_argument("--timeout", type=float, default=5.0, help="seconds to wait for the vehicle")
+    p.add_argument("--signing-key-file", type=Path, default=None,
+                   help="sign the commands (MAVLink 2 signing, 64 hex characters)")
     p.add_argument("what", choices=("motor", "servo", "wind", "clear", "script"))
     p.add_argument("n", nargs="?", help="motor or servo number 1..4; wind speed m/s; script file")
     p.add_argument("action", nargs="?", help="motor: off|on|eff|tv; servo: stuck|free; "
@@ -174,7 +177,12 @@ def main(argv: list[str] | None = None) -> int:
         print(f"inject_fault: {exc}", file=sys.stderr)
         return 2
     try:
-        with MavClient(args.connect) as client:
+        key = load_key(args.signing_key_file) if args.signing_key_file else None
+    except SigningKeyError as exc:
+        print(f"inject_fault: {exc}", file=sys.stderr)
+        return 2
+    try:
+        with MavClient(args.connect, signing_key=key) as client:
             client.hello(args.timeout)
             if actions is None:
                 play(client, events, log=lambda s: print(f"inject_fault: {s}"))

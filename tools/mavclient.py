@@ -25,7 +25,8 @@ class NoAnswer(RuntimeError):
 
 class MavClient:
     def __init__(self, connect: str = "udpout:127.0.0.1:18570", *, system_id: int = 255,
-                 component_id: int = 190, target_system: int = 1, target_component: int = 1) -> None:
+                 component_id: int = 190, target_system: int = 1, target_component: int = 1,
+                 signing_key: bytes | None = None, link_id: int = 2) -> None:
         mode, _, rest = connect.partition(":")
         host, _, port = rest.rpartition(":")
         if mode not in ("udpin", "udpout") or not port.isdigit():
@@ -38,6 +39,9 @@ class MavClient:
             self.sock.bind(("0.0.0.0", 0))
             self.peer = (host, int(port))
         self.mav = mavlink.MAVLink(None, srcSystem=system_id, srcComponent=component_id)
+        if signing_key is not None:            # MAVLink 2 signing of everything this tool sends
+            from sil_vehicle.mavlink.signing import sign_outgoing
+            sign_outgoing(self.mav, signing_key, link_id)
         self.target = (target_system, target_component)
         self.vehicle_time_us = 0
         self.last: dict[str, object] = {}

@@ -179,7 +179,8 @@ def prepare(scenario: Scenario, controller: str, out: Path) -> tuple[Path, Path,
     return ctrl_yaml, sim_yaml, Path(cfg.vehicle.file).resolve(), rate
 
 
-def fly(scenario: Scenario, run: Run, realtime: bool, lock: threading.Lock) -> None:
+def fly(scenario: Scenario, run: Run, realtime: bool, lock: threading.Lock,
+        signing_key_file: Path | None = None) -> None:
     ctrl_yaml, sim_yaml, vehicle_file, _ = prepare(scenario, run.controller, run.out)
     p_vehicle, p_ctrl, p_gcs = free_ports(3)
     vcmd = [sys.executable, "-m", "sil_vehicle", "--sim", str(sim_yaml), "--vehicle",
@@ -199,6 +200,9 @@ def fly(scenario: Scenario, run: Run, realtime: bool, lock: threading.Lock) -> N
     ccmd = [sys.executable, "-m", "trq_offboard", "--controller", str(ctrl_yaml), "--connect",
             f"udpin:127.0.0.1:{p_ctrl}", "--log-dir", str(run.out),
             "--applied-delay-s", f"{delay_s:g}"]
+    if signing_key_file is not None:
+        vcmd += ["--signing-key-file", str(signing_key_file)]
+        ccmd += ["--signing-key-file", str(signing_key_file)]
     env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
     (run.out / "command.txt").write_text(" ".join(vcmd) + "\n" + " ".join(ccmd) + "\n")
     wall0 = time.monotonic()
@@ -362,6 +366,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--only", action="append", default=None,
                     help="fly only this controller (repeatable)")
     ap.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
+    ap.add_argument("--signing-key-file", type=Path, default=None,
+                    help="fly with MAVLink 2 signing (both daemons get the key file)")
     args = ap.parse_args(argv)
     try:
         scenario = load_scenario(args.scenario)
@@ -405,7 +411,8 @@ def main(argv: list[str] | None = None) -> int:
             active = [t for t in active if t.is_alive()]
             while pending and len(active) < jobs:
                 run = pending.pop(0)
-                t = threading.Thread(target=fly, args=(scenario, run, args.realtime, lock))
+                t = threading.Thread(target=fly, args=(scenario, run, args.realtime, lock,
+                                                       args.signing_key_file))
                 t.start()
                 active.append(t)
             time.sleep(0.2)

@@ -20,6 +20,7 @@ import time
 from pathlib import Path
 
 from trq_offboard.config import PARAMS_DIR, ConfigError, load_controller
+from trq_offboard.link.signing import read_key_file
 from trq_offboard.link.udp import Connection, MavlinkUdp
 from trq_offboard.link.wire import tilt_half_range
 from trq_offboard.log import ControllerLog, Tlog
@@ -57,6 +58,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "measured (the observer's b0): 0 in lockstep (the default of the "
                         "controller file), about the solve time plus the link latency in real "
                         "time")
+    p.add_argument("--signing-key-file", type=Path, default=None,
+                   help="MAVLink 2 signing: a file with the 32-byte secret as 64 hex characters; "
+                        "everything sent is signed and only signed, fresh telemetry is trusted")
     p.add_argument("--connect-timeout", type=float, default=30.0,
                    help="seconds to wait for the vehicle's heartbeat")
     p.add_argument("-v", "--verbose", action="store_true", help="debug logging")
@@ -80,6 +84,7 @@ def main(argv: list[str] | None = None) -> int:
             import dataclasses
             cfg = dataclasses.replace(cfg, applied_delay_s=args.applied_delay_s)
         connection = Connection.parse(args.connect)
+        key = read_key_file(args.signing_key_file) if args.signing_key_file else None
     except (ConfigError, ValueError) as exc:
         print(f"trq-offboard: {exc}", file=sys.stderr)
         return 2
@@ -99,7 +104,11 @@ def main(argv: list[str] | None = None) -> int:
                               "frames": "world NED, body FRD"})
         tlog = Tlog(log_dir / "offboard.tlog")
 
-    link = MavlinkUdp(connection, on_message=lambda msg: None)
+    link = MavlinkUdp(connection, on_message=lambda msg: None, signing_key=key)
+    if connection.mode == "udpin" and connection.host not in ("127.0.0.1", "localhost", "::1") \
+            and key is None:
+        log.warning("listening on %s without a signing key: anyone on the network can feed "
+                    "this controller telemetry (use --signing-key-file)", connection.host)
     if tlog:
         link.on_frame = tlog
     flight = OffboardFlight(

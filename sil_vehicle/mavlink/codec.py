@@ -14,6 +14,7 @@ from typing import Iterable
 from pymavlink.dialects.v20 import common as mavlink
 
 from sil_vehicle.frames import ned_to_geodetic, quat_to_euler
+from sil_vehicle.mavlink.signing import SignatureCheck
 
 SYSTEM_ID = 1
 COMPONENT_ID = 1  # MAV_COMP_ID_AUTOPILOT1
@@ -35,11 +36,12 @@ class RxCounters:
     rejected_targets: int = 0    # actuator targets with NaN, inf or out-of-range values
     stale_targets: int = 0       # lockstep targets answering an older stamp
     impaired_lost: int = 0       # lost on purpose by a link impairment (not an error)
+    unauthenticated: int = 0     # signing on: unsigned, wrongly signed or replayed frames
 
     @property
     def dropped(self) -> int:
         return (self.bad_frames + self.unknown_ids + self.other_system + self.rejected_targets
-                + self.stale_targets)
+                + self.stale_targets + self.unauthenticated)
 
 
 @dataclass
@@ -48,6 +50,7 @@ class Codec:
     system_id: int = SYSTEM_ID
     component_id: int = COMPONENT_ID
     counters: RxCounters = field(default_factory=RxCounters)
+    check: SignatureCheck | None = None      # signing: what is received must be signed
 
     def __post_init__(self) -> None:
         self.mav = mavlink.MAVLink(None, srcSystem=self.system_id,
@@ -82,6 +85,10 @@ class Codec:
             if len(frame) < length:
                 c.bad_frames += 1
                 break
+            if self.check is not None and not self.check.accept(frame):
+                c.unauthenticated += 1
+                i += length
+                continue
             try:
                 msg = self._rx.decode(bytearray(frame))
             except Exception:  # pymavlink raises MAVError and, on odd payloads, others

@@ -16,6 +16,8 @@ from typing import Callable
 
 from pymavlink.dialects.v20 import common as mavlink
 
+from trq_offboard.link.signing import Verifier, enable_signing
+
 log = logging.getLogger("trq_offboard.link")
 
 
@@ -45,11 +47,15 @@ class LinkStats:
 
 class MavlinkUdp(asyncio.DatagramProtocol):
     def __init__(self, connection: Connection, on_message: Callable[[object], None],
-                 system_id: int = 255, component_id: int = 191) -> None:
+                 system_id: int = 255, component_id: int = 191,
+                 signing_key: bytes | None = None) -> None:
         self.connection = connection
         self.on_message = on_message
         self.stats = LinkStats()
         self._tx = mavlink.MAVLink(None, srcSystem=system_id, srcComponent=component_id)
+        self._verifier = Verifier(signing_key) if signing_key is not None else None
+        if signing_key is not None:
+            enable_signing(self._tx, signing_key)
         self._transport: asyncio.DatagramTransport | None = None
         self.peer: tuple[str, int] | None = (
             (connection.host, connection.port) if connection.mode == "udpout" else None)
@@ -79,6 +85,9 @@ class MavlinkUdp(asyncio.DatagramProtocol):
                 self.stats.bad += 1
                 continue
             if msg.get_srcSystem() != 1:
+                continue
+            if self._verifier is not None and not self._verifier.trusted(bytes(msg.get_msgbuf())):
+                self.stats.bad += 1            # unsigned, forged or replayed: not trusted
                 continue
             if self.connection.mode == "udpin":
                 self.peer = tuple(addr[:2])
