@@ -313,10 +313,20 @@ def main(argv: list[str] | None = None) -> int:
                            allow_unsigned_gcs=args.allow_unsigned_gcs)
     daemon.sitl.schedule(events)
 
+    signalled: list[int] = []
+
+    def on_signal(sig: int) -> None:
+        signalled.append(sig)
+        # the process ends: an armed vehicle is disarmed (it would fall anyway), said in the log
+        if daemon.sitl.vehicle.armed:
+            daemon.sitl.vehicle.force_disarm()
+            daemon.send(daemon.sitl.announce(2, f"{signal.Signals(sig).name}: disarmed"))
+        daemon.stop(signal.Signals(sig).name)
+
     async def _main() -> None:
         loop = asyncio.get_running_loop()
         for sig in (signal.SIGINT, signal.SIGTERM):
-            loop.add_signal_handler(sig, daemon.stop, signal.Signals(sig).name)
+            loop.add_signal_handler(sig, on_signal, sig)
         await daemon.run(args.duration)
 
     try:
@@ -332,7 +342,8 @@ def main(argv: list[str] | None = None) -> int:
           f"({sum(c.unauthenticated for c in daemon.sitl.counters.values())} unauthenticated, "
           f"{sum(c.bad_frames for c in daemon.sitl.counters.values())} malformed)"
           + (f", logs in {log_dir}" if log_dir else ""))
-    return 0
+    # the exit status says what happened: 0 the duration ran out, 128 + N stopped by signal N
+    return 128 + signalled[0] if signalled else 0
 
 
 if __name__ == "__main__":

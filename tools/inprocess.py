@@ -333,7 +333,9 @@ def fly_inprocess(controller, sim, fault_events=(), seed: int | None = None, *,
         sitl.schedule(fault_events)
         link = InMemoryLink(sitl, Codec(counters=sitl.counters["offboard"]), lambda: None)
         flight = OffboardFlight(
-            link, ctl, lambda state: Reference(cfg.reference, state.pos_ned_m, state.euler_rad[2]),
+            link, ctl, lambda state, airborne=False: Reference(
+                cfg.reference, state.pos_ned_m, state.euler_rad[2], airborne=airborne,
+                ground_down_m=0.0 if airborne else None),
             name=name or cfg.name,
             tilt_limit_rad=tilt_half_range(cfg.vehicle.tilt_min_rad, cfg.vehicle.tilt_max_rad),
             record=clog)

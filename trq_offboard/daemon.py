@@ -22,7 +22,7 @@ from pathlib import Path
 from trq_offboard.config import PARAMS_DIR, ConfigError, load_controller
 from trq_offboard.link.signing import read_key_file
 from trq_offboard.link.udp import Connection, MavlinkUdp
-from trq_offboard.link.wire import tilt_half_range
+from trq_offboard.link.wire import HOME_GROUND_DOWN_M, tilt_half_range
 from trq_offboard.log import ControllerLog, Tlog
 from trq_offboard.loop import FlightError, OffboardFlight
 
@@ -112,29 +112,39 @@ def main(argv: list[str] | None = None) -> int:
     if tlog:
         link.on_frame = tlog
     flight = OffboardFlight(
-        link, controller, lambda state: Reference(cfg.reference, state.pos_ned_m,
-                                                  state.euler_rad[2]),
+        link, controller, lambda state, airborne=False: Reference(
+            cfg.reference, state.pos_ned_m, state.euler_rad[2], airborne=airborne,
+            ground_down_m=HOME_GROUND_DOWN_M if airborne else None),
         name=cfg.name, tilt_limit_rad=tilt_half_range(cfg.vehicle.tilt_min_rad, cfg.vehicle.tilt_max_rad), record=clog,
         connect_timeout_s=args.connect_timeout)
 
     async def _main() -> int:
         await link.open()
-        task = asyncio.current_task()
         loop = asyncio.get_running_loop()
+        flying = asyncio.ensure_future(flight.run())
+        received: list[int] = []
+
+        def interrupt(sig: int) -> None:
+            received.append(sig)
+            flying.cancel()
+
         for sig in (signal.SIGINT, signal.SIGTERM):
-            loop.add_signal_handler(sig, task.cancel)
+            loop.add_signal_handler(sig, interrupt, sig)
         try:
-            summary = await flight.run()
+            summary = await flying
         except FlightError as exc:
             print(f"trq-offboard: {exc}", file=sys.stderr)
             return 1
         except asyncio.CancelledError:
-            print("trq-offboard: interrupted", file=sys.stderr)
-            return 130
+            name = signal.Signals(received[0]).name if received else "cancelled"
+            done = await flight.hand_over()
+            print(f"trq-offboard: interrupted by {name}: {done}; logs complete"
+                  + (f" in {log_dir}" if log_dir else ""), file=sys.stderr)
+            return 128 + (received[0] if received else signal.SIGINT)
         finally:
             link.close()
         print(f"trq-offboard: {summary.line()}" + (f"; logs in {log_dir}" if log_dir else ""))
-        return 0 if summary.disarmed else 1
+        return 0 if summary.disarmed and not summary.crashed else 1
 
     try:
         return asyncio.run(_main())

@@ -26,6 +26,8 @@ from trq_offboard.records import ActuatorCommand, ReferenceSample, StateEstimate
 log = logging.getLogger("trq_offboard")
 
 TOUCHDOWN_ALT_M = 0.05
+TAKEOVER_ALTITUDE_M = 0.3         # higher than this, armed: the vehicle is flying
+MAX_MODE_REQUESTS = 5
 TOUCHDOWN_SPEED_M_S = 0.15
 IDLE_STEPS_BEFORE_DISARM = 10
 
@@ -58,6 +60,9 @@ class FlightSummary:
     fallbacks: int = 0
     landed: bool = False
     disarmed: bool = False
+    crashed: bool = False
+    took_over: bool = False       # started against a flying vehicle
+    offboard: bool = False        # the vehicle granted offboard mode
     errors: list[str] = field(default_factory=list)
 
     def line(self) -> str:
@@ -65,6 +70,8 @@ class FlightSummary:
                 f"{self.rmse_pos_m:.3f} m (max {self.max_pos_err_m:.3f} m), yaw RMSE "
                 f"{self.rmse_yaw_deg:.2f} deg, solve p50 {self.solve_ms_p50:.1f} ms p99 "
                 f"{self.solve_ms_p99:.1f} ms, {self.fallbacks} fallbacks, "
+                f"{'took over in flight, ' if self.took_over else ''}"
+                f"{'CRASHED, ' if self.crashed else ''}"
                 f"{'landed' if self.landed else 'NOT landed'}, "
                 f"{'disarmed' if self.disarmed else 'armed'}")
 
@@ -93,6 +100,7 @@ class OffboardFlight:
         self._answered_stamp: int | None = None
         self._last_target = None
         self._have_output_status = False    # prefer ACTUATOR_OUTPUT_STATUS (full resolution)
+        self._mode_task: asyncio.Future | None = None
         self.summary = FlightSummary(name)
         self._errors: list[np.ndarray] = []
         self._yaw_errors: list[float] = []
@@ -177,6 +185,8 @@ class OffboardFlight:
             return await self._fly()
         finally:
             beat.cancel()
+            if self._mode_task is not None:
+                self._mode_task.cancel()
 
     async def _fly(self) -> FlightSummary:
         loop = asyncio.get_running_loop()
@@ -188,14 +198,22 @@ class OffboardFlight:
                               f"{self.link.connection.port}") from None
         first = await self._next_odometry()
         t0 = first.stamp_us
-        reference = self.make_reference(first.state)
+        # taking over a flying vehicle (a restarted controller, or after the vehicle's failsafe):
+        # no take-off and no arming; observer and plan start from the measured state
+        airborne = wire.is_armed(self.heartbeat) and \
+            first.state.pos_ned_m[2] < wire.HOME_GROUND_DOWN_M - TAKEOVER_ALTITUDE_M
+        reference = self.make_reference(first.state, airborne)
         self.controller.reset(0.0, first.state)
-        if not wire.is_armed(self.heartbeat):
+        self.summary.took_over = airborne
+        if airborne:
+            log.info("taking over a flying vehicle at %.2f m", -first.state.pos_ned_m[2])
+        elif not wire.is_armed(self.heartbeat):
             result = await self._command(wire.arm_command(True),
                                          mavlink.MAV_CMD_COMPONENT_ARM_DISARM)
             if result != mavlink.MAV_RESULT_ACCEPTED:
                 raise FlightError(f"arming refused (MAV_RESULT {result})")
-        ground_z = first.state.pos_ned_m[2]
+        ground_z = wire.HOME_GROUND_DOWN_M if airborne else first.state.pos_ned_m[2]
+        answered = 0
         while True:
             odo = await self._next_odometry()
             t = (odo.stamp_us - t0) * 1e-6
@@ -208,6 +226,21 @@ class OffboardFlight:
                                                    applied, reference)
             self._answer(odo.stamp_us, cmd)
             self._account(t, odo, ref, cmd, applied, info, time.perf_counter() - wall0)
+            answered += 1
+            # ask for offboard control once the stream is flowing (PX4 grants it only then;
+            # after the vehicle's failsafe it is how control comes back), without ever holding
+            # up the control loop for the answer
+            if answered == 2:
+                self._mode_task = asyncio.ensure_future(self._request_offboard())
+            # the preparation phase of the next step (RTI), while the vehicle flies this one
+            prepare = getattr(self.controller, "prepare", None)
+            if prepare is not None:
+                await loop.run_in_executor(None, prepare, reference)
+            if self.heartbeat is not None and wire.is_crashed(self.heartbeat):
+                self.summary.crashed = True
+                log.error("the vehicle reports a crash (EMERGENCY)")
+                self._finish(t)
+                return self.summary
             if reference.done(t) and not getattr(getattr(reference, "cfg", None), "land", True):
                 break
         if not self._touched_down(odo.state, ground_z):
@@ -244,6 +277,36 @@ class OffboardFlight:
         self.summary.steps += 1
         if self.record:
             self.record(StepRecord(t, odo.stamp_us, odo.state, ref, cmd, applied, info))
+
+    async def _request_offboard(self) -> None:
+        for _ in range(MAX_MODE_REQUESTS):
+            try:
+                result = await self._command(wire.set_mode_offboard(),
+                                             mavlink.MAV_CMD_DO_SET_MODE, retries=1)
+            except FlightError:
+                continue
+            if result == mavlink.MAV_RESULT_ACCEPTED:
+                self.summary.offboard = True
+                return
+            log.warning("offboard mode refused (MAV_RESULT %s), streaming on", result)
+            await asyncio.sleep(0.2)
+
+    async def hand_over(self) -> str:
+        """Leaving early (SIGINT, SIGTERM): ask the vehicle to land itself if it flies, disarm
+        it if it stands armed on the ground. Returns what was done."""
+        hb, odo = self.heartbeat, self.odometry
+        if hb is None or not wire.is_armed(hb):
+            return "the vehicle is disarmed"
+        try:
+            if odo is not None and odo.state.pos_ned_m[2] < wire.HOME_GROUND_DOWN_M - TOUCHDOWN_ALT_M:
+                result = await self._command(wire.set_mode_land(), mavlink.MAV_CMD_DO_SET_MODE,
+                                             retries=2)
+                return f"asked the vehicle to land (MAV_RESULT {result})"
+            result = await self._command(wire.arm_command(False, force=True),
+                                         mavlink.MAV_CMD_COMPONENT_ARM_DISARM, retries=2)
+            return f"disarmed the vehicle (MAV_RESULT {result})"
+        except FlightError as exc:
+            return f"could not hand over: {exc}"
 
     def _finish(self, t_end: float) -> None:
         s = self.summary

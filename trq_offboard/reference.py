@@ -50,12 +50,18 @@ class Reference:
     """The flight plan of one run (see the module docstring)."""
 
     def __init__(self, cfg: ReferenceConfig, start_ned_m, start_yaw_rad: float = 0.0,
-                 t0_s: float = 0.0) -> None:
+                 t0_s: float = 0.0, *, airborne: bool = False,
+                 ground_down_m: float | None = None) -> None:
+        """`airborne`: the controller takes over a flying vehicle: no take-off, the plan starts
+        by holding where the vehicle is; it lands on `ground_down_m` (NED down of the ground,
+        default the start point's)."""
         self.cfg = cfg
         self.start = np.asarray(start_ned_m, float).reshape(3)
         self.yaw = float(start_yaw_rad)
         self.t0 = float(t0_s)
-        self.hover_point = self.start + np.array([0.0, 0.0, -cfg.altitude_m])
+        self.airborne = airborne
+        self.ground = float(self.start[2] if ground_down_m is None else ground_down_m)
+        self.hover_point = self.start + np.array([0.0, 0.0, 0.0 if airborne else -cfg.altitude_m])
         rise = self.hover_point[2] - self.start[2]
         self.t_takeoff = abs(rise) * 1.875 / cfg.climb_speed_m_s
         self.t1 = self.t0 + self.t_takeoff
@@ -63,7 +69,7 @@ class Reference:
         self.t3 = self.t2 + cfg.duration_s
         self.t4 = self.t3 + cfg.hold_s
         self.end_point = self._manoeuvre(cfg.duration_s)[0]
-        drop = (self.start[2] + LAND_BELOW_M) - self.end_point[2]
+        drop = (self.ground + LAND_BELOW_M) - self.end_point[2]
         self.t_land = abs(drop) * 1.875 / cfg.climb_speed_m_s if cfg.land else 0.0
         self.t5 = self.t4 + self.t_land
 
@@ -123,7 +129,7 @@ class Reference:
             return _sample(pos, vel, self.yaw, self.cfg.kind)
         if t < self.t4 or not self.cfg.land:
             return _sample(self.end_point, np.zeros(3), self.yaw, "hold")
-        z_ground = self.start[2] + LAND_BELOW_M
+        z_ground = self.ground + LAND_BELOW_M
         dz = z_ground - self.end_point[2]
         s, ds = _smoothstep5((t - self.t4) / self.t_land if self.t_land > 0 else 1.0)
         pos = self.end_point + np.array([0.0, 0.0, s * dz])

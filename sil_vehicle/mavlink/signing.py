@@ -15,14 +15,13 @@ from __future__ import annotations
 import hashlib
 import hmac
 import re
-import time
 from pathlib import Path
 from typing import Callable
 
 from pymavlink.dialects.v20 import common as mavlink
 
-# 10 us units since 2015-01-01 00:00:00 UTC, as the MAVLink signing specification asks
-_EPOCH_2015_S = 1_420_070_400
+from sil_vehicle.clock import signing_now_10us as now_10us
+
 ONE_MINUTE = 60 * 100_000
 
 READ_ONLY_IDS = frozenset({
@@ -45,10 +44,6 @@ def load_key(path: Path | str) -> bytes:
         raise SigningKeyError(f"signing key file {path}: expected 64 hexadecimal characters "
                         f"(a 32-byte secret), found {len(text)} characters")
     return bytes.fromhex(text)
-
-
-def now_10us(wall: Callable[[], float] = time.time) -> int:
-    return int((wall() - _EPOCH_2015_S) * 100_000)
 
 
 class SignatureCheck:

@@ -262,13 +262,7 @@ def test_help_lists_every_option(tmp_path):
 
 # --- (3) real time -----------------------------------------------------------------------------
 
-@pytest.mark.parametrize("controller", [
-    "trq_nmpc",
-    pytest.param("trq_nmpc_eso", marks=pytest.mark.xfail(
-        strict=False, reason="known limit: the observer at 70 rad/s needs the commands' real "
-        "timing; with --applied-delay-s it flies a 5 ms delay in one process, but on a loaded "
-        "2-core machine real-time runs see gaps of up to 200 ms between answered stamps")),
-])
+@pytest.mark.parametrize("controller", ["trq_nmpc", "trq_nmpc_eso"])
 def test_realtime_hover_flight(tmp_path, controller):
     """The same controller program against the wall-clock vehicle (no lockstep): it connects,
     arms, hovers, lands and disarms without crashing. This takes the flight's wall time (~12 s)."""

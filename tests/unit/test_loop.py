@@ -96,7 +96,7 @@ def make_flight(reference: FakeReference | None = None, **kw):
     ref = reference or FakeReference(done_at_s=1e9)
     kw.setdefault("connect_timeout_s", 1.0)
     kw.setdefault("ack_timeout_s", 0.5)
-    flight = OffboardFlight(link, ctl, lambda state: ref, name="fake", tilt_limit_rad=LIMIT,
+    flight = OffboardFlight(link, ctl, lambda state, airborne=False: ref, name="fake", tilt_limit_rad=LIMIT,
                             **kw)
     assert link.on_message == flight.on_message     # the loop takes over the link's callback
     return flight, link, ctl

@@ -16,6 +16,7 @@ from pymavlink.dialects.v20 import common as mavlink
 from trq_offboard.records import ActuatorCommand, StateEstimate
 
 VEHICLE_SYSTEM = 1
+HOME_GROUND_DOWN_M = 0.0     # PROTOCOL.md: the NED origin is home, on the ground
 VEHICLE_COMPONENT = 1
 FORCE_DISARM = 21196
 
@@ -89,6 +90,24 @@ def arm_command(arm: bool, force: bool = False):
     return mavlink.MAVLink_command_long_message(
         VEHICLE_SYSTEM, VEHICLE_COMPONENT, mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 0,
         1.0 if arm else 0.0, float(FORCE_DISARM) if force else 0.0, 0, 0, 0, 0, 0)
+
+
+def set_mode_offboard():
+    """MAV_CMD_DO_SET_MODE to PX4's OFFBOARD (custom main mode 6)."""
+    return mavlink.MAVLink_command_long_message(
+        VEHICLE_SYSTEM, VEHICLE_COMPONENT, mavlink.MAV_CMD_DO_SET_MODE, 0,
+        float(mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED), 6.0, 0, 0, 0, 0, 0)
+
+
+def set_mode_land():
+    """MAV_CMD_DO_SET_MODE to PX4's AUTO.LAND (main mode 4, sub mode 6): the vehicle lands."""
+    return mavlink.MAVLink_command_long_message(
+        VEHICLE_SYSTEM, VEHICLE_COMPONENT, mavlink.MAV_CMD_DO_SET_MODE, 0,
+        float(mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED), 4.0, 6.0, 0, 0, 0, 0)
+
+
+def is_crashed(heartbeat_msg) -> bool:
+    return heartbeat_msg.system_status == mavlink.MAV_STATE_EMERGENCY
 
 
 def heartbeat():

@@ -37,10 +37,57 @@ import numpy as np
 from trq_offboard.config import ControllerConfig
 from trq_offboard.model import PredictionModel
 
-__all__ = ["Ocp"]
+__all__ = ["Ocp", "Stage"]
 
 _BIG = 1e20
 
+
+@dataclass(frozen=True)
+class Stage:
+    """One shooting interval of the OCP as CasADi SX Functions, shared by the whole-horizon NLP
+    (`Ocp`, inlined) and the real-time iteration (`rti`, compiled once and reused per stage):
+
+        dynamics(s, v, d) -> s_next            RK4 over h (tilt states: a + h w)
+        cost(s, v, x_ref_k, u_trim) -> l_k     quadratic (constant Hessian)
+        terminal_cost(s, x_ref_N) -> l_N
+    """
+    dynamics: ca.Function
+    cost: ca.Function
+    terminal_cost: ca.Function
+    ns: int
+    nv: int
+
+    @staticmethod
+    def build(cfg: ControllerConfig, model: PredictionModel) -> "Stage":
+        h = cfg.step_s
+        nx, nu, tilting = model.nx, model.nu, model.tilting
+        ns, nv = (nx + 4, 8) if tilting else (nx, 4)
+        F = model.discrete(h, 1)
+        wts = cfg.weights
+        Q = np.array([*wts.position, *wts.velocity, *wts.euler, *wts.rates])
+        R = np.array(([wts.tilt] * 4 if tilting else []) + [wts.throttle] * 4)
+        s, v = ca.SX.sym("s", ns), ca.SX.sym("v", nv)
+        xr, u_trim, d = ca.SX.sym("x_ref", nx), ca.SX.sym("u_trim", nu), ca.SX.sym("d", 6)
+        x = s[0:nx]
+        ex = x - xr
+        if tilting:
+            a_next = s[nx:nx + 4] + h * v[0:4]
+            u_scaled = ca.vertcat(a_next, v[4:8])
+            u_phys = ca.vertcat(a_next, 100.0 * v[4:8])
+            l_rate = wts.tilt_rate * ca.sumsqr(v[0:4])
+        else:
+            u_scaled, u_phys, l_rate = v, 100.0 * v, 0
+        eu = u_scaled - u_trim
+        l_k = ca.dot(Q * ex, ex) + ca.dot(R * eu, eu) + l_rate
+        x_next = F(x, u_phys, d)
+        s_next = ca.vertcat(x_next, a_next) if tilting else x_next
+        return Stage(
+            ca.Function("stage_dynamics", [s, v, d], [s_next], ["s", "v", "d"], ["s_next"]),
+            ca.Function("stage_cost", [s, v, xr, u_trim], [l_k],
+                        ["s", "v", "x_ref", "u_trim"], ["l"]),
+            ca.Function("terminal_cost", [s, xr], [wts.terminal_factor * ca.dot(Q * ex, ex)],
+                        ["s", "x_ref"], ["l"]),
+            ns, nv)
 
 @dataclass
 class Ocp:
@@ -69,11 +116,8 @@ class Ocp:
         nx, nu = model.nx, model.nu
         tilting = model.tilting
         ns, nv = (nx + 4, 8) if tilting else (nx, 4)
-        F = model.discrete(h, 1)
-        wts = cfg.weights
-        Q = np.array([*wts.position, *wts.velocity, *wts.euler, *wts.rates])
-        R = np.array(([wts.tilt] * 4 if tilting else []) + [wts.throttle] * 4)
 
+        stage = Stage.build(cfg, model)
         ss = [ca.SX.sym(f"s{k}", ns) for k in range(N + 1)]
         vs = [ca.SX.sym(f"v{k}", nv) for k in range(N)]
         x_ref = ca.SX.sym("x_ref", nx, N + 1)
@@ -105,29 +149,16 @@ class Ocp:
             pos += ns
             lbw.append(slo)
             ubw.append(shi)
-            xk = ss[k][0:nx]
-            ex = xk - x_ref[:, k]
             if k == N:
-                cost += wts.terminal_factor * ca.dot(Q * ex, ex)
+                cost += stage.terminal_cost(ss[k], x_ref[:, k])
                 break
             w.append(vs[k])
             v_index.append(np.arange(pos, pos + nv))
             pos += nv
             lbw.append(v0lo if k == 0 else vlo)
             ubw.append(v0hi if k == 0 else vhi)
-            if tilting:
-                a_next = ss[k][nx:nx + 4] + h * vs[k][0:4]
-                u_scaled = ca.vertcat(a_next, vs[k][4:8])
-                u_phys = ca.vertcat(a_next, 100.0 * vs[k][4:8])
-                cost += wts.tilt_rate * ca.sumsqr(vs[k][0:4])
-            else:
-                u_scaled = vs[k]
-                u_phys = 100.0 * vs[k]
-            eu = u_scaled - u_trim
-            cost += ca.dot(Q * ex, ex) + ca.dot(R * eu, eu)
-            x_next = F(xk, u_phys, d)
-            gap = ca.vertcat(x_next, a_next) if tilting else x_next
-            gaps.append(gap - ss[k + 1])
+            cost += stage.cost(ss[k], vs[k], x_ref[:, k], u_trim)
+            gaps.append(stage.dynamics(ss[k], vs[k], d) - ss[k + 1])
         wv = ca.vertcat(*w)
         g = ca.vertcat(*gaps)
         nlp = {"x": wv, "p": p, "f": cost, "g": g}

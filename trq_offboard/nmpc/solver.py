@@ -1,6 +1,8 @@
 """NMPC solvers behind one interface: `Solver.solve(x0, x_ref, d, u_prev, guess) -> (u, x, info)`.
 
-    SqpSolver    the fast default: a hand-written SQP (full steps) on the NLP of ocp.py with a
+    RtiSolver    (rti.py, kind "rti", the default) the real-time iteration on per-stage C
+                 compiled once and cached, with a preparation / feedback split (`prepare`).
+    SqpSolver    (kind "sqp") a hand-written SQP (full steps) on the NLP of ocp.py with a
                  structured QP solver (HPIPM through casadi.conic, no code generation); Hessian
                  either Gauss-Newton (the constant Hessian of the quadratic cost: always convex,
                  cheapest) or exact (cost + constraint curvature with the QP multipliers);
@@ -178,4 +180,7 @@ class IpoptSolver(_Base):
 def make_solver(cfg: ControllerConfig, model: PredictionModel, u_trim: np.ndarray) -> Solver:
     if cfg.solver.kind == "ipopt":
         return IpoptSolver(cfg, model, u_trim)
+    if cfg.solver.kind == "rti":
+        from trq_offboard.nmpc.rti import RtiSolver
+        return RtiSolver(cfg, model, u_trim, cfg.solver.hessian)
     return SqpSolver(cfg, model, u_trim, cfg.solver.hessian)

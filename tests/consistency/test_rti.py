@@ -1,0 +1,149 @@
+"""The real-time iteration (trq_offboard/nmpc/rti.py) against the converged reference, and its
+compiled-function cache (trq_offboard/nmpc/cache.py): reuse, invalidation, no-compiler fallback.
+
+Every test builds into a temporary cache directory ($TRQ_CACHE_DIR), never the user's."""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from trq_offboard.allocation import Allocator
+from trq_offboard.config import load_controller
+from trq_offboard.model import PredictionModel
+from trq_offboard.nmpc import cache
+from trq_offboard.nmpc.rti import RtiSolver
+from trq_offboard.nmpc.solver import IpoptSolver
+from trq_offboard.records import SolveStatus
+
+CTRL = Path(__file__).resolve().parents[2] / "params" / "controller"
+
+
+@pytest.fixture(scope="module")
+def cache_root(tmp_path_factory):
+    return tmp_path_factory.mktemp("trq-cache")
+
+
+@pytest.fixture
+def cache_env(cache_root, monkeypatch):
+    monkeypatch.setenv("TRQ_CACHE_DIR", str(cache_root))
+    return cache_root
+
+
+def _cfg(name="trq_nmpc_eso", **solver):
+    cfg = load_controller(CTRL / f"{name}.yaml")
+    return dataclasses.replace(cfg, solver=dataclasses.replace(
+        cfg.solver, kind="rti", **solver))
+
+
+def _problem(cfg):
+    model = PredictionModel(cfg.vehicle)
+    alloc = Allocator(cfg.vehicle)
+    u_trim = alloc.command_vector(alloc.hover())
+    N = cfg.horizon_steps
+    x0 = np.zeros(12)
+    x0[0:3] = (0.3, -0.2, -1.8)
+    x0[3:6] = (0.2, 0.1, 0.0)
+    x0[6:9] = (0.05, -0.03, 0.1)
+    x_ref = np.zeros((N + 1, 12))
+    x_ref[:, 2] = -2.0
+    x_ref[:, 3] = 0.3
+    x_ref[:, 0] = 0.3 * cfg.step_s * np.arange(N + 1)
+    d = np.array([0.5, -0.2, 0.3, 1.0, -2.0, 0.5])
+    guess = (np.tile(u_trim, (N, 1)), np.tile(x0, (N + 1, 1)))
+    return model, u_trim, x0, x_ref, d, guess
+
+
+def _has_compiler() -> bool:
+    return cache.find_compiler() is not None
+
+
+@pytest.mark.parametrize("hessian,codegen", [("gauss_newton", "auto"), ("exact", "off")])
+def test_rti_steps_at_fixed_state_converge_to_ipopt(cache_env, hessian, codegen):
+    """Repeated real-time iterations at a fixed x0, each warm-started from the previous plan,
+    converge to IPOPT's solution of the same NLP (exact-Hessian case interpreted: its C takes
+    tens of seconds to compile, the algorithm is the same)."""
+    cfg = _cfg(hessian=hessian, codegen=codegen)
+    model, u_trim, x0, x_ref, d, guess = _problem(cfg)
+    u_r, x_r, info_r = IpoptSolver(cfg, model, u_trim).solve(x0, x_ref, d, u_trim, guess)
+    assert info_r.status is SolveStatus.OK
+    rti = RtiSolver(cfg, model, u_trim, hessian)
+    plan = guess
+    for _ in range(25):
+        u, x, info = rti.solve(x0, x_ref, d, u_trim, plan)
+        assert info.status is SolveStatus.OK and info.iterations == 1
+        assert 0 < rti.qp_iterations < 50          # the QP converges, not at its limit
+        plan = (u, x)
+    np.testing.assert_allclose(u, u_r, atol=1e-4)        # rad and %
+    np.testing.assert_allclose(x, x_r, atol=1e-5)
+    assert info.cost == pytest.approx(info_r.cost, rel=1e-6)
+    # the split: prepare at the plan, then feedback with the same data: the same step
+    rti.prepare(x_ref, d, u_trim, plan)
+    u2, x2, info2 = rti.solve(x0, x_ref, d, u_trim, plan)
+    np.testing.assert_allclose(u2, u, atol=1e-5)
+    # feedback corrects for a reference and a disturbance that changed after the preparation
+    x_ref2 = x_ref.copy()
+    x_ref2[:, 0] += 0.02
+    d2 = d + 0.01
+    rti.prepare(x_ref, d, u_trim, plan)
+    u_split, _, _ = rti.solve(x0, x_ref2, d2, u_trim, plan)
+    u_full, _, _ = rti.solve(x0, x_ref2, d2, u_trim, plan)     # prepared with the new data
+    np.testing.assert_allclose(u_split[:, 0:4], u_full[:, 0:4], atol=2e-3)    # rad
+    np.testing.assert_allclose(u_split[:, 4:8], u_full[:, 4:8], atol=0.1)     # %
+
+
+@pytest.mark.skipif(not _has_compiler(), reason="no C compiler")
+def test_cache_is_reused_and_invalidated(cache_env, monkeypatch):
+    calls = []
+    real_run = cache.subprocess.run
+
+    def spy(*a, **k):
+        calls.append(a[0][0])
+        return real_run(*a, **k)
+
+    monkeypatch.setattr(cache.subprocess, "run", spy)
+    cfg = _cfg(hessian="gauss_newton")
+    model, u_trim, *_ = _problem(cfg)
+    t0 = time.perf_counter()
+    first = RtiSolver(cfg, model, u_trim)
+    t_first = time.perf_counter() - t0
+    n_first = len(calls)       # 0 if an earlier test of this module already compiled it
+    t0 = time.perf_counter()
+    second = RtiSolver(cfg, model, u_trim)
+    t_second = time.perf_counter() - t0
+    assert second.build_mode == "cached" and len(calls) == n_first      # no compiler call
+    if n_first:
+        assert first.build_mode == "compiled" and t_second < 0.5 * t_first
+    # the per-stage code does not depend on the horizon length: reused for another N
+    cfg_n = dataclasses.replace(cfg, horizon_steps=10)
+    assert RtiSolver(cfg_n, model, u_trim).build_mode == "cached"
+    # a parameter of the formulation changes: a new library is compiled
+    heavy = dataclasses.replace(cfg, vehicle=dataclasses.replace(
+        cfg.vehicle, mass_kg=cfg.vehicle.mass_kg * 1.1))
+    before = len(calls)
+    s = RtiSolver(heavy, PredictionModel(heavy.vehicle), u_trim)
+    assert s.build_mode == "compiled" and len(calls) == before + 1
+    # and the prediction step h too
+    cfg_h = dataclasses.replace(cfg, step_s=0.04)
+    assert RtiSolver(cfg_h, model, u_trim).build_mode == "compiled"
+    libs = sorted(p.name for p in cache_env.glob("*.so"))
+    assert len(libs) == 3, libs
+
+
+def test_pure_python_fallback_without_compiler(cache_env, monkeypatch):
+    """No compiler on PATH (and none in $CC): the RTI runs interpreted and says so."""
+    monkeypatch.setenv("PATH", "")
+    monkeypatch.delenv("CC", raising=False)
+    assert cache.find_compiler() is None
+    cfg = _cfg(name="quad_nmpc", hessian="gauss_newton")
+    model, u_trim, x0, x_ref, d, guess = _problem(cfg)
+    with pytest.warns(RuntimeWarning, match="no C compiler"):
+        rti = RtiSolver(cfg, model, u_trim)
+    assert rti.build_mode == "interpreted"
+    u, x, info = rti.solve(x0, x_ref, d, u_trim, guess)
+    assert info.status is SolveStatus.OK
+    assert np.all(np.isfinite(u)) and np.all(np.isfinite(x))

@@ -1,0 +1,241 @@
+"""Benchmark of the NMPC solver modes on the paper's fault flight, side by side in one run.
+
+    .venv/bin/python tools/bench_nmpc.py                 # all modes, the whole flight
+    .venv/bin/python tools/bench_nmpc.py --quick         # 16 s (4 s after the fault)
+    .venv/bin/python tools/bench_nmpc.py --modes rti-gn,ipopt --json out/bench_nmpc.json
+
+The flight (in one process, no MAVLink): trq_nmpc_eso on the SITL plant of params/sim/default.yaml,
+8 m/s wind from the north, the helix of params/controller/nmpc.yaml, motor 1 at 50 % from t = 12 s.
+Each step: the controller steps on the measured state, its command is held for the physics ticks
+of one control period, then `Controller.prepare` runs (the RTI's preparation phase; a no-op for
+the other solvers).
+
+Each mode runs in its own subprocess (so that peak memory, ru_maxrss, is its own) with its own
+empty cache directory: the first controller construction is the cold build (code generation and
+compilation), the second the cached build; the flight is flown with the second. Step times:
+`solve` is the solver call inside Controller.step (SolveInfo.solve_time_s: for RTI the feedback
+phase, the latency from state to command), `prep` the preparation after the command, `total` their
+sum (the solver work per control period); wall times from time.perf_counter, CPU times from
+time.thread_time. The machine is shared: compare medians and the ratios to the fastest mode.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import math
+import os
+import platform
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path[:0] = [str(ROOT)]
+
+MODES = {     # name: solver overrides of params/controller/trq_nmpc_eso.yaml
+    "rti-gn": dict(kind="rti", hessian="gauss_newton", max_iterations=1),
+    "rti-exact": dict(kind="rti", hessian="exact", max_iterations=1),
+    "rti-gn-py": dict(kind="rti", hessian="gauss_newton", max_iterations=1, codegen="off"),
+    "sqp-gn": dict(kind="sqp", hessian="gauss_newton", max_iterations=1),
+    "ipopt": dict(kind="ipopt"),
+}
+DEFAULT_MODES = "rti-gn,rti-exact,rti-gn-py,sqp-gn,ipopt"
+FAULT_T_S, EFFECTIVENESS, WIND_M_S = 12.0, 0.5, 8.0
+
+
+def fly(mode: str, seconds: float | None) -> dict:
+    """Child process: build twice (cold, cached), fly, return the figures."""
+    from sil_vehicle.config import load_sim
+    from sil_vehicle.frames import quat_to_euler
+    from sil_vehicle.sitl import Sitl
+    from sil_vehicle.vehicle import ActuatorCommand as PlantCmd
+    from trq_offboard.config import load_controller
+    from trq_offboard.controller import Controller
+    from trq_offboard.nmpc import cache
+    from trq_offboard.records import SolveStatus, StateEstimate
+    from trq_offboard.reference import Reference
+
+    cfg = load_controller(ROOT / "params" / "controller" / "trq_nmpc_eso.yaml")
+    cfg = dataclasses.replace(cfg, solver=dataclasses.replace(cfg.solver, **MODES[mode]))
+    t0 = time.perf_counter()
+    Controller(cfg)
+    build_cold = time.perf_counter() - t0
+    compiled_cold = cache.COUNTS["compiled"]
+    t0 = time.perf_counter()
+    ctl = Controller(cfg)
+    build_cached = time.perf_counter() - t0
+    compiled_cached = cache.COUNTS["compiled"] - compiled_cold
+
+    sim = load_sim(ROOT / "params" / "sim" / "default.yaml", cfg.vehicle.file)
+    sitl = Sitl(sim)
+    v = sitl.vehicle
+    v.set_wind(WIND_M_S, 0.0, False, 1.0, 50.0)
+    rate = cfg.control_rate_hz
+    ticks = sim.physics_rate_hz // rate
+
+    def measured() -> StateEstimate:
+        m = sitl.measured()
+        return StateEstimate(m.pos_ned_m, m.vel_ned_m_s, quat_to_euler(*m.quat_wxyz),
+                             m.rates_frd_rad_s)
+
+    st = measured()
+    ref = Reference(cfg.reference, st.pos_ned_m, st.euler_rad[2])
+    ctl.reset(0.0, st)
+    v.set_armed(True)
+    fault_us = round(FAULT_T_S * 1e6)
+    end = ref.end_time_s if seconds is None else seconds
+    rows = []      # solve wall, step cpu, prep wall, prep cpu, iterations, qp iterations
+    errs, yerr, times = [], [], []
+    failures = 0
+    k = 0
+    t = 0.0
+    while t < end:
+        st = measured()
+        c0 = time.thread_time()
+        cmd, info = ctl.step(t, st, None, ref)
+        c1 = time.thread_time()
+        v.command = PlantCmd(tuple(cmd.throttle_pct), tuple(cmd.tilt_rad))
+        # the target is delivered in-process, not over MAVLink: feed the SITL's offboard-loss
+        # watchdog (COM_OF_LOSS_T) as a received SET_ACTUATOR_CONTROL_TARGET would
+        sitl._last_target_us = sitl.t_us
+        p0, pc0 = time.perf_counter(), time.thread_time()
+        ctl.prepare(ref)
+        prep_wall, prep_cpu = time.perf_counter() - p0, time.thread_time() - pc0
+        failures += info.solve.status is not SolveStatus.OK
+        rows.append((info.solve.solve_time_s, c1 - c0, prep_wall, prep_cpu,
+                     info.solve.iterations, getattr(ctl.solver, "qp_iterations", 0)))
+        for _ in range(ticks):
+            if sitl.t_us == fault_us and EFFECTIVENESS < 1:
+                v.faults = v.faults.with_motor(0, effectiveness=EFFECTIVENESS)
+            sitl.step()
+        k += 1
+        t = k / rate
+        s = v.state
+        r = ref.sample(t)
+        rp = np.array(r.pos_ned_m)
+        rp[2] = min(rp[2], 0.0)
+        errs.append(float(np.linalg.norm(np.array(s.x[0:3]) - rp)))
+        times.append(t)
+        yerr.append(math.degrees((s.euler_rad[2] - r.yaw_rad + math.pi) % (2 * math.pi)
+                                 - math.pi))
+        if s.crashed:
+            break
+    a = np.array(rows)
+    errs, times, yerr = map(np.array, (errs, times, yerr))
+    after = times >= FAULT_T_S
+    ms = 1e3
+    total = a[:, 0] + a[:, 2]
+    return dict(
+        name=mode, steps=len(rows), flight_s=float(t), crashed=bool(v.state.crashed),
+        median_ms=float(np.median(a[:, 0]) * ms), p99_ms=float(np.percentile(a[:, 0], 99) * ms),
+        max_ms=float(a[:, 0].max() * ms),
+        step_cpu_median_ms=float(np.median(a[:, 1]) * ms),
+        step_cpu_p99_ms=float(np.percentile(a[:, 1], 99) * ms),
+        prep_median_ms=float(np.median(a[:, 2]) * ms),
+        prep_cpu_median_ms=float(np.median(a[:, 3]) * ms),
+        total_median_ms=float(np.median(total) * ms),
+        total_p99_ms=float(np.percentile(total, 99) * ms),
+        iterations_median=float(np.median(a[:, 4])), iterations_max=int(a[:, 4].max()),
+        qp_iterations_median=float(np.median(a[:, 5])), qp_iterations_max=int(a[:, 5].max()),
+        failures=int(failures),
+        rmse_pos_m=float(np.sqrt(np.mean(errs ** 2))),
+        rmse_after_fault_m=(float(np.sqrt(np.mean(errs[after] ** 2))) if after.any()
+                            else float("nan")),
+        max_yaw_err_deg=float(np.abs(yerr).max()),
+        build_cold_s=build_cold, build_cached_s=build_cached,
+        compilations_cold=compiled_cold, compilations_cached=compiled_cached,
+        build_mode=getattr(ctl.solver, "build_mode", "-"),
+        peak_rss_mb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0)
+
+
+def run_mode(mode: str, seconds: float | None) -> dict:
+    with tempfile.TemporaryDirectory(prefix="trq-bench-cache-") as cache_dir:
+        env = dict(os.environ, TRQ_CACHE_DIR=cache_dir)
+        cmd = [sys.executable, __file__, "--child", mode]
+        if seconds is not None:
+            cmd += ["--seconds", str(seconds)]
+        out = subprocess.run(cmd, env=env, capture_output=True, text=True)
+    if out.returncode != 0:
+        raise RuntimeError(f"mode {mode} failed:\n{out.stderr[-2000:]}")
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def table(results: list[dict]) -> str:
+    fastest = min(r["total_median_ms"] for r in results)
+    head = ("| mode | solve p50 ms | solve p99 ms | solve max ms | step CPU p50 ms | prep p50 ms "
+            "| solve+prep p50 ms | solve+prep p99 ms | x fastest | SQP it | QP it p50/max "
+            "| failures | pos RMSE m | RMSE after fault m | max yaw err deg | build cold s "
+            "| build cached s | peak RSS MB |")
+    lines = [head, "|" + "---|" * head.count(" | ") + "---|"]
+    for r in results:
+        lines.append(
+            f"| {r['name']} | {r['median_ms']:.2f} | {r['p99_ms']:.2f} | {r['max_ms']:.1f} "
+            f"| {r['step_cpu_median_ms']:.2f} | {r['prep_median_ms']:.2f} "
+            f"| {r['total_median_ms']:.2f} | {r['total_p99_ms']:.2f} "
+            f"| {r['total_median_ms'] / fastest:.1f} | {r['iterations_median']:.0f} "
+            f"| {r['qp_iterations_median']:.0f}/{r['qp_iterations_max']} | {r['failures']} "
+            f"| {r['rmse_pos_m']:.4f} | {r['rmse_after_fault_m']:.4f} "
+            f"| {r['max_yaw_err_deg']:.2f} | {r['build_cold_s']:.1f} | {r['build_cached_s']:.2f} "
+            f"| {r['peak_rss_mb']:.0f} |")
+    return "\n".join(lines)
+
+
+def machine_line() -> str:
+    try:
+        load = "load %.2f %.2f %.2f" % os.getloadavg()
+    except OSError:
+        load = ""
+    cpu = platform.processor() or platform.machine()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    import casadi
+    return (f"machine: {cpu}, {os.cpu_count()} cores, {load}; Python {platform.python_version()}, "
+            f"casadi {casadi.__version__}")
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--modes", default=DEFAULT_MODES,
+                    help=f"comma-separated, of {', '.join(MODES)} (default: {DEFAULT_MODES})")
+    ap.add_argument("--quick", action="store_true", help="fly 16 s (4 s after the fault)")
+    ap.add_argument("--seconds", type=float, default=None, help="flight length (default: all)")
+    ap.add_argument("--json", type=Path, default=None, help="write the figures to this file")
+    ap.add_argument("--child", default=None, help=argparse.SUPPRESS)
+    args = ap.parse_args(argv)
+    seconds = args.seconds if args.seconds is not None else (16.0 if args.quick else None)
+    if args.child:
+        print(json.dumps(fly(args.child, seconds)), flush=True)
+        return 0
+    modes = [m.strip() for m in args.modes.split(",") if m.strip()]
+    unknown = [m for m in modes if m not in MODES]
+    if unknown:
+        ap.error(f"unknown mode(s) {unknown}; known: {', '.join(MODES)}")
+    print(machine_line(), flush=True)
+    results = []
+    for m in modes:       # one after the other: the modes do not share the cores
+        r = run_mode(m, seconds)
+        results.append(r)
+        print(f"  {m}: {r['steps']} steps, crashed {r['crashed']}, build {r['build_mode']}, "
+              f"compilations cold/cached {r['compilations_cold']}/{r['compilations_cached']}",
+              flush=True)
+    print(table(results))
+    if args.json:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps({"machine": machine_line(), "modes": results}, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

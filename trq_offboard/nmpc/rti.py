@@ -1,0 +1,279 @@
+"""Real-time iteration (RTI) of the NMPC: one SQP step per control step, split into a preparation
+and a feedback phase, on per-stage functions compiled once (acados' structure, in CasADi).
+
+    solver = RtiSolver(cfg, model, u_trim, hessian="gauss_newton")   # build once (cached C)
+    u, x, info = solver.solve(x0, x_ref, d, u_prev, guess)           # feedback (+ preparation
+                                                                     #   if none is pending)
+    solver.prepare(x_ref_next, d, u_cmd, guess_next)                 # after sending the command
+
+Preparation (before the new state is known): at the linearisation point w (the caller's guess,
+normally the previous plan shifted by one control period) evaluate, for every stage k,
+
+    phi_k = F(s_k, v_k, d)   A_k, B_k = dF/d(s, v)   D_k = dF/dd   grad l_k   [H_k]
+
+with ONE call of a per-stage function mapped over the horizon (the stage function is generated as C
+and compiled once, `cache.py`; the same code serves every stage and every horizon length), and
+assemble the structured QP in the increments dw:
+
+    min 1/2 dw' H dw + grad' dw   s.t.  gaps + J dw = 0,   lbw - w <= dw <= ubw - w
+
+H is the constant Hessian of the quadratic cost (Gauss-Newton: exact here, since the cost is
+quadratic in w) or, for hessian="exact", the Hessian of the Lagrangian with the multipliers of the
+previous QP; plus `regularization` on the diagonal.
+Feedback (when x0 arrives): embed s_0 = [x0, alpha_prev] as equal bounds on ds_0, correct the
+gaps to first order for the change of d since the preparation (D_k (d - d_prep)) and the cost
+gradient exactly for the change of the reference (the cost is quadratic), solve the QP (HPIPM
+through casadi.conic: Riccati-based, exploits the stage structure) and take the full step.
+
+SolveInfo of solve(): solve_time_s is the time of solve() itself (the feedback phase, or
+preparation + feedback when no preparation was pending); `last_prepare_s` holds the time of the
+last preparation. iterations counts SQP steps (1 per control step); `qp_iterations` the QP's.
+The cost reported is the model cost of the returned plan (exact: the cost is quadratic).
+Never returns NaN: a failure returns the (finite) guess with status FAILED.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+
+from trq_offboard.config import ControllerConfig
+from trq_offboard.model import PredictionModel
+from trq_offboard.nmpc.cache import compiled_many
+from trq_offboard.nmpc.ocp import Ocp, Stage
+from trq_offboard.records import SolveInfo, SolveStatus
+
+__all__ = ["RtiSolver"]
+
+
+@dataclass
+class _Prepared:
+    w: np.ndarray            # linearisation point (nw)
+    a: ca.DM                 # constraint Jacobian (sparse)
+    h: ca.DM                 # Hessian (sparse)
+    gaps: np.ndarray         # F(s_k, v_k) - s_{k+1}, stage-major (N ns)
+    grad: np.ndarray         # cost gradient (nw)
+    jd: np.ndarray           # (N, ns, 6) dF/dd per stage
+    d: np.ndarray            # d and the reference the preparation used
+    xr_w: np.ndarray         # x_ref placed at the state positions of w (nw)
+
+
+class RtiSolver:
+    """One SQP step per control step on compiled per-stage functions; HPIPM QP."""
+
+    def __init__(self, cfg: ControllerConfig, model: PredictionModel, u_trim: np.ndarray,
+                 hessian: str = "gauss_newton", ocp=None):
+        t_build = time.perf_counter()
+        self.cfg = cfg
+        self.ocp = ocp if ocp is not None else Ocp.build(cfg, model)
+        self.u_trim = np.asarray(u_trim, float)
+        self.hessian = hessian
+        sc = cfg.solver
+        self.max_iterations = sc.max_iterations
+        o = self.ocp
+        N, ns, nv, nx, nu = o.n_steps, o.ns, o.nv, o.nx, o.nu
+        nz, nw = ns + nv, o.lbw.size
+        self._N, self._ns, self._nv, self._nx = N, ns, nv, nx
+        stage = Stage.build(cfg, model)
+
+        # --- per-stage functions (SX, compiled once) -------------------------------------------
+        s, v = ca.SX.sym("s", ns), ca.SX.sym("v", nv)
+        xr, ut, d = ca.SX.sym("x_ref", nx), ca.SX.sym("u_trim", nu), ca.SX.sym("d", 6)
+        lam = ca.SX.sym("lam", ns)
+        z = ca.vertcat(s, v)
+        phi = stage.dynamics(s, v, d)
+        l_k = stage.cost(s, v, xr, ut)
+        tag = "trq" if o.tilting else "quad"
+        fns = [ca.Function(f"rti_lin_{tag}", [s, v, xr, ut, d],
+                           [phi, ca.jacobian(phi, z), ca.gradient(l_k, z), ca.jacobian(phi, d)],
+                           {"cse": True})]
+        if hessian == "exact":
+            fns.append(ca.Function(f"rti_hess_{tag}", [s, v, d, lam],
+                                   [ca.hessian(ca.dot(lam, phi), z)[0]], {"cse": True}))
+        enabled = sc.codegen == "auto"
+        built = compiled_many(fns, enabled)
+        self.build_mode = built[0][1]                  # compiled | cached | interpreted
+        lin = built[0][0].map(N)
+        # constant cost Hessians (stage and terminal)
+        zero = [np.zeros(ns), np.zeros(nv), np.zeros(nx), np.zeros(nu)]
+        hc = np.asarray(ca.Function("hc", [s, v, xr, ut], [ca.hessian(l_k, z)[0]])(*zero))
+        lN = stage.terminal_cost(s, xr)
+        hcN = np.asarray(ca.Function("hcN", [s, xr], [ca.hessian(lN, s)[0]])(zero[0], zero[2]))
+        gN = ca.Function("gN", [s, xr], [ca.gradient(lN, s)])
+        reg = sc.regularization
+
+        # --- the preparation as one MX function: mapped stage calls + QP assembly --------------
+        W = ca.MX.sym("w", nw)
+        XR = ca.MX.sym("x_ref", nx, N + 1)
+        UT = ca.MX.sym("u_trim", nu)
+        D = ca.MX.sym("d", 6)
+        LAM = ca.MX.sym("lam", N * ns)
+        s_idx, v_idx = o.s_index, o.v_index
+        S = ca.reshape(W[s_idx[:N].ravel().tolist()], ns, N)
+        V = ca.reshape(W[v_idx.ravel().tolist()], nv, N)
+        PHI, JZ, GZ, JD = lin(S, V, XR[:, 0:N], UT, D)
+        gaps = ca.vec(PHI) - W[s_idx[1:].ravel().tolist()]
+        z_idx = np.hstack([s_idx[:N], v_idx])                     # (N, nz): w-positions of z_k
+        # gradient: stage parts from GZ, terminal from gN, placed in w order
+        grad_src = ca.vertcat(ca.vec(GZ), gN(W[s_idx[N].tolist()], XR[:, N]))
+        pos = np.concatenate([z_idx.ravel(), s_idx[N]])
+        grad = grad_src[np.argsort(pos).tolist()]
+        # constraint Jacobian: [A_k B_k] at (stage rows, z_k), -I at (stage rows, s_{k+1})
+        jsp = fns[0].sparsity_out(1)
+        jr, jc = np.array(jsp.get_triplet()[0]), np.array(jsp.get_triplet()[1])
+        nnz_j = jr.size
+        rows, cols, src = [], [], []
+        for k in range(N):
+            rows += [k * ns + jr, k * ns + np.arange(ns)]
+            cols += [z_idx[k][jc], s_idx[k + 1]]
+            src += [k * nnz_j + np.arange(nnz_j), np.full(ns, N * nnz_j)]     # -1 sentinel
+        a_sp, a_src = self._assemble(N * ns, nw, rows, cols, src)
+        A = ca.MX(a_sp, ca.vertcat(JZ.nz[:], -1)[a_src.tolist()])
+        # Hessian: block diagonal, stage blocks hc (+ Lagrangian term) and terminal hcN, + reg
+        outs = [A, gaps, grad, ca.vec(JD)]
+        rows, cols, src = [], [], []
+        for k in range(N):
+            rows.append(np.repeat(z_idx[k], nz))
+            cols.append(np.tile(z_idx[k], nz))
+            src.append(k * nz * nz + np.arange(nz * nz))
+        rows.append(np.repeat(s_idx[N], ns))
+        cols.append(np.tile(s_idx[N], ns))
+        src.append(N * nz * nz + np.arange(ns * ns))
+        h_sp, h_src = self._assemble(nw, nw, rows, cols, src)
+        base = np.concatenate([np.tile((hc + reg * np.eye(nz)).ravel(order="F"), N),
+                               (hcN + reg * np.eye(ns)).ravel(order="F")])
+        if hessian == "exact":
+            hess = built[1][0].map(N)
+            HL = ca.densify(hess(S, V, D, ca.reshape(LAM, ns, N)))   # (nz, nz N)
+            hsrc = ca.vertcat(ca.vec(HL), ca.DM.zeros(ns * ns)) + ca.DM(base)
+            outs.append(ca.MX(h_sp, hsrc[h_src.tolist()]))
+        else:
+            self._h_const = ca.DM(h_sp, ca.DM(base[h_src]))
+        self._prep = ca.Function("rti_prep", [W, XR, UT, D, LAM], outs)
+        # the QP: HPIPM (Riccati, stage structure detected from the sparsity)
+        qp_opts = {"error_on_fail": False, "print_time": False}
+        if sc.qp_solver == "hpipm":
+            qp_opts["hpipm"] = {"iter_max": 50, "warm_start": 0}
+        elif sc.qp_solver == "qrqp":
+            qp_opts.update({"print_iter": False, "print_header": False, "print_info": False})
+        self._qp = ca.conic("rti_qp", sc.qp_solver, {"h": h_sp, "a": a_sp}, qp_opts)
+        # feedback helpers (NumPy)
+        self._lam = np.zeros(N * ns)
+        wts = cfg.weights
+        q2 = 2.0 * np.array([*wts.position, *wts.velocity, *wts.euler, *wts.rates])
+        self._x_pos = s_idx[:, 0:nx]                                # (N+1, nx)
+        self._q2_w = np.zeros(nw)
+        self._q2_w[self._x_pos[:N]] = q2
+        self._q2_w[self._x_pos[N]] = wts.terminal_factor * q2
+        self._cost_w = (q2 / 2.0, np.array(([wts.tilt] * 4 if o.tilting else [])
+                                           + [wts.throttle] * 4),
+                        wts.terminal_factor, wts.tilt_rate)
+        self._free_lbw, self._free_ubw = o.lbw.copy(), o.ubw.copy()   # s_0 rows: state bounds
+        self._prepared: _Prepared | None = None
+        self.last_prepare_s = 0.0
+        self.qp_iterations = 0
+        self.build_s = time.perf_counter() - t_build
+
+    @staticmethod
+    def _assemble(nr, nc, rows, cols, src):
+        rows, cols, src = (np.concatenate(a).astype(int) for a in (rows, cols, src))
+        order = np.lexsort((rows, cols))                 # column-major (CCS) order
+        sp = ca.Sparsity.triplet(nr, nc, rows[order].tolist(), cols[order].tolist())
+        assert sp.nnz() == rows.size, "duplicate entries in the QP structure"
+        return sp, src[order]
+
+    # --- phases --------------------------------------------------------------------------------
+    def prepare(self, x_ref, d, u_prev, guess) -> None:
+        """Linearise at `guess` (u (N, nu), x (N+1, 12): the plan expected at the next step) and
+        assemble the QP; the next solve() only embeds its x0 and solves it."""
+        t0 = time.perf_counter()
+        o = self.ocp
+        a_prev = np.asarray(u_prev, float)[0:4] if o.tilting else None
+        w = np.clip(o.pack(guess[1], guess[0], a_prev), self._free_lbw, self._free_ubw)
+        x_ref = np.asarray(x_ref, float).reshape(self._N + 1, self._nx)
+        d = np.asarray(d, float).reshape(6)
+        out = self._prep(w, x_ref.T, self.u_trim / o.u_scale, d, self._lam)
+        h = out[4] if self.hessian == "exact" else self._h_const
+        xr_w = np.zeros(w.size)
+        xr_w[self._x_pos] = x_ref
+        self._prepared = _Prepared(
+            w, out[0], h, np.asarray(out[1]).ravel(), np.asarray(out[2]).ravel(),
+            np.asarray(out[3]).reshape(self._N, 6, self._ns).transpose(0, 2, 1),
+            d, xr_w)
+        self.last_prepare_s = time.perf_counter() - t0
+
+    def discard(self) -> None:
+        """Forget a pending preparation (the controller was reset)."""
+        self._prepared = None
+
+    def solve(self, x0, x_ref, d, u_prev, guess):
+        t0 = time.perf_counter()
+        try:
+            it = 0
+            P = self._prepared
+            if P is not None and np.max(np.abs(np.asarray(x0, float).reshape(12)
+                                               - P.w[self._x_pos[0]])) > 2.0:
+                self._prepared = None      # stale: the state is far from the linearisation
+            for it in range(1, self.max_iterations + 1):
+                if self._prepared is None or it > 1:
+                    self.prepare(x_ref, d, u_prev, guess)
+                w, status = self._feedback(x0, x_ref, d, u_prev)
+                if w is None:
+                    return self._failed(guess, t0, it, status)
+                guess = self.ocp.unpack(w)
+        except RuntimeError as exc:      # casadi evaluation errors
+            self._prepared = None
+            return self._failed(guess, t0, 0, f"exception: {exc}")
+        u, x = guess
+        return u, x, SolveInfo(SolveStatus.OK, it, time.perf_counter() - t0,
+                               self._cost(w, x_ref), status)
+
+    def _feedback(self, x0, x_ref, d, u_prev):
+        P, o = self._prepared, self.ocp
+        self._prepared = None
+        x0 = np.asarray(x0, float).reshape(12)
+        d = np.asarray(d, float).reshape(6)
+        gaps = P.gaps
+        dd = d - P.d
+        if np.any(dd):
+            gaps = gaps + (P.jd @ dd).ravel()
+        grad = P.grad
+        xr_w = np.zeros(P.w.size)
+        xr_w[self._x_pos] = np.asarray(x_ref, float).reshape(self._N + 1, self._nx)
+        if not np.array_equal(xr_w, P.xr_w):
+            grad = grad - self._q2_w * (xr_w - P.xr_w)
+        lbw, ubw = o.bounds(x0, np.asarray(u_prev, float)[0:4] if o.tilting else None)
+        res = self._qp(h=P.h, g=grad, a=P.a, lba=-gaps, uba=-gaps, lbx=lbw - P.w, ubx=ubw - P.w)
+        st = self._qp.stats()
+        self.qp_iterations = int(st.get("iter_count", -1))
+        dw = np.asarray(res["x"]).ravel()
+        lam = np.asarray(res["lam_a"]).ravel()
+        if not (np.all(np.isfinite(dw)) and np.all(np.isfinite(lam))):
+            return None, "non-finite QP step"
+        if self.hessian == "exact":
+            self._lam = lam
+        w = np.clip(P.w + dw, lbw, ubw)
+        msg = "rti" if st.get("success", False) else f"rti (QP: {st.get('return_status')})"
+        return w, msg
+
+    def _cost(self, w, x_ref) -> float:
+        """The NLP's cost at w (NumPy; the cost is quadratic: see ocp.Stage)."""
+        o, (q, r, c_n, w_rate) = self.ocp, self._cost_w
+        s, v = w[o.s_index], w[o.v_index]
+        ex = s[:, 0:o.nx] - np.asarray(x_ref, float).reshape(o.n_steps + 1, o.nx)
+        cost = float(np.sum(q * ex[:-1] ** 2) + c_n * np.sum(q * ex[-1] ** 2))
+        if o.tilting:
+            us = np.hstack([s[:-1, o.nx:o.nx + 4] + o.step_s * v[:, 0:4], v[:, 4:8]])
+            cost += w_rate * float(np.sum(v[:, 0:4] ** 2))
+        else:
+            us = v
+        return cost + float(np.sum(r * (us - self.u_trim / o.u_scale) ** 2))
+
+    def _failed(self, guess, t0, iters, msg):
+        u, x = (np.nan_to_num(np.asarray(a, float)) for a in guess)
+        return u, x, SolveInfo(SolveStatus.FAILED, iters, time.perf_counter() - t0,
+                               float("nan"), msg)
+
