@@ -73,6 +73,7 @@ class FailsafeLander:
         self._i_vz = 0.0
 
     def update(self, state: VehicleState, dt_s: float) -> ActuatorCommand:
+        """One tick of the hold-then-land controller (engaged at `engage`)."""
         g, vp = self.g, self.vp
         roll, pitch, yaw = quat_to_euler(*state.x[6:10])
         rates = np.array(state.x[10:13])

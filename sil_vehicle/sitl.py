@@ -67,6 +67,8 @@ class Sitl:
                   lambda v, value: setattr(self, "offboard_loss_s", value)),))
         self.mode = MODE_OFFBOARD
         self.lander = FailsafeLander(sim.vehicle)
+        # targets silent for longer than three control periods: the vehicle's own hold bridges
+        self._bridge_after_us = 3 * 1_000_000 // sim.control_rate_hz
         self._last_target_us = 0
         self._newest_target_us = -1
         self.counters = {name: RxCounters() for name in LINKS}
@@ -92,6 +94,7 @@ class Sitl:
         self.targets_applied = 0
         self.targets_ignored = 0
         self.failsafes = 0
+        self.bridges = 0
         self._last_announce_us = -ANNOUNCE_EVERY_US
         self._measured: Measured | None = None
         self._was_crashed = False
@@ -151,24 +154,35 @@ class Sitl:
         return out
 
     def _failsafe(self) -> list[Outgoing]:
-        """Offboard loss: no valid target for COM_OF_LOSS_T while armed -> the vehicle's own
-        controller holds attitude and altitude, lands and disarms (PX4's offboard failsafe)."""
+        """Offboard loss. A target stream that stops for more than a few control periods is
+        bridged at once by the vehicle's own controller (it holds attitude and altitude, as an
+        autopilot's inner loops would), so that nothing flies open loop; a fresh target ends
+        the bridge. No valid target for COM_OF_LOSS_T while armed: mode AUTO.LAND, the same
+        controller holds, lands and disarms (PX4's offboard failsafe)."""
         v, s = self.vehicle, self.vehicle.state
         if not v.armed or s.crashed:
+            self.lander.active = False
             return []
+        out: list[Outgoing] = []
         if self.mode == MODE_OFFBOARD:
-            if s.landed or s.t_us - self._last_target_us <= self.offboard_loss_s * 1e6:
+            silence_us = s.t_us - self._last_target_us
+            if s.landed or silence_us <= self._bridge_after_us:
+                self.lander.active = False
                 return []
-            self.mode = MODE_AUTO_LAND
-            self.lander.engage(s)
-            self.failsafes += 1
-            return self.announce(mavlink.MAV_SEVERITY_CRITICAL,
-                                 "offboard lost: failsafe, holding then landing")
-        if s.landed and s.t_us - self.lander.engaged_us > 1_000_000:
+            if not self.lander.active:
+                self.lander.engage(s)
+                self.bridges += 1
+            if silence_us > self.offboard_loss_s * 1e6:
+                self.mode = MODE_AUTO_LAND
+                self.failsafes += 1
+                out += self.announce(mavlink.MAV_SEVERITY_CRITICAL,
+                                     "offboard lost: failsafe, holding then landing")
+        elif s.landed and s.t_us - self.lander.engaged_us > 1_000_000:
             v.force_disarm()
+            self.lander.active = False
             return self.announce(mavlink.MAV_SEVERITY_WARNING, "failsafe: landed, disarmed")
         v.command = self.lander.update(s, self.sim.dt_us * 1e-6)
-        return []
+        return out
 
     def telemetry_due(self, everything: bool = False) -> list[Outgoing]:
         """The telemetry due now (or one of each enabled stream), through the link: what the
@@ -413,7 +427,8 @@ class Sitl:
         if main == 4 and sub == 6:
             if self.mode != MODE_AUTO_LAND and self.vehicle.armed:
                 self.mode = MODE_AUTO_LAND
-                self.lander.engage(self.vehicle.state)
+                if not self.lander.active:
+                    self.lander.engage(self.vehicle.state)
             return [self._ack(link, msg, mavlink.MAV_RESULT_ACCEPTED, sender)] + self.announce(
                 mavlink.MAV_SEVERITY_INFO, "mode AUTO.LAND")
         return [self._ack(link, msg, mavlink.MAV_RESULT_UNSUPPORTED, sender)]

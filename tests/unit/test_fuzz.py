@@ -198,6 +198,29 @@ def test_codec_concatenations(parts):
         _decode_checked(codec, p)
 
 
+KEY = bytes(range(32))
+
+
+@FUZZ
+@given(st.lists(st.one_of(garbage, valid_frames, st.binary(min_size=1, max_size=40).map(
+    lambda b: b"\xfd" + bytes([len(b), 1]) + b)), max_size=6), st.booleans(), st.data())
+def test_codec_with_signing_never_raises_nor_trusts_unsigned(parts, read_only, data):
+    """Signing on: anything unsigned (or signed with another key, or truncated) is refused,
+    except read-only requests where allowed; nothing raises."""
+    from sil_vehicle.mavlink.signing import READ_ONLY_IDS, SignatureCheck, sign_outgoing
+
+    forger = mavlink.MAVLink(None, srcSystem=255, srcComponent=190)
+    sign_outgoing(forger, bytes(32), 0)                  # the wrong key
+    forged = bytes(mavlink.MAVLink_command_long_message(
+        1, 1, 400, 0, 1, 0, 0, 0, 0, 0, 0).pack(forger))
+    if data.draw(st.booleans(), label="append a forged ARM"):
+        parts = parts + [forged]
+    codec = Codec(check=SignatureCheck(KEY, allow_unsigned_read_only=read_only))
+    out = _decode_checked(codec, b"".join(parts))
+    for m in out:
+        assert read_only and m.get_msgId() in READ_ONLY_IDS
+
+
 def test_codec_counts_each_kind():
     codec = Codec()
     good = _pack(mavlink.MAVLink_heartbeat_message(6, 8, 0, 0, 0, 3))
