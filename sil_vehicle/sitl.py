@@ -99,7 +99,7 @@ class Sitl:
         self._measured: Measured | None = None
         self._was_crashed = False
         self._events: list[Event] = []
-        self._gcd_key: tuple = ()
+        self._gcd_key: tuple | None = None
         self._gcd = 1
         self.events_played: list[tuple[int, str]] = []
 
@@ -202,10 +202,10 @@ class Sitl:
 
 
     def _period_gcd(self) -> int:
-        key = tuple(p for link in LINKS for p in self.periods[link].values())
-        if key != self._gcd_key:
-            self._gcd_key = key
-            self._gcd = math.gcd(*(p for p in key if p)) or 1
+        if self._gcd_key is None:           # recomputed only after a rate change
+            self._gcd_key = ()
+            self._gcd = math.gcd(*(p for link in LINKS for p in self.periods[link].values()
+                                   if p)) or 1
         return self._gcd
 
     @property
@@ -395,6 +395,7 @@ class Sitl:
             else:
                 return [self._ack(link, msg, denied, sender)]
             self.periods[link][name] = period
+            self._gcd_key = None
             return [self._ack(link, msg, ok, sender)]
         if cmd in (mavlink.MAV_CMD_REQUEST_MESSAGE, mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES):
             wanted = (int(msg.param1) if cmd == mavlink.MAV_CMD_REQUEST_MESSAGE and

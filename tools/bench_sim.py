@@ -83,8 +83,15 @@ def bench_sitl(steps: int, runs: int = 5) -> tuple[float, float]:
         airborne(s.vehicle, sim.vehicle.hover_throttle_pct + 0.5)
         codecs = {name: Codec() for name in LINKS}
         n_msgs = 0
+        zeta = (sim.vehicle.hover_throttle_pct + 0.5) / 100.0
+        controller = mavlink.MAVLink(None, srcSystem=255, srcComponent=190)
         t0 = time.perf_counter()
-        for _ in range(steps):
+        for k in range(steps):
+            if k % s.lockstep_ticks() == 0:      # a controller's target every control period
+                raw = mavlink.MAVLink_set_actuator_control_target_message(
+                    s.t_us, 0, 1, 1, [zeta] * 4 + [0.0] * 4).pack(controller)
+                for msg in codecs["offboard"].decode(bytes(raw)):
+                    s.handle("offboard", msg)
             for item in s.step():
                 codecs[item.link].encode(item.msg)
                 n_msgs += 1

@@ -241,10 +241,12 @@ def fly(scenario: Scenario, run: Run, realtime: bool, lock: threading.Lock,
     run.returncode = controller.returncode
     run.wall_s = time.monotonic() - wall0
     run.t_s = _last_time(run.out / "controller.csv")
-    if run.status == "flying":
-        run.status = "done" if controller.returncode == 0 else f"exit {controller.returncode}"
     lines = (run.out / "controller.out").read_text(errors="replace").strip().splitlines()
     run.summary = next((ln for ln in reversed(lines) if ln.startswith("trq-offboard:")), "")
+    if run.status == "flying":
+        # a crash is an outcome of the flight (the metrics say so), not a failure of the run
+        run.status = ("done" if controller.returncode == 0 else
+                      "crashed" if "CRASHED" in run.summary else f"exit {controller.returncode}")
 
 
 def _last_time(path: Path) -> float:
@@ -443,7 +445,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"  TARGET MISSED: {f}")
     print(f"run_scenario: metrics {args.out / 'metrics.json'}, report {args.out / 'report.md'}"
           + (f", figures {', '.join(str(p) for p in figures)}" if figures else ""))
-    return 1 if (failures or interrupted or any(r.status != "done" for r in runs)) else 0
+    return 1 if (failures or interrupted
+                 or any(r.status not in ("done", "crashed") for r in runs)) else 0
 
 
 if __name__ == "__main__":
