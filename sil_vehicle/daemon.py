@@ -21,7 +21,7 @@ import time
 from pathlib import Path
 
 from sil_vehicle.clock import RealTimePacer
-from sil_vehicle.config import PARAMS_DIR, ConfigError, Endpoint, SimParams, load_sim, parse_endpoint
+from sil_vehicle.config import PARAMS_DIR, ConfigError, SimParams, load_sim, parse_endpoint
 from sil_vehicle.faultscript import load_script
 from sil_vehicle.log import FlightLog, Tlog
 from sil_vehicle.mavlink.codec import Codec

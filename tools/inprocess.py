@@ -40,7 +40,6 @@ import dataclasses
 import hashlib
 import json
 import math
-import os
 import sys
 import time
 from dataclasses import dataclass
@@ -151,20 +150,10 @@ def controller_file(name_or_path: str | Path) -> Path:
 def prepare_controller(controller: str | Path, reference: dict | None, out_dir: Path) -> Path:
     """Write the flight's controller overlay (the base file with `reference` over it) exactly as
     run_scenario.prepare does, and return its path. Raises ConfigError if it is invalid."""
-    from trq_offboard.config import load_controller
+    from overlays import write_controller_overlay
 
-    base = controller_file(controller)
-    cfg = load_controller(base)
-    overlay = {"extends": str(base), "vehicle": str(Path(cfg.vehicle.file).resolve()),
-               "observer": {"file": str(Path(cfg.eso.file).resolve()) if cfg.eso else
-                            str(PARAMS / "controller" / "eso.yaml")}}
-    if reference:
-        overlay["reference"] = dict(reference)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    path = out_dir / "controller.yaml"
-    path.write_text("# written by tools/inprocess.py\n" + _yaml_dump(overlay))
-    load_controller(path)
-    return path
+    return write_controller_overlay(controller_file(controller), reference, out_dir,
+                                    "written by tools/inprocess.py")
 
 
 def sim_params(vehicle_file: Path | str, control_rate_hz: int, *, seed: int,

@@ -33,6 +33,7 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tools"))
 
 import metrics as metrics_mod  # noqa: E402
+from overlays import write_controller_overlay  # noqa: E402
 from sil_vehicle.config import load_vehicle  # noqa: E402
 from sil_vehicle.faultscript import load_script  # noqa: E402
 from sil_vehicle.yamlcheck import ConfigError, Section, load_yaml  # noqa: E402
@@ -159,16 +160,10 @@ def prepare(scenario: Scenario, controller: str, out: Path) -> tuple[Path, Path,
     file, control rate)."""
     from trq_offboard.config import load_controller
 
-    base = ROOT / "params" / "controller" / f"{controller}.yaml"
-    cfg = load_controller(base)
-    out.mkdir(parents=True, exist_ok=True)
-    overlay = {"extends": str(base), "vehicle": str(Path(cfg.vehicle.file).resolve()),
-               "observer": {"file": str(Path(cfg.eso.file).resolve()) if cfg.eso else
-                            str(ROOT / "params" / "controller" / "eso.yaml")},
-               "reference": scenario.reference}
-    ctrl_yaml = out / "controller.yaml"
-    ctrl_yaml.write_text(f"# written by run_scenario.py for {scenario.name}\n" + _yaml_dump(overlay))
-    load_controller(ctrl_yaml)          # the overlay must be valid before anything starts
+    cfg = load_controller(ROOT / "params" / "controller" / f"{controller}.yaml")
+    # valid before anything starts (raises otherwise)
+    ctrl_yaml = write_controller_overlay(controller, scenario.reference, out,
+                                         f"written by run_scenario.py for {scenario.name}")
     rate = cfg.control_rate_hz
     sim_yaml = out / "sim.yaml"
     sim_overlay = {"extends": str(ROOT / "params" / "sim" / "default.yaml"),

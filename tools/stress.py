@@ -383,21 +383,10 @@ def start_vehicle(out: Path, gcs_target: int, offboard_target: int, *extra: str)
 
 
 def write_overlay(out: Path, controller: str, reference: dict) -> Path:
-    """A controller file extending params/controller/<controller>.yaml, with absolute paths and
-    the given reference (as tools/run_scenario.py does)."""
-    import yaml
-    from trq_offboard.config import load_controller
+    """A controller file extending params/controller/<controller>.yaml with the reference."""
+    from overlays import write_controller_overlay
 
-    base = ROOT / "params" / "controller" / f"{controller}.yaml"
-    cfg = load_controller(base)
-    overlay = {"extends": str(base), "vehicle": str(Path(cfg.vehicle.file).resolve()),
-               "observer": {"file": str(Path(cfg.eso.file).resolve()) if cfg.eso else
-                            str(ROOT / "params" / "controller" / "eso.yaml")},
-               "reference": reference}
-    out.mkdir(parents=True, exist_ok=True)
-    path = out / "controller.yaml"
-    path.write_text(yaml.safe_dump(overlay, sort_keys=False))
-    return path
+    return write_controller_overlay(controller, reference, out)
 
 
 def wait_bound(port: int, proc: subprocess.Popen, timeout_s: float) -> bool:

@@ -8,7 +8,6 @@ times. Run as a script for a report: `.venv/bin/python tests/integration/test_cl
 from __future__ import annotations
 
 import dataclasses
-import math
 from pathlib import Path
 
 import numpy as np

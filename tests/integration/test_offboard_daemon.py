@@ -25,12 +25,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import yaml
 
 from conftest import ROOT, free_udp_port
 
 sys.path.insert(0, str(ROOT / "tools"))
 import metrics  # noqa: E402
+from overlays import write_controller_overlay  # noqa: E402
 
 ENV = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
 STARTUP_S = 60.0               # the controller builds its NMPC before it listens
@@ -44,18 +44,10 @@ TILT_LIMIT_RAD = math.radians(30.0)
 
 def write_overlay(out: Path, controller: str, reference: dict) -> Path:
     """A controller file extending params/controller/<controller>.yaml with absolute paths and a
-    short reference (as tools/run_scenario.py prepare() does)."""
+    short reference (the tools' own writer)."""
     from trq_offboard.config import load_controller
 
-    base = ROOT / "params" / "controller" / f"{controller}.yaml"
-    cfg = load_controller(base)
-    overlay = {"extends": str(base), "vehicle": str(Path(cfg.vehicle.file).resolve()),
-               "observer": {"file": str(Path(cfg.eso.file).resolve()) if cfg.eso else
-                            str(ROOT / "params" / "controller" / "eso.yaml")},
-               "reference": reference}
-    out.mkdir(parents=True, exist_ok=True)
-    path = out / "controller.yaml"
-    path.write_text(yaml.safe_dump(overlay, sort_keys=False))
+    path = write_controller_overlay(controller, reference, out)
     assert load_controller(path).reference.kind == reference["kind"]
     return path
 
