@@ -179,7 +179,7 @@ class VehicleDaemon:
                     waited += self._monotonic() - wall0
                     if free_run:
                         break              # no controller: one period in real time
-                    self.send(sitl.telemetry_due(everything=True))
+                    self.send(sitl.telemetry_due(everything=True, resend=True))
                     # only a controller that was there and went away: before the first
                     # answer the vehicle waits (a controller may take seconds to build)
                     if waited >= self.sim.free_run_after_s and sitl.had_offboard:

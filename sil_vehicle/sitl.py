@@ -90,7 +90,9 @@ class Sitl:
         self._log_period = sim.physics_rate_hz // sim.log_rate_hz if sim.log_rate_hz else 0
         self._limit = sim.vehicle.tilt_limit_rad
         self.lockstep_stamp_us: int | None = None   # latest ODOMETRY stamp on the offboard link
-        self.answered = False                        # has the target for that stamp arrived?
+        # has the target for that stamp arrived? True until a stamp has left: on a delayed link
+        # the first ODOMETRY (and HEARTBEAT) leave only once time has advanced by the delay
+        self.answered = True
         self.targets_applied = 0
         self.targets_ignored = 0
         self.failsafes = 0
@@ -184,10 +186,20 @@ class Sitl:
         v.command = self.lander.update(s, self.sim.dt_us * 1e-6)
         return out
 
-    def telemetry_due(self, everything: bool = False) -> list[Outgoing]:
+    def telemetry_due(self, everything: bool = False, resend: bool = False) -> list[Outgoing]:
         """The telemetry due now (or one of each enabled stream), through the link: what the
-        daemon sends first (t = 0) and again when a lockstep answer is late."""
-        return self._deliver(self._due_streams(everything))
+        daemon sends first (t = 0). `resend`: what it sends again when a lockstep answer is
+        late in wall-clock time; that is the daemon's recovery from a real network's loss, not
+        part of the simulated link, so it bypasses an impairment (whose delays run in
+        simulated time, which stands still while the vehicle waits)."""
+        out = self._due_streams(everything)
+        if not resend:
+            return self._deliver(out)
+        down, self._down = self._down, {}
+        try:
+            return self._deliver(out)
+        finally:
+            self._down = down
 
     def _due_streams(self, everything: bool = False) -> list[Outgoing]:
         """Streams whose period divides the current tick (or one of each enabled stream)."""

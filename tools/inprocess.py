@@ -158,11 +158,14 @@ def prepare_controller(controller: str | Path, reference: dict | None, out_dir: 
 
 def sim_params(vehicle_file: Path | str, control_rate_hz: int, *, seed: int,
                wind_speed_m_s: float = 0.0, wind_from_deg: float = 0.0, gusts: bool = False,
-               gust_sigma_m_s: float | None = None, sim_file: Path | str = SIM_DEFAULT):
+               gust_sigma_m_s: float | None = None, sim_file: Path | str = SIM_DEFAULT,
+               offboard_impair: dict[str, float] | None = None):
     """The vehicle's settings as run_scenario.py gives them to the daemon: the default sim file,
     the control rate (and offboard ODOMETRY rate) of the controller, its airframe, the seed and
-    the wind (the daemon's --seed, --wind-speed, --wind-dir, --gusts)."""
+    the wind (the daemon's --seed, --wind-speed, --wind-dir, --gusts), and a scenario's
+    offboard_link impairment."""
     from sil_vehicle.config import load_sim
+    from sil_vehicle.impair import ImpairParams
 
     sim = load_sim(sim_file, vehicle_file)
     links = []
@@ -171,6 +174,8 @@ def sim_params(vehicle_file: Path | str, control_rate_hz: int, *, seed: int,
             rates = tuple((s, control_rate_hz if s == "ODOMETRY" else hz)
                           for s, hz in link.rates_hz)
             link = dataclasses.replace(link, rates_hz=rates)
+            if offboard_impair:
+                link = dataclasses.replace(link, impair=ImpairParams(**offboard_impair))
         links.append(link)
     if sim.physics_rate_hz % control_rate_hz:
         from sil_vehicle.yamlcheck import ConfigError
@@ -235,9 +240,9 @@ async def _fly(sitl, flight, link, *, timeout_us: int, crash_grace_us: int) -> t
         link.deliver(sitl.telemetry_due())          # as the daemon does before its loop
         crash_us = None
         while True:
-            await answered.wait()
-            answered.clear()
-            if not sitl.answered:                   # an answer for an older stamp: keep waiting
+            if not sitl.answered:       # wait for the answer to the latest stamp (an answer to
+                await answered.wait()   # an older one, or another message: keep waiting); on
+                answered.clear()        # an impaired link a stamp the vehicle dropped needs none
                 continue
             for _ in range(ticks):
                 link.deliver(sitl.step())
@@ -392,14 +397,16 @@ def main(argv: list[str] | None = None) -> int:
     for c in sc.controllers:
         if args.only and c not in args.only:
             continue
-        cfg = load_controller(controller_file(c))
+        cfg = load_controller(prepare_controller(c, sc.reference, args.out / c))
+        cfg = dataclasses.replace(
+            cfg, applied_delay_s=run_scenario.command_delay_s(sc.offboard_impair, False))
         sim = sim_params(cfg.vehicle.file, cfg.control_rate_hz, seed=sc.seed,
                          wind_speed_m_s=sc.wind_speed_m_s, wind_from_deg=sc.wind_from_deg,
-                         gusts=sc.gusts)
+                         gusts=sc.gusts, offboard_impair=sc.offboard_impair)
         vp = sim.vehicle        # the daemon checks stuck angles against the airframe's range
         ev = load_script(sc.faults, (math.degrees(vp.tilt_min_rad),
                                      math.degrees(vp.tilt_max_rad))) if sc.faults else ()
-        res = fly_inprocess(c, sim, ev, out_dir=args.out / c, reference=sc.reference,
+        res = fly_inprocess(cfg, sim, ev, out_dir=args.out / c,
                             timeout_s=sc.timeout_s, inline_solve=not args.thread, name=c)
         m = flight_metrics(res.out_dir, c, onset, sc.recovery_threshold_m)
         m.update(status=res.status, wall_s=round(res.wall_s, 2), sim_s=round(res.sim_s, 3),

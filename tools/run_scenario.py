@@ -64,6 +64,14 @@ class Scenario:
     offboard_impair: dict[str, float]            # links.offboard.impair of the vehicle
 
 
+def command_delay_s(impair: dict[str, float], realtime: bool) -> float:
+    """How long a command takes to act after the state it answers was measured: the offboard
+    link's round trip (its delay and mean jitter, each way: the telemetry going down, the
+    target coming up), plus in real time about one solve. The controller's applied_delay_s."""
+    one_way_s = (impair.get("delay_ms", 0.0) + 0.5 * impair.get("jitter_ms", 0.0)) * 1e-3
+    return 2.0 * one_way_s + (REALTIME_LATENCY_S if realtime else 0.0)
+
+
 def load_scenario(path: Path) -> Scenario:
     path = Path(path)
     top = Section(load_yaml(path), path)
@@ -190,8 +198,7 @@ def fly(scenario: Scenario, run: Run, realtime: bool, lock: threading.Lock,
     if scenario.faults:
         vcmd += ["--faults", str(scenario.faults)]
     # how long a command takes to act: the link's delay, plus in real time about a solve
-    delay_s = scenario.offboard_impair.get("delay_ms", 0.0) * 1e-3 + (REALTIME_LATENCY_S
-                                                                       if realtime else 0.0)
+    delay_s = command_delay_s(scenario.offboard_impair, realtime)
     ccmd = [sys.executable, "-m", "trq_offboard", "--controller", str(ctrl_yaml), "--connect",
             f"udpin:127.0.0.1:{p_ctrl}", "--log-dir", str(run.out),
             "--applied-delay-s", f"{delay_s:g}"]

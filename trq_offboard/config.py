@@ -217,6 +217,10 @@ class VehicleModel:
     tilt_max_rad: float
     servo_rate_limit_rad_s: float
     drag_N_s2_m2: float
+    # actuator lags: not in the NMPC's model; the delay predictor (controller.py) uses them
+    motor_time_constant_s: float = 0.0
+    motor_rate_limit_pct_s: float = math.inf
+    servo_time_constant_s: float = 0.0
     # derived
     hover_throttle_pct: float = field(init=False)
 
@@ -258,14 +262,14 @@ def _vehicle(k: _Keys, path: Path) -> VehicleModel:
         rotors.append(RotorGeometry(rname, a, (arm * a[0], arm * a[1], 0.0), spin))
     mk = k.sub("motor")
     idle = mk.number("idle_pct", 0.0, 50.0)
-    mk.number("time_constant_s", 0.0, 1.0)       # plant detail: read, checked, not modelled
-    mk.number("rate_limit_pct_s", 1.0, 1e6)
+    motor_tau = mk.number("time_constant_s", 0.0, 1.0)
+    motor_rate = mk.number("rate_limit_pct_s", 1.0, 1e6)
     mk.close()
     tk = k.sub("tilt")
     locked = tk.flag("locked")
     tmin = tk.number("min_deg", -90.0, 0.0)
     tmax = tk.number("max_deg", 0.0, 90.0)
-    tk.number("servo_time_constant_s", 0.0, 1.0)  # plant detail, not modelled
+    servo_tau = tk.number("servo_time_constant_s", 0.0, 1.0)
     srate = tk.number("servo_rate_limit_deg_s", 1.0, 1e5)
     tk.close()
     dk = k.sub("drag")
@@ -279,7 +283,7 @@ def _vehicle(k: _Keys, path: Path) -> VehicleModel:
                       f"full throttle to lift the weight {mass * g:.2f} N")
     return VehicleModel(name, str(path), mass, inertia, g, arm, thrust, torque, tuple(rotors),
                         idle, locked, math.radians(tmin), math.radians(tmax),
-                        math.radians(srate), drag)
+                        math.radians(srate), drag, motor_tau, motor_rate, servo_tau)
 
 
 def load_vehicle_model(path: Path | str) -> VehicleModel:
@@ -393,6 +397,9 @@ class ControllerConfig:
     reference: ReferenceConfig
     applied_input: str = "commanded"      # commanded | outputs: what the controller takes as applied
     applied_delay_s: float = 0.0          # how long a command takes to act (observer's b0)
+    delay_compensation: str = "predict"   # predict | none: plan from the state at t + delay
+    lagged_actuators: str = "auto"        # on | off | auto (on when applied_delay_s > 0): the
+                                          # observer's b0 and the predictor through the lags
 
     @property
     def control_dt_s(self) -> float:
@@ -446,6 +453,8 @@ def _controller(k: _Keys, path: Path) -> ControllerConfig:
     ok.close()
     applied_input = k.text("applied_input", ("commanded", "outputs"))
     applied_delay = k.number("applied_delay_s", 0.0, 1.0)
+    delay_comp = k.text("delay_compensation", ("predict", "none"), default="predict")
+    lagged = k.text("lagged_actuators", ("on", "off", "auto"), default="auto")
     eso = None
     if observer != "none":
         base = load_eso(path.parent / eso_file)
@@ -467,7 +476,7 @@ def _controller(k: _Keys, path: Path) -> ControllerConfig:
         raise k.error("horizon.step_s", step_s, f"at least one control period ({1.0 / rate:g} s)")
     return ControllerConfig(str(path), name, vehicle, observer, eso, rate, steps, step_s,
                             weights, max_tilt, max_rate, solver, reference, applied_input,
-                            applied_delay)
+                            applied_delay, delay_comp, lagged)
 
 
 def load_controller(path: Path | str) -> ControllerConfig:

@@ -42,6 +42,8 @@ from trq_offboard.records import (ActuatorCommand, CommandSource, ReferenceSampl
 
 __all__ = ["Controller"]
 
+PREDICT_STEP_S = 0.005        # RK4 step of the delay predictor
+
 
 def _wrap(a: float) -> float:
     return (a + math.pi) % (2.0 * math.pi) - math.pi
@@ -60,12 +62,21 @@ class Controller:
                     if cfg.eso is not None else None)
         self.N, self.h = cfg.horizon_steps, cfg.step_s
         self._rollout = self.model.discrete(self.h, 1)
+        self._step_dt = self.model.discrete_dt()
+        self.delay_s = (cfg.applied_delay_s if cfg.delay_compensation == "predict" else 0.0)
+        self._lagged = cfg.lagged_actuators == "on" or (cfg.lagged_actuators == "auto"
+                                                        and cfg.applied_delay_s > 0.0)
+        tilts = 4 if self.model.tilting else 0
+        self._tau = np.array([vm.servo_time_constant_s] * tilts + [vm.motor_time_constant_s] * 4)
+        self._rate_limit = np.array([vm.servo_rate_limit_rad_s] * tilts
+                                    + [vm.motor_rate_limit_pct_s] * 4)
         self._u_lo = np.array(([vm.tilt_min_rad] * 4 if self.model.tilting else [])
                               + [vm.idle_pct] * 4)
         self._u_hi = np.array(([vm.tilt_max_rad] * 4 if self.model.tilting else []) + [100.0] * 4)
         self._plan: tuple[np.ndarray, np.ndarray] | None = None
         self._plan_t = 0.0
         self._last_t: float | None = None
+        self._last_t_act = 0.0        # when the last command starts to act (t + delay_s)
         self._last_d = np.zeros(6)
         self._last_u = self.u_trim.copy()
         self._prev_u = self.u_trim.copy()
@@ -93,6 +104,7 @@ class Controller:
             self.eso.reset(np.concatenate([x[0:3], x[6:9]]), np.concatenate([x[3:6], eta_dot]))
         self._plan = None
         self._last_t = float(t_s)
+        self._last_t_act = float(t_s) + self.delay_s
         self._last_d = np.zeros(6)
         discard = getattr(self.solver, "discard", None)
         if discard is not None:
@@ -109,21 +121,82 @@ class Controller:
     def _b0_delayed(self, x: np.ndarray, t0: float, t1: float) -> np.ndarray:
         """b0 averaged over [t0, t1] with each command acting applied_delay_s after it was sent
         (the time of the state it answered): the commands that were really in effect."""
-        delay = self.cfg.applied_delay_s
-        if delay <= 0.0 or not self._sent:
-            return self._b0(x, self._last_u)
         total = np.zeros(6)
-        # the command in effect at tau is the newest one with t_sent + delay <= tau
-        acts = [(ts + delay, u) for ts, u in self._sent]
+        if self._lagged:
+            for a, b, y in self._actuator_path(t0, t1):
+                total += (b - a) * self._b0(x, y)
+            return total / (t1 - t0)
+        if self.cfg.applied_delay_s <= 0.0 or not self._sent:
+            return self._b0(x, self._last_u)
+        for lo, hi, u in self._in_effect(t0, t1):
+            total += (hi - lo) * self._b0(x, u)
+        return total / (t1 - t0)
+
+    def _in_effect(self, t0: float, t1: float) -> list[tuple[float, float, np.ndarray]]:
+        """The commands acting over [t0, t1] as (start, end, u) segments: each command acts
+        from the stamp of the state it answered plus applied_delay_s until the next one does;
+        before the oldest remembered command, the oldest one."""
+        delay = self.cfg.applied_delay_s
+        acts = [(ts + delay, u) for ts, u in self._sent] or [(t0, self._last_u)]
+        segs = []
+        if acts[0][0] > t0:
+            segs.append((t0, min(acts[0][0], t1), acts[0][1]))
         for i, (start, u) in enumerate(acts):
             end = acts[i + 1][0] if i + 1 < len(acts) else math.inf
             lo, hi = max(start, t0), min(end, t1)
             if hi > lo:
-                total += (hi - lo) * self._b0(x, u)
-        covered = max(0.0, min(t1, math.inf) - max(t0, acts[0][0]))
-        if covered < t1 - t0:        # before the oldest remembered command: the oldest one
-            total += (t1 - t0 - covered) * self._b0(x, acts[0][1])
-        return total / (t1 - t0)
+                segs.append((lo, hi, u))
+        return segs
+
+    def _actuator_path(self, t0: float, t1: float):
+        """The actuators over [t0, t1] as (a, b, y_mid) steps of at most PREDICT_STEP_S: the
+        commands in effect (each from its state's stamp + applied_delay_s) through the
+        actuators' first-order lags and rate limits (vehicle file: motor and servo time
+        constants, which the NMPC's model leaves out), y_mid at each step's midpoint. Their
+        state at t0 is rebuilt from the remembered commands (32 periods: many time constants)."""
+        segs = self._in_effect(-math.inf, t1)
+        y = segs[0][2].copy()
+        path = []
+        for lo, hi, u in segs:
+            cuts = [lo] + ([t0] if lo < t0 < hi else []) + [hi]
+            for a, b in zip(cuts[:-1], cuts[1:]):
+                if b <= a or not math.isfinite(a):
+                    continue
+                n = max(1, math.ceil((b - a) / PREDICT_STEP_S - 1e-9)) if a >= t0 else 1
+                h = (b - a) / n
+                for i in range(n):
+                    if a >= t0:
+                        path.append((a + i * h, a + (i + 1) * h, self._lag(y, u, 0.5 * h)))
+                    y = self._lag(y, u, h)
+        return path
+
+    def _predict(self, x: np.ndarray, t0: float, t1: float, d: np.ndarray) -> np.ndarray:
+        """The state at t1 predicted from the one measured at t0: the delay compensation of a
+        link whose round trip is applied_delay_s (a Smith predictor's role). The model (RK4)
+        is driven by the commands in flight, sent but not yet acting when x was measured
+        (through the actuators' lags with lagged_actuators), with the disturbance estimate d
+        held."""
+        xk = x
+        if self._lagged:
+            for a, b, y in self._actuator_path(t0, t1):
+                xk = self._step_dt(xk, y, d, b - a)
+        else:
+            for lo, hi, u in self._in_effect(t0, t1):
+                n = max(1, math.ceil((hi - lo) / PREDICT_STEP_S - 1e-9))
+                for _ in range(n):
+                    xk = self._step_dt(xk, u, d, (hi - lo) / n)
+        xk = np.asarray(xk).ravel()
+        return xk if np.all(np.isfinite(xk)) else x
+
+    def _lag(self, y: np.ndarray, u: np.ndarray, dt: float) -> np.ndarray:
+        """The actuators (first-order lag, rate limit) after dt towards the command u."""
+        step = self._lag_gain(dt) * (u - y)
+        lim = self._rate_limit * dt
+        return y + np.clip(step, -lim, lim)
+
+    def _lag_gain(self, dt: float) -> np.ndarray:
+        with np.errstate(divide="ignore"):
+            return np.where(self._tau > 0.0, -np.expm1(-dt / np.maximum(self._tau, 1e-12)), 1.0)
 
     def _euler_rate(self, x: np.ndarray) -> np.ndarray:
         return np.asarray(self.model.f(x, self._last_u, np.zeros(6))).ravel()[6:9]
@@ -157,19 +230,23 @@ class Controller:
         self._last_t = float(t_s)
         self._last_d = d
 
-        x_ref = self._reference_states(t_s, x, reference)
-        guess = self._guess(t_s, x, d)
-        u_plan, x_plan, info = self.solver.solve(x, x_ref, d, u_applied, guess)
+        # the command computed now acts from t_act: plan from the state predicted for then
+        t_act = t_s + self.delay_s
+        x0 = self._predict(x, t_s, t_act, d) if self.delay_s > 0.0 else x
+        self._last_t_act = t_act
+        x_ref = self._reference_states(t_act, x0, reference)
+        guess = self._guess(t_act, x0, d)
+        u_plan, x_plan, info = self.solver.solve(x0, x_ref, d, u_applied, guess)
         if info.status is SolveStatus.OK and np.all(np.isfinite(u_plan)) \
                 and np.all(np.isfinite(x_plan)):
-            self._plan, self._plan_t = (u_plan, x_plan), float(t_s)
+            self._plan, self._plan_t = (u_plan, x_plan), t_act
             u, source = u_plan[0], CommandSource.NMPC
         else:
             self.failures += 1
             if info.status is SolveStatus.OK:      # finite-status but non-finite plan
                 info = SolveInfo(SolveStatus.FAILED, info.iterations, info.solve_time_s,
                                  float("nan"), "non-finite plan")
-            u, source = self._fallback(t_s)
+            u, source = self._fallback(t_act)
         return self._finish(u, source, info, d, out_err)
 
     def prepare(self, reference) -> None:
@@ -179,7 +256,7 @@ class Controller:
         prep = getattr(self.solver, "prepare", None)
         if prep is None or self._plan is None or self._last_t is None:
             return
-        t_next = self._last_t + self.cfg.control_dt_s
+        t_next = self._last_t_act + self.cfg.control_dt_s
         elapsed = t_next - self._plan_t
         if elapsed >= self.N * self.h:
             return
@@ -246,6 +323,6 @@ class Controller:
 
     def _emergency(self, t_s, why) -> tuple[ActuatorCommand, StepInfo]:
         self.failures += 1
-        u, source = self._fallback(t_s)
+        u, source = self._fallback(t_s + self.delay_s)
         info = SolveInfo(SolveStatus.FAILED, 0, 0.0, float("nan"), why)
         return self._finish(u, source, info, np.zeros(6), 0.0)

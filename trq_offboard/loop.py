@@ -30,6 +30,7 @@ TAKEOVER_ALTITUDE_M = 0.3         # higher than this, armed: the vehicle is flyi
 MAX_MODE_REQUESTS = 5
 TOUCHDOWN_SPEED_M_S = 0.15
 IDLE_STEPS_BEFORE_DISARM = 10
+IDLE = ActuatorCommand((0.0,) * 4, (0.0,) * 4)   # motors at idle, tilts centred
 
 
 class FlightError(RuntimeError):
@@ -157,15 +158,33 @@ class OffboardFlight:
                 silent_s += wait_s
                 log.warning("no telemetry for %.1f s: not commanding", silent_s)
 
-    async def _command(self, msg, command_id: int, retries: int = 3) -> int:
+    async def _command(self, msg, command_id: int, retries: int = 3,
+                       hold: ActuatorCommand | None = None) -> int:
+        """Send a command and wait for its COMMAND_ACK (retries on silence). With `hold` (only
+        when the control loop is not running), every new state that arrives meanwhile is
+        answered with that command: in lockstep the vehicle's time, and with it a delayed
+        link's delivery of the command and of its ACK, moves only on answers (PX4, too, wants
+        the setpoint stream flowing around arming and mode changes)."""
+        loop = asyncio.get_running_loop()
         for _ in range(retries):
-            fut = asyncio.get_running_loop().create_future()
+            fut = loop.create_future()
             self._acks[command_id] = fut
             self.link.send(msg)
-            try:
-                return await asyncio.wait_for(fut, self.ack_timeout_s)
-            except asyncio.TimeoutError:
-                continue
+            deadline = loop.time() + self.ack_timeout_s
+            while not fut.done() and loop.time() < deadline:
+                if hold is None:
+                    await asyncio.wait({fut}, timeout=deadline - loop.time())
+                    break
+                odo = self.odometry
+                if odo is not None and odo.stamp_us != self._answered_stamp:
+                    self._answer(odo.stamp_us, hold)
+                self._new_odometry.clear()
+                waiter = asyncio.ensure_future(self._new_odometry.wait())
+                await asyncio.wait({fut, waiter}, timeout=max(0.0, deadline - loop.time()),
+                                   return_when=asyncio.FIRST_COMPLETED)
+                waiter.cancel()
+            if fut.done():
+                return fut.result()
         raise FlightError(f"no COMMAND_ACK for command {command_id} after {retries} tries")
 
     def _answer(self, stamp_us: int, cmd: ActuatorCommand) -> None:
@@ -209,7 +228,7 @@ class OffboardFlight:
             log.info("taking over a flying vehicle at %.2f m", -first.state.pos_ned_m[2])
         elif not wire.is_armed(self.heartbeat):
             result = await self._command(wire.arm_command(True),
-                                         mavlink.MAV_CMD_COMPONENT_ARM_DISARM)
+                                         mavlink.MAV_CMD_COMPONENT_ARM_DISARM, hold=IDLE)
             if result != mavlink.MAV_RESULT_ACCEPTED:
                 raise FlightError(f"arming refused (MAV_RESULT {result})")
         ground_z = wire.HOME_GROUND_DOWN_M if airborne else first.state.pos_ned_m[2]
@@ -249,14 +268,14 @@ class OffboardFlight:
             return self.summary
         self.summary.landed = True
         # idle, then disarm (the vehicle refuses a disarm in flight)
-        idle = ActuatorCommand((0.0,) * 4, (0.0,) * 4)
         for _ in range(IDLE_STEPS_BEFORE_DISARM):
             odo = await self._next_odometry()
-            self._answer(odo.stamp_us, idle)
-        result = await self._command(wire.arm_command(False), mavlink.MAV_CMD_COMPONENT_ARM_DISARM)
+            self._answer(odo.stamp_us, IDLE)
+        result = await self._command(wire.arm_command(False), mavlink.MAV_CMD_COMPONENT_ARM_DISARM,
+                                     hold=IDLE)
         self.summary.disarmed = result == mavlink.MAV_RESULT_ACCEPTED
         odo = await self._next_odometry()
-        self._answer(odo.stamp_us, idle)
+        self._answer(odo.stamp_us, IDLE)
         self._finish(t)
         return self.summary
 

@@ -435,3 +435,48 @@ def test_flight_log_round_trip_with_gusts(sim, tmp_path):
     assert data[-1, columns.index("t_us")] == 500_000
     assert data[-1, columns.index("pos_d_m")] < 0.0                     # airborne
     assert data[-1, columns.index("wind_n_m_s")] != data[-2, columns.index("wind_n_m_s")]
+
+
+def impaired(sim, **impair):
+    from sil_vehicle.impair import ImpairParams
+    links = tuple(dataclasses.replace(link, impair=ImpairParams(**impair))
+                  if link.name == "offboard" else link for link in sim.links)
+    return Sitl(sim.with_changes(links=links))
+
+
+def test_delayed_link_lockstep_starts_and_waits_only_for_stamps_that_left(sim):
+    """20 ms each way: the first ODOMETRY leaves at t = 20 ms, so the vehicle must not wait
+    for an answer before then (it did: a lockstep deadlock at t = 0); then it waits for the
+    answer to the stamp that left, and the target acts 20 ms after it arrived."""
+    s = impaired(sim, delay_ms=20.0)
+    out = s.telemetry_due()
+    assert not of(out, "ODOMETRY") and not of(out, "HEARTBEAT", "offboard")
+    assert s.answered and s.lockstep_stamp_us is None
+    ticks = 0
+    while s.answered:
+        out = s.step()
+        ticks += 1
+        assert ticks <= 20
+    assert s.t_us == 20_000 and s.lockstep_stamp_us == 0
+    assert [m.time_usec for m in of(out, "ODOMETRY")] == [0]
+    assert of(out, "HEARTBEAT", "offboard")
+    s.handle("offboard", target(0, [0.3] * 4))
+    assert s.answered and s.vehicle.command.throttle_pct == (0.0,) * 4      # still in flight
+    for _ in range(19):
+        s.step()
+    assert s.vehicle.command.throttle_pct == (0.0,) * 4
+    s.step()                                                                # t = 40 ms
+    assert s.vehicle.command.throttle_pct == pytest.approx((30.0,) * 4)
+
+
+def test_lockstep_resend_bypasses_the_simulated_impairment(sim):
+    """A resend (the daemon's wall-clock recovery) goes out at once: simulated delays cannot
+    elapse while the vehicle waits, and a lost first HEARTBEAT would otherwise never be
+    followed by another one."""
+    s = impaired(sim, delay_ms=20.0, loss=1.0)
+    offboard = lambda out: [o for o in out if o.link == "offboard"]          # noqa: E731
+    assert offboard(s.telemetry_due()) == []
+    out = s.telemetry_due(everything=True, resend=True)
+    assert of(out, "HEARTBEAT", "offboard") and of(out, "ODOMETRY", "offboard")
+    assert s.lockstep_stamp_us == 0 and not s.answered
+    assert offboard(s.telemetry_due(everything=True)) == []     # the impairment is still there

@@ -127,3 +127,15 @@ class PredictionModel:
             k4 = self.f(xk + h * k3, u, d)
             xk = xk + h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
         return ca.Function("F", [x, u, d], [xk], ["x", "u", "d"], ["x_next"])
+
+    def discrete_dt(self) -> ca.Function:
+        """One RK4 step over a step length given at call time: F(x, u, d, dt) (the controller's
+        delay predictor, whose segments follow the stamps of the commands in flight)."""
+        x, u, d = self._x, self._u, self._d
+        h = ca.SX.sym("dt")
+        k1 = self.f(x, u, d)
+        k2 = self.f(x + 0.5 * h * k1, u, d)
+        k3 = self.f(x + 0.5 * h * k2, u, d)
+        k4 = self.f(x + h * k3, u, d)
+        xk = x + h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+        return ca.Function("F_dt", [x, u, d, h], [xk], ["x", "u", "d", "dt"], ["x_next"])

@@ -1,0 +1,101 @@
+"""The controller's delay predictor (controller.Controller._predict): over a link whose round
+trip is applied_delay_s, the NMPC plans from the state predicted for the time its command will
+act, driven by the commands in flight, through the actuators' lags when asked to."""
+
+from __future__ import annotations
+
+import collections
+import dataclasses
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from trq_offboard.config import load_controller
+from trq_offboard.controller import Controller
+
+CTRL = Path(__file__).resolve().parents[2] / "params" / "controller" / "trq_nmpc_eso.yaml"
+DELAY_S = 0.04
+
+
+class _NoSolver:
+    """The predictor needs no NMPC; building one would cost seconds."""
+
+
+def controller(lagged: str, delay_s: float = DELAY_S) -> Controller:
+    cfg = dataclasses.replace(load_controller(CTRL), applied_delay_s=delay_s,
+                              lagged_actuators=lagged)
+    return Controller(cfg, solver=_NoSolver())
+
+
+def hover_state() -> np.ndarray:
+    x = np.zeros(12)
+    x[2] = -2.0                          # 2 m up (NED)
+    return x
+
+
+def fill(ctl: Controller, commands: list[tuple[float, np.ndarray]]) -> None:
+    ctl._sent = collections.deque(commands, maxlen=32)
+
+
+def test_hover_commands_in_flight_predict_no_motion():
+    ctl = controller("on")
+    u = ctl.u_trim
+    fill(ctl, [(-0.01 * k, u) for k in range(32, -1, -1)])
+    x = hover_state()
+    xp = ctl._predict(x, 0.0, DELAY_S, np.zeros(6))
+    assert np.max(np.abs(xp - x)) < 1e-6
+
+
+def test_a_climb_command_in_flight_acts_only_from_its_stamp_plus_the_delay():
+    """Commands answering states at -0.02 and -0.01 s act from 0.02 and 0.03 s: over [0, 0.04]
+    the step acts for 0.02 s. Without the lags the vertical speed changes by a_z * 0.02; with
+    them (30 ms motor time constant) by a_z times the integral of the lagged step."""
+    u_up = None
+    out = {}
+    for lagged in ("off", "on"):
+        ctl = controller(lagged)
+        hover = ctl.u_trim
+        u_up = hover.copy()
+        u_up[4:8] += 10.0                             # +10 % throttle on every motor
+        fill(ctl, [(-0.01 * k, hover) for k in range(32, 2, -1)]
+             + [(-0.02, u_up), (-0.01, u_up)])
+        x = hover_state()
+        out[lagged] = ctl._predict(x, 0.0, DELAY_S, np.zeros(6))
+    ctl = controller("off")
+    a_z = float(np.asarray(ctl.model.accel(hover_state(), u_up)).ravel()[2])
+    assert a_z < -1.0                                  # upward (NED) and not small
+    dv_off, dv_on = out["off"][5], out["on"][5]
+    assert dv_off == pytest.approx(a_z * 0.02, rel=1e-3)
+    tau = ctl.cfg.vehicle.motor_time_constant_s
+    lagged_s = 0.02 - tau * (1.0 - math.exp(-0.02 / tau))    # integral of the lagged step
+    assert dv_on == pytest.approx(a_z * lagged_s, rel=0.05)
+    assert a_z * 0.02 < dv_on < 0.0
+    # nothing but the vertical channel moves
+    for xp in out.values():
+        assert np.max(np.abs(xp[[0, 1, 3, 4, 6, 7, 8, 9, 10, 11]])) < 1e-9
+
+
+def test_actuator_path_is_the_first_order_lag():
+    """A small throttle step held from t = 0 (no rate limit reached): after one time constant
+    the reconstructed throttle has gone 1 - 1/e of the way."""
+    ctl = controller("on", delay_s=0.0)
+    tau = ctl.cfg.vehicle.motor_time_constant_s
+    assert tau > 0.0
+    hover = ctl.u_trim
+    step = hover.copy()
+    step[4:8] += 2.0
+    fill(ctl, [(-0.01 * k, hover) for k in range(31, 0, -1)] + [(0.0, step)])
+    path = ctl._actuator_path(tau - 0.0025, tau + 0.0025)     # one step centred on tau
+    (a, b, y_mid), = path
+    assert (a, b) == pytest.approx((tau - 0.0025, tau + 0.0025))
+    assert y_mid[4:8] == pytest.approx(hover[4:8] + 2.0 * (1.0 - math.exp(-1.0)), abs=1e-9)
+    # tilts were not commanded to move and have not
+    assert y_mid[0:4] == pytest.approx(hover[0:4], abs=1e-12)
+
+
+def test_no_delay_no_prediction():
+    ctl = controller("auto", delay_s=0.0)
+    assert ctl.delay_s == 0.0 and not ctl._lagged
+    assert controller("auto")._lagged and controller("off").delay_s == DELAY_S
