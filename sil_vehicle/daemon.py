@@ -32,6 +32,7 @@ from sil_vehicle.yamlcheck import Section
 log = logging.getLogger("sil_vehicle")
 
 MAX_PEERS = 16
+PEER_TIMEOUT_S = 10.0      # a peer silent this long (wall clock) gets no more telemetry
 MAX_DATAGRAM = 1400          # bytes: frames to one address are packed up to this (below the MTU)
 
 
@@ -75,7 +76,8 @@ class VehicleDaemon:
                     signing_key, allow_unsigned_read_only=allow_unsigned_gcs and name == "gcs")
                 sign_outgoing(codec.mav, signing_key, link_id)
         self.transports: dict[str, asyncio.DatagramTransport] = {}
-        self.peers: dict[str, list[tuple[str, int]]] = {name: [] for name in LINKS}
+        # per link: address -> wall time of its last valid message (insertion-ordered)
+        self.peers: dict[str, dict[tuple[str, int], float]] = {name: {} for name in LINKS}
         self._answer: asyncio.Future | None = None   # resolved when the lockstep target arrives
         self._stop = asyncio.Event()
         self._monotonic = monotonic
@@ -104,6 +106,7 @@ class VehicleDaemon:
         (up to MAX_DATAGRAM bytes), as MAVLink over UDP allows: far fewer system calls on both
         sides of a lockstep exchange."""
         batches: dict[tuple[str, tuple[str, int]], list[bytes]] = {}
+        live: dict[str, list[tuple[str, int]]] = {}
         for item in outgoing:
             if item.link not in self.transports:
                 continue
@@ -113,8 +116,10 @@ class VehicleDaemon:
             if item.to is not None:
                 dests = [item.to]
             else:
+                if item.link not in live:
+                    live[item.link] = self._live_peers(item.link)
                 target = self.sim.link(item.link).target
-                dests = list(dict.fromkeys([(target.host, target.port)] + self.peers[item.link]))
+                dests = list(dict.fromkeys([(target.host, target.port), *live[item.link]]))
             for dest in dests:
                 batches.setdefault((item.link, dest), []).append(data)
         for (link, dest), frames in batches.items():
@@ -128,12 +133,33 @@ class VehicleDaemon:
             if chunk:
                 transport.sendto(chunk, dest)
 
+    def _live_peers(self, link: str) -> list[tuple[str, int]]:
+        peers = self.peers[link]
+        if not peers:
+            return []
+        now = self._monotonic()
+        return [a for a, t in peers.items() if now - t <= PEER_TIMEOUT_S]
+
+    def _heard(self, link: str, addr: tuple[str, int]) -> None:
+        """A valid (and, with a key, authenticated) message came from addr: it gets the link's
+        telemetry until it has been silent for PEER_TIMEOUT_S. Garbage makes nobody a peer;
+        a full table makes room by dropping its longest-silent peer, so that junk senders can
+        never lock a ground station out."""
+        now = self._monotonic()
+        peers = self.peers[link]
+        peers.pop(addr, None)
+        for old in [a for a, t in peers.items() if now - t > PEER_TIMEOUT_S]:
+            del peers[old]
+        if len(peers) >= MAX_PEERS:
+            del peers[min(peers, key=peers.get)]
+        peers[addr] = now
+
     def on_datagram(self, link: str, data: bytes, addr) -> None:
         addr = tuple(addr[:2])
-        peers = self.peers[link]
-        if addr not in peers and len(peers) < MAX_PEERS:
-            peers.append(addr)
-        for msg in self.codecs[link].decode(data):
+        msgs = self.codecs[link].decode(data)
+        if msgs:
+            self._heard(link, addr)
+        for msg in msgs:
             if self.tlog:
                 self.tlog.write(self._wall_us(), bytes(msg.get_msgbuf()))
             self.send(self.sitl.handle(link, msg, addr))

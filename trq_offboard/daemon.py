@@ -143,7 +143,11 @@ def main(argv: list[str] | None = None) -> int:
             return 128 + (received[0] if received else signal.SIGINT)
         finally:
             link.close()
+        st = link.stats
         print(f"trq-offboard: {summary.line()}" + (f"; logs in {log_dir}" if log_dir else ""))
+        print(f"trq-offboard link: {st.messages} messages in {st.datagrams} datagrams, "
+              f"{st.bad} bad or untrusted, {st.other_peer} from another address, "
+              f"{st.sent} sent", file=sys.stderr)
         return 0 if summary.disarmed and not summary.crashed else 1
 
     try:

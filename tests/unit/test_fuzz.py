@@ -350,3 +350,28 @@ def test_controller_link_random_bytes(parts, signed, raising):
     if signed:
         assert got == []               # nothing unsigned is trusted
     assert link.stats.messages == len(got)
+
+
+def test_controller_link_locks_onto_the_vehicle_that_talks():
+    """udpin: the first sender of valid vehicle messages is the peer; a second address with the
+    same system id neither receives the commands nor feeds states while the first one talks;
+    after PEER_TIMEOUT_S of silence a vehicle restarted on another port is taken."""
+    from trq_offboard.link.udp import PEER_TIMEOUT_S
+
+    now = [0.0]
+    got = []
+    link = MavlinkUdp(Connection.parse("udpin:127.0.0.1:14540"),
+                      lambda m: got.append(m), monotonic=lambda: now[0])
+    vehicle, intruder = ("127.0.0.1", 14580), ("127.0.0.1", 9999)
+    link.datagram_received(_vehicle_frame(), vehicle)
+    assert link.peer == vehicle and len(got) == 1
+    now[0] += PEER_TIMEOUT_S / 2
+    link.datagram_received(_vehicle_frame(), intruder)
+    assert link.peer == vehicle and len(got) == 1 and link.stats.other_peer == 1
+    link.datagram_received(_vehicle_frame(), vehicle)           # the vehicle talks on
+    now[0] += PEER_TIMEOUT_S * 0.9
+    link.datagram_received(_vehicle_frame(), intruder)
+    assert link.peer == vehicle and link.stats.other_peer == 2
+    now[0] += PEER_TIMEOUT_S                                      # the vehicle went silent
+    link.datagram_received(_vehicle_frame(), intruder)
+    assert link.peer == intruder and len(got) == 3

@@ -1,6 +1,8 @@
 """A MAVLink endpoint over UDP for asyncio, with connection strings as in MAVProxy / MAVSDK:
 
-    udpin:HOST:PORT    listen on HOST:PORT; answer whoever sends (PX4's offboard API port 14540)
+    udpin:HOST:PORT    listen on HOST:PORT; answer the vehicle that sends (PX4's offboard API
+                       port 14540): the first sender of a valid system-1 message, locked while
+                       it talks (PEER_TIMEOUT_S)
     udpout:HOST:PORT   send to HOST:PORT from an ephemeral port
 
 Incoming datagrams are parsed frame by frame (a fresh parse per datagram: frames never span
@@ -11,6 +13,8 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import math
+import time
 from dataclasses import dataclass
 from typing import Callable
 
@@ -19,6 +23,8 @@ from pymavlink.dialects.v20 import common as mavlink
 from trq_offboard.link.signing import Verifier, enable_signing
 
 log = logging.getLogger("trq_offboard.link")
+
+PEER_TIMEOUT_S = 2.0       # udpin: silence after which another address may become the peer
 
 
 @dataclass(frozen=True)
@@ -43,13 +49,16 @@ class LinkStats:
     messages: int = 0
     bad: int = 0
     sent: int = 0
+    other_peer: int = 0      # udpin: valid messages from an address other than the vehicle's
 
 
 class MavlinkUdp(asyncio.DatagramProtocol):
     def __init__(self, connection: Connection, on_message: Callable[[object], None],
                  system_id: int = 255, component_id: int = 191,
-                 signing_key: bytes | None = None) -> None:
+                 signing_key: bytes | None = None, monotonic=time.monotonic) -> None:
         self.connection = connection
+        self._monotonic = monotonic
+        self._peer_heard = -math.inf
         self.on_message = on_message
         self.stats = LinkStats()
         self._tx = mavlink.MAVLink(None, srcSystem=system_id, srcComponent=component_id)
@@ -89,8 +98,9 @@ class MavlinkUdp(asyncio.DatagramProtocol):
             if self._verifier is not None and not self._verifier.trusted(bytes(msg.get_msgbuf())):
                 self.stats.bad += 1            # unsigned, forged or replayed: not trusted
                 continue
-            if self.connection.mode == "udpin":
-                self.peer = tuple(addr[:2])
+            if self.connection.mode == "udpin" and not self._from_peer(tuple(addr[:2])):
+                self.stats.other_peer += 1
+                continue
             self.stats.messages += 1
             if self.on_frame:
                 self.on_frame(bytes(msg.get_msgbuf()))
@@ -98,6 +108,20 @@ class MavlinkUdp(asyncio.DatagramProtocol):
                 self.on_message(msg)
             except Exception:
                 log.exception("error handling %s", msg.get_type())
+
+    def _from_peer(self, addr: tuple[str, int]) -> bool:
+        """udpin: the first sender of a valid system-1 message becomes the peer (where the
+        commands go) and stays it while it talks; another address takes over only after the
+        peer has been silent for PEER_TIMEOUT_S (a vehicle restarted on another port), so a
+        second sender cannot divert the commands or feed states from elsewhere."""
+        now = self._monotonic()
+        if self.peer is not None and addr != self.peer \
+                and now - self._peer_heard <= PEER_TIMEOUT_S:
+            return False
+        if addr != self.peer:
+            log.info("vehicle peer is %s:%d", *addr)
+        self.peer, self._peer_heard = addr, now
+        return True
 
     def error_received(self, exc: Exception) -> None:
         log.debug("link error: %s", exc)
