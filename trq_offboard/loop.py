@@ -30,6 +30,7 @@ TAKEOVER_ALTITUDE_M = 0.3         # higher than this, armed: the vehicle is flyi
 MAX_MODE_REQUESTS = 5
 TOUCHDOWN_SPEED_M_S = 0.15
 IDLE_STEPS_BEFORE_DISARM = 10
+LAND_DETECT_S = 0.2                # on the ground and still this long while landing: landed
 IDLE = ActuatorCommand((0.0,) * 4, (0.0,) * 4)   # motors at idle, tilts centred
 
 
@@ -233,12 +234,21 @@ class OffboardFlight:
                 raise FlightError(f"arming refused (MAV_RESULT {result})")
         ground_z = wire.HOME_GROUND_DOWN_M if airborne else first.state.pos_ned_m[2]
         answered = 0
+        down_since: float | None = None
         while True:
             odo = await self._next_odometry()
             t = (odo.stamp_us - t0) * 1e-6
-            if reference.done(t) and self._touched_down(odo.state, ground_z):
-                break
             ref = reference.sample(t)
+            # land detector: on the ground and still, in the landing phase, for LAND_DETECT_S
+            # (the plan aims a little below the ground; pushing on the ground longer only
+            # winds the observer up and makes the motors thrash), or the plan is over
+            if self._touched_down(odo.state, ground_z) and (ref.phase == "land"
+                                                            or reference.done(t)):
+                down_since = t if down_since is None else down_since
+                if reference.done(t) or t - down_since >= LAND_DETECT_S:
+                    break
+            else:
+                down_since = None
             applied = self.applied
             wall0 = time.perf_counter()
             cmd, info = await loop.run_in_executor(None, self.controller.step, t, odo.state,

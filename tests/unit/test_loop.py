@@ -280,3 +280,43 @@ def test_plan_without_landing_never_idles_the_motors_in_the_air():
         assert not link.commands(0.0), "disarm commanded in flight"
 
     asyncio.run(scenario())
+
+
+class LandingReference(FakeReference):
+    """Landing from the start and never done: only the land detector can end the flight."""
+
+    def sample(self, t_s):
+        return ReferenceSample((0.0, 0.0, 0.2), (0.0, 0.0, 0.1), 0.0, "land")
+
+
+def test_land_detector_ends_the_landing_once_down_and_still():
+    from trq_offboard.loop import LAND_DETECT_S
+
+    async def scenario():
+        flight, link, ctl = make_flight(LandingReference(done_at_s=1e9))
+        task = asyncio.create_task(flight.run())
+        await take_off(flight, link)
+        stamp = 10_000
+        # in the air, then one touch and a bounce: the detector restarts
+        for down in (-0.5, -0.2, 0.0, -0.2):
+            flight.on_message(odometry(stamp, down_m=down))
+            await until(lambda: link.targets(stamp), f"the target of stamp {stamp}")
+            stamp += 10_000
+        steps_before = len(ctl.steps)
+        first_down = stamp
+        while not link.commands(0.0):
+            flight.on_message(odometry(stamp, down_m=0.0))
+            await until(lambda: link.targets(stamp) or link.commands(0.0), f"answer to {stamp}")
+            stamp += 10_000
+            assert stamp - first_down <= 2e6 * LAND_DETECT_S, "the detector did not fire"
+        # commanded while down for LAND_DETECT_S (0.01 s stamps), then idle only
+        down_steps = len(ctl.steps) - steps_before
+        assert down_steps == pytest.approx(LAND_DETECT_S / 0.01, abs=1)
+        idle = [m for m in link.targets() if m.time_usec > first_down + 1e6 * LAND_DETECT_S]
+        assert idle and all(list(m.controls) == [0.0] * 8 for m in idle)
+        flight.on_message(ack(mavlink.MAV_RESULT_ACCEPTED))
+        flight.on_message(odometry(stamp, down_m=0.0))
+        summary = await asyncio.wait_for(task, WAIT_S)
+        assert summary.landed and summary.disarmed
+
+    asyncio.run(scenario())
