@@ -64,6 +64,7 @@ class Controller:
         self._rollout = self.model.discrete(self.h, 1)
         self._step_dt = self.model.discrete_dt()
         self.delay_s = (cfg.applied_delay_s if cfg.delay_compensation == "predict" else 0.0)
+        # auto: through the lags whenever there is a delay (nmpc.yaml: measured)
         self._lagged = cfg.lagged_actuators == "on" or (cfg.lagged_actuators == "auto"
                                                         and cfg.applied_delay_s > 0.0)
         tilts = 4 if self.model.tilting else 0

@@ -99,3 +99,4 @@ def test_no_delay_no_prediction():
     ctl = controller("auto", delay_s=0.0)
     assert ctl.delay_s == 0.0 and not ctl._lagged
     assert controller("auto")._lagged and controller("off").delay_s == DELAY_S
+    assert controller("auto", delay_s=0.005)._lagged and not controller("off")._lagged
