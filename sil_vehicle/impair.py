@@ -10,6 +10,7 @@ decides, the lockstep never waits for an answer to a message it dropped.
 from __future__ import annotations
 
 import heapq
+import zlib
 from dataclasses import dataclass
 from typing import Any
 
@@ -30,21 +31,36 @@ class ImpairParams:
 
 
 class Impairment:
-    """One direction of one link: `offer(now_us, item)` then `due(now_us)`."""
+    """One direction of one link: `offer(now_us, item, kind)` then `due(now_us)`.
 
-    def __init__(self, params: ImpairParams, rng: np.random.Generator) -> None:
+    Each kind of message (its MAVLink type) draws from its own random stream, derived from the
+    link's seed and the kind's name: what happens to the actuator targets depends only on the
+    targets, not on how many heartbeats or command replies the wall clock slipped in between
+    (a controller's 1 Hz heartbeat is timed by its wall clock, even in lockstep). That keeps an
+    impaired lockstep flight reproducible bit for bit."""
+
+    def __init__(self, params: ImpairParams, seed: np.random.SeedSequence) -> None:
         self.p = params
-        self._rng = rng
+        self._seed = seed
+        self._rngs: dict[str, np.random.Generator] = {}
         self._queue: list[tuple[int, int, Any]] = []
         self._n = 0
         self.lost = 0
         self.duplicated = 0
         self.reordered = 0
 
-    def offer(self, now_us: int, item: Any) -> bool:
+    def _rng(self, kind: str) -> np.random.Generator:
+        rng = self._rngs.get(kind)
+        if rng is None:
+            seq = np.random.SeedSequence(self._seed.entropy, spawn_key=(
+                *self._seed.spawn_key, zlib.crc32(kind.encode("utf-8"))))
+            rng = self._rngs[kind] = np.random.default_rng(seq)
+        return rng
+
+    def offer(self, now_us: int, item: Any, kind: str = "") -> bool:
         """Queue an item for delivery; False if it is lost."""
         p = self.p
-        u = self._rng.random(4)             # always four draws: the stream stays aligned
+        u = self._rng(kind).random(4)       # always four draws: the stream stays aligned
         if u[0] < p.loss:
             self.lost += 1
             return False

@@ -73,14 +73,14 @@ class Sitl:
         self._newest_target_us = -1
         self.counters = {name: RxCounters() for name in LINKS}
         # a bad link on purpose: per link, one impairment each way (seeded, simulated time)
-        link_rngs = iter(np.random.default_rng(s) for s in link_seq.spawn(2 * len(LINKS)))
+        link_seqs = iter(link_seq.spawn(2 * len(LINKS)))
         self._down: dict[str, Impairment] = {}
         self._up: dict[str, Impairment] = {}
         for link in sim.links:
-            down_rng, up_rng = next(link_rngs), next(link_rngs)
+            down_seq, up_seq = next(link_seqs), next(link_seqs)
             if link.impair.active:
-                self._down[link.name] = Impairment(link.impair, down_rng)
-                self._up[link.name] = Impairment(link.impair, up_rng)
+                self._down[link.name] = Impairment(link.impair, down_seq)
+                self._up[link.name] = Impairment(link.impair, up_seq)
         self.periods = {link.name: {s: (sim.physics_rate_hz // hz if hz else 0)
                                     for s, hz in link.rates_hz} for link in sim.links}
         self.default_periods = {k: dict(v) for k, v in self.periods.items()}
@@ -143,7 +143,7 @@ class Sitl:
                 if down is None:
                     kept.append(item)
                 else:
-                    down.offer(self.t_us, item)
+                    down.offer(self.t_us, item, item.msg.get_type())
             for down in self._down.values():
                 kept += down.due(self.t_us)
             out = kept
@@ -294,7 +294,7 @@ class Sitl:
         if msg.get_type() == "SET_ACTUATOR_CONTROL_TARGET" \
                 and int(msg.time_usec) == self.lockstep_stamp_us:
             self.answered = True
-        if up.offer(self.t_us, (msg, sender)):
+        if up.offer(self.t_us, (msg, sender), msg.get_type()):
             return self._deliver([r for m, s in up.due(self.t_us)
                                   for r in self._handle(link, m, s)])
         self.counters[link].impaired_lost += 1

@@ -397,8 +397,9 @@ class ControllerConfig:
     reference: ReferenceConfig
     applied_input: str = "commanded"      # commanded | outputs: what the controller takes as applied
     applied_delay_s: float = 0.0          # how long a command takes to act (observer's b0)
-    delay_compensation: str = "predict"   # predict | none: plan from the state at t + delay
-    lagged_actuators: str = "auto"        # on | off | auto (on when applied_delay_s > 0): the
+    delay_compensation: str = "auto"      # predict | none | auto (predict from one control
+                                          # period of delay): plan from the state at t + delay
+    lagged_actuators: str = "auto"        # on | off | auto (on when predicting): the
                                           # observer's b0 and the predictor through the lags
 
     @property
@@ -453,7 +454,7 @@ def _controller(k: _Keys, path: Path) -> ControllerConfig:
     ok.close()
     applied_input = k.text("applied_input", ("commanded", "outputs"))
     applied_delay = k.number("applied_delay_s", 0.0, 1.0)
-    delay_comp = k.text("delay_compensation", ("predict", "none"), default="predict")
+    delay_comp = k.text("delay_compensation", ("predict", "none", "auto"), default="auto")
     lagged = k.text("lagged_actuators", ("on", "off", "auto"), default="auto")
     eso = None
     if observer != "none":

@@ -63,10 +63,14 @@ class Controller:
         self.N, self.h = cfg.horizon_steps, cfg.step_s
         self._rollout = self.model.discrete(self.h, 1)
         self._step_dt = self.model.discrete_dt()
-        self.delay_s = (cfg.applied_delay_s if cfg.delay_compensation == "predict" else 0.0)
-        # auto: through the lags whenever there is a delay (nmpc.yaml: measured)
+        # auto: predict, and through the actuator lags, once the delay reaches one control
+        # period; below it the observer's delayed b0 alone does better (nmpc.yaml: measured)
+        long_delay = cfg.applied_delay_s >= cfg.control_dt_s - 1e-12
+        predict = cfg.delay_compensation == "predict" or (cfg.delay_compensation == "auto"
+                                                          and long_delay)
+        self.delay_s = cfg.applied_delay_s if predict else 0.0
         self._lagged = cfg.lagged_actuators == "on" or (cfg.lagged_actuators == "auto"
-                                                        and cfg.applied_delay_s > 0.0)
+                                                        and predict and self.delay_s > 0.0)
         tilts = 4 if self.model.tilting else 0
         self._tau = np.array([vm.servo_time_constant_s] * tilts + [vm.motor_time_constant_s] * 4)
         self._rate_limit = np.array([vm.servo_rate_limit_rad_s] * tilts

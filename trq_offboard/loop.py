@@ -30,6 +30,7 @@ TAKEOVER_ALTITUDE_M = 0.3         # higher than this, armed: the vehicle is flyi
 MAX_MODE_REQUESTS = 5
 TOUCHDOWN_SPEED_M_S = 0.15
 IDLE_STEPS_BEFORE_DISARM = 10
+ACK_TIMEOUT_VEHICLE_US = 300_000   # a command's ACK missing this long in vehicle time: resend
 LAND_DETECT_S = 0.2                # on the ground and still this long while landing: landed
 IDLE = ActuatorCommand((0.0,) * 4, (0.0,) * 4)   # motors at idle, tilts centred
 
@@ -172,11 +173,15 @@ class OffboardFlight:
             self._acks[command_id] = fut
             self.link.send(msg)
             deadline = loop.time() + self.ack_timeout_s
+            sent_us = self.odometry.stamp_us if self.odometry is not None else None
             while not fut.done() and loop.time() < deadline:
                 if hold is None:
                     await asyncio.wait({fut}, timeout=deadline - loop.time())
                     break
                 odo = self.odometry
+                if odo is not None and sent_us is not None \
+                        and odo.stamp_us - sent_us >= ACK_TIMEOUT_VEHICLE_US:
+                    break          # lost (vehicle time: in lockstep it runs on our answers)
                 if odo is not None and odo.stamp_us != self._answered_stamp:
                     self._answer(odo.stamp_us, hold)
                 self._new_odometry.clear()
@@ -217,13 +222,11 @@ class OffboardFlight:
                               f"{self.link.connection.mode}:{self.link.connection.host}:"
                               f"{self.link.connection.port}") from None
         first = await self._next_odometry()
-        t0 = first.stamp_us
+        ground_z = first.state.pos_ned_m[2]       # on the ground, before arming
         # taking over a flying vehicle (a restarted controller, or after the vehicle's failsafe):
         # no take-off and no arming; observer and plan start from the measured state
         airborne = wire.is_armed(self.heartbeat) and \
             first.state.pos_ned_m[2] < wire.HOME_GROUND_DOWN_M - TAKEOVER_ALTITUDE_M
-        reference = self.make_reference(first.state, airborne)
-        self.controller.reset(0.0, first.state)
         self.summary.took_over = airborne
         if airborne:
             log.info("taking over a flying vehicle at %.2f m", -first.state.pos_ned_m[2])
@@ -232,11 +235,20 @@ class OffboardFlight:
                                          mavlink.MAV_CMD_COMPONENT_ARM_DISARM, hold=IDLE)
             if result != mavlink.MAV_RESULT_ACCEPTED:
                 raise FlightError(f"arming refused (MAV_RESULT {result})")
-        ground_z = wire.HOME_GROUND_DOWN_M if airborne else first.state.pos_ned_m[2]
+            # the plan's clock starts with the first state after arming (which may have
+            # taken a few control periods, or retries, of vehicle time on a lossy link)
+            first = await self._next_odometry()
+        t0 = first.stamp_us
+        reference = self.make_reference(first.state, airborne)
+        self.controller.reset(0.0, first.state)
+        if airborne:
+            ground_z = wire.HOME_GROUND_DOWN_M
         answered = 0
         down_since: float | None = None
+        pending: wire.Odometry | None = first
         while True:
-            odo = await self._next_odometry()
+            odo = pending if pending is not None else await self._next_odometry()
+            pending = None
             t = (odo.stamp_us - t0) * 1e-6
             ref = reference.sample(t)
             # land detector: on the ground and still, in the landing phase, for LAND_DETECT_S

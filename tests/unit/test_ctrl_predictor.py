@@ -26,6 +26,7 @@ class _NoSolver:
 def controller(lagged: str, delay_s: float = DELAY_S) -> Controller:
     cfg = dataclasses.replace(load_controller(CTRL), applied_delay_s=delay_s,
                               lagged_actuators=lagged)
+    assert cfg.delay_compensation == "auto"
     return Controller(cfg, solver=_NoSolver())
 
 
@@ -99,4 +100,11 @@ def test_no_delay_no_prediction():
     ctl = controller("auto", delay_s=0.0)
     assert ctl.delay_s == 0.0 and not ctl._lagged
     assert controller("auto")._lagged and controller("off").delay_s == DELAY_S
-    assert controller("auto", delay_s=0.005)._lagged and not controller("off")._lagged
+    assert not controller("off")._lagged
+    # auto: nothing is predicted below one control period (10 ms; real time's solve latency)
+    short = controller("auto", delay_s=0.005)
+    assert short.delay_s == 0.0 and not short._lagged
+    cfg = dataclasses.replace(load_controller(CTRL), applied_delay_s=0.005,
+                              delay_compensation="predict", lagged_actuators="auto")
+    forced = Controller(cfg, solver=_NoSolver())
+    assert forced.delay_s == 0.005 and forced._lagged

@@ -126,7 +126,7 @@ async def take_off(flight, link) -> None:
 
 def test_arms_then_answers_each_stamp_once_and_lands():
     async def scenario():
-        flight, link, ctl = make_flight(FakeReference(done_at_s=0.03))
+        flight, link, ctl = make_flight(FakeReference(done_at_s=0.02))
         task = asyncio.create_task(flight.run())
         flight.on_message(heartbeat())
         await settle()
@@ -144,12 +144,13 @@ def test_arms_then_answers_each_stamp_once_and_lands():
         flight.on_message(ack(mavlink.MAV_RESULT_ACCEPTED))
         await settle()
 
-        # one new stamp, one target with that stamp, computed from that state
+        # one new stamp, one target with that stamp, computed from that state; the plan's clock
+        # starts with the first state after arming
         flight.on_message(odometry(10_000, down_m=-0.5))
         await until(lambda: link.targets(10_000), "the target of stamp 10000")
         await settle()
         assert len(link.targets(10_000)) == 1 and len(link.targets()) == 2
-        assert [t for t, _ in ctl.steps] == pytest.approx([0.01])
+        assert [t for t, _ in ctl.steps] == pytest.approx([0.0])
         assert ctl.steps[-1][1].pos_ned_m[2] == pytest.approx(-0.5)
         first = link.targets(10_000)[0]
         assert list(first.controls) == pytest.approx(
@@ -171,7 +172,7 @@ def test_arms_then_answers_each_stamp_once_and_lands():
         await until(lambda: link.targets(20_000), "the target of stamp 20000")
         assert len(ctl.steps) == 2
 
-        # the plan is over (t >= 0.03 s) and the vehicle is on the ground: idle, then disarm
+        # the plan is over (t >= 0.02 s) and the vehicle is on the ground: idle, then disarm
         stamp = 30_000
         while not link.commands(0.0):
             flight.on_message(odometry(stamp, down_m=0.0))
@@ -267,7 +268,7 @@ def test_telemetry_lost_for_good_is_a_flight_error():
 
 def test_plan_without_landing_never_idles_the_motors_in_the_air():
     async def scenario():
-        flight, link, ctl = make_flight(FakeReference(done_at_s=0.02, land=False))
+        flight, link, ctl = make_flight(FakeReference(done_at_s=0.01, land=False))
         task = asyncio.create_task(flight.run())
         await take_off(flight, link)
         for stamp in (10_000, 20_000):
@@ -318,5 +319,32 @@ def test_land_detector_ends_the_landing_once_down_and_still():
         flight.on_message(odometry(stamp, down_m=0.0))
         summary = await asyncio.wait_for(task, WAIT_S)
         assert summary.landed and summary.disarmed
+
+    asyncio.run(scenario())
+
+
+def test_a_lost_arm_is_resent_after_vehicle_time_not_wall_time():
+    """In lockstep, answering stamps while ARM waits lets vehicle time run as fast as the
+    exchange goes: a lost ARM (a lossy link) must be resent after ACK_TIMEOUT_VEHICLE_US of
+    vehicle time (it waited a wall-clock second: 30 s of flight time went by)."""
+    from trq_offboard.loop import ACK_TIMEOUT_VEHICLE_US
+
+    async def scenario():
+        flight, link, ctl = make_flight(ack_timeout_s=30.0)
+        task = asyncio.create_task(flight.run())
+        flight.on_message(heartbeat())
+        flight.on_message(odometry(0))
+        await until(lambda: link.commands(1.0), "the ARM command")
+        stamp = 10_000
+        while stamp < ACK_TIMEOUT_VEHICLE_US:
+            flight.on_message(odometry(stamp))
+            await until(lambda: link.targets(stamp), f"the idle answer to {stamp}")
+            assert len(link.commands(1.0)) == 1, f"resent early, at {stamp}"
+            stamp += 10_000
+        flight.on_message(odometry(stamp))
+        await until(lambda: len(link.commands(1.0)) == 2, "the ARM resent")
+        assert not ctl.steps and all(list(m.controls) == [0.0] * 8 for m in link.targets())
+        task.cancel()
+        await asyncio.gather(task, return_exceptions=True)
 
     asyncio.run(scenario())

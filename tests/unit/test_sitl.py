@@ -480,3 +480,30 @@ def test_lockstep_resend_bypasses_the_simulated_impairment(sim):
     assert of(out, "HEARTBEAT", "offboard") and of(out, "ODOMETRY", "offboard")
     assert s.lockstep_stamp_us == 0 and not s.answered
     assert offboard(s.telemetry_due(everything=True)) == []     # the impairment is still there
+
+
+def test_impaired_lockstep_does_not_depend_on_wall_clock_traffic(sim):
+    """A controller's heartbeat (1 Hz of its wall clock) lands between targets at places that
+    vary from run to run; on a lossy link that must not change which targets are lost or when
+    they act (it did: one random stream for every message made impaired flights differ)."""
+    heartbeat = wire(mavlink.MAVLink_heartbeat_message(
+        mavlink.MAV_TYPE_ONBOARD_CONTROLLER, mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 0, 3))
+
+    def fly(extra_every: int | None):
+        s = impaired(sim, loss=0.3, delay_ms=10.0)
+        s.telemetry_due()
+        history = []
+        for k in range(150):
+            if not s.answered:
+                throttle = [0.2 + 0.001 * (k % 50)] * 4
+                s.handle("offboard", target(s.lockstep_stamp_us, throttle))
+            if extra_every and k % extra_every == 0:
+                s.handle("offboard", heartbeat)
+            for _ in range(s.lockstep_ticks()):
+                s.step()
+            history.append((s.t_us, s.vehicle.command.throttle_pct))
+        return history, s.counters["offboard"].impaired_lost
+
+    base, lost = fly(None)
+    assert lost > 10                                         # the link did lose targets
+    assert fly(7)[0] == base and fly(3)[0] == base           # (the heartbeats lost count apart)
