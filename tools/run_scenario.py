@@ -197,7 +197,7 @@ def fly(scenario: Scenario, run: Run, realtime: bool, lock: threading.Lock,
         vcmd.append("--gusts")
     if scenario.faults:
         vcmd += ["--faults", str(scenario.faults)]
-    # how long a command takes to act: the link's delay, plus in real time about a solve
+    # how long a command takes to act: the link's round trip, plus in real time about a solve
     delay_s = command_delay_s(scenario.offboard_impair, realtime)
     ccmd = [sys.executable, "-m", "trq_offboard", "--controller", str(ctrl_yaml), "--connect",
             f"udpin:127.0.0.1:{p_ctrl}", "--log-dir", str(run.out),

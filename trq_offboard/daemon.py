@@ -55,9 +55,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-log", action="store_true", help="write no logs")
     p.add_argument("--applied-delay-s", type=float, default=None,
                    help="how long a command takes to act after the state it answers was "
-                        "measured (the observer's b0): 0 in lockstep (the default of the "
-                        "controller file), about the solve time plus the link latency in real "
-                        "time")
+                        "measured (the observer's b0 and, from one control period on, the "
+                        "delay predictor): 0 in lockstep on a clean link (the default of the "
+                        "controller file), the link's round trip on a slow one, plus about "
+                        "the solve time in real time")
     p.add_argument("--signing-key-file", type=Path, default=None,
                    help="MAVLink 2 signing: a file with the 32-byte secret as 64 hex characters; "
                         "everything sent is signed and only signed, fresh telemetry is trusted")

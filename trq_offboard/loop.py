@@ -222,12 +222,12 @@ class OffboardFlight:
                               f"{self.link.connection.mode}:{self.link.connection.host}:"
                               f"{self.link.connection.port}") from None
         first = await self._next_odometry()
-        ground_z = first.state.pos_ned_m[2]       # on the ground, before arming
         # taking over a flying vehicle (a restarted controller, or after the vehicle's failsafe):
         # no take-off and no arming; observer and plan start from the measured state
         airborne = wire.is_armed(self.heartbeat) and \
             first.state.pos_ned_m[2] < wire.HOME_GROUND_DOWN_M - TAKEOVER_ALTITUDE_M
         self.summary.took_over = airborne
+        ground_z = wire.HOME_GROUND_DOWN_M if airborne else first.state.pos_ned_m[2]
         if airborne:
             log.info("taking over a flying vehicle at %.2f m", -first.state.pos_ned_m[2])
         elif not wire.is_armed(self.heartbeat):
@@ -241,8 +241,6 @@ class OffboardFlight:
         t0 = first.stamp_us
         reference = self.make_reference(first.state, airborne)
         self.controller.reset(0.0, first.state)
-        if airborne:
-            ground_z = wire.HOME_GROUND_DOWN_M
         answered = 0
         down_since: float | None = None
         pending: wire.Odometry | None = first
