@@ -75,6 +75,7 @@ class Controller:
         self._tau = np.array([vm.servo_time_constant_s] * tilts + [vm.motor_time_constant_s] * 4)
         self._rate_limit = np.array([vm.servo_rate_limit_rad_s] * tilts
                                     + [vm.motor_rate_limit_pct_s] * 4)
+        self._gains: dict[float, np.ndarray] = {}
         self._u_lo = np.array(([vm.tilt_min_rad] * 4 if self.model.tilting else [])
                               + [vm.idle_pct] * 4)
         self._u_hi = np.array(([vm.tilt_max_rad] * 4 if self.model.tilting else []) + [100.0] * 4)
@@ -123,13 +124,14 @@ class Controller:
         eta_acc = np.asarray(self.model.euler_accel(x, u, np.zeros(6))).ravel()
         return np.concatenate([acc[0:3], eta_acc])
 
-    def _b0_delayed(self, x: np.ndarray, t0: float, t1: float) -> np.ndarray:
+    def _b0_delayed(self, x: np.ndarray, t0: float, t1: float, path=None) -> np.ndarray:
         """b0 averaged over [t0, t1] with each command acting applied_delay_s after it was sent
         (the time of the state it answered): the commands that were really in effect."""
         total = np.zeros(6)
         if self._lagged:
-            for a, b, y in self._actuator_path(t0, t1):
-                total += (b - a) * self._b0(x, y)
+            for a, b, y in (path if path is not None else self._actuator_path(t0, t1)):
+                if t0 <= a and b <= t1:
+                    total += (b - a) * self._b0(x, y)
             return total / (t1 - t0)
         if self.cfg.applied_delay_s <= 0.0 or not self._sent:
             return self._b0(x, self._last_u)
@@ -153,17 +155,19 @@ class Controller:
                 segs.append((lo, hi, u))
         return segs
 
-    def _actuator_path(self, t0: float, t1: float):
+    def _actuator_path(self, t0: float, t1: float, cut: float | None = None):
         """The actuators over [t0, t1] as (a, b, y_mid) steps of at most PREDICT_STEP_S: the
         commands in effect (each from its state's stamp + applied_delay_s) through the
         actuators' first-order lags and rate limits (vehicle file: motor and servo time
         constants, which the NMPC's model leaves out), y_mid at each step's midpoint. Their
-        state at t0 is rebuilt from the remembered commands (32 periods: many time constants)."""
+        state at t0 is rebuilt from the remembered commands (32 periods: many time constants).
+        `cut`: a time in (t0, t1) that no step straddles (one path serves the observer before
+        it and the predictor after it)."""
         segs = self._in_effect(-math.inf, t1)
         y = segs[0][2].copy()
         path = []
         for lo, hi, u in segs:
-            cuts = [lo] + ([t0] if lo < t0 < hi else []) + [hi]
+            cuts = [lo] + [c for c in (t0, cut) if c is not None and lo < c < hi] + [hi]
             for a, b in zip(cuts[:-1], cuts[1:]):
                 if b <= a or not math.isfinite(a):
                     continue
@@ -175,7 +179,8 @@ class Controller:
                     y = self._lag(y, u, h)
         return path
 
-    def _predict(self, x: np.ndarray, t0: float, t1: float, d: np.ndarray) -> np.ndarray:
+    def _predict(self, x: np.ndarray, t0: float, t1: float, d: np.ndarray,
+                 path=None) -> np.ndarray:
         """The state at t1 predicted from the one measured at t0: the delay compensation of a
         link whose round trip is applied_delay_s (a Smith predictor's role). The model (RK4)
         is driven by the commands in flight, sent but not yet acting when x was measured
@@ -183,8 +188,9 @@ class Controller:
         held."""
         xk = x
         if self._lagged:
-            for a, b, y in self._actuator_path(t0, t1):
-                xk = self._step_dt(xk, y, d, b - a)
+            for a, b, y in (path if path is not None else self._actuator_path(t0, t1)):
+                if t0 <= a and b <= t1:
+                    xk = self._step_dt(xk, y, d, b - a)
         else:
             for lo, hi, u in self._in_effect(t0, t1):
                 n = max(1, math.ceil((hi - lo) / PREDICT_STEP_S - 1e-9))
@@ -200,8 +206,12 @@ class Controller:
         return y + np.clip(step, -lim, lim)
 
     def _lag_gain(self, dt: float) -> np.ndarray:
-        with np.errstate(divide="ignore"):
-            return np.where(self._tau > 0.0, -np.expm1(-dt / np.maximum(self._tau, 1e-12)), 1.0)
+        gain = self._gains.get(dt)           # the same few step lengths come back every period
+        if gain is None:
+            gain = np.where(self._tau > 0.0, -np.expm1(-dt / np.maximum(self._tau, 1e-12)), 1.0)
+            if len(self._gains) < 256:
+                self._gains[dt] = gain
+        return gain
 
     def _euler_rate(self, x: np.ndarray) -> np.ndarray:
         return np.asarray(self.model.f(x, self._last_u, np.zeros(6))).ravel()[6:9]
@@ -221,6 +231,11 @@ class Controller:
                      else self._last_u)
         d = np.zeros(6)
         out_err = 0.0
+        # the actuators through their lags from the last step to when this command acts: one
+        # path for the observer (before t_s) and the predictor (after it)
+        t_act = t_s + self.delay_s
+        path = (self._actuator_path(min(self._last_t, t_s), t_act, t_s) if self._lagged
+                else None)
         if self.eso is not None:
             y = np.concatenate([x[0:3], x[6:9]])
             if t_s > self._last_t:
@@ -228,7 +243,7 @@ class Controller:
                 if self.cfg.applied_input == "outputs" and applied is not None:
                     b0 = self._b0(x, u_applied)
                 else:
-                    b0 = self._b0_delayed(x, self._last_t, t_s)
+                    b0 = self._b0_delayed(x, self._last_t, t_s, path)
                 self.eso.update(y, b0, dt)
             d = self.eso.disturbance(x[6:9])
             out_err = self.eso.output_error(y)
@@ -236,8 +251,7 @@ class Controller:
         self._last_d = d
 
         # the command computed now acts from t_act: plan from the state predicted for then
-        t_act = t_s + self.delay_s
-        x0 = self._predict(x, t_s, t_act, d) if self.delay_s > 0.0 else x
+        x0 = self._predict(x, t_s, t_act, d, path) if self.delay_s > 0.0 else x
         self._last_t_act = t_act
         x_ref = self._reference_states(t_act, x0, reference)
         guess = self._guess(t_act, x0, d)
