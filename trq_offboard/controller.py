@@ -130,7 +130,7 @@ class Controller:
         total = np.zeros(6)
         if self._lagged:
             for a, b, y in (path if path is not None else self._actuator_path(t0, t1)):
-                if t0 <= a and b <= t1:
+                if t0 < 0.5 * (a + b) < t1:        # steps never straddle t0 or t1
                     total += (b - a) * self._b0(x, y)
             return total / (t1 - t0)
         if self.cfg.applied_delay_s <= 0.0 or not self._sent:
@@ -175,7 +175,8 @@ class Controller:
                 h = (b - a) / n
                 for i in range(n):
                     if a >= t0:
-                        path.append((a + i * h, a + (i + 1) * h, self._lag(y, u, 0.5 * h)))
+                        end = b if i == n - 1 else a + (i + 1) * h
+                        path.append((a + i * h, end, self._lag(y, u, 0.5 * h)))
                     y = self._lag(y, u, h)
         return path
 
@@ -189,7 +190,7 @@ class Controller:
         xk = x
         if self._lagged:
             for a, b, y in (path if path is not None else self._actuator_path(t0, t1)):
-                if t0 <= a and b <= t1:
+                if t0 < 0.5 * (a + b) < t1:        # steps never straddle t0 or t1
                     xk = self._step_dt(xk, y, d, b - a)
         else:
             for lo, hi, u in self._in_effect(t0, t1):

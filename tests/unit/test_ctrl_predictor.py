@@ -108,3 +108,27 @@ def test_no_delay_no_prediction():
                               delay_compensation="predict", lagged_actuators="auto")
     forced = Controller(cfg, solver=_NoSolver())
     assert forced.delay_s == 0.005 and forced._lagged
+
+
+def test_one_path_serves_the_observer_and_the_predictor():
+    """The step builds the actuators' path once, cut at the measurement time: the observer's
+    part and the predictor's part are exactly the two paths built on their own, none of their
+    steps lost to rounding at the cut (times that are not multiples of the step length)."""
+    ctl = controller("on")
+    hover = ctl.u_trim
+    up = hover.copy()
+    up[4:8] += 5.0
+    t_last, t_s = 1.0 / 3.0, 1.0 / 3.0 + 0.0101
+    fill(ctl, [(t_s - 0.0101 * k, hover if k % 2 else up) for k in range(31, -1, -1)])
+    x, d = hover_state(), np.zeros(6)
+    path = ctl._actuator_path(t_last, t_s + DELAY_S, t_s)
+    b0_alone = ctl._b0_delayed(x, t_last, t_s)
+    pred_alone = ctl._predict(x, t_s, t_s + DELAY_S, d)
+    assert ctl._b0_delayed(x, t_last, t_s, path) == pytest.approx(b0_alone, rel=1e-12, abs=1e-12)
+    assert ctl._predict(x, t_s, t_s + DELAY_S, d, path) == pytest.approx(pred_alone, rel=1e-9,
+                                                                          abs=1e-12)
+    # the steps cover both intervals exactly
+    before = sum(b - a for a, b, _ in path if 0.5 * (a + b) < t_s)
+    after = sum(b - a for a, b, _ in path if 0.5 * (a + b) > t_s)
+    assert before == pytest.approx(t_s - t_last, abs=1e-12)
+    assert after == pytest.approx(DELAY_S, abs=1e-12)
