@@ -133,10 +133,10 @@ class Sitl:
                 replies += self._handle(link, msg, sender)
         return self._deliver(out + replies + self._due_streams())
 
-    def _deliver(self, out: list[Outgoing]) -> list[Outgoing]:
-        """Pass outgoing messages through the impaired links, and note the lockstep stamp of
-        each offboard ODOMETRY that actually leaves."""
-        if self._down:
+    def _deliver(self, out: list[Outgoing], impaired: bool = True) -> list[Outgoing]:
+        """Pass outgoing messages through the impaired links (unless `impaired` is False), and
+        note the lockstep stamp of each offboard ODOMETRY that actually leaves."""
+        if self._down and impaired:
             kept = []
             for item in out:
                 down = self._down.get(item.link)
@@ -192,14 +192,7 @@ class Sitl:
         late in wall-clock time; that is the daemon's recovery from a real network's loss, not
         part of the simulated link, so it bypasses an impairment (whose delays run in
         simulated time, which stands still while the vehicle waits)."""
-        out = self._due_streams(everything)
-        if not resend:
-            return self._deliver(out)
-        down, self._down = self._down, {}
-        try:
-            return self._deliver(out)
-        finally:
-            self._down = down
+        return self._deliver(self._due_streams(everything), impaired=not resend)
 
     def _due_streams(self, everything: bool = False) -> list[Outgoing]:
         """Streams whose period divides the current tick (or one of each enabled stream)."""

@@ -82,7 +82,6 @@ class Controller:
         self._plan: tuple[np.ndarray, np.ndarray] | None = None
         self._plan_t = 0.0
         self._last_t: float | None = None
-        self._last_t_act = 0.0        # when the last command starts to act (t + delay_s)
         self._last_d = np.zeros(6)
         self._last_u = self.u_trim.copy()
         self._prev_u = self.u_trim.copy()
@@ -110,7 +109,6 @@ class Controller:
             self.eso.reset(np.concatenate([x[0:3], x[6:9]]), np.concatenate([x[3:6], eta_dot]))
         self._plan = None
         self._last_t = float(t_s)
-        self._last_t_act = float(t_s) + self.delay_s
         self._last_d = np.zeros(6)
         discard = getattr(self.solver, "discard", None)
         if discard is not None:
@@ -253,7 +251,6 @@ class Controller:
 
         # the command computed now acts from t_act: plan from the state predicted for then
         x0 = self._predict(x, t_s, t_act, d, path) if self.delay_s > 0.0 else x
-        self._last_t_act = t_act
         x_ref = self._reference_states(t_act, x0, reference)
         guess = self._guess(t_act, x0, d)
         u_plan, x_plan, info = self.solver.solve(x0, x_ref, d, u_applied, guess)
@@ -276,7 +273,7 @@ class Controller:
         prep = getattr(self.solver, "prepare", None)
         if prep is None or self._plan is None or self._last_t is None:
             return
-        t_next = self._last_t_act + self.cfg.control_dt_s
+        t_next = self._last_t + self.delay_s + self.cfg.control_dt_s   # when the next acts
         elapsed = t_next - self._plan_t
         if elapsed >= self.N * self.h:
             return

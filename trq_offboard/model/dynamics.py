@@ -121,11 +121,7 @@ class PredictionModel:
         h = dt_s / substeps
         xk = x
         for _ in range(substeps):
-            k1 = self.f(xk, u, d)
-            k2 = self.f(xk + 0.5 * h * k1, u, d)
-            k3 = self.f(xk + 0.5 * h * k2, u, d)
-            k4 = self.f(xk + h * k3, u, d)
-            xk = xk + h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+            xk = self._rk4(xk, u, d, h)
         return ca.Function("F", [x, u, d], [xk], ["x", "u", "d"], ["x_next"])
 
     def discrete_dt(self) -> ca.Function:
@@ -133,9 +129,13 @@ class PredictionModel:
         delay predictor, whose segments follow the stamps of the commands in flight)."""
         x, u, d = self._x, self._u, self._d
         h = ca.SX.sym("dt")
+        return ca.Function("F_dt", [x, u, d, h], [self._rk4(x, u, d, h)], ["x", "u", "d", "dt"],
+                           ["x_next"])
+
+    def _rk4(self, x, u, d, h):
+        """One RK4 step of length h with u and d held."""
         k1 = self.f(x, u, d)
         k2 = self.f(x + 0.5 * h * k1, u, d)
         k3 = self.f(x + 0.5 * h * k2, u, d)
         k4 = self.f(x + h * k3, u, d)
-        xk = x + h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
-        return ca.Function("F_dt", [x, u, d, h], [xk], ["x", "u", "d", "dt"], ["x_next"])
+        return x + h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
