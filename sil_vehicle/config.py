@@ -198,6 +198,7 @@ class SimParams:
     home_alt_m: float
     log_dir: str
     log_rate_hz: int
+    physics_core: str = "auto"   # "auto" | "compiled" | "python" (sil_vehicle/compiled.py)
 
     @property
     def dt_us(self) -> int:
@@ -245,6 +246,7 @@ def load_sim(path: Path | str, vehicle: Path | str | None = None) -> SimParams:
     if control == 0:
         raise top.fail("control_rate_hz", 0, "a rate > 0")
     seed = top.int("seed", 0, 2**63 - 1)
+    core = top.str("physics_core", ("auto", "compiled", "python"), default="auto")
     clock = top.section("clock")
     mode = clock.str("mode", ("lockstep", "realtime"))
     speed_up = clock.float("speed_up", 0.01, 1000.0)
@@ -324,4 +326,4 @@ def load_sim(path: Path | str, vehicle: Path | str | None = None) -> SimParams:
         motor_effectiveness=eff, motor_tv_amplitude=tv_b, motor_tv_omega_rad_s=tv_w,
         motor_tv_phase_rad=tv_phi, crash_speed_m_s=crash_speed,
         crash_tilt_rad=math.radians(crash_tilt), home_lat_deg=lat, home_lon_deg=lon,
-        home_alt_m=alt, log_dir=log_dir, log_rate_hz=log_rate)
+        home_alt_m=alt, log_dir=log_dir, log_rate_hz=log_rate, physics_core=core)

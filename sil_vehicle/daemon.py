@@ -59,14 +59,16 @@ class VehicleDaemon:
         self.log_dir = log_dir
         self.flight_log = None
         self.tlog = None
+        self.sitl = Sitl(sim)
         if log_dir is not None:
             meta = {"vehicle": sim.vehicle.name, "vehicle_file": sim.vehicle.file,
                     "sim_file": sim.file, "seed": sim.seed, "physics_rate_hz": sim.physics_rate_hz,
+                    "physics_core": self.sitl.vehicle.core_name,
                     "clock": sim.clock_mode, "frames": "world NED, body FRD, quaternion wxyz"}
             self.flight_log = FlightLog(log_dir / "flight.csv", LOG_COLUMNS, meta,
                                         flush_every=max(1, sim.log_rate_hz))
             self.tlog = Tlog(log_dir / "vehicle.tlog")
-        self.sitl = Sitl(sim, log_sink=self.flight_log)
+            self.sitl.log_sink = self.flight_log
         self.codecs = {name: Codec(counters=self.sitl.counters[name]) for name in LINKS}
         self.signed = signing_key is not None
         if signing_key is not None:
@@ -267,6 +269,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--speed-up", type=float, default=None,
                    help="real time only: simulated seconds per wall second")
     p.add_argument("--seed", type=int, default=None, help="random seed (gusts, sensor noise)")
+    p.add_argument("--physics-core", choices=("auto", "compiled", "python"), default=None,
+                   help="the physics tick: compiled C (built once, cached) or the Python "
+                        "reference; bit-identical results (default: the sim file's, auto)")
     p.add_argument("--gcs-bind", default=None, help="HOST:PORT the ground-station link listens on "
                    "(default 127.0.0.1:18570)")
     p.add_argument("--gcs-target", default=None, help="HOST:PORT telemetry is sent to "
@@ -308,6 +313,8 @@ def apply_overrides(sim: SimParams, args: argparse.Namespace) -> SimParams:
         if args.seed < 0:
             raise ConfigError(f"--seed: got {args.seed}, expected an integer >= 0")
         changes["seed"] = args.seed
+    if args.physics_core is not None:
+        changes["physics_core"] = args.physics_core
     if args.wind_speed is not None:
         if not 0.0 <= args.wind_speed <= 40.0:
             raise ConfigError(f"--wind-speed: got {args.wind_speed}, expected [0, 40] m/s")

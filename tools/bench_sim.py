@@ -3,14 +3,18 @@
 
     python tools/bench_sim.py [--steps 20000] [--sim-seconds 20] [--json out/bench_sim.json]
 
+Each figure for both physics cores (`physics_core`: the compiled tick and the Python reference,
+which give bit-identical flights), with their ratio:
 (1) Vehicle.step: physics ticks per second, armed, in the air at (a hair above) the hover
     throttle, median of 5 runs;
 (2) Sitl.step: the same with telemetry due at the default rates, every message encoded to bytes
     (the daemon's work per tick, without sockets), median of 5 runs;
 (3) the daemon (`python -m sil_vehicle`, a subprocess) in lockstep with a trivial responder that
     answers every ODOMETRY with a target, control rate 100 Hz: the real-time factor (simulated
-    seconds per wall second, from the first ODOMETRY to the last), median of 3 runs.
-The target is 20x real time. Numbers are measured, never estimated.
+    seconds per wall second, from the first ODOMETRY to the last), median of 3 runs; and the
+    daemon's CPU time per simulated second (its whole process, start-up included), which is
+    what bounds it when the responder is free.
+The target is 20x real time with the default core. Numbers are measured, never estimated.
 """
 
 from __future__ import annotations
@@ -20,6 +24,7 @@ import dataclasses
 import json
 import os
 import platform
+import resource
 import socket
 import statistics
 import subprocess
@@ -35,6 +40,7 @@ from pymavlink.dialects.v20 import common as mavlink
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
+from sil_vehicle import compiled  # noqa: E402
 from sil_vehicle.config import PARAMS_DIR, load_sim  # noqa: E402
 from sil_vehicle.mavlink.codec import Codec  # noqa: E402
 from sil_vehicle.sitl import LINKS, Sitl  # noqa: E402
@@ -72,8 +78,8 @@ def check_flying(vehicle: Vehicle, what: str) -> None:
                            f"({s.crash_reason or 'on the ground'}): not a measurement of flight")
 
 
-def bench_vehicle(steps: int, runs: int = 5) -> float:
-    sim = load_sim(SIM_DEFAULT)
+def bench_vehicle(steps: int, core: str, runs: int = 5) -> float:
+    sim = load_sim(SIM_DEFAULT).with_changes(physics_core=core)
     rates = []
     for _ in range(runs):
         v = Vehicle(sim, np.random.default_rng(0))
@@ -86,9 +92,9 @@ def bench_vehicle(steps: int, runs: int = 5) -> float:
     return statistics.median(rates)
 
 
-def bench_sitl(steps: int, runs: int = 5) -> tuple[float, float]:
+def bench_sitl(steps: int, core: str, runs: int = 5) -> tuple[float, float]:
     """(steps/s, messages encoded per simulated second)."""
-    sim = load_sim(SIM_DEFAULT).with_changes(clock_mode="realtime")
+    sim = load_sim(SIM_DEFAULT).with_changes(clock_mode="realtime", physics_core=core)
     rates, per_s = [], 0.0
     for _ in range(runs):
         s = Sitl(sim)
@@ -113,8 +119,9 @@ def bench_sitl(steps: int, runs: int = 5) -> tuple[float, float]:
     return statistics.median(rates), per_s
 
 
-def lockstep_run(sim_yaml: Path, sim_seconds: float, log_dir: Path) -> float:
-    """One daemon run answered by a trivial responder; returns the real-time factor."""
+def lockstep_run(sim_yaml: Path, sim_seconds: float, log_dir: Path) -> tuple[float, float]:
+    """One daemon run answered by a trivial responder: (real-time factor, the daemon's CPU
+    seconds per simulated second)."""
     trim = load_sim(sim_yaml).vehicle.hover_throttle_pct
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     sock.bind(("127.0.0.1", 0))
@@ -126,6 +133,7 @@ def lockstep_run(sim_yaml: Path, sim_seconds: float, log_dir: Path) -> float:
            "--gcs-bind", f"127.0.0.1:{free_port()}", "--gcs-target", "127.0.0.1:9",
            "--log-dir", str(log_dir), "--duration", str(sim_seconds)]
     env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    usage0 = resource.getrusage(resource.RUSAGE_CHILDREN)
     proc = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=subprocess.DEVNULL,
                             stderr=subprocess.DEVNULL)
     mav = mavlink.MAVLink(None, srcSystem=255, srcComponent=190)
@@ -167,19 +175,23 @@ def lockstep_run(sim_yaml: Path, sim_seconds: float, log_dir: Path) -> float:
         sock.close()
     if proc.returncode != 0:
         raise RuntimeError(f"the vehicle exited with {proc.returncode}")
-    return sim_seconds / wall
+    usage1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (usage1.ru_utime - usage0.ru_utime) + (usage1.ru_stime - usage0.ru_stime)
+    return sim_seconds / wall, cpu / sim_seconds
 
 
-def bench_lockstep(sim_seconds: float, runs: int = 3) -> float:
+def bench_lockstep(sim_seconds: float, core: str, runs: int = 3) -> tuple[float, float]:
+    """Medians of (real-time factor, daemon CPU seconds per simulated second)."""
     with tempfile.TemporaryDirectory(prefix="bench_sim_") as tmp:
         sim_yaml = Path(tmp) / "bench_100hz.yaml"
         # `vehicle:` absolute: a relative one inherited through `extends:` would be resolved
         # against this temporary file's folder
         sim_yaml.write_text(yaml.safe_dump({
             "extends": str(SIM_DEFAULT), "vehicle": str(VEHICLE), "control_rate_hz": 100,
-            "telemetry": {"offboard": {"ODOMETRY": 100}}}), encoding="utf-8")
-        rtfs = [lockstep_run(sim_yaml, sim_seconds, Path(tmp) / f"run{i}") for i in range(runs)]
-    return statistics.median(rtfs)
+            "physics_core": core, "telemetry": {"offboard": {"ODOMETRY": 100}}}),
+            encoding="utf-8")
+        runs_ = [lockstep_run(sim_yaml, sim_seconds, Path(tmp) / f"run{i}") for i in range(runs)]
+    return (statistics.median(r[0] for r in runs_), statistics.median(r[1] for r in runs_))
 
 
 def machine() -> dict[str, object]:
@@ -198,18 +210,32 @@ def main(argv: list[str] | None = None) -> int:
 
     sim = load_sim(SIM_DEFAULT)
     physics_hz = sim.physics_rate_hz
-    vehicle_sps = bench_vehicle(args.steps)
-    sitl_sps, msgs_per_s = bench_sitl(args.steps)
-    rtf = bench_lockstep(args.sim_seconds)
+    if compiled.load_core() is None:
+        print("no compiled physics core on this machine (no C compiler): Python only")
+        cores = ["python"]
+    else:
+        cores = ["compiled", "python"]
+    default = "compiled" if sim.physics_core != "python" and "compiled" in cores else "python"
+    per_core: dict[str, dict[str, float]] = {}
+    for core in cores:
+        vehicle_sps = bench_vehicle(args.steps, core)
+        sitl_sps, msgs_per_s = bench_sitl(args.steps, core)
+        rtf, cpu_per_s = bench_lockstep(args.sim_seconds, core)
+        per_core[core] = {
+            "vehicle_step_per_s": round(vehicle_sps, 1),
+            "vehicle_step_rtf_bound": round(vehicle_sps / physics_hz, 2),
+            "sitl_step_with_telemetry_per_s": round(sitl_sps, 1),
+            "sitl_messages_per_sim_s": round(msgs_per_s, 1),
+            "sitl_step_rtf_bound": round(sitl_sps / physics_hz, 2),
+            "lockstep_rtf_100hz": round(rtf, 2),
+            "lockstep_daemon_cpu_s_per_sim_s": round(cpu_per_s, 4),
+        }
+    rtf = per_core[default]["lockstep_rtf_100hz"]
     result = {
         "machine": machine(),
         "physics_rate_hz": physics_hz,
-        "vehicle_step_per_s": round(vehicle_sps, 1),
-        "vehicle_step_rtf_bound": round(vehicle_sps / physics_hz, 2),
-        "sitl_step_with_telemetry_per_s": round(sitl_sps, 1),
-        "sitl_messages_per_sim_s": round(msgs_per_s, 1),
-        "sitl_step_rtf_bound": round(sitl_sps / physics_hz, 2),
-        "lockstep_rtf_100hz": round(rtf, 2),
+        "default_core": default,
+        "cores": per_core,
         "lockstep_sim_seconds": args.sim_seconds,
         "target_rtf": TARGET_RTF,
         "lockstep_rtf_over_target": round(rtf / TARGET_RTF, 2),
@@ -218,14 +244,25 @@ def main(argv: list[str] | None = None) -> int:
     m = result["machine"]
     print(f"machine: {m['platform']}, {m['processor']}, {m['cpu_count']} CPUs, "
           f"{m['implementation']} {m['python']}")
-    print(f"(1) Vehicle.step                 {vehicle_sps:10.0f} steps/s  "
-          f"(bound {vehicle_sps / physics_hz:.1f}x real time at {physics_hz} Hz; median of 5 x "
-          f"{args.steps})")
-    print(f"(2) Sitl.step + encoding         {sitl_sps:10.0f} steps/s  "
-          f"(bound {sitl_sps / physics_hz:.1f}x; {msgs_per_s:.0f} messages per simulated s)")
-    print(f"(3) daemon lockstep, 100 Hz       {rtf:10.1f}x real time "
-          f"({args.sim_seconds:g} simulated s, median of 3; target {TARGET_RTF:g}x: "
-          f"{rtf / TARGET_RTF:.2f} of it, {'met' if rtf >= TARGET_RTF else 'NOT met'})")
+    rows = [("(1) Vehicle.step, steps/s", "vehicle_step_per_s", "{:10.0f}"),
+            ("(2) Sitl.step + encoding, steps/s", "sitl_step_with_telemetry_per_s", "{:10.0f}"),
+            ("(3) daemon lockstep 100 Hz, x real time", "lockstep_rtf_100hz", "{:10.1f}"),
+            ("    daemon CPU ms per simulated s", "lockstep_daemon_cpu_s_per_sim_s", None)]
+    print(f"{'':42s}" + "".join(f"{c:>12s}" for c in cores)
+          + ("       ratio" if len(cores) == 2 else ""))
+    for label, key, fmt in rows:
+        vals = [per_core[c][key] for c in cores]
+        cells = [f"{1000 * v:12.1f}" if fmt is None else f"  {fmt.format(v)}" for v in vals]
+        ratio = ""
+        if len(cores) == 2:
+            r = vals[0] / vals[1] if fmt is not None else vals[1] / vals[0]
+            ratio = f"{r:11.2f}x"
+        print(f"{label:42s}" + "".join(cells) + ratio)
+    print(f"(1), (2): median of 5 x {args.steps} ticks at {physics_hz} Hz; (3): "
+          f"{args.sim_seconds:g} simulated s, median of 3; "
+          f"{per_core[cores[0]]['sitl_messages_per_sim_s']:.0f} messages per simulated s")
+    print(f"target: {TARGET_RTF:g}x real time in lockstep with the default core ({default}): "
+          f"{rtf:.1f}x, {rtf / TARGET_RTF:.2f} of it, {'met' if rtf >= TARGET_RTF else 'NOT met'}")
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(result, indent=2) + "\n", encoding="utf-8")

@@ -313,9 +313,11 @@ def fly_inprocess(controller, sim, fault_events=(), seed: int | None = None, *,
                          f"{cfg.control_rate_hz}")
     wall0 = time.perf_counter()
     ctl = build_controller(cfg)
+    sitl = Sitl(sim)
     meta = {"vehicle": sim.vehicle.name, "vehicle_file": sim.vehicle.file, "sim_file": sim.file,
             "seed": sim.seed, "physics_rate_hz": sim.physics_rate_hz, "clock": sim.clock_mode,
-            "frames": "world NED, body FRD, quaternion wxyz", "link": "in-process MAVLink bytes"}
+            "frames": "world NED, body FRD, quaternion wxyz", "link": "in-process MAVLink bytes",
+            "physics_core": sitl.vehicle.core_name}
     flight_log = FlightLog(out_dir / "flight.csv", LOG_COLUMNS, meta,
                            flush_every=max(1, sim.log_rate_hz))
     clog = ControllerLog(out_dir / "controller.csv",
@@ -323,7 +325,7 @@ def fly_inprocess(controller, sim, fault_events=(), seed: int | None = None, *,
                           "vehicle_file": cfg.vehicle.file, "connect": "in-process",
                           "frames": "world NED, body FRD"})
     try:
-        sitl = Sitl(sim, log_sink=flight_log)
+        sitl.log_sink = flight_log
         sitl.schedule(fault_events)
         link = InMemoryLink(sitl, Codec(counters=sitl.counters["offboard"]), lambda: None)
         flight = OffboardFlight(

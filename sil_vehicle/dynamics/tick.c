@@ -1,0 +1,228 @@
+/* One physics tick of the truth plant, compiled: the same arithmetic as the Python reference
+ * (sil_vehicle/vehicle.py Vehicle._step_python and the pure functions of sil_vehicle/dynamics),
+ * operation for operation and in the same order, so that both give bit-identical results
+ * (IEEE double, no fused multiply-add: built with -ffp-contract=off, never -ffast-math; sin, cos,
+ * exp, atan2, acos come from the same C library as Python's math module). tests/consistency/
+ * test_compiled_core.py holds the two to equality, bit for bit.
+ *
+ * Layout of the two arrays (sil_vehicle/dynamics/compiled.py names every index):
+ *   p (parameters, set once): see P_* below;
+ *   s (state and inputs, read and written every tick): see S_* below.
+ * Returns 0, or TICK_IMPACT / TICK_ATTITUDE when the vehicle crashed during this tick.
+ * No allocation, no I/O, no global state: a pure function of (p, s) into s.
+ */
+#include <math.h>
+
+enum {
+    P_DT, P_MASS, P_IXX, P_IYY, P_IZZ, P_GRAVITY, P_DRAG, P_IDLE, P_MOTOR_FACTOR, P_MOTOR_MAX,
+    P_SERVO_FACTOR, P_SERVO_MAX, P_TILT_MIN, P_TILT_MAX, P_TILT_LOCKED, P_CRASH_SPEED,
+    P_CRASH_TILT, P_THRUST, /* c2, c1, c0 */ P_TORQUE = P_THRUST + 3, /* c2, c1, c0 */
+    P_ROTORS = P_TORQUE + 3, /* 4 x (spin, px, py, pz, ax, ay, az) */
+    P_SIZE = P_ROTORS + 28
+};
+
+enum {
+    S_X = 0, /* 13 */ S_MOTOR = 13, /* 4 */ S_TILT = 17, /* 4 */ S_LANDED = 21, S_CRASHED = 22,
+    S_RUNNING = 23, S_T = 24, S_CMD_THROTTLE = 25, /* 4 */ S_CMD_TILT = 29, /* 4 */
+    S_WIND = 33, /* 3 */ S_MOTOR_FAULT = 36, /* 4 x (a, b, w, phi, off) */
+    S_SERVO_FAULT = 56, /* 4 x (stuck, angle) */ S_IMPACT_SPEED = 64, S_SIZE = 65
+};
+
+enum { TICK_OK = 0, TICK_IMPACT = 1, TICK_ATTITUDE = 2 };
+
+int trq_tick_sizes(int *p_size, int *s_size)
+{
+    *p_size = P_SIZE;
+    *s_size = S_SIZE;
+    return 0;
+}
+
+static double first_order_step(double value, double target, double factor, double max_change,
+                               double lo, double hi)
+{
+    double delta = factor * (target - value);
+    if (delta > max_change)
+        delta = max_change;
+    else if (delta < -max_change)
+        delta = -max_change;
+    value += delta;
+    return value < lo ? lo : value > hi ? hi : value;
+}
+
+static double quadratic(const double *c, double zeta)
+{
+    double value = (c[0] * zeta + c[1]) * zeta + c[2];
+    return value > 0.0 ? value : 0.0;
+}
+
+static double fault_factor(const double *f, double t_s)
+{
+    double e;
+    if (f[4] != 0.0)
+        return 0.0;
+    if (f[1] == 0.0)
+        e = f[0];
+    else
+        e = f[0] - f[1] * sin(f[2] * t_s + f[3]);
+    return e < 0.0 ? 0.0 : e > 1.0 ? 1.0 : e;
+}
+
+static void derivative(const double *x, const double *w, const double *wind, const double *p,
+                       double *dx)
+{
+    double vn = x[3], ve = x[4], vd = x[5], qw = x[6], qx = x[7], qy = x[8], qz = x[9];
+    double pr = x[10], qr = x[11], rr = x[12];
+    double fx = w[0], fy = w[1], fz = w[2], mx = w[3], my = w[4], mz = w[5];
+    double fn = (1 - 2 * (qy * qy + qz * qz)) * fx + 2 * (qx * qy - qw * qz) * fy
+                + 2 * (qx * qz + qw * qy) * fz;
+    double fe = 2 * (qx * qy + qw * qz) * fx + (1 - 2 * (qx * qx + qz * qz)) * fy
+                + 2 * (qy * qz - qw * qx) * fz;
+    double fdn = 2 * (qx * qz - qw * qy) * fx + 2 * (qy * qz + qw * qx) * fy
+                 + (1 - 2 * (qx * qx + qy * qy)) * fz;
+    double rx = vn - wind[0], ry = ve - wind[1], rz = vd - wind[2];
+    double s = -p[P_DRAG] * sqrt(rx * rx + ry * ry + rz * rz);
+    double inv_m = 1.0 / p[P_MASS];
+    double ixx = p[P_IXX], iyy = p[P_IYY], izz = p[P_IZZ];
+    dx[0] = vn;
+    dx[1] = ve;
+    dx[2] = vd;
+    dx[3] = (fn + s * rx) * inv_m;
+    dx[4] = (fe + s * ry) * inv_m;
+    dx[5] = (fdn + s * rz) * inv_m + p[P_GRAVITY];
+    dx[6] = 0.5 * (-qx * pr - qy * qr - qz * rr);
+    dx[7] = 0.5 * (qw * pr + qy * rr - qz * qr);
+    dx[8] = 0.5 * (qw * qr - qx * rr + qz * pr);
+    dx[9] = 0.5 * (qw * rr + qx * qr - qy * pr);
+    dx[10] = (mx - (izz - iyy) * qr * rr) / ixx;
+    dx[11] = (my - (ixx - izz) * rr * pr) / iyy;
+    dx[12] = (mz - (iyy - ixx) * pr * qr) / izz;
+}
+
+static void rk4_step(double *x, double dt, const double *w, const double *wind, const double *p)
+{
+    double k1[13], k2[13], k3[13], k4[13], y[13];
+    double h = 0.5 * dt, d6 = dt / 6.0, n;
+    int i;
+    derivative(x, w, wind, p, k1);
+    for (i = 0; i < 13; i++)
+        y[i] = x[i] + h * k1[i];
+    derivative(y, w, wind, p, k2);
+    for (i = 0; i < 13; i++)
+        y[i] = x[i] + h * k2[i];
+    derivative(y, w, wind, p, k3);
+    for (i = 0; i < 13; i++)
+        y[i] = x[i] + dt * k3[i];
+    derivative(y, w, wind, p, k4);
+    for (i = 0; i < 13; i++)
+        x[i] = x[i] + d6 * (k1[i] + 2.0 * (k2[i] + k3[i]) + k4[i]);
+    n = 1.0 / sqrt(x[6] * x[6] + x[7] * x[7] + x[8] * x[8] + x[9] * x[9]);
+    x[6] *= n;
+    x[7] *= n;
+    x[8] *= n;
+    x[9] *= n;
+}
+
+static void body_wrench(const double *zeta, const double *alpha, const double *p, double *w)
+{
+    double fx = 0.0, fy = 0.0, fz = 0.0, mx = 0.0, my = 0.0, mz = 0.0;
+    int i;
+    for (i = 0; i < 4; i++) {
+        const double *r = p + P_ROTORS + 7 * i;
+        double f = quadratic(p + P_THRUST, zeta[i]);
+        double tau = quadratic(p + P_TORQUE, zeta[i]) * r[0];
+        double sa = sin(alpha[i]), ca = cos(alpha[i]);
+        double nx = -r[5] * sa, ny = r[4] * sa, nz = -ca;
+        double px = r[1], py = r[2], pz = r[3];
+        fx += f * nx;
+        fy += f * ny;
+        fz += f * nz;
+        mx += f * (py * nz - pz * ny) - tau * nx;
+        my += f * (pz * nx - px * nz) - tau * ny;
+        mz += f * (px * ny - py * nx) - tau * nz;
+    }
+    w[0] = fx;
+    w[1] = fy;
+    w[2] = fz;
+    w[3] = mx;
+    w[4] = my;
+    w[5] = mz;
+}
+
+int trq_tick(const double *p, double *s)
+{
+    double *x = s + S_X, *motor = s + S_MOTOR, *tilt = s + S_TILT;
+    const double *wind = s + S_WIND;
+    int running = s[S_RUNNING] != 0.0, locked = p[P_TILT_LOCKED] != 0.0;
+    int landed = s[S_LANDED] != 0.0, crashed = s[S_CRASHED] != 0.0, event = TICK_OK;
+    double w[6];
+    int i;
+    for (i = 0; i < 4; i++) {
+        double target = 0.0;
+        if (running) {
+            double c = s[S_CMD_THROTTLE + i];
+            if (p[P_IDLE] > c)              /* Python's max(cmd, idle), min(.., 100.0) */
+                c = p[P_IDLE];
+            if (100.0 < c)
+                c = 100.0;
+            target = c * fault_factor(s + S_MOTOR_FAULT + 5 * i, s[S_T]);
+        }
+        motor[i] = first_order_step(motor[i], target, p[P_MOTOR_FACTOR], p[P_MOTOR_MAX], 0.0,
+                                    100.0);
+    }
+    for (i = 0; i < 4; i++) {
+        const double *sf = s + S_SERVO_FAULT + 2 * i;
+        double target;
+        if (sf[0] != 0.0) {
+            tilt[i] = sf[1];
+            continue;
+        }
+        target = (locked || !running) ? 0.0 : s[S_CMD_TILT + i];
+        tilt[i] = first_order_step(tilt[i], target, p[P_SERVO_FACTOR], p[P_SERVO_MAX],
+                                   p[P_TILT_MIN], p[P_TILT_MAX]);
+    }
+    if (locked)
+        for (i = 0; i < 4; i++)
+            tilt[i] = 0.0;
+    body_wrench(motor, tilt, p, w);
+    if (landed) {
+        double qw = x[6], qx = x[7], qy = x[8], qz = x[9];
+        double fdown = (2 * (qx * qz - qw * qy) * w[0] + 2 * (qy * qz + qw * qx) * w[1]
+                        + (1 - 2 * (qx * qx + qy * qy)) * w[2]);
+        if (!(fdown + p[P_MASS] * p[P_GRAVITY] < 0.0)) {     /* stays on the ground */
+            x[3] = x[4] = x[5] = 0.0;
+            x[10] = x[11] = x[12] = 0.0;
+            return TICK_OK;
+        }
+    }
+    rk4_step(x, p[P_DT], w, wind, p);
+    landed = 0;
+    if (x[2] >= 0.0) {                                       /* GROUND_DOWN_M */
+        double qw = x[6], qx = x[7], qy = x[8], qz = x[9];
+        if (!crashed && x[5] > p[P_CRASH_SPEED]) {
+            crashed = 1;
+            event = TICK_IMPACT;
+            s[S_IMPACT_SPEED] = x[5];
+        }
+        if (!crashed) {
+            double yaw = atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz));
+            x[6] = cos(yaw / 2);
+            x[7] = 0.0;
+            x[8] = 0.0;
+            x[9] = sin(yaw / 2);
+        }
+        x[2] = 0.0;
+        x[3] = x[4] = x[5] = 0.0;
+        x[10] = x[11] = x[12] = 0.0;
+        landed = 1;
+    } else if (!crashed) {
+        double qx = x[7], qy = x[8];
+        double c = 1 - 2 * (qx * qx + qy * qy);
+        if (acos(c > 1.0 ? 1.0 : c < -1.0 ? -1.0 : c) > p[P_CRASH_TILT]) {
+            crashed = 1;
+            event = TICK_ATTITUDE;
+        }
+    }
+    s[S_LANDED] = landed;
+    s[S_CRASHED] = crashed;
+    return event;
+}
