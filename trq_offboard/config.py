@@ -401,6 +401,24 @@ class ControllerConfig:
                                           # period of delay): plan from the state at t + delay
     lagged_actuators: str = "auto"        # on | off | auto (on when predicting): the
                                           # observer's b0 and the predictor through the lags
+    actuator_states: str = "auto"         # on | off | auto (on when predicting): the NMPC's
+                                          # stage state carries the actuators' lag states
+
+    @property
+    def predicts_delay(self) -> bool:
+        """Whether the controller plans from the state predicted at t + applied_delay_s:
+        delay_compensation predict, or auto once the delay reaches one control period."""
+        long_delay = self.applied_delay_s >= self.control_dt_s - 1e-12
+        return self.delay_compensation == "predict" or (self.delay_compensation == "auto"
+                                                        and long_delay)
+
+    @property
+    def nmpc_actuator_states(self) -> bool:
+        """Whether the NMPC's stage state carries the actuators' first-order lag states
+        (actuator_states on, or auto while the delay predictor is on with a delay)."""
+        return self.actuator_states == "on" or (self.actuator_states == "auto"
+                                                and self.predicts_delay
+                                                and self.applied_delay_s > 0.0)
 
     @property
     def control_dt_s(self) -> float:
@@ -456,6 +474,7 @@ def _controller(k: _Keys, path: Path) -> ControllerConfig:
     applied_delay = k.number("applied_delay_s", 0.0, 1.0)
     delay_comp = k.text("delay_compensation", ("predict", "none", "auto"), default="auto")
     lagged = k.text("lagged_actuators", ("on", "off", "auto"), default="auto")
+    act_states = k.text("actuator_states", ("on", "off", "auto"), default="auto")
     eso = None
     if observer != "none":
         base = load_eso(path.parent / eso_file)
@@ -477,7 +496,7 @@ def _controller(k: _Keys, path: Path) -> ControllerConfig:
         raise k.error("horizon.step_s", step_s, f"at least one control period ({1.0 / rate:g} s)")
     return ControllerConfig(str(path), name, vehicle, observer, eso, rate, steps, step_s,
                             weights, max_tilt, max_rate, solver, reference, applied_input,
-                            applied_delay, delay_comp, lagged)
+                            applied_delay, delay_comp, lagged, act_states)
 
 
 def load_controller(path: Path | str) -> ControllerConfig:

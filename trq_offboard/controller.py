@@ -65,9 +65,7 @@ class Controller:
         self._step_dt = self.model.discrete_dt()
         # auto: predict, and through the actuator lags, once the delay reaches one control
         # period; below it the observer's delayed b0 alone does better (nmpc.yaml: measured)
-        long_delay = cfg.applied_delay_s >= cfg.control_dt_s - 1e-12
-        predict = cfg.delay_compensation == "predict" or (cfg.delay_compensation == "auto"
-                                                          and long_delay)
+        predict = cfg.predicts_delay
         self.delay_s = cfg.applied_delay_s if predict else 0.0
         self._lagged = cfg.lagged_actuators == "on" or (cfg.lagged_actuators == "auto"
                                                         and predict and self.delay_s > 0.0)
@@ -76,6 +74,10 @@ class Controller:
         self._rate_limit = np.array([vm.servo_rate_limit_rad_s] * tilts
                                     + [vm.motor_rate_limit_pct_s] * 4)
         self._gains: dict[float, np.ndarray] = {}
+        # the NMPC's stage carries the actuators' lag states (actuator_states): its plan starts
+        # from the actuators' outputs predicted for t + delay (self._y_act)
+        self._act_states = bool(getattr(getattr(self.solver, "ocp", None), "n_lag", 0))
+        self._y_act: np.ndarray | None = None
         self._u_lo = np.array(([vm.tilt_min_rad] * 4 if self.model.tilting else [])
                               + [vm.idle_pct] * 4)
         self._u_hi = np.array(([vm.tilt_max_rad] * 4 if self.model.tilting else []) + [100.0] * 4)
@@ -108,6 +110,7 @@ class Controller:
             eta_dot = np.asarray(self._euler_rate(x)).ravel()
             self.eso.reset(np.concatenate([x[0:3], x[6:9]]), np.concatenate([x[3:6], eta_dot]))
         self._plan = None
+        self._y_act = None
         self._last_t = float(t_s)
         self._last_d = np.zeros(6)
         discard = getattr(self.solver, "discard", None)
@@ -157,10 +160,14 @@ class Controller:
         """The actuators over [t0, t1] as (a, b, y_mid) steps of at most PREDICT_STEP_S: the
         commands in effect (each from its state's stamp + applied_delay_s) through the
         actuators' first-order lags and rate limits (vehicle file: motor and servo time
-        constants, which the NMPC's model leaves out), y_mid at each step's midpoint. Their
-        state at t0 is rebuilt from the remembered commands (32 periods: many time constants).
-        `cut`: a time in (t0, t1) that no step straddles (one path serves the observer before
-        it and the predictor after it)."""
+        constants), y_mid at each step's midpoint. Their state at t0 is rebuilt from the
+        remembered commands (32 periods: many time constants). `cut`: a time in (t0, t1) that
+        no step straddles (one path serves the observer before it and the predictor after
+        it)."""
+        return self._actuator_walk(t0, t1, cut)[0]
+
+    def _actuator_walk(self, t0: float, t1: float, cut: float | None = None):
+        """(_actuator_path(t0, t1, cut), the actuators' outputs at t1)."""
         segs = self._in_effect(-math.inf, t1)
         y = segs[0][2].copy()
         path = []
@@ -176,7 +183,7 @@ class Controller:
                         end = b if i == n - 1 else a + (i + 1) * h
                         path.append((a + i * h, end, self._lag(y, u, 0.5 * h)))
                     y = self._lag(y, u, h)
-        return path
+        return path, y
 
     def _predict(self, x: np.ndarray, t0: float, t1: float, d: np.ndarray,
                  path=None) -> np.ndarray:
@@ -233,8 +240,11 @@ class Controller:
         # the actuators through their lags from the last step to when this command acts: one
         # path for the observer (before t_s) and the predictor (after it)
         t_act = t_s + self.delay_s
-        path = (self._actuator_path(min(self._last_t, t_s), t_act, t_s) if self._lagged
-                else None)
+        path, y_act = None, None
+        if self._lagged:
+            path, y_act = self._actuator_walk(min(self._last_t, t_s), t_act, t_s)
+        elif self._act_states:
+            y_act = self._actuator_walk(t_act, t_act)[1]
         if self.eso is not None:
             y = np.concatenate([x[0:3], x[6:9]])
             if t_s > self._last_t:
@@ -253,7 +263,11 @@ class Controller:
         x0 = self._predict(x, t_s, t_act, d, path) if self.delay_s > 0.0 else x
         x_ref = self._reference_states(t_act, x0, reference)
         guess = self._guess(t_act, x0, d)
-        u_plan, x_plan, info = self.solver.solve(x0, x_ref, d, u_applied, guess)
+        if self._act_states:
+            self._y_act = y_act
+            u_plan, x_plan, info = self.solver.solve(x0, x_ref, d, u_applied, guess, y0=y_act)
+        else:
+            u_plan, x_plan, info = self.solver.solve(x0, x_ref, d, u_applied, guess)
         if info.status is SolveStatus.OK and np.all(np.isfinite(u_plan)) \
                 and np.all(np.isfinite(x_plan)):
             self._plan, self._plan_t = (u_plan, x_plan), t_act
@@ -281,7 +295,13 @@ class Controller:
         grid = self.h * np.arange(self.N + 1)
         x_pred = np.array([np.interp(elapsed, grid, x_old[:, j]) for j in range(12)])
         x_ref = self._reference_states(t_next, x_pred, reference)
-        prep(x_ref, self._last_d, self._last_u, self._guess(t_next, x_pred, self._last_d))
+        guess = self._guess(t_next, x_pred, self._last_d)
+        if self._act_states and self._y_act is not None:
+            # the actuators one period on, under the command just sent (it acts from t_act)
+            y_next = self._lag(self._y_act, self._last_u, self.cfg.control_dt_s)
+            prep(x_ref, self._last_d, self._last_u, guess, y0=y_next)
+        else:
+            prep(x_ref, self._last_d, self._last_u, guess)
 
     # --- helpers --------------------------------------------------------------------------------
     def _reference_states(self, t_s: float, x: np.ndarray, reference) -> np.ndarray:

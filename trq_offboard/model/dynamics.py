@@ -132,10 +132,23 @@ class PredictionModel:
         return ca.Function("F_dt", [x, u, d, h], [self._rk4(x, u, d, h)], ["x", "u", "d", "dt"],
                            ["x_next"])
 
-    def _rk4(self, x, u, d, h):
-        """One RK4 step of length h with u and d held."""
+    def discrete_varying(self, dt_s: float) -> ca.Function:
+        """One RK4 step over dt_s with the input given at the step's start, midpoint and end:
+        F(x, u0, u_mid, u_end, d) -> x_next (d held). The NMPC's actuator lag states drive the
+        model through it with the lag's exact values at the three RK4 times."""
+        x, d = self._x, self._d
+        u0, um, ue = (ca.SX.sym(n, self.nu) for n in ("u0", "u_mid", "u_end"))
+        return ca.Function("F_varying", [x, u0, um, ue, d],
+                           [self._rk4(x, u0, d, dt_s, um, ue)],
+                           ["x", "u0", "u_mid", "u_end", "d"], ["x_next"])
+
+    def _rk4(self, x, u, d, h, u_mid=None, u_end=None):
+        """One RK4 step of length h with d held and u held (or u at the start, u_mid at the
+        midpoint and u_end at the end of the step)."""
+        um = u if u_mid is None else u_mid
+        ue = u if u_end is None else u_end
         k1 = self.f(x, u, d)
-        k2 = self.f(x + 0.5 * h * k1, u, d)
-        k3 = self.f(x + 0.5 * h * k2, u, d)
-        k4 = self.f(x + h * k3, u, d)
+        k2 = self.f(x + 0.5 * h * k1, um, d)
+        k3 = self.f(x + 0.5 * h * k2, um, d)
+        k4 = self.f(x + h * k3, ue, d)
         return x + h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)

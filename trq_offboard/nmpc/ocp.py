@@ -14,6 +14,20 @@ solvers such as HPIPM exploit):
 so the plan's input k is u_k = [a_{k+1}, zeta_k] in the paper's order [alpha, zeta]. The fixed-rotor
 quadcopter has s_k = x_k and v_k = c_k (4 scaled throttles).
 
+Actuator lag states (controller key actuator_states, `ControllerConfig.nmpc_actuator_states`):
+the plan's inputs become the *commands* and the stage state carries what the actuators produce,
+through their first-order lags (vehicle file: servo and motor time constants T; rate limits are
+left out):
+
+    s_k = [x_k, a_k, y_k]       y_k = [servo angles (4), throttles / 100 (4)] (quad: throttles)
+    y_{k+1} = y_k + (1 - exp(-h/T)) (u_k - y_k)        exact for u_k held over the step
+    x_{k+1} = RK4 over h with the input y(t) = u_k + (y_k - u_k) exp(-t/T) evaluated exactly at
+              the RK4 times 0, h/2, h
+    s_0 = [x_meas, alpha_prev, y_meas]     y_meas: the actuators when the plan starts (the
+                                           controller's predictor: at t + applied_delay_s)
+
+Every constraint stays local to a stage. The cost is still on the commands u_k.
+
 Cost (scaled inputs: tilt in rad, throttle as a fraction about the hover trim)
     sum_{k<N} (x_k - xr_k)' Q (x_k - xr_k) + (u_k - u_trim)' R (u_k - u_trim) + w_rate |w_k|^2
     + (x_N - xr_N)' c_N Q (x_N - xr_N)
@@ -47,7 +61,8 @@ class Stage:
     """One shooting interval of the OCP as CasADi SX Functions, shared by the whole-horizon NLP
     (`Ocp`, inlined) and the real-time iteration (`rti`, compiled once and reused per stage):
 
-        dynamics(s, v, d) -> s_next            RK4 over h (tilt states: a + h w)
+        dynamics(s, v, d) -> s_next            RK4 over h (tilt states: a + h w; lag states:
+                                               y + g (u - y), g = 1 - exp(-h/T))
         cost(s, v, x_ref_k, u_trim) -> l_k     quadratic (constant Hessian)
         terminal_cost(s, x_ref_N) -> l_N
     """
@@ -56,12 +71,22 @@ class Stage:
     terminal_cost: ca.Function
     ns: int
     nv: int
+    n_lag: int = 0                     # actuator lag states (0, 4 quad, 8 TRQ) at the end of s
+
+    @staticmethod
+    def lag_gain(cfg: ControllerConfig, model: PredictionModel, dt_s: float) -> np.ndarray:
+        """1 - exp(-dt/T) per input ([servo (4),] motor (4)); 1 for T = 0 (no lag)."""
+        vm = cfg.vehicle
+        tau = np.array(([vm.servo_time_constant_s] * 4 if model.tilting else [])
+                       + [vm.motor_time_constant_s] * 4)
+        return np.where(tau > 0.0, -np.expm1(-dt_s / np.maximum(tau, 1e-12)), 1.0)
 
     @staticmethod
     def build(cfg: ControllerConfig, model: PredictionModel) -> "Stage":
         h = cfg.step_s
         nx, nu, tilting = model.nx, model.nu, model.tilting
-        ns, nv = (nx + 4, 8) if tilting else (nx, 4)
+        n_lag = nu if cfg.nmpc_actuator_states else 0
+        ns, nv = (nx + 4 + n_lag, 8) if tilting else (nx + n_lag, 4)
         F = model.discrete(h, 1)
         wts = cfg.weights
         Q = np.array([*wts.position, *wts.velocity, *wts.euler, *wts.rates])
@@ -79,15 +104,25 @@ class Stage:
             u_scaled, u_phys, l_rate = v, 100.0 * v, 0
         eu = u_scaled - u_trim
         l_k = ca.dot(Q * ex, ex) + ca.dot(R * eu, eu) + l_rate
-        x_next = F(x, u_phys, d)
-        s_next = ca.vertcat(x_next, a_next) if tilting else x_next
+        if n_lag:
+            scale = ca.DM(([1.0] * 4 if tilting else []) + [100.0] * 4)
+            y = s[ns - n_lag:ns]
+            g_mid = ca.DM(Stage.lag_gain(cfg, model, 0.5 * h))
+            g_end = ca.DM(Stage.lag_gain(cfg, model, h))
+            y_mid = y + g_mid * (u_scaled - y)
+            y_end = y + g_end * (u_scaled - y)
+            x_next = model.discrete_varying(h)(x, scale * y, scale * y_mid, scale * y_end, d)
+            s_next = ca.vertcat(x_next, a_next, y_end) if tilting else ca.vertcat(x_next, y_end)
+        else:
+            x_next = F(x, u_phys, d)
+            s_next = ca.vertcat(x_next, a_next) if tilting else x_next
         return Stage(
             ca.Function("stage_dynamics", [s, v, d], [s_next], ["s", "v", "d"], ["s_next"]),
             ca.Function("stage_cost", [s, v, xr, u_trim], [l_k],
                         ["s", "v", "x_ref", "u_trim"], ["l"]),
             ca.Function("terminal_cost", [s, xr], [wts.terminal_factor * ca.dot(Q * ex, ex)],
                         ["s", "x_ref"], ["l"]),
-            ns, nv)
+            ns, nv, n_lag)
 
 @dataclass
 class Ocp:
@@ -101,13 +136,15 @@ class Ocp:
     step_s: float
     nx: int                            # model state (12)
     nu: int                            # model input (8 TRQ, 4 quad)
-    ns: int                            # stage state (16 TRQ, 12 quad)
+    ns: int                            # stage state (16 TRQ, 12 quad; + n_lag)
     nv: int                            # stage input (8 TRQ, 4 quad)
     tilting: bool
     s_index: np.ndarray                # (N+1, ns) positions of s_k in w
     v_index: np.ndarray                # (N, nv) positions of v_k in w
     cost_fn: ca.Function               # cost(w, p)
     n_params: int
+    n_lag: int = 0                     # actuator lag states, the last n_lag rows of s_k
+    lag_gain: np.ndarray | None = None  # (n_lag,) 1 - exp(-h/T) (scaled units, as v)
 
     @staticmethod
     def build(cfg: ControllerConfig, model: PredictionModel) -> "Ocp":
@@ -115,9 +152,8 @@ class Ocp:
         N, h = cfg.horizon_steps, cfg.step_s
         nx, nu = model.nx, model.nu
         tilting = model.tilting
-        ns, nv = (nx + 4, 8) if tilting else (nx, 4)
-
         stage = Stage.build(cfg, model)
+        ns, nv, n_lag = stage.ns, stage.nv, stage.n_lag
         ss = [ca.SX.sym(f"s{k}", ns) for k in range(N + 1)]
         vs = [ca.SX.sym(f"v{k}", nv) for k in range(N)]
         x_ref = ca.SX.sym("x_ref", nx, N + 1)
@@ -165,7 +201,8 @@ class Ocp:
         zeros = np.zeros(g.shape[0])
         return Ocp(nlp, zeros, zeros.copy(), np.concatenate(lbw), np.concatenate(ubw), N, h,
                    nx, nu, ns, nv, tilting, np.array(s_index), np.array(v_index),
-                   ca.Function("cost", [wv, p], [cost]), int(p.shape[0]))
+                   ca.Function("cost", [wv, p], [cost]), int(p.shape[0]), n_lag,
+                   Stage.lag_gain(cfg, model, h) if n_lag else None)
 
     # --- packing (all NumPy) ------------------------------------------------------------------
     def params(self, x_ref, u_trim, d) -> np.ndarray:
@@ -179,26 +216,44 @@ class Ocp:
     def u_scale(self) -> np.ndarray:
         return np.array(([1.0] * 4 if self.tilting else []) + [100.0] * 4)
 
-    def bounds(self, x0, alpha_prev) -> tuple[np.ndarray, np.ndarray]:
+    def _lag_rows(self, y0) -> np.ndarray:
+        """The actuator part of s_0 (scaled) from y0, physical [alpha, zeta] (nu)."""
+        if y0 is None:
+            raise ValueError("the OCP has actuator lag states: y0 (the actuators' outputs when "
+                             "the plan starts) is required")
+        return np.asarray(y0, float).reshape(self.nu) / self.u_scale
+
+    def bounds(self, x0, alpha_prev, y0=None) -> tuple[np.ndarray, np.ndarray]:
+        """Bounds of w with s_0 fixed to [x0, alpha_prev (TRQ), y0 (with lag states)]."""
         lbw, ubw = self.lbw.copy(), self.ubw.copy()
         s0 = np.concatenate([x0, alpha_prev]) if self.tilting else np.asarray(x0, float)
+        if self.n_lag:
+            s0 = np.concatenate([s0, self._lag_rows(y0)])
         lbw[self.s_index[0]] = s0
         ubw[self.s_index[0]] = s0
         return lbw, ubw
 
-    def pack(self, x_plan, u_plan, alpha_prev) -> np.ndarray:
-        """w from physical plans x (N+1, 12), u (N, nu) and the previously applied tilt."""
+    def pack(self, x_plan, u_plan, alpha_prev, y0=None) -> np.ndarray:
+        """w from physical plans x (N+1, 12), u (N, nu), the previously applied tilt and (with
+        lag states) the actuators' outputs y0 when the plan starts, rolled out through the
+        lags under the plan's commands."""
         w = np.zeros(self.lbw.size)
         x_plan = np.asarray(x_plan, float)
         u_plan = np.asarray(u_plan, float)
         if self.tilting:
             tilts = np.vstack([np.asarray(alpha_prev, float).reshape(1, 4), u_plan[:, 0:4]])
-            w[self.s_index] = np.hstack([x_plan, tilts])
+            s_main = np.hstack([x_plan, tilts])
             rates = np.diff(tilts, axis=0) / self.step_s
             w[self.v_index] = np.hstack([rates, u_plan[:, 4:8] / 100.0])
         else:
-            w[self.s_index] = x_plan
+            s_main = x_plan
             w[self.v_index] = u_plan / 100.0
+        if self.n_lag:
+            ys = [self._lag_rows(y0)]
+            for u in u_plan / self.u_scale:
+                ys.append(ys[-1] + self.lag_gain * (u - ys[-1]))
+            s_main = np.hstack([s_main, np.array(ys)])
+        w[self.s_index] = s_main
         return w
 
     def unpack(self, w) -> tuple[np.ndarray, np.ndarray]:

@@ -20,7 +20,7 @@ assemble the structured QP in the increments dw:
 H is the constant Hessian of the quadratic cost (Gauss-Newton: exact here, since the cost is
 quadratic in w) or, for hessian="exact", the Hessian of the Lagrangian with the multipliers of the
 previous QP; plus `regularization` on the diagonal.
-Feedback (when x0 arrives): embed s_0 = [x0, alpha_prev] as equal bounds on ds_0, correct the
+Feedback (when x0 arrives): embed s_0 = [x0, alpha_prev (, y0)] as equal bounds on ds_0, correct the
 gaps to first order for the change of d since the preparation (D_k (d - d_prep)) and the cost
 gradient exactly for the change of the reference (the cost is quadratic), solve the QP (HPIPM
 through casadi.conic: Riccati-based, exploits the stage structure) and take the full step.
@@ -186,13 +186,16 @@ class RtiSolver:
         return sp, src[order]
 
     # --- phases --------------------------------------------------------------------------------
-    def prepare(self, x_ref, d, u_prev, guess) -> None:
+    def prepare(self, x_ref, d, u_prev, guess, y0=None) -> None:
         """Linearise at `guess` (u (N, nu), x (N+1, 12): the plan expected at the next step) and
-        assemble the QP; the next solve() only embeds its x0 and solves it."""
+        assemble the QP; the next solve() only embeds its x0 and solves it. y0 (with actuator
+        lag states): the actuators' outputs expected when that plan starts (default u_prev)."""
         t0 = time.perf_counter()
         o = self.ocp
         a_prev = np.asarray(u_prev, float)[0:4] if o.tilting else None
-        w = np.clip(o.pack(guess[1], guess[0], a_prev), self._free_lbw, self._free_ubw)
+        if o.n_lag and y0 is None:
+            y0 = u_prev
+        w = np.clip(o.pack(guess[1], guess[0], a_prev, y0), self._free_lbw, self._free_ubw)
         x_ref = np.asarray(x_ref, float).reshape(self._N + 1, self._nx)
         d = np.asarray(d, float).reshape(6)
         out = self._prep(w, x_ref.T, self.u_trim / o.u_scale, d, self._lam)
@@ -209,8 +212,10 @@ class RtiSolver:
         """Forget a pending preparation (the controller was reset)."""
         self._prepared = None
 
-    def solve(self, x0, x_ref, d, u_prev, guess):
+    def solve(self, x0, x_ref, d, u_prev, guess, y0=None):
         t0 = time.perf_counter()
+        if self.ocp.n_lag and y0 is None:
+            y0 = u_prev                    # actuators settled at the applied command
         try:
             it = 0
             P = self._prepared
@@ -219,8 +224,8 @@ class RtiSolver:
                 self._prepared = None      # stale: the state is far from the linearisation
             for it in range(1, self.max_iterations + 1):
                 if self._prepared is None or it > 1:
-                    self.prepare(x_ref, d, u_prev, guess)
-                w, status = self._feedback(x0, x_ref, d, u_prev)
+                    self.prepare(x_ref, d, u_prev, guess, y0)
+                w, status = self._feedback(x0, x_ref, d, u_prev, y0)
                 if w is None:
                     return self._failed(guess, t0, it, status)
                 guess = self.ocp.unpack(w)
@@ -231,7 +236,7 @@ class RtiSolver:
         return u, x, SolveInfo(SolveStatus.OK, it, time.perf_counter() - t0,
                                self._cost(w, x_ref), status)
 
-    def _feedback(self, x0, x_ref, d, u_prev):
+    def _feedback(self, x0, x_ref, d, u_prev, y0=None):
         P, o = self._prepared, self.ocp
         self._prepared = None
         x0 = np.asarray(x0, float).reshape(12)
@@ -245,7 +250,7 @@ class RtiSolver:
         xr_w[self._x_pos] = np.asarray(x_ref, float).reshape(self._N + 1, self._nx)
         if not np.array_equal(xr_w, P.xr_w):
             grad = grad - self._q2_w * (xr_w - P.xr_w)
-        lbw, ubw = o.bounds(x0, np.asarray(u_prev, float)[0:4] if o.tilting else None)
+        lbw, ubw = o.bounds(x0, np.asarray(u_prev, float)[0:4] if o.tilting else None, y0)
         res = self._qp(h=P.h, g=grad, a=P.a, lba=-gaps, uba=-gaps, lbx=lbw - P.w, ubx=ubw - P.w)
         st = self._qp.stats()
         self.qp_iterations = int(st.get("iter_count", -1))

@@ -36,11 +36,13 @@ class Solver(Protocol):
     ocp: Ocp
 
     def solve(self, x0: np.ndarray, x_ref: np.ndarray, d: np.ndarray, u_prev: np.ndarray,
-              guess: Plan) -> tuple[np.ndarray, np.ndarray, SolveInfo]:
+              guess: Plan, y0: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray,
+                                                                 SolveInfo]:
         """x0 (12) measured state, x_ref (N+1, 12) reference states, d (6) disturbance held
         over the horizon, u_prev (nu) the command applied now (its tilts bound the first tilt
-        step), guess an initial plan (u, x). Returns the plan (u (N, nu) physical [alpha, zeta]
-        or [zeta], x (N+1, 12)) and a SolveInfo."""
+        step), guess an initial plan (u, x), y0 (nu, physical; only with actuator lag states,
+        default u_prev) the actuators' outputs when the plan starts. Returns the plan (u (N, nu)
+        physical [alpha, zeta] or [zeta]: the commands, x (N+1, 12)) and a SolveInfo."""
         ...
 
 
@@ -50,13 +52,15 @@ class _Base:
         self.ocp = Ocp.build(cfg, model)
         self.u_trim = np.asarray(u_trim, float)
 
-    def _setup(self, x0, x_ref, d, u_prev, guess):
+    def _setup(self, x0, x_ref, d, u_prev, guess, y0=None):
         ocp = self.ocp
         x0 = np.asarray(x0, float).reshape(12)
         a_prev = np.asarray(u_prev, float)[0:4] if ocp.tilting else np.zeros(0)
+        if ocp.n_lag and y0 is None:
+            y0 = u_prev                    # actuators settled at the applied command
         p = ocp.params(x_ref, self.u_trim, d)
-        lbw, ubw = ocp.bounds(x0, a_prev)
-        w0 = ocp.pack(guess[1], guess[0], a_prev if ocp.tilting else None)
+        lbw, ubw = ocp.bounds(x0, a_prev, y0)
+        w0 = ocp.pack(guess[1], guess[0], a_prev if ocp.tilting else None, y0)
         w0 = np.clip(w0, lbw, ubw)
         return p, lbw, ubw, w0
 
@@ -109,11 +113,11 @@ class SqpSolver(_Base):
         self._lam = np.zeros(g.shape[0])
         self._fg = ca.Function("fg", [w, p], [f, g])
 
-    def solve(self, x0, x_ref, d, u_prev, guess):
+    def solve(self, x0, x_ref, d, u_prev, guess, y0=None):
         t0 = time.perf_counter()
         ocp = self.ocp
         try:
-            p, lbw, ubw, w = self._setup(x0, x_ref, d, u_prev, guess)
+            p, lbw, ubw, w = self._setup(x0, x_ref, d, u_prev, guess, y0)
             lam = self._lam
             it = 0
             step = np.inf
@@ -160,11 +164,11 @@ class IpoptSolver(_Base):
             "ipopt.print_level": 0, "ipopt.sb": "yes", "ipopt.tol": tol,
             "ipopt.max_iter": cfg.solver.ipopt_max_iterations})
 
-    def solve(self, x0, x_ref, d, u_prev, guess):
+    def solve(self, x0, x_ref, d, u_prev, guess, y0=None):
         t0 = time.perf_counter()
         ocp = self.ocp
         try:
-            p, lbw, ubw, w0 = self._setup(x0, x_ref, d, u_prev, guess)
+            p, lbw, ubw, w0 = self._setup(x0, x_ref, d, u_prev, guess, y0)
             r = self._nlp(x0=w0, p=p, lbx=lbw, ubx=ubw, lbg=ocp.lbg, ubg=ocp.ubg)
         except RuntimeError as exc:
             return self._failed(guess, t0, 0, f"exception: {exc}")
