@@ -147,3 +147,39 @@ def test_pure_python_fallback_without_compiler(cache_env, monkeypatch):
     u, x, info = rti.solve(x0, x_ref, d, u_trim, guess)
     assert info.status is SolveStatus.OK
     assert np.all(np.isfinite(u)) and np.all(np.isfinite(x))
+
+
+@pytest.mark.parametrize("name", ["trq_nmpc_eso", "quad_nmpc"])
+def test_rti_and_sqp_with_actuator_lag_states_converge_to_ipopt(cache_env, name):
+    """actuator_states on (the actuators start behind the applied command): repeated real-time
+    iterations and the SQP converge to IPOPT on the same NLP (they share ocp.Stage); the plan
+    is the commands, which lead the lagged outputs."""
+    from trq_offboard.nmpc.solver import SqpSolver
+
+    cfg = dataclasses.replace(_cfg(name=name, hessian="gauss_newton"), actuator_states="on")
+    model, u_trim, x0, x_ref, d, guess = _problem(cfg)
+    y0 = u_trim.copy()
+    y0[-4:] -= 4.0                                   # throttles 4 % below the command
+    if model.tilting:
+        y0[0:4] += (0.03, -0.02, 0.0, 0.01)
+    ref = IpoptSolver(cfg, model, u_trim)
+    assert ref.ocp.n_lag == model.nu
+    u_r, x_r, info_r = ref.solve(x0, x_ref, d, u_trim, guess, y0=y0)
+    assert info_r.status is SolveStatus.OK
+    rti = RtiSolver(cfg, model, u_trim)
+    plan = guess
+    for _ in range(25):
+        u, x, info = rti.solve(x0, x_ref, d, u_trim, plan, y0=y0)
+        assert info.status is SolveStatus.OK
+        plan = (u, x)
+    np.testing.assert_allclose(u, u_r, atol=1e-4)
+    np.testing.assert_allclose(x, x_r, atol=1e-5)
+    assert info.cost == pytest.approx(info_r.cost, rel=1e-6)
+    sqp = SqpSolver(dataclasses.replace(cfg, solver=dataclasses.replace(
+        cfg.solver, max_iterations=60, tolerance=1e-10)), model, u_trim)
+    u_s, x_s, info_s = sqp.solve(x0, x_ref, d, u_trim, guess, y0=y0)
+    assert info_s.status is SolveStatus.OK
+    np.testing.assert_allclose(u_s, u_r, atol=1e-4)
+    # the lag matters: without it (actuators settled at the command) the plan differs
+    u_settled, _, _ = ref.solve(x0, x_ref, d, u_trim, guess, y0=u_trim)
+    assert np.max(np.abs(u_settled - u_r)) > 0.1
