@@ -39,8 +39,11 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(ROOT)]
 
-MODES = {     # name: solver overrides of params/controller/trq_nmpc_eso.yaml
+MODES = {     # name: solver overrides of params/controller/trq_nmpc_eso.yaml (and in "controller"
+              # overrides of the controller's own keys)
     "rti-gn": dict(kind="rti", hessian="gauss_newton", max_iterations=1),
+    "rti-gn-lag": dict(kind="rti", hessian="gauss_newton", max_iterations=1,
+                       controller=dict(actuator_states="on")),   # the actuators' lag states
     "rti-exact": dict(kind="rti", hessian="exact", max_iterations=1),
     "rti-gn-py": dict(kind="rti", hessian="gauss_newton", max_iterations=1, codegen="off"),
     "sqp-gn": dict(kind="sqp", hessian="gauss_newton", max_iterations=1),
@@ -63,7 +66,9 @@ def fly(mode: str, seconds: float | None) -> dict:
     from trq_offboard.reference import Reference
 
     cfg = load_controller(ROOT / "params" / "controller" / "trq_nmpc_eso.yaml")
-    cfg = dataclasses.replace(cfg, solver=dataclasses.replace(cfg.solver, **MODES[mode]))
+    overrides = dict(MODES[mode])
+    cfg = dataclasses.replace(cfg, **overrides.pop("controller", {}))
+    cfg = dataclasses.replace(cfg, solver=dataclasses.replace(cfg.solver, **overrides))
     t0 = time.perf_counter()
     Controller(cfg)
     build_cold = time.perf_counter() - t0
