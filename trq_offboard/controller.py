@@ -67,8 +67,12 @@ class Controller:
         # period; below it the observer's delayed b0 alone does better (nmpc.yaml: measured)
         predict = cfg.predicts_delay
         self.delay_s = cfg.applied_delay_s if predict else 0.0
-        self._lagged = cfg.lagged_actuators == "on" or (cfg.lagged_actuators == "auto"
-                                                        and predict and self.delay_s > 0.0)
+        # auto: also whenever the NMPC carries the lag states, which must not meet an observer
+        # whose b0 ignores the lags (paper_fault50 with actuator_states on: 0.206 m with the
+        # observer's b0 unlagged, 0.022 m lagged)
+        self._lagged = cfg.lagged_actuators == "on" or (
+            cfg.lagged_actuators == "auto"
+            and ((predict and self.delay_s > 0.0) or cfg.nmpc_actuator_states))
         tilts = 4 if self.model.tilting else 0
         self._tau = np.array([vm.servo_time_constant_s] * tilts + [vm.motor_time_constant_s] * 4)
         self._rate_limit = np.array([vm.servo_rate_limit_rad_s] * tilts

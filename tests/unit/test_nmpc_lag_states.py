@@ -249,3 +249,23 @@ def test_controller_starts_the_plan_from_the_lagged_actuators():
     for (a, b, ym), (a2, b2, ym2) in zip(path, again):
         assert (a, b) == (a2, b2)
         np.testing.assert_array_equal(ym, ym2)
+
+
+def test_lag_states_bring_the_lagged_observer_along():
+    """lagged_actuators auto is on whenever the NMPC carries the lag states, even without a
+    delay (the observer's b0 must see the same lags); the lockstep default has neither."""
+    from trq_offboard.controller import Controller
+
+    class _Ocp:
+        n_lag = 8
+
+    class _Solver:
+        ocp = _Ocp()
+
+    base = load_controller(CTRL / "trq_nmpc_eso.yaml")
+    assert not Controller(base, solver=_Solver())._lagged           # default: lockstep
+    forced = dataclasses.replace(base, actuator_states="on")
+    ctl = Controller(forced, solver=_Solver())
+    assert ctl._lagged and ctl._act_states and ctl.delay_s == 0.0
+    off = dataclasses.replace(forced, lagged_actuators="off")
+    assert not Controller(off, solver=_Solver())._lagged

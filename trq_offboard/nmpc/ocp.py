@@ -28,10 +28,6 @@ left out):
 
 Every constraint stays local to a stage. The cost is still on the commands u_k.
 
-A shorter first step (horizon.first_step_s = h0 < h): stage 0 steps h0 (its own Stage: RK4, tilt
-a + h0 w, lag gain 1 - exp(-h0/T)), its running cost is weighted h0 / h, the first tilt-rate bound
-is the servo rate * control period / h0, and the nodes lie at 0, h0, h0 + h, ...
-
 Cost (scaled inputs: tilt in rad, throttle as a fraction about the hover trim)
     sum_{k<N} (x_k - xr_k)' Q (x_k - xr_k) + (u_k - u_trim)' R (u_k - u_trim) + w_rate |w_k|^2
     + (x_N - xr_N)' c_N Q (x_N - xr_N)
