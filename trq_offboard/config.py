@@ -128,6 +128,8 @@ class _Keys:
 
     def text(self, key: str, choices: tuple[str, ...] | None = None, default: Any = None) -> str:
         val = self._pop(key, _MISSING if default is None else default)
+        if isinstance(val, bool) and choices and {"on", "off"} <= set(choices):
+            val = "on" if val else "off"      # YAML 1.1 reads a bare on / off as a boolean
         if not isinstance(val, str) or (choices and val not in choices):
             raise self.error(key, val, ("one of " + "|".join(choices)) if choices else "a string")
         return val

@@ -45,7 +45,9 @@ def _state():
 
 def test_auto_follows_the_delay_predictor():
     cfg = load_controller(CTRL / "trq_nmpc_eso.yaml")
-    assert cfg.actuator_states == "auto"
+    assert cfg.actuator_states == "off"                      # the default (nmpc.yaml: measured)
+    assert not dataclasses.replace(cfg, applied_delay_s=0.04).nmpc_actuator_states
+    cfg = dataclasses.replace(cfg, actuator_states="auto")
     assert not cfg.nmpc_actuator_states                      # lockstep: no delay, no states
     assert dataclasses.replace(cfg, applied_delay_s=0.04).nmpc_actuator_states
     assert not dataclasses.replace(cfg, applied_delay_s=0.005).nmpc_actuator_states  # < period
@@ -269,3 +271,20 @@ def test_lag_states_bring_the_lagged_observer_along():
     assert ctl._lagged and ctl._act_states and ctl.delay_s == 0.0
     off = dataclasses.replace(forced, lagged_actuators="off")
     assert not Controller(off, solver=_Solver())._lagged
+
+
+def test_bare_yaml_on_off_read_as_words(tmp_path):
+    """YAML 1.1 reads a bare `off` as false: an on|off|auto key takes it as the word."""
+    src = yaml.safe_load((CTRL / "nmpc.yaml").read_text())
+    src["vehicle"] = str(PARAMS / "vehicle/trq.yaml")
+    src["observer"]["file"] = str(CTRL / "eso.yaml")
+    del src["actuator_states"], src["lagged_actuators"]
+    base = yaml.safe_dump(src)
+    path = tmp_path / "c.yaml"
+    for word in ("off", "on", "auto"):
+        path.write_text(base + f"actuator_states: {word}\nlagged_actuators: {word}\n")
+        cfg = load_controller(path)
+        assert (cfg.actuator_states, cfg.lagged_actuators) == (word, word)
+    path.write_text(base + "actuator_states: 1\n")
+    with pytest.raises(ConfigError, match="actuator_states.*one of on"):
+        load_controller(path)
