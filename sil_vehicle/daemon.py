@@ -36,6 +36,12 @@ PEER_TIMEOUT_S = 10.0      # a peer silent this long (wall clock) gets no more t
 MAX_DATAGRAM = 1400          # bytes: frames to one address are packed up to this (below the MTU)
 
 
+def _expire(answer: asyncio.Future) -> None:
+    """The lockstep wait's timer: no answer in time (result None)."""
+    if not answer.done():
+        answer.set_result(None)
+
+
 class _Protocol(asyncio.DatagramProtocol):
     def __init__(self, daemon: "VehicleDaemon", link: str) -> None:
         self.daemon, self.link = daemon, link
@@ -198,12 +204,19 @@ class VehicleDaemon:
         while not self._stop.is_set():
             waited = 0.0
             while not sitl.answered and not self._stop.is_set():
-                # a bare future (no task per wait): this exchange runs hundreds of times a second
-                self._answer = loop.create_future()
+                # a bare future and one timer (no task, no wait_for): this exchange runs
+                # hundreds of times a second. Its result: True answered, False stopped, None
+                # the timer ran out
+                answer = self._answer = loop.create_future()
                 wall0 = self._monotonic()
+                timer = loop.call_later(period_s if free_run else self.sim.resend_s,
+                                        _expire, answer)
                 try:
-                    await asyncio.wait_for(self._answer, period_s if free_run else self.sim.resend_s)
-                except asyncio.TimeoutError:
+                    await answer
+                finally:
+                    timer.cancel()
+                    self._answer = None
+                if answer.result() is None:
                     waited += self._monotonic() - wall0
                     if free_run:
                         break              # no controller: one period in real time
@@ -214,18 +227,23 @@ class VehicleDaemon:
                         free_run = True
                         self.free_runs += 1
                         self.send(sitl.announce(6, "no offboard answer: time runs in real time"))
-                finally:
-                    self._answer = None
             if self._stop.is_set():
                 break
             if free_run and sitl.answered:
                 free_run = False           # the controller is back: lockstep again
                 self.send(sitl.announce(6, "offboard answers again: lockstep"))
+            # one period's telemetry leaves together (in order, packed into as few datagrams as
+            # fit): in lockstep nothing waits for it before the period's last ODOMETRY anyway
+            out: list = []
             for _ in range(sitl.lockstep_ticks()):
-                self.send(sitl.step())
+                out += sitl.step()
+            self.send(out)
             if end_us is not None and sitl.t_us >= end_us:
                 self.stop("duration reached")
-            await asyncio.sleep(0)
+            if sitl.answered:
+                # no stamp left this period (a lost or delayed ODOMETRY): let the loop breathe
+                # before the next period; otherwise the wait for the answer yields anyway
+                await asyncio.sleep(0)
 
     async def _realtime(self, end_us: int | None) -> None:
         sitl = self.sitl
