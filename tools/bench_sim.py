@@ -220,7 +220,9 @@ def bench_lockstep(sim_seconds: float, core: str, runs: int = 3) -> tuple[float,
 def machine() -> dict[str, object]:
     return {"platform": platform.platform(), "processor": platform.processor() or
             platform.machine(), "cpu_count": os.cpu_count(),
-            "python": platform.python_version(), "implementation": platform.python_implementation()}
+            "python": platform.python_version(), "implementation": platform.python_implementation(),
+            "mavlink_crc": "fastcrc" if mavlink.x25crc.__name__ == "_x25crc_fast" else
+            "pure Python (fastcrc not installed)"}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -267,7 +269,7 @@ def main(argv: list[str] | None = None) -> int:
     }
     m = result["machine"]
     print(f"machine: {m['platform']}, {m['processor']}, {m['cpu_count']} CPUs, "
-          f"{m['implementation']} {m['python']}")
+          f"{m['implementation']} {m['python']}, MAVLink CRC: {m['mavlink_crc']}")
     rows = [("(1) Vehicle.step, steps/s", "vehicle_step_per_s", "{:10.0f}"),
             ("(2) Sitl.step + encoding, steps/s", "sitl_step_with_telemetry_per_s", "{:10.0f}"),
             ("(3) daemon lockstep 100 Hz, x real time", "lockstep_rtf_100hz", "{:10.1f}"),
