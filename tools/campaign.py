@@ -42,11 +42,14 @@ Campaign file (strict: an unknown or misspelt key is an error naming the file an
       fault: {motor: [1, 2, 3, 4], effectiveness: {uniform: [0.3, 1.0]}, at_s: 4.0}
 
 An axis of `grid` may also be a list of such mappings (their union); `none` in the fault axis is
-a flight without a fault. Axes left out: no fault, no wind, the controller file's reference.
+a flight without a fault. Axes left out: no fault, no wind, the controller file's reference, a
+clean link.
 Fault keys: at_s and either motor (1..4) with effectiveness (a), optional time-varying terms
 tv_b, tv_w_rad_s, tv_phi_rad (e = a - b sin(w t + phi)), or stopped: true; or servo (1..4) with
 stuck_deg. Wind keys: speed_m_s, direction_deg (from, clockwise from north), gusts,
-gust_sigma_m_s. Trajectory keys: those of the controller file's `reference` (kind, altitude_m,
+gust_sigma_m_s. Link keys (the offboard link's seeded impairment, as a scenario's
+offboard_link; the controller is told its round trip as applied_delay_s, as by the scenario
+runner): loss, delay_ms, jitter_ms, duplicate, reorder. Trajectory keys: those of the controller file's `reference` (kind, altitude_m,
 climb_speed_m_s, hold_s, duration_s, ramp_s, radius_m, period_s, helix_climb_m, step_ned_m, land);
 their types are checked when the campaign is read, their values and combinations (ramp_s at most
 half of duration_s, ...) by the controller's own loader when the flight is prepared: an invalid
@@ -59,6 +62,7 @@ bad campaign file or command line.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import hashlib
 import itertools
 import json
@@ -80,7 +84,7 @@ for _p in (str(ROOT), str(ROOT / "tools")):
 from sil_vehicle.yamlcheck import ConfigError, Section, load_yaml  # noqa: E402
 
 PARAMS = ROOT / "params"
-AXES = ("fault", "wind", "trajectory")
+AXES = ("fault", "wind", "trajectory", "link")
 REFERENCE_KINDS = ("hover", "step", "circle", "helix", "figure8")
 
 # key: (kind, lo, hi); kind: int | float | bool | vec3 | kind
@@ -96,7 +100,12 @@ TRAJECTORY_KEYS = {"kind": ("kind", None, None), "altitude_m": ("float", None, N
                    "radius_m": ("float", None, None), "period_s": ("float", None, None),
                    "helix_climb_m": ("float", None, None), "step_ned_m": ("vec3", None, None),
                    "land": ("bool", None, None)}
-AXIS_KEYS = {"fault": FAULT_KEYS, "wind": WIND_KEYS, "trajectory": TRAJECTORY_KEYS}
+# the offboard link's impairment (sil_vehicle.impair.ImpairParams, as a scenario's offboard_link)
+LINK_KEYS = {"loss": ("float", 0.0, 1.0), "delay_ms": ("float", 0.0, 10_000.0),
+             "jitter_ms": ("float", 0.0, 10_000.0), "duplicate": ("float", 0.0, 1.0),
+             "reorder": ("float", 0.0, 1.0)}
+AXIS_KEYS = {"fault": FAULT_KEYS, "wind": WIND_KEYS, "trajectory": TRAJECTORY_KEYS,
+             "link": LINK_KEYS}
 WIND_DEFAULT = {"speed_m_s": 0.0, "direction_deg": 0.0, "gusts": False}
 SAMPLE_DIGITS = 4            # sampled numbers are rounded: readable tables, stable ids
 
@@ -349,10 +358,12 @@ def load_campaign(path: Path) -> Campaign:
     top.done()
     flights = []
     seen = set()
-    for fault, wind, traj in cells:
+    for fault, wind, traj, link in cells:
         wind = {**WIND_DEFAULT, **(wind or {})}
         for r in range(repeats):
             cell = {"fault": fault, "wind": wind, "trajectory": traj or {}, "repeat": r}
+            if link:            # only then: a clean link keeps the ids and seeds it always had
+                cell["link"] = link
             text = json.dumps({"campaign_seed": seed, **cell}, sort_keys=True)
             fseed = int(hashlib.sha256(text.encode()).hexdigest()[:8], 16) % 2**31
             for c in controllers:
@@ -392,6 +403,9 @@ def flight_inputs(spec: dict) -> dict:
         row[f"fault_{key}"] = fault.get(key)
     for key in WIND_KEYS:
         row[f"wind_{key}"] = spec["wind"].get(key)
+    link = spec.get("link") or {}
+    for key in LINK_KEYS:
+        row[f"link_{key}"] = link.get(key, 0.0)
     traj = spec["trajectory"]
     row["traj_kind"] = traj.get("kind", "(controller file)")
     for key in TRAJECTORY_KEYS:
@@ -422,11 +436,18 @@ def run_flight(spec: dict, root: str | None = None, log_dir: str | None = None) 
             out = Path(log_dir) / spec["id"] if log_dir else Path(tmp)
             ctl_yaml = inprocess.prepare_controller(spec["controller"], spec["trajectory"], out)
             cfg = load_controller(ctl_yaml)
+            link = spec.get("link")
+            if link:            # the controller is told the link's round trip, as by the runner
+                import run_scenario
+                cfg = dataclasses.replace(
+                    cfg, applied_delay_s=run_scenario.command_delay_s(link, False))
+            record["applied_delay_s"] = cfg.applied_delay_s
             w = spec["wind"]
             sim = inprocess.sim_params(cfg.vehicle.file, cfg.control_rate_hz, seed=spec["seed"],
                                        wind_speed_m_s=w["speed_m_s"],
                                        wind_from_deg=w["direction_deg"], gusts=w["gusts"],
-                                       gust_sigma_m_s=w.get("gust_sigma_m_s"))
+                                       gust_sigma_m_s=w.get("gust_sigma_m_s"),
+                                       offboard_impair=link or None)
             vp = sim.vehicle
             event = _fault_event(spec["fault"], f"flight {spec['id']}", "fault",
                                  (math.degrees(vp.tilt_min_rad), math.degrees(vp.tilt_max_rad)))
@@ -526,28 +547,47 @@ def _bins(values: list[float], max_distinct: int = 12, n_bins: int = 8):
     return f
 
 
+def _link_label(r: dict) -> str:
+    """'' for a clean link, else what is impaired (loss %, delay and jitter ms, ...)."""
+    parts = []
+    if r.get("link_loss"):
+        parts.append(f"{100 * r['link_loss']:g} % lost")
+    if r.get("link_delay_ms"):
+        parts.append(f"{r['link_delay_ms']:g} ms")
+    if r.get("link_jitter_ms"):
+        parts.append(f"+-{r['link_jitter_ms']:g} ms jitter")
+    if r.get("link_duplicate"):
+        parts.append(f"{100 * r['link_duplicate']:g} % dup")
+    if r.get("link_reorder"):
+        parts.append(f"{100 * r['link_reorder']:g} % reordered")
+    return ", link " + " ".join(parts) if parts else ""
+
+
 def _wind_label(r: dict) -> str:
     s = f"{r['wind_speed_m_s']:g} m/s"
     if r["wind_speed_m_s"]:
         s += f" from {r['wind_direction_deg']:g}"
     if r["wind_gusts"]:
         s += " gusts"
-    return s
+    return s + _link_label(r)
 
 
 def cells(rows: list[dict]):
     """Group the rows by (controller, wind key, severity key): the heat-map cells."""
     sev_of = {kind: _bins([r["severity"] for r in rows if r["fault_kind"] == kind])
               for kind in {r["fault_kind"] for r in rows}}
-    wind_distinct = {(r["wind_speed_m_s"], r["wind_direction_deg"], r["wind_gusts"]) for r in rows}
+    def conditions(r):                 # the wind and the link a flight met
+        return (r["wind_speed_m_s"], r["wind_direction_deg"], r["wind_gusts"],
+                *(r.get(f"link_{k}", 0.0) for k in LINK_KEYS))
+    wind_distinct = {conditions(r) for r in rows}
     speed_bin = _bins([r["wind_speed_m_s"] for r in rows])
     out: dict[tuple, list[dict]] = {}
     for r in rows:
         if len(wind_distinct) <= 12:
-            wkey = ((r["wind_speed_m_s"], r["wind_direction_deg"], r["wind_gusts"]), _wind_label(r))
+            wkey = (conditions(r), _wind_label(r))
         else:
             k, label = speed_bin(r["wind_speed_m_s"])
-            wkey = ((k,), f"{label} m/s")
+            wkey = ((k, *conditions(r)[3:]), f"{label} m/s{_link_label(r)}")
         skey, slabel = sev_of[r["fault_kind"]](r["severity"])
         kind_label = {"motor": "motor loss", "servo": "servo stuck deg", "none": "no fault"}
         sev = ((r["fault_kind"], skey), f"{kind_label[r['fault_kind']]} {slabel}"

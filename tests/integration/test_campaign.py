@@ -224,6 +224,43 @@ def test_sampled_campaign_is_seeded(tmp_path):
     assert campaign.load_campaign(path).flights != a.flights
 
 
+def test_link_axis_impairs_the_offboard_link(tmp_path):
+    """grid.link: the offboard link's seeded impairment per flight. A clean link (`{}`) keeps the
+    ids and seeds of a campaign without the axis; an impaired one reaches the flight (its truth
+    log differs from the clean flight's with the same seed) and the controller is told the
+    round trip; a bad key is refused with its name."""
+    import campaign
+    from sil_vehicle.yamlcheck import ConfigError
+
+    base = SMOKE.read_text().replace("effectiveness: [1.0, 0.6]", "effectiveness: 0.6").replace(
+        "speed_m_s: [0.0, 4.0]", "speed_m_s: 0.0").replace(
+        "[trq_nmpc_eso, quad_nmpc]", "[trq_nmpc_eso]")
+    plain, linked = tmp_path / "plain.yaml", tmp_path / "linked.yaml"
+    plain.write_text(base)
+    linked.write_text(base + "  link: [{}, {loss: 0.1, delay_ms: 20.0}]\n")
+    a, b = campaign.load_campaign(plain), campaign.load_campaign(linked)
+    assert len(a.flights) == 1 and len(b.flights) == 2
+    clean, lossy = b.flights
+    assert clean == a.flights[0] and "link" not in clean
+    assert lossy["link"] == {"delay_ms": 20.0, "loss": 0.1} and lossy["id"] != clean["id"]
+    row = campaign.flight_inputs(lossy)
+    assert (row["link_loss"], row["link_delay_ms"], row["link_jitter_ms"]) == (0.1, 20.0, 0.0)
+    assert campaign._wind_label(row) == "0 m/s, link 10 % lost 20 ms"
+
+    lossy = dict(lossy, seed=clean["seed"])          # the same seed: only the link differs
+    logs = tmp_path / "logs"
+    recs = [campaign.run_flight(spec, str(ROOT), str(logs)) for spec in (clean, lossy)]
+    assert [r["error"] for r in recs] == [None, None]
+    assert all(r["metrics"] is not None for r in recs)
+    truth = [(logs / spec["id"] / "flight.csv").read_text() for spec in (clean, lossy)]
+    assert truth[0] != truth[1]
+    assert [r["applied_delay_s"] for r in recs] == [0.0, pytest.approx(0.04)]
+
+    linked.write_text(base + "  link: {loss: 0.1, delay: 20.0}\n")
+    with pytest.raises(ConfigError, match=r"grid\.link\.delay"):
+        campaign.load_campaign(linked)
+
+
 # --- the in-process flight against the daemons over UDP ---------------------------------------
 
 def _udp_lockstep_flight(out: Path, scenario) -> None:
