@@ -17,8 +17,10 @@ vehicle daemon drives), the controller is `Controller` + `Reference` driven by `
   parsed back by a fresh pymavlink parser (as `MavlinkUdp` parses a datagram), then delivered to
   `flight.on_message` as a separate event-loop callback (as a datagram would be);
 - the clock: a 'vehicle' task advances `sitl.lockstep_ticks()` physics ticks each time
-  `sitl.answered` becomes true (PROTOCOL.md, lockstep handshake). The controller always answers,
-  so the daemon's wall-clock resend and free-run never happen here.
+  `sitl.answered` becomes true (PROTOCOL.md, lockstep handshake). As in the daemon, an answer
+  that does not come within the sim's resend_s (loop time) gets the latest telemetry sent again,
+  bypassing a simulated impairment (on a lossy link a lost first HEARTBEAT would otherwise keep
+  the controller waiting while time stands still); the daemon's free-run never happens here.
 
 The ground-station link's messages are still built every tick (they consume the same sensor
 noise draws as in the daemon) but are not encoded: nobody listens.
@@ -241,8 +243,17 @@ async def _fly(sitl, flight, link, *, timeout_us: int, crash_grace_us: int) -> t
         crash_us = None
         while True:
             if not sitl.answered:       # wait for the answer to the latest stamp (an answer to
-                await answered.wait()   # an older one, or another message: keep waiting); on
-                answered.clear()        # an impaired link a stamp the vehicle dropped needs none
+                try:                    # an older one, or another message: keep waiting); on
+                    # an impaired link a stamp the vehicle dropped needs none. asyncio.timeout,
+                    # not wait_for: wait_for can swallow the cancellation that ends the flight
+                    async with asyncio.timeout(sitl.sim.resend_s):
+                        await answered.wait()
+                except TimeoutError:
+                    # the daemon's recovery from a lost message (a controller that never saw
+                    # the vehicle's first HEARTBEAT waits for it, and time stands still): after
+                    # resend_s the latest telemetry again, bypassing the simulated impairment
+                    link.deliver(sitl.telemetry_due(everything=True, resend=True))
+                answered.clear()
                 continue
             for _ in range(ticks):
                 link.deliver(sitl.step())

@@ -13,7 +13,7 @@ import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
 from trq_offboard.link.udp import Connection
-from trq_offboard.loop import IDLE_STEPS_BEFORE_DISARM, FlightError, OffboardFlight
+from trq_offboard.loop import COMMAND_TRIES, IDLE_STEPS_BEFORE_DISARM, FlightError, OffboardFlight
 from trq_offboard.records import (ActuatorCommand, CommandSource, ReferenceSample, SolveInfo,
                                   SolveStatus, StepInfo)
 
@@ -247,9 +247,9 @@ def test_unanswered_arm_command_is_retried_then_a_flight_error():
         task = asyncio.create_task(flight.run())
         flight.on_message(heartbeat())
         flight.on_message(odometry(0))
-        with pytest.raises(FlightError, match="no COMMAND_ACK"):
+        with pytest.raises(FlightError, match=f"no COMMAND_ACK.*after {COMMAND_TRIES} tries"):
             await asyncio.wait_for(task, WAIT_S)
-        assert len(link.commands(1.0)) == 3
+        assert len(link.commands(1.0)) == COMMAND_TRIES
 
     asyncio.run(scenario())
 
