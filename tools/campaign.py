@@ -485,7 +485,8 @@ def load_results(out: Path) -> dict[str, dict]:
 
 
 METRIC_KEYS = ("vehicle", "crashed", "flight_s", "rmse_pos_m", "max_pos_err_m",
-               "rmse_pos_after_fault_m", "rmse_yaw_deg", "max_yaw_err_deg", "recovery_s",
+               "rmse_pos_after_fault_m", "rmse_vert_after_fault_m", "max_sink_after_fault_m",
+               "rmse_yaw_deg", "max_yaw_err_deg", "recovery_s",
                "solve_ms_p50", "solve_ms_p99")
 
 

@@ -8,6 +8,12 @@ the crash, whichever comes first:
 
     rmse_pos_m, max_pos_err_m      norm of the 3-D position error
     rmse_pos_after_fault_m         the same from the fault onset on
+    rmse_vert_after_fault_m        its vertical part (down axis; the horizontal part is
+                                   sqrt(after^2 - vert^2)): after a motor loss the vehicle hovers
+                                   near full thrust, so height lost in the transient is slow to
+                                   win back and this part usually dominates
+    max_sink_after_fault_m         the largest height below the reference after the onset (0 if
+                                   it never was below)
     rmse_yaw_deg, max_yaw_err_deg  yaw error, wrapped to +-180 deg
     recovery_s                     from the onset to the last time the position error exceeded
                                    the recovery threshold (0 if it never did; None if crashed)
@@ -35,6 +41,8 @@ class RunMetrics:
     rmse_pos_m: float
     max_pos_err_m: float
     rmse_pos_after_fault_m: float | None
+    rmse_vert_after_fault_m: float | None
+    max_sink_after_fault_m: float | None
     rmse_yaw_deg: float
     max_yaw_err_deg: float
     recovery_s: float | None
@@ -93,17 +101,20 @@ def compute(controller: str, vehicle: str, truth: dict[str, np.ndarray],
     # ground (home, down = 0) is where it can get to
     ref[:, 2] = np.minimum(ref[:, 2], GROUND_DOWN_M)
     err = np.linalg.norm(pos - ref, axis=1)
+    down_err = pos[:, 2] - ref[:, 2]                  # > 0: below the reference
     yaw_err = wrap_deg(np.degrees(truth["yaw_rad"][rows] - steps["ref_yaw_rad"][keep]))
     t_us = stamps[keep]
 
     def rms(x: np.ndarray) -> float:
         return float(np.sqrt(np.mean(np.square(x)))) if len(x) else math.nan
 
-    after = None
+    after = vert = sink = None
     recovery = None
     if fault_onset_us is not None:
         sel = t_us >= fault_onset_us
         after = rms(err[sel]) if sel.any() else math.nan
+        vert = rms(down_err[sel]) if sel.any() else math.nan
+        sink = float(max(0.0, down_err[sel].max())) if sel.any() else math.nan
         if crash_us is None and sel.any():
             over = np.flatnonzero(sel & (err > recovery_threshold_m))
             recovery = 0.0 if len(over) == 0 else float((t_us[over[-1]] - fault_onset_us) * 1e-6)
@@ -113,7 +124,8 @@ def compute(controller: str, vehicle: str, truth: dict[str, np.ndarray],
         controller=controller, vehicle=vehicle, crashed=crash_us is not None,
         flight_s=float((flight_end - (int(stamps[0]) if len(stamps) else 0)) * 1e-6),
         rmse_pos_m=rms(err), max_pos_err_m=float(err.max()) if len(err) else math.nan,
-        rmse_pos_after_fault_m=after, rmse_yaw_deg=rms(yaw_err),
+        rmse_pos_after_fault_m=after, rmse_vert_after_fault_m=vert,
+        max_sink_after_fault_m=sink, rmse_yaw_deg=rms(yaw_err),
         max_yaw_err_deg=float(np.abs(yaw_err).max()) if len(yaw_err) else math.nan,
         recovery_s=recovery,
         solve_ms_p50=float(np.percentile(solve, 50)) if len(solve) else math.nan,

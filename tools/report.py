@@ -19,6 +19,8 @@ COLUMNS = [("controller", "controller", "{}"), ("vehicle", "vehicle", "{}"),
            ("crashed", "crashed", "{}"), ("flight_s", "flight s", "{:.1f}"),
            ("rmse_pos_m", "pos RMSE m", "{:.3f}"), ("max_pos_err_m", "max pos err m", "{:.3f}"),
            ("rmse_pos_after_fault_m", "pos RMSE after fault m", "{:.3f}"),
+           ("rmse_vert_after_fault_m", "of it vertical m", "{:.3f}"),
+           ("max_sink_after_fault_m", "max sink after fault m", "{:.3f}"),
            ("rmse_yaw_deg", "yaw RMSE deg", "{:.2f}"), ("max_yaw_err_deg", "max yaw err deg", "{:.2f}"),
            ("recovery_s", "recovery s", "{:.2f}"), ("solve_ms_p50", "solve p50 ms", "{:.1f}"),
            ("solve_ms_p99", "solve p99 ms", "{:.1f}")]

@@ -50,6 +50,7 @@ def test_on_the_reference_everything_is_zero():
     assert m.rmse_pos_m == 0.0 and m.max_pos_err_m == 0.0
     assert m.rmse_yaw_deg == 0.0 and m.max_yaw_err_deg == 0.0
     assert m.crashed is False and m.recovery_s is None and m.rmse_pos_after_fault_m is None
+    assert m.rmse_vert_after_fault_m is None and m.max_sink_after_fault_m is None
     assert m.flight_s == pytest.approx((N_STEPS - 1) * STEP_US * 1e-6)
     assert (m.controller, m.vehicle) == ("trq_nmpc_eso", "trq")
 
@@ -69,11 +70,31 @@ def test_offset_after_the_fault_only():
     truth["pos_d_m"][at(truth, onset)] = -1.4           # and 0.4 m high: |e| = 0.5
     m = compute(truth, steps, onset=onset)
     assert m.rmse_pos_after_fault_m == pytest.approx(0.5, abs=1e-12)
+    assert m.rmse_vert_after_fault_m == pytest.approx(0.4, abs=1e-12)   # its vertical part
+    assert m.max_sink_after_fault_m == 0.0                # high, not low: no sink
     # half of the steps at 0.5 m, half at 0: sqrt(0.25 / 2)
     assert m.rmse_pos_m == pytest.approx(math.sqrt(0.125), abs=1e-12)
     assert m.max_pos_err_m == pytest.approx(0.5, abs=1e-12)
     # never back under the threshold: the last excursion is the last step
     assert m.recovery_s == pytest.approx(((N_STEPS - 1) * STEP_US - onset) * 1e-6)
+
+
+def test_vertical_part_and_sink_after_the_fault():
+    truth, steps = synthetic()
+    onset = 1_000_000
+    after = at(truth, onset)
+    t = truth["t_us"]
+    truth["pos_n_m"][after] = 0.3
+    # the down error ramps from 0 to 0.5 m below the reference over the steps after the onset
+    ramp = (t - onset) / (t.max() - onset)
+    truth["pos_d_m"][after] += 0.5 * ramp[after]
+    truth["pos_d_m"][~after] -= 1.0                     # 1 m high before: not a sink, not after
+    m = compute(truth, steps, onset=onset)
+    down = 0.5 * ramp[np.isin(t, steps["stamp_us"]) & after]
+    assert m.rmse_vert_after_fault_m == pytest.approx(math.sqrt(np.mean(down ** 2)), abs=1e-12)
+    assert m.max_sink_after_fault_m == pytest.approx(down.max(), abs=1e-12)
+    assert m.rmse_pos_after_fault_m ** 2 == pytest.approx(0.09 + m.rmse_vert_after_fault_m ** 2,
+                                                          abs=1e-12)
 
 
 def test_offset_before_the_fault_does_not_count_after():
