@@ -366,3 +366,24 @@ def test_inprocess_flight_reproduces_the_udp_flight(tmp_path):
 
     a, b = truth_rows(udp / "flight.csv"), truth_rows(res.flight_csv)
     assert len(a) > 800 and a == b
+
+
+@pytest.mark.parametrize("path", sorted((PARAMS / "campaigns").glob("*.yaml")),
+                         ids=lambda p: p.stem)
+def test_every_shipped_campaign_loads(path):
+    """The campaign files in params/campaigns/ load (strict keys, controllers that build) and
+    expand to flights with distinct ids."""
+    import campaign
+
+    plan = campaign.load_campaign(path)
+    ids = [f["id"] for f in plan.flights]
+    assert ids and len(ids) == len(set(ids)) and plan.name == path.stem
+
+
+def test_link_delay_sweep_sweeps_the_one_way_delay():
+    import campaign
+
+    plan = campaign.load_campaign(PARAMS / "campaigns" / "link_delay_sweep.yaml")
+    delays = sorted(campaign.flight_inputs(f)["link_delay_ms"] for f in plan.flights)
+    assert delays == [0.0, 5.0, 10.0, 15.0, 20.0]
+    assert {campaign.flight_inputs(f)["link_loss"] for f in plan.flights} == {0.0}
