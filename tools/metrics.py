@@ -112,8 +112,7 @@ def compute(controller: str, vehicle: str, truth: dict[str, np.ndarray],
     recovery = None
     if fault_onset_us is not None:
         sel = t_us >= fault_onset_us
-        after = rms(err[sel]) if sel.any() else math.nan
-        vert = rms(down_err[sel]) if sel.any() else math.nan
+        after, vert = rms(err[sel]), rms(down_err[sel])       # nan when no step is after
         sink = float(max(0.0, down_err[sel].max())) if sel.any() else math.nan
         if crash_us is None and sel.any():
             over = np.flatnonzero(sel & (err > recovery_threshold_m))
