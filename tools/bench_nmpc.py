@@ -44,6 +44,10 @@ MODES = {     # name: solver overrides of params/controller/trq_nmpc_eso.yaml (a
     "rti-gn": dict(kind="rti", hessian="gauss_newton", max_iterations=1),
     "rti-gn-lag": dict(kind="rti", hessian="gauss_newton", max_iterations=1,
                        controller=dict(actuator_states="on")),   # the actuators' lag states
+    "rti-gn-conic": dict(kind="rti", hessian="gauss_newton", max_iterations=1,
+                         hpipm_interface="conic"),     # HPIPM through casadi.conic
+    "rti-gn-tilt1": dict(kind="rti", hessian="gauss_newton", max_iterations=1,
+                         controller=dict(tilt_rate_limit="first_step")),  # tilts as inputs
     "rti-exact": dict(kind="rti", hessian="exact", max_iterations=1),
     "rti-gn-py": dict(kind="rti", hessian="gauss_newton", max_iterations=1, codegen="off"),
     "sqp-gn": dict(kind="sqp", hessian="gauss_newton", max_iterations=1),

@@ -365,6 +365,8 @@ class SolverConfig:
     ipopt_max_iterations: int
     codegen: str = "auto"                 # rti: "auto" (compile and cache C when a compiler is
                                           # found, else interpreted with a warning) | "off"
+    hpipm_interface: str = "direct"       # rti with hpipm: "direct" (nmpc/hpipm.py) | "conic"
+    hpipm_mode: str = "speed"             # direct: speed_abs | speed | balance | robust
 
 
 @dataclass(frozen=True)
@@ -405,6 +407,8 @@ class ControllerConfig:
                                           # observer's b0 and the predictor through the lags
     actuator_states: str = "auto"         # on | off | auto (on when predicting): the NMPC's
                                           # stage state carries the actuators' lag states
+    tilt_rate_limit: str = "horizon"      # horizon | first_step: where the NMPC enforces the
+                                          # servos' rate limit (nmpc/ocp.py)
 
     @property
     def predicts_delay(self) -> bool:
@@ -445,7 +449,10 @@ def _solver(k: _Keys) -> SolverConfig:
                      k.text("qp_solver", ("qrqp", "osqp", "qpoases", "hpipm", "daqp", "proxqp")),
                      k.number("regularization", 0.0, 1e3),
                      k.integer("ipopt_max_iterations", 1, 10_000),
-                     k.text("codegen", ("auto", "off"), default="auto"))
+                     k.text("codegen", ("auto", "off"), default="auto"),
+                     k.text("hpipm_interface", ("direct", "conic"), default="direct"),
+                     k.text("hpipm_mode", ("speed_abs", "speed", "balance", "robust"),
+                            default="speed"))
     k.close()
     return s
 
@@ -477,6 +484,7 @@ def _controller(k: _Keys, path: Path) -> ControllerConfig:
     delay_comp = k.text("delay_compensation", ("predict", "none", "auto"), default="auto")
     lagged = k.text("lagged_actuators", ("on", "off", "auto"), default="auto")
     act_states = k.text("actuator_states", ("on", "off", "auto"), default="auto")
+    tilt_rate_limit = k.text("tilt_rate_limit", ("horizon", "first_step"), default="horizon")
     eso = None
     if observer != "none":
         base = load_eso(path.parent / eso_file)
@@ -498,7 +506,7 @@ def _controller(k: _Keys, path: Path) -> ControllerConfig:
         raise k.error("horizon.step_s", step_s, f"at least one control period ({1.0 / rate:g} s)")
     return ControllerConfig(str(path), name, vehicle, observer, eso, rate, steps, step_s,
                             weights, max_tilt, max_rate, solver, reference, applied_input,
-                            applied_delay, delay_comp, lagged, act_states)
+                            applied_delay, delay_comp, lagged, act_states, tilt_rate_limit)
 
 
 def load_controller(path: Path | str) -> ControllerConfig:

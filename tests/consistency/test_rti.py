@@ -6,7 +6,6 @@ Every test builds into a temporary cache directory ($TRQ_CACHE_DIR), never the u
 from __future__ import annotations
 
 import dataclasses
-import time
 from pathlib import Path
 
 import numpy as np
@@ -34,9 +33,9 @@ def cache_env(cache_root, monkeypatch):
     return cache_root
 
 
-def _cfg(name="trq_nmpc_eso", **solver):
+def _cfg(name="trq_nmpc_eso", tilt_rate_limit="horizon", **solver):
     cfg = load_controller(CTRL / f"{name}.yaml")
-    return dataclasses.replace(cfg, solver=dataclasses.replace(
+    return dataclasses.replace(cfg, tilt_rate_limit=tilt_rate_limit, solver=dataclasses.replace(
         cfg.solver, kind="rti", **solver))
 
 
@@ -62,16 +61,23 @@ def _has_compiler() -> bool:
     return cache.find_compiler() is not None
 
 
-@pytest.mark.parametrize("hessian,codegen", [("gauss_newton", "auto"), ("exact", "off")])
-def test_rti_steps_at_fixed_state_converge_to_ipopt(cache_env, hessian, codegen):
+@pytest.mark.parametrize("hessian,codegen,interface,tilt_rate_limit", [
+    ("gauss_newton", "auto", "direct", "horizon"), ("exact", "off", "direct", "horizon"),
+    ("gauss_newton", "auto", "conic", "horizon"), ("exact", "off", "conic", "horizon"),
+    ("gauss_newton", "auto", "direct", "first_step")])
+def test_rti_steps_at_fixed_state_converge_to_ipopt(cache_env, hessian, codegen, interface,
+                                                     tilt_rate_limit):
     """Repeated real-time iterations at a fixed x0, each warm-started from the previous plan,
     converge to IPOPT's solution of the same NLP (exact-Hessian case interpreted: its C takes
-    tens of seconds to compile, the algorithm is the same)."""
-    cfg = _cfg(hessian=hessian, codegen=codegen)
+    tens of seconds to compile, the algorithm is the same), with HPIPM called directly or
+    through casadi.conic, and with either place for the servos' rate limit."""
+    cfg = _cfg(hessian=hessian, codegen=codegen, hpipm_interface=interface,
+               tilt_rate_limit=tilt_rate_limit)
     model, u_trim, x0, x_ref, d, guess = _problem(cfg)
     u_r, x_r, info_r = IpoptSolver(cfg, model, u_trim).solve(x0, x_ref, d, u_trim, guess)
     assert info_r.status is SolveStatus.OK
     rti = RtiSolver(cfg, model, u_trim, hessian)
+    assert rti.qp_interface == interface
     plan = guess
     for _ in range(25):
         u, x, info = rti.solve(x0, x_ref, d, u_trim, plan)
@@ -96,6 +102,64 @@ def test_rti_steps_at_fixed_state_converge_to_ipopt(cache_env, hessian, codegen)
     np.testing.assert_allclose(u_split[:, 4:8], u_full[:, 4:8], atol=0.1)     # %
 
 
+@pytest.mark.parametrize("hessian", ["gauss_newton", "exact"])
+def test_direct_hpipm_step_equals_the_conic_one(cache_env, hessian):
+    """One RTI step from the same guess: HPIPM called directly (initial state eliminated, only
+    finite bounds, with the compiled shim and with the ctypes loop) and through casadi.conic
+    give the same plan; and the same multipliers, which the exact Hessian's next step uses."""
+    plans = {}
+    for interface, shim in (("conic", True), ("direct", True), ("direct", False)):
+        cfg = _cfg(hessian=hessian, codegen="off", hpipm_interface=interface)
+        model, u_trim, x0, x_ref, d, guess = _problem(cfg)
+        rti = RtiSolver(cfg, model, u_trim, hessian)
+        if interface == "direct" and not shim:
+            rti._hqp._shim = None
+        u, x, info = rti.solve(x0, x_ref, d, u_trim, guess)
+        assert info.status is SolveStatus.OK
+        u2, x2, _ = rti.solve(x0, x_ref, d, u_trim, (u, x))     # uses the multipliers (exact)
+        plans[interface, shim] = (u, x, u2, x2)
+    ref = plans["conic", True]      # both solve to HPIPM's tolerance: about 1e-4 % of throttle
+    for key in (("direct", True), ("direct", False)):
+        for a, b, atol in zip(plans[key], ref, (None, 2e-5, None, 2e-5)):
+            if atol is None:                                        # u: rad and %
+                np.testing.assert_allclose(a[:, 0:4], b[:, 0:4], atol=2e-5)
+                np.testing.assert_allclose(a[:, 4:8], b[:, 4:8], atol=2e-3)
+            else:
+                np.testing.assert_allclose(a, b, atol=atol)
+
+
+def test_direct_hpipm_missing_falls_back_to_conic(cache_env, monkeypatch):
+    """No usable libhpipm (an exotic casadi build): the RTI says so and uses casadi.conic."""
+    from trq_offboard.nmpc import hpipm
+    monkeypatch.setattr(hpipm, "available", lambda: (False, "libhpipm not found (test)"))
+    cfg = _cfg(codegen="off")
+    model, u_trim, x0, x_ref, d, guess = _problem(cfg)
+    with pytest.warns(RuntimeWarning, match="libhpipm not found"):
+        rti = RtiSolver(cfg, model, u_trim)
+    assert rti.qp_interface == "conic"
+    u, x, info = rti.solve(x0, x_ref, d, u_trim, guess)
+    assert info.status is SolveStatus.OK
+
+
+def test_first_step_tilt_rate_limit(cache_env):
+    """tilt_rate_limit first_step: the tilts are inputs and only the first command is limited
+    against the applied tilt (rate x control period); later steps move farther."""
+    cfg = _cfg(codegen="off", tilt_rate_limit="first_step")
+    model, u_trim, x0, x_ref, d, guess = _problem(cfg)
+    rti = RtiSolver(cfg, model, u_trim)
+    assert (rti.ocp.ns, rti.ocp.nv) == (12, 8)
+    u_prev = u_trim.copy()
+    u_prev[0:4] += 0.3                          # the servos sit 0.3 rad away from the trim
+    step = cfg.vehicle.servo_rate_limit_rad_s * cfg.control_dt_s
+    plan = guess
+    for _ in range(5):
+        u, x, info = rti.solve(x0, x_ref, d, u_prev, plan)
+        assert info.status is SolveStatus.OK
+        plan = (u, x)
+    assert np.all(np.abs(u[0, 0:4] - u_prev[0:4]) <= step + 1e-9)
+    assert np.max(np.abs(u[1, 0:4] - u_prev[0:4])) > step     # not limited beyond the first
+
+
 @pytest.mark.skipif(not _has_compiler(), reason="no C compiler")
 def test_cache_is_reused_and_invalidated(cache_env, monkeypatch):
     calls = []
@@ -108,16 +172,13 @@ def test_cache_is_reused_and_invalidated(cache_env, monkeypatch):
     monkeypatch.setattr(cache.subprocess, "run", spy)
     cfg = _cfg(hessian="gauss_newton")
     model, u_trim, *_ = _problem(cfg)
-    t0 = time.perf_counter()
+    libs_before = set(cache_env.glob("rti_lin_*.so"))
     first = RtiSolver(cfg, model, u_trim)
-    t_first = time.perf_counter() - t0
     n_first = len(calls)       # 0 if an earlier test of this module already compiled it
-    t0 = time.perf_counter()
     second = RtiSolver(cfg, model, u_trim)
-    t_second = time.perf_counter() - t0
     assert second.build_mode == "cached" and len(calls) == n_first      # no compiler call
     if n_first:
-        assert first.build_mode == "compiled" and t_second < 0.5 * t_first
+        assert first.build_mode == "compiled"
     # the per-stage code does not depend on the horizon length: reused for another N
     cfg_n = dataclasses.replace(cfg, horizon_steps=10)
     assert RtiSolver(cfg_n, model, u_trim).build_mode == "cached"
@@ -130,8 +191,8 @@ def test_cache_is_reused_and_invalidated(cache_env, monkeypatch):
     # and the prediction step h too
     cfg_h = dataclasses.replace(cfg, step_s=0.04)
     assert RtiSolver(cfg_h, model, u_trim).build_mode == "compiled"
-    libs = sorted(p.name for p in cache_env.glob("*.so"))
-    assert len(libs) == 3, libs
+    new = set(cache_env.glob("rti_lin_*.so")) - libs_before
+    assert len(new) == (1 if n_first else 0) + 2, new
 
 
 def test_pure_python_fallback_without_compiler(cache_env, monkeypatch):

@@ -28,7 +28,8 @@ from pathlib import Path
 
 import casadi as ca
 
-__all__ = ["cache_dir", "find_compiler", "compiled", "compiled_many", "COUNTS", "CFLAGS"]
+__all__ = ["cache_dir", "find_compiler", "compiled", "compiled_many", "compiled_c", "COUNTS",
+           "CFLAGS"]
 
 CFLAGS = ("-O1", "-fPIC", "-shared")   # -O1: 2-3x faster to build than -O2, same speed here
 COUNTS = {"compiled": 0, "cached": 0, "interpreted": 0}   # per process, for tests and benches
@@ -109,3 +110,31 @@ def compiled_many(fns: list[ca.Function], enabled: bool = True) -> list[tuple[ca
         return [_build(f, cc) for f in fns]
     with ThreadPoolExecutor(max_workers=min(len(fns), os.cpu_count() or 1)) as ex:
         return list(ex.map(lambda f: _build(f, cc), fns))
+
+
+def compiled_c(name: str, source: str, link_args: tuple[str, ...] = ()) -> Path | None:
+    """A shared library built from C `source` (plus `link_args`), cached like the functions above
+    (the key covers the source, the compiler, the flags and the link arguments); None without a
+    compiler or when the compilation fails (with a RuntimeWarning naming the error)."""
+    cc = find_compiler()
+    if cc is None:
+        return None
+    root = cache_dir()
+    root.mkdir(parents=True, exist_ok=True)
+    lib = root / f"{name}_{_key(source + chr(0) + ' '.join(link_args), cc)}.so"
+    if lib.exists():
+        COUNTS["cached"] += 1
+        return lib
+    with tempfile.TemporaryDirectory(dir=root, prefix=".build-") as tmp:
+        c_file = Path(tmp) / f"{name}.c"
+        c_file.write_text(source)
+        out = Path(tmp) / lib.name
+        res = subprocess.run([cc, "-O2", "-fPIC", "-shared", str(c_file), "-o", str(out),
+                              *link_args], capture_output=True, text=True)
+        if res.returncode != 0:
+            warnings.warn(f"compiling {name} failed ({res.stderr.strip()[:300]})",
+                          RuntimeWarning, stacklevel=2)
+            return None
+        os.replace(out, lib)
+    COUNTS["compiled"] += 1
+    return lib

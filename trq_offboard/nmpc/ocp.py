@@ -72,6 +72,7 @@ class Stage:
     ns: int
     nv: int
     n_lag: int = 0                     # actuator lag states (0, 4 quad, 8 TRQ) at the end of s
+    tilt_states: bool = False          # TRQ: s carries the 4 tilt states a_k (tilt_rate_limit)
 
     @staticmethod
     def lag_gain(cfg: ControllerConfig, model: PredictionModel, dt_s: float) -> np.ndarray:
@@ -86,7 +87,8 @@ class Stage:
         h = cfg.step_s
         nx, nu, tilting = model.nx, model.nu, model.tilting
         n_lag = nu if cfg.nmpc_actuator_states else 0
-        ns, nv = (nx + 4 + n_lag, 8) if tilting else (nx + n_lag, 4)
+        tilt_states = tilting and cfg.tilt_rate_limit == "horizon"
+        ns, nv = (nx + 4 * tilt_states + n_lag, 8) if tilting else (nx + n_lag, 4)
         F = model.discrete(h, 1)
         wts = cfg.weights
         Q = np.array([*wts.position, *wts.velocity, *wts.euler, *wts.rates])
@@ -95,11 +97,13 @@ class Stage:
         xr, u_trim, d = ca.SX.sym("x_ref", nx), ca.SX.sym("u_trim", nu), ca.SX.sym("d", 6)
         x = s[0:nx]
         ex = x - xr
-        if tilting:
+        if tilt_states:
             a_next = s[nx:nx + 4] + h * v[0:4]
             u_scaled = ca.vertcat(a_next, v[4:8])
             u_phys = ca.vertcat(a_next, 100.0 * v[4:8])
             l_rate = wts.tilt_rate * ca.sumsqr(v[0:4])
+        elif tilting:
+            u_scaled, u_phys, l_rate = v, ca.vertcat(v[0:4], 100.0 * v[4:8]), 0
         else:
             u_scaled, u_phys, l_rate = v, 100.0 * v, 0
         eu = u_scaled - u_trim
@@ -112,17 +116,18 @@ class Stage:
             y_mid = y + g_mid * (u_scaled - y)
             y_end = y + g_end * (u_scaled - y)
             x_next = model.discrete_varying(h)(x, scale * y, scale * y_mid, scale * y_end, d)
-            s_next = ca.vertcat(x_next, a_next, y_end) if tilting else ca.vertcat(x_next, y_end)
+            s_next = (ca.vertcat(x_next, a_next, y_end) if tilt_states
+                      else ca.vertcat(x_next, y_end))
         else:
             x_next = F(x, u_phys, d)
-            s_next = ca.vertcat(x_next, a_next) if tilting else x_next
+            s_next = ca.vertcat(x_next, a_next) if tilt_states else x_next
         return Stage(
             ca.Function("stage_dynamics", [s, v, d], [s_next], ["s", "v", "d"], ["s_next"]),
             ca.Function("stage_cost", [s, v, xr, u_trim], [l_k],
                         ["s", "v", "x_ref", "u_trim"], ["l"]),
             ca.Function("terminal_cost", [s, xr], [wts.terminal_factor * ca.dot(Q * ex, ex)],
                         ["s", "x_ref"], ["l"]),
-            ns, nv, n_lag)
+            ns, nv, n_lag, tilt_states)
 
 @dataclass
 class Ocp:
@@ -145,6 +150,8 @@ class Ocp:
     n_params: int
     n_lag: int = 0                     # actuator lag states, the last n_lag rows of s_k
     lag_gain: np.ndarray | None = None  # (n_lag,) 1 - exp(-h/T) (scaled units, as v)
+    tilt_states: bool = False          # TRQ: tilts as states a_k, servo rates as inputs
+    tilt_step0: float = 0.0            # tilt_rate_limit first_step: |alpha_0 - alpha_prev| bound
 
     @staticmethod
     def build(cfg: ControllerConfig, model: PredictionModel) -> "Ocp":
@@ -165,15 +172,17 @@ class Ocp:
         tb = math.radians(cfg.max_tilt_deg)
         slo[6:8], shi[6:8] = -tb, tb
         slo[9:12], shi[9:12] = -cfg.max_rate_rad_s, cfg.max_rate_rad_s
-        if tilting:
-            slo[12:16], shi[12:16] = vm.tilt_min_rad, vm.tilt_max_rad
         rate = vm.servo_rate_limit_rad_s
         c_lo, c_hi = [vm.idle_pct / 100.0] * 4, [1.0] * 4
-        vlo = np.array(([-rate] * 4 if tilting else []) + c_lo)
-        vhi = np.array(([rate] * 4 if tilting else []) + c_hi)
-        rate0 = min(rate, rate * cfg.control_dt_s / h)
-        v0lo = np.array(([-rate0] * 4 if tilting else []) + c_lo)
-        v0hi = np.array(([rate0] * 4 if tilting else []) + c_hi)
+        if stage.tilt_states:
+            slo[12:16], shi[12:16] = vm.tilt_min_rad, vm.tilt_max_rad
+            vlo, vhi = np.array([-rate] * 4 + c_lo), np.array([rate] * 4 + c_hi)
+            rate0 = min(rate, rate * cfg.control_dt_s / h)
+            v0lo, v0hi = np.array([-rate0] * 4 + c_lo), np.array([rate0] * 4 + c_hi)
+        else:      # tilts (if any) are inputs; the first one's rate bound is set per solve
+            vlo = np.array(([vm.tilt_min_rad] * 4 if tilting else []) + c_lo)
+            vhi = np.array(([vm.tilt_max_rad] * 4 if tilting else []) + c_hi)
+            v0lo, v0hi = vlo, vhi
 
         w, lbw, ubw, s_index, v_index = [], [], [], [], []
         pos = 0
@@ -202,7 +211,8 @@ class Ocp:
         return Ocp(nlp, zeros, zeros.copy(), np.concatenate(lbw), np.concatenate(ubw), N, h,
                    nx, nu, ns, nv, tilting, np.array(s_index), np.array(v_index),
                    ca.Function("cost", [wv, p], [cost]), int(p.shape[0]), n_lag,
-                   Stage.lag_gain(cfg, model, h) if n_lag else None)
+                   Stage.lag_gain(cfg, model, h) if n_lag else None, stage.tilt_states,
+                   rate * cfg.control_dt_s)
 
     # --- packing (all NumPy) ------------------------------------------------------------------
     def params(self, x_ref, u_trim, d) -> np.ndarray:
@@ -226,11 +236,16 @@ class Ocp:
     def bounds(self, x0, alpha_prev, y0=None) -> tuple[np.ndarray, np.ndarray]:
         """Bounds of w with s_0 fixed to [x0, alpha_prev (TRQ), y0 (with lag states)]."""
         lbw, ubw = self.lbw.copy(), self.ubw.copy()
-        s0 = np.concatenate([x0, alpha_prev]) if self.tilting else np.asarray(x0, float)
+        s0 = np.concatenate([x0, alpha_prev]) if self.tilt_states else np.asarray(x0, float)
         if self.n_lag:
             s0 = np.concatenate([s0, self._lag_rows(y0)])
         lbw[self.s_index[0]] = s0
         ubw[self.s_index[0]] = s0
+        if self.tilting and not self.tilt_states:       # the servos' rate over the first step
+            a = np.asarray(alpha_prev, float).reshape(4)
+            i = self.v_index[0][0:4]
+            lbw[i] = np.minimum(np.maximum(lbw[i], a - self.tilt_step0), ubw[i])
+            ubw[i] = np.maximum(np.minimum(ubw[i], a + self.tilt_step0), lbw[i])
         return lbw, ubw
 
     def pack(self, x_plan, u_plan, alpha_prev, y0=None) -> np.ndarray:
@@ -240,14 +255,14 @@ class Ocp:
         w = np.zeros(self.lbw.size)
         x_plan = np.asarray(x_plan, float)
         u_plan = np.asarray(u_plan, float)
-        if self.tilting:
+        if self.tilt_states:
             tilts = np.vstack([np.asarray(alpha_prev, float).reshape(1, 4), u_plan[:, 0:4]])
             s_main = np.hstack([x_plan, tilts])
             rates = np.diff(tilts, axis=0) / self.step_s
             w[self.v_index] = np.hstack([rates, u_plan[:, 4:8] / 100.0])
         else:
             s_main = x_plan
-            w[self.v_index] = u_plan / 100.0
+            w[self.v_index] = u_plan / self.u_scale
         if self.n_lag:
             ys = [self._lag_rows(y0)]
             for u in u_plan / self.u_scale:
@@ -261,8 +276,8 @@ class Ocp:
         w = np.asarray(w, float).reshape(-1)
         s = w[self.s_index]
         v = w[self.v_index]
-        if self.tilting:
+        if self.tilt_states:
             u = np.hstack([s[1:, self.nx:self.nx + 4], 100.0 * v[:, 4:8]])
         else:
-            u = 100.0 * v
+            u = v * self.u_scale
         return u, s[:, 0:self.nx]

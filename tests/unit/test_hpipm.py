@@ -1,0 +1,105 @@
+"""The direct HPIPM binding (trq_offboard/nmpc/hpipm.py) against a dense KKT solve in NumPy."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from trq_offboard.nmpc import hpipm
+
+pytestmark = pytest.mark.skipif(not hpipm.available()[0], reason="no libhpipm in casadi")
+
+
+def _problem(rng, N=4, ns=3, nv=2):
+    At = rng.normal(size=(N, ns, ns)) * 0.4
+    Bt = rng.normal(size=(N, nv, ns))
+    b = rng.normal(size=(N, ns)) * 0.1
+    q = rng.normal(size=(N + 1, ns))
+    r = rng.normal(size=(N, nv))
+    L = rng.normal(size=(ns + nv, ns + nv))
+    H = L @ L.T + np.eye(ns + nv)             # stage Hessian of [s; v], with cross terms
+    HN = np.eye(ns) * 2.0
+    return At, Bt, b, q, r, H, HN
+
+
+def _dense_kkt(At, Bt, b, q, r, H, HN, fixed_u=None):
+    """The same QP in the variables [u_0, x_1, u_1, ..., x_N] by its KKT system (equalities only;
+    fixed_u: {(k, i): value} pinned inputs)."""
+    N, ns, nv = At.shape[0], At.shape[1], Bt.shape[1]
+    iu = [k * (nv + ns) for k in range(N)]                  # u_k at iu[k], x_{k+1} after it
+    ix = [None] + [iu[k] + nv for k in range(N)]
+    n = N * (nv + ns)
+    Hd, g = np.zeros((n, n)), np.zeros(n)
+    for k in range(N):
+        u = slice(iu[k], iu[k] + nv)
+        Hd[u, u] += H[ns:, ns:]
+        g[u] += r[k]
+        if k > 0:
+            x = slice(ix[k], ix[k] + ns)
+            Hd[x, x] += H[:ns, :ns]
+            Hd[u, x] += H[ns:, :ns]
+            Hd[x, u] += H[:ns, ns:]
+            g[x] += q[k]
+    xN = slice(ix[N], ix[N] + ns)
+    Hd[xN, xN] += HN
+    g[xN] += q[N]
+    rows, rhs = [], []
+    for k in range(N):                      # x_{k+1} - A_k x_k - B_k u_k = b_k
+        E = np.zeros((ns, n))
+        E[:, ix[k + 1]:ix[k + 1] + ns] = np.eye(ns)
+        E[:, iu[k]:iu[k] + nv] = -Bt[k].T
+        if k > 0:
+            E[:, ix[k]:ix[k] + ns] = -At[k].T
+        rows.append(E)
+        rhs.append(b[k])
+    for (k, i), val in (fixed_u or {}).items():
+        e = np.zeros((1, n))
+        e[0, iu[k] + i] = 1.0
+        rows.append(e)
+        rhs.append([val])
+    E, e = np.vstack(rows), np.concatenate(rhs)
+    kkt = np.block([[Hd, E.T], [E, np.zeros((E.shape[0], E.shape[0]))]])
+    sol = np.linalg.solve(kkt, np.concatenate([-g, e]))
+    z = sol[:n]
+    return (np.array([z[iu[k]:iu[k] + nv] for k in range(N)]),
+            np.array([z[ix[k]:ix[k] + ns] for k in range(1, N + 1)]))
+
+
+@pytest.mark.parametrize("shim", [True, False])
+def test_unconstrained_qp_matches_dense_kkt(shim):
+    rng = np.random.default_rng(3)
+    At, Bt, b, q, r, H, HN = _problem(rng)
+    N, ns, nv = 4, 3, 2
+    qp = hpipm.OcpQp(ns, nv, N, [0], shim=shim)
+    qp.set_hessian(H, HN)
+    big = np.full((N + 1, 1), 1e6)
+    x, u, _ = qp.solve(At, Bt, b, q, r, -big, big, np.full((N, nv), -1e6),
+                       np.full((N, nv), 1e6))
+    assert qp.status == 0 and 0 < qp.iterations < 50
+    u_ref, x_ref = _dense_kkt(At, Bt, b, q, r, H, HN)
+    np.testing.assert_allclose(u, u_ref, atol=1e-6)
+    np.testing.assert_allclose(x[1:], x_ref, atol=1e-6)
+    np.testing.assert_array_equal(x[0], 0.0)                # stage 0 has no state
+
+
+def test_active_input_bound_matches_pinned_kkt():
+    rng = np.random.default_rng(5)
+    At, Bt, b, q, r, H, HN = _problem(rng)
+    N, ns, nv = 4, 3, 2
+    u_free, _ = _dense_kkt(At, Bt, b, q, r, H, HN)
+    bound = u_free[1, 0] - 0.5                              # cut the free optimum
+    ubu = np.full((N, nv), 1e6)
+    ubu[1, 0] = bound
+    qp = hpipm.OcpQp(ns, nv, N, [0])
+    qp.set_hessian(H, HN)
+    big = np.full((N + 1, 1), 1e6)
+    x, u, _ = qp.solve(At, Bt, b, q, r, -big, big, np.full((N, nv), -1e6), ubu)
+    assert qp.status == 0
+    u_ref, x_ref = _dense_kkt(At, Bt, b, q, r, H, HN, fixed_u={(1, 0): bound})
+    np.testing.assert_allclose(u, u_ref, atol=1e-6)
+    np.testing.assert_allclose(x[1:], x_ref, atol=1e-6)
+
+
+def test_unknown_mode_is_named():
+    with pytest.raises(ValueError, match="'fast'.*speed_abs"):
+        hpipm.OcpQp(3, 2, 4, [0], mode="fast")

@@ -1,0 +1,333 @@
+"""A direct binding (ctypes) of HPIPM's OCP QP interior-point solver: the libhpipm that ships in the
+CasADi wheel, built once and called without CasADi's conic layer.
+
+    qp = OcpQp(ns, nv, N, idxbx, mode="speed")      # workspaces allocated once
+    qp.set_hessian(H_stage, H_terminal)             # constant (Gauss-Newton) or per solve
+    x, u, pi = qp.solve(A, B, b, q, r, lbx, ubx, lbu, ubu, ds0)
+
+The QP (HPIPM's form, Frison & Diehl 2020), with the initial state eliminated (stage 0 has no state
+variable: its dynamics carry A_0 ds0 in their constant):
+
+    min  sum_k 1/2 [u_k; x_k]' [R S; S' Q] [u_k; x_k] + r_k' u_k + q_k' x_k  (+ terminal in x_N)
+    s.t. x_{k+1} = A_k x_k + B_k u_k + b_k,    lbx_k <= x_k[idxbx] <= ubx_k,  lbu_k <= u_k <= ubu_k
+
+Why not casadi.conic("hpipm"): measured on 160 QPs of the paper's fault flight (N = 20, stage
+16 + 8), CasADi's interface spends 0.37 to 0.39 ms per call before the first iteration (it
+allocates and builds HPIPM's workspace on every call and converts the sparse matrices), a quarter
+of the solve, and it boxes every state of every stage (unbounded ones with a large number), which
+the interior point then carries. Here the workspace is built once, only the finite bounds are
+constraints, and the initial state is not a variable.
+
+Only the stable per-field entry points of HPIPM are used (`d_ocp_qp_set_A(stage, mat, qp)` and the
+like, column-major), not the `*_set_all` ones whose argument lists changed between versions.
+Setting a QP takes about 190 of them (9 fields, 21 stages): through ctypes that is 0.2 ms, so with
+a C compiler a 40-line shim (`_SHIM`, compiled once and cached by `cache.compiled_c`, linked
+against the same libhpipm) makes them and the solve in one call; without one the loop runs in
+Python. `available()` says whether the library was found and loaded; the caller falls back to
+CasADi's conic interface when it was not.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import os
+import sys
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["OcpQp", "available", "library_path", "MODES"]
+
+MODES = {"speed_abs": 0, "speed": 1, "balance": 2, "robust": 3}   # enum hpipm_mode
+_LIB: ctypes.CDLL | None = None
+_LIB_ERROR: str | None = None
+_SHIM: ctypes.CDLL | None | bool = None         # False: tried, not available
+
+_SHIM_SOURCE = r"""
+/* trq_hpipm_shim: set one OCP QP's per-solve data, solve it, read the solution (HPIPM). */
+typedef void (*set_fn)(int, double *, void *);
+extern void d_ocp_qp_set_A(int, double *, void *);
+extern void d_ocp_qp_set_B(int, double *, void *);
+extern void d_ocp_qp_set_b(int, double *, void *);
+extern void d_ocp_qp_set_q(int, double *, void *);
+extern void d_ocp_qp_set_r(int, double *, void *);
+extern void d_ocp_qp_set_lbx(int, double *, void *);
+extern void d_ocp_qp_set_ubx(int, double *, void *);
+extern void d_ocp_qp_set_lbu(int, double *, void *);
+extern void d_ocp_qp_set_ubu(int, double *, void *);
+extern void d_ocp_qp_ipm_solve(void *, void *, void *, void *);
+extern void d_ocp_qp_ipm_get_status(void *, int *);
+extern void d_ocp_qp_ipm_get_iter(void *, int *);
+extern void d_ocp_qp_sol_get_u(int, void *, double *);
+extern void d_ocp_qp_sol_get_x(int, void *, double *);
+extern void d_ocp_qp_sol_get_pi(int, void *, double *);
+
+int trq_hpipm_solve(int N, int ns, int nv, int nb, void *qp, void *sol, void *arg, void *ws,
+                    double *A, double *B, double *b, double *q, double *r,
+                    double *lbx, double *ubx, double *lbu, double *ubu,
+                    double *x, double *u, double *pi, int *iter)
+{
+    int k, status;
+    for (k = 0; k < N; ++k) {
+        if (k > 0) {
+            d_ocp_qp_set_A(k, A + k * ns * ns, qp);
+            d_ocp_qp_set_q(k, q + k * ns, qp);
+            d_ocp_qp_set_lbx(k, lbx + k * nb, qp);
+            d_ocp_qp_set_ubx(k, ubx + k * nb, qp);
+        }
+        d_ocp_qp_set_B(k, B + k * ns * nv, qp);
+        d_ocp_qp_set_b(k, b + k * ns, qp);
+        d_ocp_qp_set_r(k, r + k * nv, qp);
+        d_ocp_qp_set_lbu(k, lbu + k * nv, qp);
+        d_ocp_qp_set_ubu(k, ubu + k * nv, qp);
+    }
+    d_ocp_qp_set_q(N, q + N * ns, qp);
+    d_ocp_qp_set_lbx(N, lbx + N * nb, qp);
+    d_ocp_qp_set_ubx(N, ubx + N * nb, qp);
+    d_ocp_qp_ipm_solve(qp, sol, arg, ws);
+    d_ocp_qp_ipm_get_status(ws, &status);
+    d_ocp_qp_ipm_get_iter(ws, iter);
+    for (k = 0; k < N; ++k) {
+        d_ocp_qp_sol_get_u(k, sol, u + k * nv);
+        d_ocp_qp_sol_get_pi(k, sol, pi + k * ns);
+        d_ocp_qp_sol_get_x(k + 1, sol, x + (k + 1) * ns);
+    }
+    return status;
+}
+"""
+
+
+def library_path() -> Path | None:
+    """libhpipm of the installed CasADi (next to its own libraries), or None."""
+    try:
+        import casadi
+    except ImportError:
+        return None
+    base = Path(casadi.__file__).resolve().parent
+    names = {"linux": ["libhpipm.so"], "darwin": ["libhpipm.dylib"],
+             "win32": ["libhpipm.dll", "hpipm.dll"]}.get(sys.platform, ["libhpipm.so"])
+    for name in names:
+        if (base / name).is_file():
+            return base / name
+    return None
+
+
+def _load() -> ctypes.CDLL | None:
+    global _LIB, _LIB_ERROR
+    if _LIB is not None or _LIB_ERROR is not None:
+        return _LIB
+    path = library_path()
+    if path is None:
+        _LIB_ERROR = "libhpipm not found next to casadi"
+        return None
+    try:
+        lib = ctypes.CDLL(str(path), mode=os.RTLD_LOCAL if hasattr(os, "RTLD_LOCAL") else 0)
+        P, I, S = ctypes.c_void_p, ctypes.c_int, ctypes.c_size_t
+        sig = {
+            "d_ocp_qp_dim_strsize": (S,), "d_ocp_qp_dim_memsize": (S, I),
+            "d_ocp_qp_dim_create": (None, I, P, P),
+            "d_ocp_qp_strsize": (S,), "d_ocp_qp_memsize": (S, P),
+            "d_ocp_qp_create": (None, P, P, P),
+            "d_ocp_qp_sol_strsize": (S,), "d_ocp_qp_sol_memsize": (S, P),
+            "d_ocp_qp_sol_create": (None, P, P, P),
+            "d_ocp_qp_ipm_arg_strsize": (S,), "d_ocp_qp_ipm_arg_memsize": (S, P),
+            "d_ocp_qp_ipm_arg_create": (None, P, P, P),
+            "d_ocp_qp_ipm_arg_set_default": (None, I, P),
+            "d_ocp_qp_ipm_arg_set_iter_max": (None, P, P),
+            "d_ocp_qp_ipm_arg_set_warm_start": (None, P, P),
+            "d_ocp_qp_ipm_ws_strsize": (S,), "d_ocp_qp_ipm_ws_memsize": (S, P, P),
+            "d_ocp_qp_ipm_ws_create": (None, P, P, P, P),
+            "d_ocp_qp_ipm_solve": (None, P, P, P, P),
+            "d_ocp_qp_ipm_get_status": (None, P, P),
+            "d_ocp_qp_ipm_get_iter": (None, P, P),
+        }
+        for name in ("nx", "nu", "nbx", "nbu", "ng", "ns"):
+            sig[f"d_ocp_qp_dim_set_{name}"] = (None, I, I, P)
+        for name in ("A", "B", "b", "Q", "S", "R", "q", "r", "lbx", "ubx", "lbu", "ubu",
+                     "idxbx", "idxbu"):
+            sig[f"d_ocp_qp_set_{name}"] = (None, I, P, P)
+        for name in ("u", "x", "pi"):
+            sig[f"d_ocp_qp_sol_get_{name}"] = (None, I, P, P)
+        for name, (res, *args) in sig.items():
+            f = getattr(lib, name)
+            f.restype, f.argtypes = res, args
+    except (OSError, AttributeError) as exc:
+        _LIB_ERROR = f"{path}: {exc}"
+        return None
+    _LIB = lib
+    return lib
+
+
+def _load_shim() -> ctypes.CDLL | None:
+    """The compiled per-solve shim, or None (no compiler: the loop runs through ctypes)."""
+    global _SHIM
+    if _SHIM is None:
+        _SHIM = False
+        from trq_offboard.nmpc.cache import compiled_c
+        lib_dir = str(library_path().parent)
+        path = compiled_c("trq_hpipm_shim", _SHIM_SOURCE,
+                          (f"-L{lib_dir}", f"-Wl,-rpath,{lib_dir}", "-lhpipm"))
+        if path is not None:
+            try:
+                shim = ctypes.CDLL(str(path))
+                f = shim.trq_hpipm_solve
+                f.restype = ctypes.c_int
+                f.argtypes = [ctypes.c_int] * 4 + [ctypes.c_void_p] * 17
+                _SHIM = shim
+            except OSError:
+                pass
+    return _SHIM or None
+
+
+def available() -> tuple[bool, str]:
+    """(loaded, why not)."""
+    return (_load() is not None, _LIB_ERROR or "")
+
+
+def _aligned(nbytes: int) -> tuple[np.ndarray, int]:
+    """A zeroed buffer and the address of its first 64-byte aligned byte (HPIPM/BLASFEO align)."""
+    buf = np.zeros(int(nbytes) + 128, np.uint8)
+    addr = buf.ctypes.data
+    return buf, addr + (-addr) % 64
+
+
+class OcpQp:
+    """HPIPM OCP QP of horizon N with stage state ns (none at stage 0) and stage input nv (none
+    at stage N); state boxes on idxbx (the same at every stage 1..N), every input boxed."""
+
+    def __init__(self, ns: int, nv: int, N: int, idxbx, mode: str = "speed",
+                 iter_max: int = 50, shim: bool = True):
+        lib = _load()
+        if lib is None:
+            raise RuntimeError(f"HPIPM is not available: {_LIB_ERROR}")
+        if mode not in MODES:
+            raise ValueError(f"hpipm mode {mode!r}: expected one of {', '.join(MODES)}")
+        self._lib, self.N, self.ns, self.nv = lib, N, ns, nv
+        self.idxbx = np.asarray(idxbx, np.int32)
+        nb = self.idxbx.size
+        keep = []                                         # buffers HPIPM points into
+
+        def struct_and_mem(strsize, memsize_args, memsize_fn):
+            s, sa = _aligned(strsize())
+            m, ma = _aligned(memsize_fn(*memsize_args))
+            keep.extend([s, m])
+            return sa, ma
+
+        dim_s, dim_m = struct_and_mem(lib.d_ocp_qp_dim_strsize, (N,), lib.d_ocp_qp_dim_memsize)
+        lib.d_ocp_qp_dim_create(N, dim_s, dim_m)
+        for k in range(N + 1):
+            nxk, nuk = (0 if k == 0 else ns), (0 if k == N else nv)
+            lib.d_ocp_qp_dim_set_nx(k, nxk, dim_s)
+            lib.d_ocp_qp_dim_set_nu(k, nuk, dim_s)
+            lib.d_ocp_qp_dim_set_nbx(k, 0 if k == 0 else nb, dim_s)
+            lib.d_ocp_qp_dim_set_nbu(k, nuk, dim_s)
+            lib.d_ocp_qp_dim_set_ng(k, 0, dim_s)
+            lib.d_ocp_qp_dim_set_ns(k, 0, dim_s)
+        qp_s, qp_m = struct_and_mem(lib.d_ocp_qp_strsize, (dim_s,), lib.d_ocp_qp_memsize)
+        lib.d_ocp_qp_create(dim_s, qp_s, qp_m)
+        sol_s, sol_m = struct_and_mem(lib.d_ocp_qp_sol_strsize, (dim_s,),
+                                      lib.d_ocp_qp_sol_memsize)
+        lib.d_ocp_qp_sol_create(dim_s, sol_s, sol_m)
+        arg_s, arg_m = struct_and_mem(lib.d_ocp_qp_ipm_arg_strsize, (dim_s,),
+                                      lib.d_ocp_qp_ipm_arg_memsize)
+        lib.d_ocp_qp_ipm_arg_create(dim_s, arg_s, arg_m)
+        lib.d_ocp_qp_ipm_arg_set_default(MODES[mode], arg_s)
+        it = ctypes.c_int(int(iter_max))
+        lib.d_ocp_qp_ipm_arg_set_iter_max(ctypes.byref(it), arg_s)
+        ws_s = _aligned(lib.d_ocp_qp_ipm_ws_strsize())
+        ws_m = _aligned(lib.d_ocp_qp_ipm_ws_memsize(dim_s, arg_s))
+        keep.extend([ws_s[0], ws_m[0]])
+        lib.d_ocp_qp_ipm_ws_create(dim_s, arg_s, ws_s[1], ws_m[1])
+        self._keep = keep
+        self._qp, self._sol, self._arg, self._ws = qp_s, sol_s, arg_s, ws_s[1]
+        self._idxbx_addr = self.idxbx.ctypes.data
+        self._idxbu = np.arange(nv, dtype=np.int32)
+        for k in range(N + 1):
+            if k > 0:
+                lib.d_ocp_qp_set_idxbx(k, self._idxbx_addr, qp_s)
+            if k < N:
+                lib.d_ocp_qp_set_idxbu(k, self._idxbu.ctypes.data, qp_s)
+        # output buffers
+        self.x = np.zeros((N + 1, ns))
+        self.u = np.zeros((N, nv))
+        self.pi = np.zeros((N, ns))
+        self._status, self._iter = ctypes.c_int(0), ctypes.c_int(0)
+        self.status, self.iterations = 0, 0
+        self._shim = _load_shim() if shim else None
+        self.uses_shim = self._shim is not None
+
+    # --- data ------------------------------------------------------------------------------
+    def set_hessian(self, H, HN) -> None:
+        """Stage Hessians H (N, ns + nv, ns + nv) of [s; v] (or one for all stages) and the
+        terminal HN (ns, ns). Stage 0 uses only its input block (its state is eliminated)."""
+        ns, N, lib, qp = self.ns, self.N, self._lib, self._qp
+        H = np.asarray(H, float)
+        if H.ndim == 2:
+            H = np.broadcast_to(H, (N,) + H.shape)
+        self._hq = np.asfortranarray(H[:, :ns, :ns].transpose(1, 2, 0))     # (ns, ns, N)
+        self._hs = np.asfortranarray(H[:, ns:, :ns].transpose(1, 2, 0))     # (nv, ns, N)
+        self._hr = np.asfortranarray(H[:, ns:, ns:].transpose(1, 2, 0))     # (nv, nv, N)
+        self._hn = np.asfortranarray(np.asarray(HN, float))
+        for k in range(N):
+            lib.d_ocp_qp_set_R(k, self._hr[:, :, k].ctypes.data, qp)
+            if k > 0:
+                lib.d_ocp_qp_set_Q(k, self._hq[:, :, k].ctypes.data, qp)
+                lib.d_ocp_qp_set_S(k, self._hs[:, :, k].ctypes.data, qp)
+        lib.d_ocp_qp_set_Q(N, self._hn.ctypes.data, qp)
+
+    def solve(self, At, Bt, b, q, r, lbx, ubx, lbu, ubu):
+        """At (N, ns, ns) and Bt (N, nv, ns): the transposes of A_k and B_k (so that each stage's
+        block is A_k column-major), b (N, ns) (b[0] already holding A_0 ds0), q (N+1, ns)
+        (q[0] unused), r (N, nv) (r[0] with S_0 ds0 folded in), lbx/ubx (N+1, nb) (row 0
+        unused), lbu/ubu (N, nv). Returns (x (N+1, ns) with x[0] = 0, u (N, nv), pi (N, ns));
+        `status` (0 converged, 1 iteration limit, 2 minimum step, 3 NaN) and `iterations`."""
+        lib, qp, N = self._lib, self._qp, self.N
+        # column-major per stage: (N, rows, cols) -> per stage a Fortran block
+        A = np.ascontiguousarray(At, dtype=float)
+        B = np.ascontiguousarray(Bt, dtype=float)
+        arrays = [np.ascontiguousarray(a, dtype=float) for a in (b, q, r, lbx, ubx, lbu, ubu)]
+        b, q, r, lbx, ubx, lbu, ubu = arrays
+        if self._shim is not None:
+            self.status = self._shim.trq_hpipm_solve(
+                N, self.ns, self.nv, self.idxbx.size, qp, self._sol, self._arg, self._ws,
+                A.ctypes.data, B.ctypes.data, b.ctypes.data, q.ctypes.data, r.ctypes.data,
+                lbx.ctypes.data, ubx.ctypes.data, lbu.ctypes.data, ubu.ctypes.data,
+                self.x.ctypes.data, self.u.ctypes.data, self.pi.ctypes.data,
+                ctypes.addressof(self._iter))
+            self.iterations = self._iter.value
+            return self.x, self.u, self.pi
+        sA, sB, sb, sq, sr = (a.strides[0] for a in (A, B, b, q, r))
+        sx, su = lbx.strides[0], lbu.strides[0]
+        pA, pB, pb, pq, pr = (a.ctypes.data for a in (A, B, b, q, r))
+        plx, pux, plu, puu = (a.ctypes.data for a in (lbx, ubx, lbu, ubu))
+        setA, setB, setb = lib.d_ocp_qp_set_A, lib.d_ocp_qp_set_B, lib.d_ocp_qp_set_b
+        setq, setr = lib.d_ocp_qp_set_q, lib.d_ocp_qp_set_r
+        setlx, setux = lib.d_ocp_qp_set_lbx, lib.d_ocp_qp_set_ubx
+        setlu, setuu = lib.d_ocp_qp_set_lbu, lib.d_ocp_qp_set_ubu
+        for k in range(N):
+            if k > 0:
+                setA(k, pA + k * sA, qp)
+                setq(k, pq + k * sq, qp)
+                setlx(k, plx + k * sx, qp)
+                setux(k, pux + k * sx, qp)
+            setB(k, pB + k * sB, qp)
+            setb(k, pb + k * sb, qp)
+            setr(k, pr + k * sr, qp)
+            setlu(k, plu + k * su, qp)
+            setuu(k, puu + k * su, qp)
+        setq(N, pq + N * sq, qp)
+        setlx(N, plx + N * sx, qp)
+        setux(N, pux + N * sx, qp)
+        lib.d_ocp_qp_ipm_solve(qp, self._sol, self._arg, self._ws)
+        lib.d_ocp_qp_ipm_get_status(self._ws, ctypes.byref(self._status))
+        lib.d_ocp_qp_ipm_get_iter(self._ws, ctypes.byref(self._iter))
+        self.status, self.iterations = self._status.value, self._iter.value
+        getx, getu, getpi = (lib.d_ocp_qp_sol_get_x, lib.d_ocp_qp_sol_get_u,
+                             lib.d_ocp_qp_sol_get_pi)
+        px, pu, ppi = self.x.ctypes.data, self.u.ctypes.data, self.pi.ctypes.data
+        ssx, ssu = self.x.strides[0], self.u.strides[0]
+        for k in range(N):
+            getu(k, self._sol, pu + k * ssu)
+            getpi(k, self._sol, ppi + k * ssx)
+            getx(k + 1, self._sol, px + (k + 1) * ssx)
+        return self.x, self.u, self.pi
