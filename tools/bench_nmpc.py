@@ -3,6 +3,7 @@
     .venv/bin/python tools/bench_nmpc.py                 # all modes, the whole flight
     .venv/bin/python tools/bench_nmpc.py --quick         # 16 s (4 s after the fault)
     .venv/bin/python tools/bench_nmpc.py --modes rti-gn,ipopt --json out/bench_nmpc.json
+    .venv/bin/python tools/bench_nmpc.py --quick --repeat 3   # median of 3 interleaved runs
 
 The flight (in one process, no MAVLink): trq_nmpc_eso on the SITL plant of params/sim/default.yaml,
 8 m/s wind from the north, the helix of params/controller/nmpc.yaml, motor 1 at 50 % from t = 12 s.
@@ -48,12 +49,14 @@ MODES = {     # name: solver overrides of params/controller/trq_nmpc_eso.yaml (a
                          hpipm_interface="conic"),     # HPIPM through casadi.conic
     "rti-gn-tilt1": dict(kind="rti", hessian="gauss_newton", max_iterations=1,
                          controller=dict(tilt_rate_limit="first_step")),  # tilts as inputs
+    "rti-gn-cap8": dict(kind="rti", hessian="gauss_newton", max_iterations=1,
+                        qp_max_iterations=8),          # the QP stopped after 8 iterations
     "rti-exact": dict(kind="rti", hessian="exact", max_iterations=1),
     "rti-gn-py": dict(kind="rti", hessian="gauss_newton", max_iterations=1, codegen="off"),
     "sqp-gn": dict(kind="sqp", hessian="gauss_newton", max_iterations=1),
     "ipopt": dict(kind="ipopt"),
 }
-DEFAULT_MODES = "rti-gn,rti-exact,rti-gn-py,sqp-gn,ipopt"
+DEFAULT_MODES = "rti-gn,rti-gn-conic,rti-exact,rti-gn-py,sqp-gn,ipopt"
 FAULT_T_S, EFFECTIVENESS, WIND_M_S = 12.0, 0.5, 8.0
 
 
@@ -161,7 +164,20 @@ def fly(mode: str, seconds: float | None) -> dict:
         build_cold_s=build_cold, build_cached_s=build_cached,
         compilations_cold=compiled_cold, compilations_cached=compiled_cached,
         build_mode=getattr(ctl.solver, "build_mode", "-"),
+        qp=_qp_line(ctl.solver),
         peak_rss_mb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0)
+
+
+def _qp_line(solver) -> str:
+    """Which QP path the mode's solver took (e.g. "hpipm direct speed_abs, shim")."""
+    iface = getattr(solver, "qp_interface", None)
+    if iface is None:
+        return "-"
+    if iface != "direct":
+        return f"{solver.cfg.solver.qp_solver} {iface}"
+    shim = "shim" if solver._hqp.uses_shim else "ctypes loop"
+    opts = "".join(f" {k} {v:g}" for k, v in solver.hpipm_options.items())
+    return f"hpipm direct {solver.hpipm_mode}{opts}, {shim}"
 
 
 def run_mode(mode: str, seconds: float | None) -> dict:
@@ -174,6 +190,21 @@ def run_mode(mode: str, seconds: float | None) -> dict:
     if out.returncode != 0:
         raise RuntimeError(f"mode {mode} failed:\n{out.stderr[-2000:]}")
     return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def combine(runs: list[dict]) -> dict:
+    """One row from K runs of a mode: the median of each number, the worst of crashes and
+    failures (each run flies the same bit-identical flight: only the times differ)."""
+    out = dict(runs[0])
+    for key, val in runs[0].items():
+        if isinstance(val, bool) or not isinstance(val, (int, float)):
+            continue
+        vals = [r[key] for r in runs]
+        out[key] = max(vals) if key in ("failures", "qp_iterations_max", "iterations_max") \
+            else float(np.median(vals))
+    out["crashed"] = any(r["crashed"] for r in runs)
+    out["runs"] = len(runs)
+    return out
 
 
 def table(results: list[dict]) -> str:
@@ -196,6 +227,24 @@ def table(results: list[dict]) -> str:
     return "\n".join(lines)
 
 
+def calibration_ms(repeats: int = 5) -> float:
+    """Median time of a fixed piece of dense linear algebra (100 products of two 64 x 64 matrices
+    and a Cholesky factorisation of the result): how fast this shared machine is right now, to
+    compare runs made at different times."""
+    rng = np.random.default_rng(0)
+    a = rng.normal(size=(64, 64))
+    spd = a @ a.T + 64 * np.eye(64)
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        m = spd
+        for _ in range(100):
+            m = (m @ spd) / 100.0
+            np.linalg.cholesky(spd)
+        times.append(time.perf_counter() - t0)
+    return float(np.median(times) * 1e3)
+
+
 def machine_line() -> str:
     try:
         load = "load %.2f %.2f %.2f" % os.getloadavg()
@@ -211,7 +260,8 @@ def machine_line() -> str:
         pass
     import casadi
     return (f"machine: {cpu}, {os.cpu_count()} cores, {load}; Python {platform.python_version()}, "
-            f"casadi {casadi.__version__}")
+            f"casadi {casadi.__version__}; calibration {calibration_ms():.2f} ms "
+            "(lower is a faster moment of the machine)")
 
 
 def main(argv=None) -> int:
@@ -221,6 +271,9 @@ def main(argv=None) -> int:
     ap.add_argument("--quick", action="store_true", help="fly 16 s (4 s after the fault)")
     ap.add_argument("--seconds", type=float, default=None, help="flight length (default: all)")
     ap.add_argument("--json", type=Path, default=None, help="write the figures to this file")
+    ap.add_argument("--repeat", type=int, default=1,
+                    help="fly every mode K times, interleaved (A B C A B C ...), and report the "
+                         "median of each figure over the K runs (a shared machine drifts)")
     ap.add_argument("--child", default=None, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     seconds = args.seconds if args.seconds is not None else (16.0 if args.quick else None)
@@ -232,14 +285,27 @@ def main(argv=None) -> int:
     if unknown:
         ap.error(f"unknown mode(s) {unknown}; known: {', '.join(MODES)}")
     print(machine_line(), flush=True)
-    results = []
-    for m in modes:       # one after the other: the modes do not share the cores
-        r = run_mode(m, seconds)
-        results.append(r)
-        print(f"  {m}: {r['steps']} steps, crashed {r['crashed']}, build {r['build_mode']}, "
-              f"compilations cold/cached {r['compilations_cold']}/{r['compilations_cached']}",
-              flush=True)
+    if args.repeat < 1:
+        ap.error(f"--repeat {args.repeat}: expected at least 1")
+    runs: dict[str, list[dict]] = {m: [] for m in modes}
+    for k in range(args.repeat):
+        for m in modes:       # one after the other: the modes do not share the cores
+            r = run_mode(m, seconds)
+            runs[m].append(r)
+            print(f"  {m}{f' (run {k + 1})' if args.repeat > 1 else ''}: {r['steps']} steps, "
+                  f"crashed {r['crashed']}, build {r['build_mode']}, compilations cold/cached "
+                  f"{r['compilations_cold']}/{r['compilations_cached']}, QP {r['qp']}, solve "
+                  f"p50/p99 {r['median_ms']:.2f}/{r['p99_ms']:.2f} ms", flush=True)
+    results = [combine(runs[m]) for m in modes]
+    if args.repeat > 1:
+        print(f"median of {args.repeat} interleaved runs per mode; solve p50 and p99 ranges:")
+        for m in modes:
+            p50 = [r["median_ms"] for r in runs[m]]
+            p99 = [r["p99_ms"] for r in runs[m]]
+            print(f"  {m}: p50 {min(p50):.2f}-{max(p50):.2f} ms, p99 {min(p99):.2f}-"
+                  f"{max(p99):.2f} ms")
     print(table(results))
+    print(f"calibration at the end {calibration_ms():.2f} ms")
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps({"machine": machine_line(), "modes": results}, indent=1))

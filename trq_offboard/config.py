@@ -366,7 +366,10 @@ class SolverConfig:
     codegen: str = "auto"                 # rti: "auto" (compile and cache C when a compiler is
                                           # found, else interpreted with a warning) | "off"
     hpipm_interface: str = "direct"       # rti with hpipm: "direct" (nmpc/hpipm.py) | "conic"
-    hpipm_mode: str = "speed"             # direct: speed_abs | speed | balance | robust
+    hpipm_mode: str = "auto"              # direct: speed_abs | speed | balance | robust | auto
+                                          # (speed_abs with gauss_newton, speed with exact)
+    qp_max_iterations: int = 50           # rti, sqp: the QP solver's iteration limit
+    hpipm_options: tuple[tuple[str, float], ...] = ()   # direct: further IPM arguments
 
 
 @dataclass(frozen=True)
@@ -441,6 +444,28 @@ def _weights(k: _Keys) -> Weights:
     return w
 
 
+# HPIPM's further IPM arguments (d_ocp_qp_ipm_arg_set_<name>) a solver file may set: range, integer
+_HPIPM_OPTIONS = {"mu0": (1e-8, 1e8, False), "tol_stat": (1e-14, 1.0, False),
+                  "tol_eq": (1e-14, 1.0, False), "tol_ineq": (1e-14, 1.0, False),
+                  "tol_comp": (1e-14, 1.0, False), "reg_prim": (0.0, 1.0, False),
+                  "ric_alg": (0, 1, True), "pred_corr": (0, 1, True), "split_step": (0, 1, True)}
+
+
+def _hpipm_options(k: _Keys) -> tuple[tuple[str, float], ...]:
+    if "hpipm_options" not in k._left:
+        return ()
+    ok = k.sub("hpipm_options")
+    out = []
+    for name in list(ok._left):
+        if name not in _HPIPM_OPTIONS:
+            raise ok.error(name, ok._left[name], "no such key: hpipm_options are "
+                           + ", ".join(_HPIPM_OPTIONS))
+        lo, hi, integer = _HPIPM_OPTIONS[name]
+        out.append((name, ok.integer(name, lo, hi) if integer else ok.number(name, lo, hi)))
+    ok.close()
+    return tuple(out)
+
+
 def _solver(k: _Keys) -> SolverConfig:
     s = SolverConfig(k.text("kind", ("rti", "sqp", "ipopt")),
                      k.text("hessian", ("gauss_newton", "exact")),
@@ -451,9 +476,15 @@ def _solver(k: _Keys) -> SolverConfig:
                      k.integer("ipopt_max_iterations", 1, 10_000),
                      k.text("codegen", ("auto", "off"), default="auto"),
                      k.text("hpipm_interface", ("direct", "conic"), default="direct"),
-                     k.text("hpipm_mode", ("speed_abs", "speed", "balance", "robust"),
-                            default="speed"))
+                     k.text("hpipm_mode", ("auto", "speed_abs", "speed", "balance", "robust"),
+                            default="auto"),
+                     k.integer("qp_max_iterations", 1, 1000, default=50),
+                     _hpipm_options(k))
     k.close()
+    if s.hessian == "exact" and s.hpipm_mode == "speed_abs":
+        raise ConfigError(f"{k.file}: key '{k.where}hpipm_mode': got 'speed_abs', expected speed, "
+                          "balance, robust or auto with hessian exact (the exact Hessian needs the "
+                          "QP's multipliers, which speed_abs does not compute to tolerance)")
     return s
 
 

@@ -94,3 +94,27 @@ def test_controller_file_errors(tmp_path):
     bad = dict(src, solver=dict(src["solver"], kind="acados"))
     with pytest.raises(ConfigError, match=r"solver\.kind"):
         load_controller(_write(tmp_path, "c4.yaml", bad))
+
+
+def test_solver_qp_keys(tmp_path):
+    src = yaml.safe_load((PARAMS / "controller/nmpc.yaml").read_text())
+    src["vehicle"] = str(PARAMS / "vehicle/trq.yaml")
+    src["observer"]["file"] = str(PARAMS / "controller/eso.yaml")
+    cfg = load_controller(_write(tmp_path, "c.yaml", src))
+    assert cfg.solver.hpipm_interface == "direct" and cfg.solver.hpipm_mode == "auto"
+    assert cfg.solver.hpipm_options == () and cfg.tilt_rate_limit == "horizon"
+    bad = dict(src, solver=dict(src["solver"], hpipm_options={"mu_0": 0.1}))
+    with pytest.raises(ConfigError, match=r"solver\.hpipm_options\.mu_0.*mu0, tol_stat"):
+        load_controller(_write(tmp_path, "c2.yaml", bad))
+    bad = dict(src, solver=dict(src["solver"], hpipm_options={"ric_alg": 2}))
+    with pytest.raises(ConfigError, match=r"hpipm_options\.ric_alg.*\[0, 1\]"):
+        load_controller(_write(tmp_path, "c3.yaml", bad))
+    bad = dict(src, solver=dict(src["solver"], hessian="exact", hpipm_mode="speed_abs"))
+    with pytest.raises(ConfigError, match=r"solver\.hpipm_mode.*multipliers"):
+        load_controller(_write(tmp_path, "c4.yaml", bad))
+    bad = dict(src, solver=dict(src["solver"], qp_max_iterations=0))
+    with pytest.raises(ConfigError, match=r"solver\.qp_max_iterations.*\[1, 1000\]"):
+        load_controller(_write(tmp_path, "c5.yaml", bad))
+    bad = dict(src, tilt_rate_limit="everywhere")
+    with pytest.raises(ConfigError, match=r"tilt_rate_limit.*horizon\|first_step"):
+        load_controller(_write(tmp_path, "c6.yaml", bad))

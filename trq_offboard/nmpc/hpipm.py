@@ -39,6 +39,11 @@ import numpy as np
 __all__ = ["OcpQp", "available", "library_path", "MODES"]
 
 MODES = {"speed_abs": 0, "speed": 1, "balance": 2, "robust": 3}   # enum hpipm_mode
+# further IPM options (d_ocp_qp_ipm_arg_set_<name>, after the mode's defaults): name -> C type
+ARG_OPTIONS = {"ric_alg": ctypes.c_int, "pred_corr": ctypes.c_int, "split_step": ctypes.c_int,
+               "tol_stat": ctypes.c_double, "tol_eq": ctypes.c_double,
+               "tol_ineq": ctypes.c_double, "tol_comp": ctypes.c_double,
+               "mu0": ctypes.c_double, "reg_prim": ctypes.c_double}
 _LIB: ctypes.CDLL | None = None
 _LIB_ERROR: str | None = None
 _SHIM: ctypes.CDLL | None | bool = None         # False: tried, not available
@@ -135,6 +140,7 @@ def _load() -> ctypes.CDLL | None:
             "d_ocp_qp_ipm_arg_set_default": (None, I, P),
             "d_ocp_qp_ipm_arg_set_iter_max": (None, P, P),
             "d_ocp_qp_ipm_arg_set_warm_start": (None, P, P),
+            **{f"d_ocp_qp_ipm_arg_set_{name}": (None, P, P) for name in ARG_OPTIONS},
             "d_ocp_qp_ipm_ws_strsize": (S,), "d_ocp_qp_ipm_ws_memsize": (S, P, P),
             "d_ocp_qp_ipm_ws_create": (None, P, P, P, P),
             "d_ocp_qp_ipm_solve": (None, P, P, P, P),
@@ -196,7 +202,7 @@ class OcpQp:
     at stage N); state boxes on idxbx (the same at every stage 1..N), every input boxed."""
 
     def __init__(self, ns: int, nv: int, N: int, idxbx, mode: str = "speed",
-                 iter_max: int = 50, shim: bool = True):
+                 iter_max: int = 50, shim: bool = True, options: dict | None = None):
         lib = _load()
         if lib is None:
             raise RuntimeError(f"HPIPM is not available: {_LIB_ERROR}")
@@ -234,6 +240,12 @@ class OcpQp:
         lib.d_ocp_qp_ipm_arg_set_default(MODES[mode], arg_s)
         it = ctypes.c_int(int(iter_max))
         lib.d_ocp_qp_ipm_arg_set_iter_max(ctypes.byref(it), arg_s)
+        for name, value in (options or {}).items():
+            if name not in ARG_OPTIONS:
+                raise ValueError(f"hpipm option {name!r}: expected one of "
+                                 f"{', '.join(ARG_OPTIONS)}")
+            getattr(lib, f"d_ocp_qp_ipm_arg_set_{name}")(
+                ctypes.byref(ARG_OPTIONS[name](value)), arg_s)
         ws_s = _aligned(lib.d_ocp_qp_ipm_ws_strsize())
         ws_m = _aligned(lib.d_ocp_qp_ipm_ws_memsize(dim_s, arg_s))
         keep.extend([ws_s[0], ws_m[0]])

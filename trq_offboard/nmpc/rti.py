@@ -22,8 +22,9 @@ quadratic in w) or, for hessian="exact", the Hessian of the Lagrangian with the 
 previous QP; plus `regularization` on the diagonal.
 Feedback (when x0 arrives): embed s_0 = [x0, alpha_prev (, y0)] as equal bounds on ds_0, correct the
 gaps to first order for the change of d since the preparation (D_k (d - d_prep)) and the cost
-gradient exactly for the change of the reference (the cost is quadratic), solve the QP (HPIPM
-through casadi.conic: Riccati-based, exploits the stage structure) and take the full step.
+gradient exactly for the change of the reference (the cost is quadratic), solve the QP (HPIPM:
+Riccati-based, exploits the stage structure; called directly through nmpc/hpipm.py with ds_0
+eliminated, or through casadi.conic: solver key hpipm_interface) and take the full step.
 
 SolveInfo of solve(): solve_time_s is the time of solve() itself (the feedback phase, or
 preparation + feedback when no preparation was pending); `last_prepare_s` holds the time of the
@@ -48,7 +49,15 @@ from trq_offboard.nmpc.cache import compiled_many
 from trq_offboard.nmpc.ocp import Ocp, Stage
 from trq_offboard.records import SolveInfo, SolveStatus
 
-__all__ = ["RtiSolver"]
+__all__ = ["RtiSolver", "HPIPM_AUTO"]
+
+# hpipm_mode auto: HPIPM's mode and arguments per Hessian. Gauss-Newton: speed_abs (no residuals
+# computed), a small initial barrier mu0 (an iteration less) and a tight complementarity tolerance
+# (speed_abs stops on it alone). Exact: speed at HPIPM's defaults (the next Hessian needs the
+# multipliers, which speed_abs does not compute to tolerance; mu0 0.1 left its QPs at the
+# iteration limit). Measurements in params/controller/nmpc.yaml.
+HPIPM_AUTO = {"gauss_newton": ("speed_abs", {"mu0": 0.1, "tol_comp": 1e-10}),
+              "exact": ("speed", {})}
 
 
 @dataclass
@@ -186,14 +195,20 @@ class RtiSolver:
             # state boxes: the finite bounds of s_k (the same for k >= 1); inputs all boxed
             self._idxbx = np.flatnonzero(np.abs(o.lbw[s_idx[1]]) < 1e19)
             self._sbx = s_idx[:, self._idxbx]
-            self._hqp = hpipm.OcpQp(ns, nv, N, self._idxbx, mode=sc.hpipm_mode, iter_max=50)
+            mode, opts = sc.hpipm_mode, dict(sc.hpipm_options)
+            if mode == "auto":       # measured presets (params/controller/nmpc.yaml)
+                mode, preset = HPIPM_AUTO[hessian]
+                opts = {**preset, **opts}
+            self.hpipm_mode, self.hpipm_options = mode, opts
+            self._hqp = hpipm.OcpQp(ns, nv, N, self._idxbx, mode=mode,
+                                    iter_max=sc.qp_max_iterations, options=opts, shim=enabled)
             if hessian != "exact":
                 self._hqp.set_hessian(self._hc, self._hcN)
         else:
             # the QP: HPIPM (Riccati, stage structure detected from the sparsity)
             qp_opts = {"error_on_fail": False, "print_time": False}
             if sc.qp_solver == "hpipm":
-                qp_opts["hpipm"] = {"iter_max": 50, "warm_start": 0}
+                qp_opts["hpipm"] = {"iter_max": sc.qp_max_iterations, "warm_start": 0}
             elif sc.qp_solver == "qrqp":
                 qp_opts.update({"print_iter": False, "print_header": False,
                                 "print_info": False})

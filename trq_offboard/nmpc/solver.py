@@ -103,7 +103,7 @@ class SqpSolver(_Base):
         a_sp = self._lin.sparsity_out(1)
         qp_opts = {"error_on_fail": False, "print_time": False}
         if sc.qp_solver == "hpipm":
-            qp_opts["hpipm"] = {"iter_max": 50, "warm_start": 0}
+            qp_opts["hpipm"] = {"iter_max": sc.qp_max_iterations, "warm_start": 0}
         elif sc.qp_solver == "qrqp":
             qp_opts.update({"print_iter": False, "print_header": False, "print_info": False})
         elif sc.qp_solver == "osqp":
