@@ -49,6 +49,16 @@ def _wrap(a: float) -> float:
     return (a + math.pi) % (2.0 * math.pi) - math.pi
 
 
+def _interp_rows(x: np.ndarray, h: float, times: np.ndarray) -> np.ndarray:
+    """Rows of x (n+1, m), sampled every h seconds from 0, linearly interpolated at `times`
+    (clamped to [0, n h], as np.interp does), all columns at once: (len(times), m)."""
+    n = x.shape[0] - 1
+    s = np.clip(times / h, 0.0, n)
+    i = np.minimum(s.astype(int), n - 1)
+    f = (s - i)[:, None]
+    return x[i] * (1.0 - f) + x[i + 1] * f
+
+
 class Controller:
     def __init__(self, cfg: ControllerConfig, solver: Solver | None = None) -> None:
         self.cfg = cfg
@@ -125,9 +135,7 @@ class Controller:
 
     def _b0(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
         """The observer's b0(u): the nominal model's accelerations (NED, Euler) under u."""
-        acc = np.asarray(self.model.accel(x, u)).ravel()
-        eta_acc = np.asarray(self.model.euler_accel(x, u, np.zeros(6))).ravel()
-        return np.concatenate([acc[0:3], eta_acc])
+        return self.model.b0(x, u)
 
     def _b0_delayed(self, x: np.ndarray, t0: float, t1: float, path=None) -> np.ndarray:
         """b0 averaged over [t0, t1] with each command acting applied_delay_s after it was sent
@@ -295,9 +303,7 @@ class Controller:
         elapsed = t_next - self._plan_t
         if elapsed >= self.N * self.h:
             return
-        x_old = self._plan[1]
-        grid = self.h * np.arange(self.N + 1)
-        x_pred = np.array([np.interp(elapsed, grid, x_old[:, j]) for j in range(12)])
+        x_pred = _interp_rows(self._plan[1], self.h, np.array([elapsed]))[0]
         x_ref = self._reference_states(t_next, x_pred, reference)
         guess = self._guess(t_next, x_pred, self._last_d)
         if self._act_states and self._y_act is not None:
@@ -311,7 +317,13 @@ class Controller:
     def _reference_states(self, t_s: float, x: np.ndarray, reference) -> np.ndarray:
         xr = np.zeros((self.N + 1, 12))
         yaw = x[8]
-        for k in range(self.N + 1):
+        grid = getattr(reference, "grid", None)
+        if grid is not None:                              # Reference, ConstantReference
+            pv, yaw_ref = grid(t_s, self.h, self.N + 1)
+            xr[:, 0:6] = pv
+            xr[:, 8] = yaw + (yaw_ref - yaw + math.pi) % (2 * math.pi) - math.pi
+            return xr
+        for k in range(self.N + 1):                        # any object with sample(t)
             s: ReferenceSample = reference.sample(t_s + k * self.h)
             xr[k, 0:3] = s.pos_ned_m
             xr[k, 3:6] = s.vel_ned_m_s
@@ -327,8 +339,7 @@ class Controller:
             if elapsed < N * h:
                 idx = np.minimum((times[:N] / h + 1e-9).astype(int), N - 1)
                 u = u_old[idx]
-                grid = h * np.arange(N + 1)
-                xg = np.column_stack([np.interp(times, grid, x_old[:, j]) for j in range(12)])
+                xg = _interp_rows(x_old, h, times)
                 xg[:, 8] += x[8] - xg[0, 8]          # keep yaw next to the measured one
                 xg[0] = x
                 return u, xg

@@ -62,15 +62,18 @@ class Reference:
         self.airborne = airborne
         self.ground = float(self.start[2] if ground_down_m is None else ground_down_m)
         self.hover_point = self.start + np.array([0.0, 0.0, 0.0 if airborne else -cfg.altitude_m])
+        self._start = tuple(float(v) for v in self.start)
+        self._hover = tuple(float(v) for v in self.hover_point)
         rise = self.hover_point[2] - self.start[2]
-        self.t_takeoff = abs(rise) * 1.875 / cfg.climb_speed_m_s
+        self.t_takeoff = float(abs(rise) * 1.875 / cfg.climb_speed_m_s)
         self.t1 = self.t0 + self.t_takeoff
         self.t2 = self.t1 + cfg.hold_s
         self.t3 = self.t2 + cfg.duration_s
         self.t4 = self.t3 + cfg.hold_s
         self.end_point = self._manoeuvre(cfg.duration_s)[0]
+        self._end = tuple(float(v) for v in self.end_point)
         drop = (self.ground + LAND_BELOW_M) - self.end_point[2]
-        self.t_land = abs(drop) * 1.875 / cfg.climb_speed_m_s if cfg.land else 0.0
+        self.t_land = float(abs(drop) * 1.875 / cfg.climb_speed_m_s) if cfg.land else 0.0
         self.t5 = self.t4 + self.t_land
 
     # --- phase of the periodic manoeuvres -------------------------------------------------
@@ -94,47 +97,63 @@ class Reference:
         return phi_end - w * ramp_integral(back), w * 0.5 * (1 - math.cos(math.pi * back / r))
 
     def _manoeuvre(self, tau: float) -> tuple[np.ndarray, np.ndarray]:
+        pv = self._manoeuvre_pv(tau)
+        return np.array(pv[0:3]), np.array(pv[3:6])
+
+    def _manoeuvre_pv(self, tau: float) -> tuple[float, ...]:
+        """(north, east, down, vn, ve, vd) at tau seconds into the manoeuvre (plain floats: the
+        controller samples 21 points twice a step)."""
         cfg = self.cfg
-        c = self.hover_point
+        cn, ce, cd = self._hover
         if cfg.kind == "hover":
-            return c.copy(), np.zeros(3)
+            return cn, ce, cd, 0.0, 0.0, 0.0
         if cfg.kind == "step":
-            on = 0.0 <= tau < cfg.duration_s
-            return c + (np.asarray(cfg.step_ned_m) if on else 0.0), np.zeros(3)
+            if 0.0 <= tau < cfg.duration_s:
+                sn, se, sd = cfg.step_ned_m
+                return cn + float(sn), ce + float(se), cd + float(sd), 0.0, 0.0, 0.0
+            return cn, ce, cd, 0.0, 0.0, 0.0
         phi, dphi = self._phase(tau)
         R = cfg.radius_m
+        c, s = math.cos(phi), math.sin(phi)
         if cfg.kind in ("circle", "helix"):
             climb = cfg.helix_climb_m / (2 * math.pi) if cfg.kind == "helix" else 0.0
-            pos = c + np.array([R * (math.cos(phi) - 1.0), R * math.sin(phi), climb * phi])
-            vel = dphi * np.array([-R * math.sin(phi), R * math.cos(phi), climb])
-            return pos, vel
+            return (cn + R * (c - 1.0), ce + R * s, cd + climb * phi,
+                    -dphi * R * s, dphi * R * c, dphi * climb)
         # figure8: x = R sin(phi), y = R/2 sin(2 phi)
-        pos = c + np.array([R * math.sin(phi), 0.5 * R * math.sin(2 * phi), 0.0])
-        vel = dphi * np.array([R * math.cos(phi), R * math.cos(2 * phi), 0.0])
-        return pos, vel
+        return (cn + R * s, ce + 0.5 * R * math.sin(2 * phi), cd,
+                dphi * R * c, dphi * R * math.cos(2 * phi), 0.0)
+
+    def _pv(self, t: float) -> tuple[tuple[float, ...], str]:
+        """(north, east, down, vn, ve, vd) and the phase at time t."""
+        if t < self.t1:
+            s, ds = _smoothstep5((t - self.t0) / self.t_takeoff if self.t_takeoff > 0 else 1.0)
+            sn, se, sd = self._start
+            dz = self._hover[2] - sd
+            vz = ds * dz / self.t_takeoff if self.t_takeoff > 0 else 0.0
+            return (sn, se, sd + s * dz, 0.0, 0.0, vz), "takeoff"
+        if t < self.t2:
+            return (*self._hover, 0.0, 0.0, 0.0), "hold"
+        if t < self.t3:
+            return self._manoeuvre_pv(t - self.t2), self.cfg.kind
+        en, ee, ed = self._end
+        if t < self.t4 or not self.cfg.land:
+            return (en, ee, ed, 0.0, 0.0, 0.0), "hold"
+        dz = self.ground + LAND_BELOW_M - ed
+        s, ds = _smoothstep5((t - self.t4) / self.t_land if self.t_land > 0 else 1.0)
+        vz = ds * dz / self.t_land if self.t_land > 0 else 0.0
+        return (en, ee, ed + s * dz, 0.0, 0.0, vz), ("land" if t < self.t5 else "landed")
 
     # --- public -------------------------------------------------------------------------------
     def sample(self, t_s: float) -> ReferenceSample:
-        t = float(t_s)
-        if t < self.t1:
-            s, ds = _smoothstep5((t - self.t0) / self.t_takeoff if self.t_takeoff > 0 else 1.0)
-            dz = self.hover_point[2] - self.start[2]
-            pos = self.start + np.array([0.0, 0.0, s * dz])
-            vel = np.array([0.0, 0.0, ds * dz / self.t_takeoff if self.t_takeoff > 0 else 0.0])
-            return _sample(pos, vel, self.yaw, "takeoff")
-        if t < self.t2:
-            return _sample(self.hover_point, np.zeros(3), self.yaw, "hold")
-        if t < self.t3:
-            pos, vel = self._manoeuvre(t - self.t2)
-            return _sample(pos, vel, self.yaw, self.cfg.kind)
-        if t < self.t4 or not self.cfg.land:
-            return _sample(self.end_point, np.zeros(3), self.yaw, "hold")
-        z_ground = self.ground + LAND_BELOW_M
-        dz = z_ground - self.end_point[2]
-        s, ds = _smoothstep5((t - self.t4) / self.t_land if self.t_land > 0 else 1.0)
-        pos = self.end_point + np.array([0.0, 0.0, s * dz])
-        vel = np.array([0.0, 0.0, ds * dz / self.t_land if self.t_land > 0 else 0.0])
-        return _sample(pos, vel, self.yaw, "land" if t < self.t5 else "landed")
+        pv, phase = self._pv(float(t_s))
+        return ReferenceSample(pv[0:3], pv[3:6], self.yaw, phase)
+
+    def grid(self, t_s: float, step_s: float, n: int) -> tuple[np.ndarray, np.ndarray]:
+        """The plan at t_s + k step_s, k = 0..n-1: (pos_vel (n, 6) NED [m, m/s], yaw (n,) rad);
+        the same values as `sample`, without a record per point."""
+        t0 = float(t_s)
+        pv = np.array([self._pv(t0 + k * step_s)[0] for k in range(n)])
+        return pv, np.full(n, self.yaw)
 
     def done(self, t_s: float) -> bool:
         """The plan is over: landed (or, without landing, the final hold has started)."""
@@ -154,10 +173,10 @@ class ConstantReference:
     def sample(self, t_s: float) -> ReferenceSample:
         return self._s
 
+    def grid(self, t_s: float, step_s: float, n: int) -> tuple[np.ndarray, np.ndarray]:
+        row = np.array([*self._s.pos_ned_m, *self._s.vel_ned_m_s], float)
+        return np.tile(row, (n, 1)), np.full(n, float(self._s.yaw_rad))
+
     def done(self, t_s: float) -> bool:
         return False
 
-
-def _sample(pos, vel, yaw, phase) -> ReferenceSample:
-    return ReferenceSample(tuple(float(v) for v in pos), tuple(float(v) for v in vel),
-                           float(yaw), phase)

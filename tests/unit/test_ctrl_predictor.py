@@ -132,3 +132,16 @@ def test_one_path_serves_the_observer_and_the_predictor():
     after = sum(b - a for a, b, _ in path if 0.5 * (a + b) > t_s)
     assert before == pytest.approx(t_s - t_last, abs=1e-12)
     assert after == pytest.approx(DELAY_S, abs=1e-12)
+
+
+def test_interp_rows_matches_np_interp():
+    """The plan interpolation the controller shifts its guess with: every column as np.interp,
+    clamped outside the plan."""
+    from trq_offboard.controller import _interp_rows
+    rng = np.random.default_rng(1)
+    x = rng.normal(size=(21, 12))
+    h = 0.05
+    times = np.concatenate([[-0.01, 0.0, 0.013, 0.5, 0.999], h * np.arange(21), [1.0, 1.3]])
+    grid = h * np.arange(21)
+    want = np.column_stack([np.interp(times, grid, x[:, j]) for j in range(12)])
+    np.testing.assert_allclose(_interp_rows(x, h, times), want, rtol=0, atol=1e-12)

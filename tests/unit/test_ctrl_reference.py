@@ -54,3 +54,21 @@ def test_pure_function_of_time():
     a = [ref.sample(t) for t in (3.0, 12.5, 20.0)]
     b = [ref.sample(t) for t in (20.0, 12.5, 3.0)][::-1]
     assert a == b
+
+
+@pytest.mark.parametrize("kind", ["hover", "circle", "helix", "figure8", "step"])
+def test_grid_equals_samples(kind):
+    """grid() (what the controller samples twice a step) gives what sample() gives, on a grid
+    across every phase, and a ConstantReference's grid is its one sample."""
+    from trq_offboard.reference import ConstantReference
+    ref = Reference(replace(CFG.reference, kind=kind), [1.0, -2.0, 0.0], 0.3, t0_s=5.0)
+    for t0 in np.arange(4.0, ref.end_time_s + 1.0, 0.37):
+        pv, yaw = ref.grid(t0, 0.05, 21)
+        for k in range(21):
+            s = ref.sample(t0 + k * 0.05)
+            assert tuple(pv[k]) == s.pos_ned_m + s.vel_ned_m_s and yaw[k] == s.yaw_rad
+            assert all(type(v) is float for v in s.pos_ned_m + s.vel_ned_m_s)
+    const = ConstantReference(ref.sample(7.0))
+    pv, yaw = const.grid(0.0, 0.05, 3)
+    assert pv.shape == (3, 6) and tuple(pv[2]) == ref.sample(7.0).pos_ned_m + \
+        ref.sample(7.0).vel_ned_m_s and yaw[1] == 0.3
