@@ -103,3 +103,26 @@ def test_active_input_bound_matches_pinned_kkt():
 def test_unknown_mode_is_named():
     with pytest.raises(ValueError, match="'fast'.*speed_abs"):
         hpipm.OcpQp(3, 2, 4, [0], mode="fast")
+
+
+def test_shim_build_failure_falls_back_to_the_ctypes_loop(tmp_path, monkeypatch):
+    """An unwritable cache directory: a warning, no shim, the QP still solves (ctypes loop)."""
+    from trq_offboard.nmpc import cache
+    blocker = tmp_path / "not-a-dir"
+    blocker.write_text("a file where the cache directory should be")
+    monkeypatch.setenv("TRQ_CACHE_DIR", str(blocker / "cache"))
+    monkeypatch.setattr(hpipm, "_SHIM", None)      # forget this process's shim (restored after)
+    if cache.find_compiler() is not None:
+        with pytest.warns(RuntimeWarning, match="trq_hpipm_shim"):
+            qp = hpipm.OcpQp(3, 2, 4, [0])
+    else:
+        qp = hpipm.OcpQp(3, 2, 4, [0])
+    assert not qp.uses_shim
+    rng = np.random.default_rng(3)
+    At, Bt, b, q, r, H, HN = _problem(rng)
+    qp.set_hessian(H, HN)
+    big = np.full((5, 1), 1e6)
+    qp.solve(At, Bt, b, q, r, -big, big, np.full((4, 2), -1e6), np.full((4, 2), 1e6))
+    assert qp.status == 0
+    u_ref, _ = _dense_kkt(At, Bt, b, q, r, H, HN)
+    np.testing.assert_allclose(qp.u, u_ref, atol=1e-6)

@@ -120,21 +120,25 @@ def compiled_c(name: str, source: str, link_args: tuple[str, ...] = ()) -> Path 
     if cc is None:
         return None
     root = cache_dir()
-    root.mkdir(parents=True, exist_ok=True)
     lib = root / f"{name}_{_key(source + chr(0) + ' '.join(link_args), cc)}.so"
     if lib.exists():
         COUNTS["cached"] += 1
         return lib
-    with tempfile.TemporaryDirectory(dir=root, prefix=".build-") as tmp:
-        c_file = Path(tmp) / f"{name}.c"
-        c_file.write_text(source)
-        out = Path(tmp) / lib.name
-        res = subprocess.run([cc, "-O2", "-fPIC", "-shared", str(c_file), "-o", str(out),
-                              *link_args], capture_output=True, text=True)
-        if res.returncode != 0:
-            warnings.warn(f"compiling {name} failed ({res.stderr.strip()[:300]})",
-                          RuntimeWarning, stacklevel=2)
-            return None
-        os.replace(out, lib)
+    try:
+        root.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryDirectory(dir=root, prefix=".build-") as tmp:
+            c_file = Path(tmp) / f"{name}.c"
+            c_file.write_text(source)
+            out = Path(tmp) / lib.name
+            res = subprocess.run([cc, "-O2", "-fPIC", "-shared", str(c_file), "-o", str(out),
+                                  *link_args], capture_output=True, text=True)
+            if res.returncode != 0:
+                warnings.warn(f"compiling {name} failed ({res.stderr.strip()[:300]})",
+                              RuntimeWarning, stacklevel=2)
+                return None
+            os.replace(out, lib)
+    except OSError as exc:               # an unwritable cache directory, a vanished compiler
+        warnings.warn(f"building {name} in {root} failed: {exc}", RuntimeWarning, stacklevel=2)
+        return None
     COUNTS["compiled"] += 1
     return lib
