@@ -6,6 +6,7 @@ Every test builds into a temporary cache directory ($TRQ_CACHE_DIR), never the u
 from __future__ import annotations
 
 import dataclasses
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -244,3 +245,20 @@ def test_rti_and_sqp_with_actuator_lag_states_converge_to_ipopt(cache_env, name)
     # the lag matters: without it (actuators settled at the command) the plan differs
     u_settled, _, _ = ref.solve(x0, x_ref, d, u_trim, guess, y0=u_trim)
     assert np.max(np.abs(u_settled - u_r)) > 0.1
+
+
+@pytest.mark.skipif(not _has_compiler(), reason="no C compiler")
+def test_unwritable_cache_runs_interpreted(tmp_path, monkeypatch):
+    """A cache directory that cannot be created: the RTI says so and runs interpreted."""
+    blocker = tmp_path / "not-a-dir"
+    blocker.write_text("a file where the cache directory should be")
+    monkeypatch.setenv("TRQ_CACHE_DIR", str(blocker / "cache"))
+    cfg = _cfg()
+    model, u_trim, x0, x_ref, d, guess = _problem(cfg)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        rti = RtiSolver(cfg, model, u_trim)
+    assert any("interpreter" in str(w.message) for w in caught), [str(w.message) for w in caught]
+    assert rti.build_mode == "interpreted"
+    u, x, info = rti.solve(x0, x_ref, d, u_trim, guess)
+    assert info.status is SolveStatus.OK

@@ -72,23 +72,29 @@ def _build(fn: ca.Function, cc: str | None) -> tuple[ca.Function, str]:
         return fn, "interpreted"
     src = _source(fn)
     root = cache_dir()
-    root.mkdir(parents=True, exist_ok=True)
     lib = root / f"{fn.name()}_{_key(src, cc)}.so"
     if lib.exists():
         COUNTS["cached"] += 1
         return ca.external(fn.name(), str(lib)), "cached"
-    with tempfile.TemporaryDirectory(dir=root, prefix=".build-") as tmp:
-        c_file = Path(tmp) / f"{fn.name()}.c"
-        c_file.write_text(src)
-        out = Path(tmp) / lib.name
-        res = subprocess.run([cc, *CFLAGS, str(c_file), "-o", str(out), "-lm"],
-                             capture_output=True, text=True)
-        if res.returncode != 0:
-            warnings.warn(f"compiling {fn.name()} failed ({res.stderr.strip()[:300]}): it runs "
-                          "in CasADi's interpreter", RuntimeWarning, stacklevel=3)
-            COUNTS["interpreted"] += 1
-            return fn, "interpreted"
-        os.replace(out, lib)
+    try:
+        root.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryDirectory(dir=root, prefix=".build-") as tmp:
+            c_file = Path(tmp) / f"{fn.name()}.c"
+            c_file.write_text(src)
+            out = Path(tmp) / lib.name
+            res = subprocess.run([cc, *CFLAGS, str(c_file), "-o", str(out), "-lm"],
+                                 capture_output=True, text=True)
+            if res.returncode != 0:
+                warnings.warn(f"compiling {fn.name()} failed ({res.stderr.strip()[:300]}): it "
+                              "runs in CasADi's interpreter", RuntimeWarning, stacklevel=3)
+                COUNTS["interpreted"] += 1
+                return fn, "interpreted"
+            os.replace(out, lib)
+    except OSError as exc:               # an unwritable cache directory, a vanished compiler
+        warnings.warn(f"building {fn.name()} in {root} failed ({exc}): it runs in CasADi's "
+                      "interpreter", RuntimeWarning, stacklevel=3)
+        COUNTS["interpreted"] += 1
+        return fn, "interpreted"
     COUNTS["compiled"] += 1
     return ca.external(fn.name(), str(lib)), "compiled"
 
