@@ -3,7 +3,7 @@ CasADi wheel, built once and called without CasADi's conic layer.
 
     qp = OcpQp(ns, nv, N, idxbx, mode="speed")      # workspaces allocated once
     qp.set_hessian(H_stage, H_terminal)             # constant (Gauss-Newton) or per solve
-    x, u, pi = qp.solve(A, B, b, q, r, lbx, ubx, lbu, ubu, ds0)
+    x, u, pi = qp.solve(At, Bt, b, q, r, lbx, ubx, lbu, ubu)   # At, Bt: A_k', B_k' per stage
 
 The QP (HPIPM's form, Frison & Diehl 2020), with the initial state eliminated (stage 0 has no state
 variable: its dynamics carry A_0 ds0 in their constant):
@@ -50,7 +50,6 @@ _SHIM: ctypes.CDLL | None | bool = None         # False: tried, not available
 
 _SHIM_SOURCE = r"""
 /* trq_hpipm_shim: set one OCP QP's per-solve data, solve it, read the solution (HPIPM). */
-typedef void (*set_fn)(int, double *, void *);
 extern void d_ocp_qp_set_A(int, double *, void *);
 extern void d_ocp_qp_set_B(int, double *, void *);
 extern void d_ocp_qp_set_b(int, double *, void *);
