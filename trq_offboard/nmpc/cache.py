@@ -64,6 +64,26 @@ def _key(source: str, cc: str) -> str:
     return h.hexdigest()[:20]
 
 
+def _compile(cc: str, flags: list[str], source: str, lib: Path, after: list[str]) -> str | None:
+    """Compile `source` into the shared library `lib` (built under a temporary name in its
+    directory, then renamed into place). None on success, else what went wrong: the compiler's
+    error, or an OSError (an unwritable cache directory, a vanished compiler)."""
+    try:
+        lib.parent.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryDirectory(dir=lib.parent, prefix=".build-") as tmp:
+            c_file = Path(tmp) / lib.with_suffix(".c").name
+            c_file.write_text(source)
+            out = Path(tmp) / lib.name
+            res = subprocess.run([cc, *flags, str(c_file), "-o", str(out), *after],
+                                 capture_output=True, text=True)
+            if res.returncode != 0:
+                return res.stderr.strip()[:300]
+            os.replace(out, lib)
+    except OSError as exc:
+        return f"{lib.parent}: {exc}"
+    return None
+
+
 def _build(fn: ca.Function, cc: str | None) -> tuple[ca.Function, str]:
     if cc is None:
         warnings.warn(f"no C compiler found (tried $CC, gcc, cc, clang): {fn.name()} runs in "
@@ -76,23 +96,10 @@ def _build(fn: ca.Function, cc: str | None) -> tuple[ca.Function, str]:
     if lib.exists():
         COUNTS["cached"] += 1
         return ca.external(fn.name(), str(lib)), "cached"
-    try:
-        root.mkdir(parents=True, exist_ok=True)
-        with tempfile.TemporaryDirectory(dir=root, prefix=".build-") as tmp:
-            c_file = Path(tmp) / f"{fn.name()}.c"
-            c_file.write_text(src)
-            out = Path(tmp) / lib.name
-            res = subprocess.run([cc, *CFLAGS, str(c_file), "-o", str(out), "-lm"],
-                                 capture_output=True, text=True)
-            if res.returncode != 0:
-                warnings.warn(f"compiling {fn.name()} failed ({res.stderr.strip()[:300]}): it "
-                              "runs in CasADi's interpreter", RuntimeWarning, stacklevel=3)
-                COUNTS["interpreted"] += 1
-                return fn, "interpreted"
-            os.replace(out, lib)
-    except OSError as exc:               # an unwritable cache directory, a vanished compiler
-        warnings.warn(f"building {fn.name()} in {root} failed ({exc}): it runs in CasADi's "
-                      "interpreter", RuntimeWarning, stacklevel=3)
+    error = _compile(cc, list(CFLAGS), src, lib, ["-lm"])
+    if error is not None:
+        warnings.warn(f"building {fn.name()} failed ({error}): it runs in CasADi's interpreter",
+                      RuntimeWarning, stacklevel=3)
         COUNTS["interpreted"] += 1
         return fn, "interpreted"
     COUNTS["compiled"] += 1
@@ -130,21 +137,9 @@ def compiled_c(name: str, source: str, link_args: tuple[str, ...] = ()) -> Path 
     if lib.exists():
         COUNTS["cached"] += 1
         return lib
-    try:
-        root.mkdir(parents=True, exist_ok=True)
-        with tempfile.TemporaryDirectory(dir=root, prefix=".build-") as tmp:
-            c_file = Path(tmp) / f"{name}.c"
-            c_file.write_text(source)
-            out = Path(tmp) / lib.name
-            res = subprocess.run([cc, "-O2", "-fPIC", "-shared", str(c_file), "-o", str(out),
-                                  *link_args], capture_output=True, text=True)
-            if res.returncode != 0:
-                warnings.warn(f"compiling {name} failed ({res.stderr.strip()[:300]})",
-                              RuntimeWarning, stacklevel=2)
-                return None
-            os.replace(out, lib)
-    except OSError as exc:               # an unwritable cache directory, a vanished compiler
-        warnings.warn(f"building {name} in {root} failed: {exc}", RuntimeWarning, stacklevel=2)
+    error = _compile(cc, ["-O2", "-fPIC", "-shared"], source, lib, list(link_args))
+    if error is not None:
+        warnings.warn(f"building {name} failed ({error})", RuntimeWarning, stacklevel=2)
         return None
     COUNTS["compiled"] += 1
     return lib

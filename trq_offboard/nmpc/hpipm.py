@@ -307,38 +307,23 @@ class OcpQp:
                 ctypes.addressof(self._iter))
             self.iterations = self._iter.value
             return self.x, self.u, self.pi
-        sA, sB, sb, sq, sr = (a.strides[0] for a in (A, B, b, q, r))
-        sx, su = lbx.strides[0], lbu.strides[0]
-        pA, pB, pb, pq, pr = (a.ctypes.data for a in (A, B, b, q, r))
-        plx, pux, plu, puu = (a.ctypes.data for a in (lbx, ubx, lbu, ubu))
-        setA, setB, setb = lib.d_ocp_qp_set_A, lib.d_ocp_qp_set_B, lib.d_ocp_qp_set_b
-        setq, setr = lib.d_ocp_qp_set_q, lib.d_ocp_qp_set_r
-        setlx, setux = lib.d_ocp_qp_set_lbx, lib.d_ocp_qp_set_ubx
-        setlu, setuu = lib.d_ocp_qp_set_lbu, lib.d_ocp_qp_set_ubu
-        for k in range(N):
-            if k > 0:
-                setA(k, pA + k * sA, qp)
-                setq(k, pq + k * sq, qp)
-                setlx(k, plx + k * sx, qp)
-                setux(k, pux + k * sx, qp)
-            setB(k, pB + k * sB, qp)
-            setb(k, pb + k * sb, qp)
-            setr(k, pr + k * sr, qp)
-            setlu(k, plu + k * su, qp)
-            setuu(k, puu + k * su, qp)
-        setq(N, pq + N * sq, qp)
-        setlx(N, plx + N * sx, qp)
-        setux(N, pux + N * sx, qp)
+        # without the shim: the same calls from Python (field, data, stages)
+        inner, states, inputs = range(1, N), range(1, N + 1), range(N)
+        for name, arr, stages in (("A", A, inner), ("B", B, inputs), ("b", b, inputs),
+                                  ("q", q, states), ("r", r, inputs), ("lbx", lbx, states),
+                                  ("ubx", ubx, states), ("lbu", lbu, inputs),
+                                  ("ubu", ubu, inputs)):
+            fn, ptr, stride = getattr(lib, f"d_ocp_qp_set_{name}"), arr.ctypes.data, arr.strides[0]
+            for k in stages:
+                fn(k, ptr + k * stride, qp)
         lib.d_ocp_qp_ipm_solve(qp, self._sol, self._arg, self._ws)
         lib.d_ocp_qp_ipm_get_status(self._ws, ctypes.byref(self._status))
         lib.d_ocp_qp_ipm_get_iter(self._ws, ctypes.byref(self._iter))
         self.status, self.iterations = self._status.value, self._iter.value
-        getx, getu, getpi = (lib.d_ocp_qp_sol_get_x, lib.d_ocp_qp_sol_get_u,
-                             lib.d_ocp_qp_sol_get_pi)
-        px, pu, ppi = self.x.ctypes.data, self.u.ctypes.data, self.pi.ctypes.data
-        ssx, ssu = self.x.strides[0], self.u.strides[0]
-        for k in range(N):
-            getu(k, self._sol, pu + k * ssu)
-            getpi(k, self._sol, ppi + k * ssx)
-            getx(k + 1, self._sol, px + (k + 1) * ssx)
+        for name, arr, stages in (("u", self.u, inputs), ("pi", self.pi, inputs),
+                                  ("x", self.x, states)):
+            fn, ptr, stride = (getattr(lib, f"d_ocp_qp_sol_get_{name}"), arr.ctypes.data,
+                               arr.strides[0])
+            for k in stages:
+                fn(k, self._sol, ptr + k * stride)
         return self.x, self.u, self.pi
