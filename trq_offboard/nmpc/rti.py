@@ -132,18 +132,6 @@ class RtiSolver:
         grad_src = ca.vertcat(ca.vec(GZ), gN(W[s_idx[N].tolist()], XR[:, N]))
         pos = np.concatenate([z_idx.ravel(), s_idx[N]])
         grad = grad_src[np.argsort(pos).tolist()]
-        # constraint Jacobian: [A_k B_k] at (stage rows, z_k), -I at (stage rows, s_{k+1})
-        jsp = fns[0].sparsity_out(1)
-        jr, jc = np.array(jsp.get_triplet()[0]), np.array(jsp.get_triplet()[1])
-        nnz_j = jr.size
-        rows, cols, src = [], [], []
-        for k in range(N):
-            rows += [k * ns + jr, k * ns + np.arange(ns)]
-            cols += [z_idx[k][jc], s_idx[k + 1]]
-            src += [k * nnz_j + np.arange(nnz_j), np.full(ns, N * nnz_j)]     # -1 sentinel
-        a_sp, a_src = self._assemble(N * ns, nw, rows, cols, src)
-        A = ca.MX(a_sp, ca.vertcat(JZ.nz[:], -1)[a_src.tolist()])
-        # Hessian: block diagonal, stage blocks hc (+ Lagrangian term) and terminal hcN, + reg
         # HPIPM called directly (nmpc/hpipm.py) or through casadi.conic
         self.qp_interface = "conic"
         if sc.qp_solver == "hpipm" and sc.hpipm_interface == "direct":
@@ -155,33 +143,48 @@ class RtiSolver:
                               "casadi.conic('hpipm') instead (slower)", RuntimeWarning,
                               stacklevel=2)
         direct = self.qp_interface == "direct"
-        # direct: the stage Jacobians [A_k B_k] dense (column-major: one block per stage), all
-        # outputs dense and evaluated into NumPy buffers (no DM conversion: 0.4 ms a step)
-        outs = ([ca.densify(JZ), ca.densify(gaps), ca.densify(grad), ca.densify(ca.vec(JD))]
-                if direct else [A, gaps, grad, ca.vec(JD)])
-        rows, cols, src = [], [], []
-        for k in range(N):
-            rows.append(np.repeat(z_idx[k], nz))
-            cols.append(np.tile(z_idx[k], nz))
-            src.append(k * nz * nz + np.arange(nz * nz))
-        rows.append(np.repeat(s_idx[N], ns))
-        cols.append(np.tile(s_idx[N], ns))
-        src.append(N * nz * nz + np.arange(ns * ns))
-        h_sp, h_src = self._assemble(nw, nw, rows, cols, src)
-        base = np.concatenate([np.tile((hc + reg * np.eye(nz)).ravel(order="F"), N),
-                               (hcN + reg * np.eye(ns)).ravel(order="F")])
         self._hc = hc + reg * np.eye(nz)               # constant stage Hessian (GN part)
         self._hcN = hcN + reg * np.eye(ns)
+        HL = None
         if hessian == "exact":
             hess = built[1][0].map(N)
             HL = ca.densify(hess(S, V, D, ca.reshape(LAM, ns, N)))   # (nz, nz N)
-            if direct:
-                outs.append(ca.densify(HL))
-            else:
+        if direct:
+            # the stage Jacobians [A_k B_k] dense (column-major: one block per stage), all
+            # outputs dense and evaluated into NumPy buffers (no DM conversion: 0.4 ms a step)
+            outs = [ca.densify(JZ), ca.densify(gaps), ca.densify(grad), ca.densify(ca.vec(JD))]
+            if HL is not None:
+                outs.append(HL)
+        else:
+            # constraint Jacobian: [A_k B_k] at (stage rows, z_k), -I at (stage rows, s_{k+1})
+            jsp = fns[0].sparsity_out(1)
+            jr, jc = np.array(jsp.get_triplet()[0]), np.array(jsp.get_triplet()[1])
+            nnz_j = jr.size
+            rows, cols, src = [], [], []
+            for k in range(N):
+                rows += [k * ns + jr, k * ns + np.arange(ns)]
+                cols += [z_idx[k][jc], s_idx[k + 1]]
+                src += [k * nnz_j + np.arange(nnz_j), np.full(ns, N * nnz_j)]    # -1 sentinel
+            a_sp, a_src = self._assemble(N * ns, nw, rows, cols, src)
+            A = ca.MX(a_sp, ca.vertcat(JZ.nz[:], -1)[a_src.tolist()])
+            outs = [A, gaps, grad, ca.vec(JD)]
+            # Hessian: block diagonal, stage blocks hc (+ Lagrangian term) and terminal hcN
+            rows, cols, src = [], [], []
+            for k in range(N):
+                rows.append(np.repeat(z_idx[k], nz))
+                cols.append(np.tile(z_idx[k], nz))
+                src.append(k * nz * nz + np.arange(nz * nz))
+            rows.append(np.repeat(s_idx[N], ns))
+            cols.append(np.tile(s_idx[N], ns))
+            src.append(N * nz * nz + np.arange(ns * ns))
+            h_sp, h_src = self._assemble(nw, nw, rows, cols, src)
+            base = np.concatenate([np.tile(self._hc.ravel(order="F"), N),
+                                   self._hcN.ravel(order="F")])
+            if HL is not None:
                 hsrc = ca.vertcat(ca.vec(HL), ca.DM.zeros(ns * ns)) + ca.DM(base)
                 outs.append(ca.MX(h_sp, hsrc[h_src.tolist()]))
-        elif not direct:
-            self._h_const = ca.DM(h_sp, ca.DM(base[h_src]))
+            else:
+                self._h_const = ca.DM(h_sp, ca.DM(base[h_src]))
         self._prep = ca.Function("rti_prep", [W, XR, UT, D, LAM], outs)
         if direct:
             buf, self._prep_eval = self._prep.buffer()
