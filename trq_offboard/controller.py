@@ -45,7 +45,8 @@ __all__ = ["Controller"]
 PREDICT_STEP_S = 0.005        # RK4 step of the delay predictor
 
 
-def _wrap(a: float) -> float:
+def _wrap(a):
+    """Angle(s) (float or array) wrapped to [-pi, pi)."""
     return (a + math.pi) % (2.0 * math.pi) - math.pi
 
 
@@ -321,7 +322,7 @@ class Controller:
         if grid is not None:                              # Reference, ConstantReference
             pv, yaw_ref = grid(t_s, self.h, self.N + 1)
             xr[:, 0:6] = pv
-            xr[:, 8] = yaw + (yaw_ref - yaw + math.pi) % (2 * math.pi) - math.pi
+            xr[:, 8] = yaw + _wrap(yaw_ref - yaw)
             return xr
         for k in range(self.N + 1):                        # any object with sample(t)
             s: ReferenceSample = reference.sample(t_s + k * self.h)

@@ -39,7 +39,7 @@ from trq_offboard.config import EsoConfig
 __all__ = ["fal", "ExtendedStateObserver"]
 
 
-def fal(e: np.ndarray, alpha: float, delta: np.ndarray) -> np.ndarray:
+def fal(e: np.ndarray, alpha: float | np.ndarray, delta: np.ndarray) -> np.ndarray:
     """Han's fal: linear with slope delta^(alpha-1) inside |e| <= delta, |e|^alpha sgn(e) out."""
     e = np.asarray(e, float)
     inside = np.abs(e) <= delta
@@ -70,9 +70,7 @@ class ExtendedStateObserver:
         self._y_prev = np.zeros(6)
         lim_t, lim_r = cfg.max_disturbance
         self._lim = np.array([lim_t] * 3 + [lim_r] * 3)
-        # fal of the three rows at once: exponents (3, 1), delta^(1 - alpha) (3, 6)
-        self._acol = np.array(self.alpha, float).reshape(3, 1)
-        self._dpow = np.power(self.delta, 1.0 - self._acol)
+        self._acol = np.array(self.alpha, float).reshape(3, 1)   # fal's exponent per row
 
     def reset(self, y: np.ndarray, y_rate: np.ndarray, disturbance: np.ndarray | None = None
               ) -> None:
@@ -82,17 +80,12 @@ class ExtendedStateObserver:
         self._y_prev = np.array(y, float)
         self.z[2] = 0.0 if disturbance is None else disturbance
 
-    def _g(self, e: np.ndarray, i: int) -> np.ndarray:
-        if self.linear or self.alpha[i] == 1.0:
-            return e
-        return fal(e, self.alpha[i], self.delta)
-
     def _g3(self, e: np.ndarray) -> np.ndarray:
-        """(3, 6): _g(e, 0), _g(e, 1), _g(e, 2) in one pass (fal with alpha 1 is e exactly)."""
+        """(3, 6): the correction of each row x1, x2, x3, fal(e, alpha_i, delta) broadcast over
+        the rows (with alpha 1, fal is e to rounding); e itself for the linear observer."""
         if self.linear:
             return np.broadcast_to(e, (3, 6))
-        ae = np.abs(e)
-        return np.where(ae <= self.delta, e / self._dpow, np.sign(e) * np.power(ae, self._acol))
+        return fal(e, self._acol, self.delta)
 
     def update(self, y: np.ndarray, b0: np.ndarray, dt_s: float | None = None) -> None:
         """Advance by dt_s (default one control period) to the measured output y (6), with

@@ -70,8 +70,8 @@ class Reference:
         self.t2 = self.t1 + cfg.hold_s
         self.t3 = self.t2 + cfg.duration_s
         self.t4 = self.t3 + cfg.hold_s
-        self.end_point = self._manoeuvre(cfg.duration_s)[0]
-        self._end = tuple(float(v) for v in self.end_point)
+        self._end = self._manoeuvre_pv(cfg.duration_s)[0:3]
+        self.end_point = np.array(self._end)
         drop = (self.ground + LAND_BELOW_M) - self.end_point[2]
         self.t_land = float(abs(drop) * 1.875 / cfg.climb_speed_m_s) if cfg.land else 0.0
         self.t5 = self.t4 + self.t_land
@@ -95,10 +95,6 @@ class Reference:
         back = T - tau
         phi_end = w * (2 * full_ramp + T - 2 * r)
         return phi_end - w * ramp_integral(back), w * 0.5 * (1 - math.cos(math.pi * back / r))
-
-    def _manoeuvre(self, tau: float) -> tuple[np.ndarray, np.ndarray]:
-        pv = self._manoeuvre_pv(tau)
-        return np.array(pv[0:3]), np.array(pv[3:6])
 
     def _manoeuvre_pv(self, tau: float) -> tuple[float, ...]:
         """(north, east, down, vn, ve, vd) at tau seconds into the manoeuvre (plain floats: the

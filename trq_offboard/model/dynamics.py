@@ -159,9 +159,10 @@ class PredictionModel:
 
 
 class NumpyFunction:
-    """A CasADi Function called with NumPy vectors and returning a NumPy vector (its first
-    output), evaluated into persistent buffers (casadi.Function.buffer): no DM conversion, about
-    a microsecond of overhead instead of about fifty. Inputs must be dense."""
+    """A CasADi Function called with NumPy arrays (each read flat, in CasADi's column-major
+    order) and evaluated into persistent buffers (casadi.Function.buffer): no DM conversion,
+    about a microsecond of overhead instead of about fifty. Inputs and outputs must be dense.
+    Calling it returns a copy of the first output; `outputs` returns copies of all of them."""
 
     def __init__(self, fn: ca.Function) -> None:
         self.fn = fn
@@ -174,8 +175,15 @@ class NumpyFunction:
         for i, a in enumerate(self._outs):
             self._buf.set_res(i, memoryview(a))
 
-    def __call__(self, *args) -> np.ndarray:
+    def _run(self, args) -> None:
         for dst, src in zip(self._in, args):
             dst[:] = np.ravel(src)
         self._eval()
+
+    def __call__(self, *args) -> np.ndarray:
+        self._run(args)
         return self._out.copy()
+
+    def outputs(self, *args) -> list[np.ndarray]:
+        self._run(args)
+        return [a.copy() for a in self._outs]

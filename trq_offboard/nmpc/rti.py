@@ -44,6 +44,7 @@ import numpy as np
 
 from trq_offboard.config import ControllerConfig
 from trq_offboard.model import PredictionModel
+from trq_offboard.model.dynamics import NumpyFunction
 from trq_offboard.nmpc import hpipm
 from trq_offboard.nmpc.cache import compiled_many
 from trq_offboard.nmpc.ocp import Ocp, Stage
@@ -187,14 +188,7 @@ class RtiSolver:
                 self._h_const = ca.DM(h_sp, ca.DM(base[h_src]))
         self._prep = ca.Function("rti_prep", [W, XR, UT, D, LAM], outs)
         if direct:
-            buf, self._prep_eval = self._prep.buffer()
-            self._prep_in = [np.zeros(self._prep.nnz_in(i)) for i in range(5)]
-            self._prep_out = [np.zeros(self._prep.nnz_out(i)) for i in range(len(outs))]
-            for i, a in enumerate(self._prep_in):
-                buf.set_arg(i, memoryview(a))
-            for i, a in enumerate(self._prep_out):
-                buf.set_res(i, memoryview(a))
-            self._prep_buf = buf                       # keeps the buffers' binding alive
+            self._prep_np = NumpyFunction(self._prep)
             # state boxes: the finite bounds of s_k (the same for k >= 1); inputs all boxed
             self._idxbx = np.flatnonzero(np.abs(o.lbw[s_idx[1]]) < 1e19)
             self._sbx = s_idx[:, self._idxbx]
@@ -256,11 +250,8 @@ class RtiSolver:
         d = np.asarray(d, float).reshape(6)
         if self.qp_interface == "direct":
             N, ns, nz = self._N, self._ns, self._ns + self._nv
-            for dst, src in zip(self._prep_in, (w, x_ref, self.u_trim / o.u_scale, d,
-                                                self._lam)):
-                dst[:] = np.ravel(src)             # x_ref (N+1, nx) row-major = (nx, N+1) col.
-            self._prep_eval()
-            out = [a.copy() for a in self._prep_out]
+            # x_ref (N+1, nx) row-major is the (nx, N+1) input column-major
+            out = self._prep_np.outputs(w, x_ref, self.u_trim / o.u_scale, d, self._lam)
             a = out[0].reshape(N, nz, ns)            # [A_k B_k]' per stage (A_k column-major)
             h = None
             if self.hessian == "exact":        # (nz, nz N) column-major -> (N, nz, nz) + cost
