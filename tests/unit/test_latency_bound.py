@@ -1,0 +1,135 @@
+"""tools/latency_bound.py: the optimal flight after a fault, given a reaction latency (the lower
+bound quoted for the lossy-link scenario), on a synthetic onset: a hover with no wind."""
+
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from conftest import PARAMS, ROOT
+
+sys.path.insert(0, str(ROOT / "tools"))
+import latency_bound as lb  # noqa: E402
+from trq_offboard.allocation import Allocator  # noqa: E402
+from trq_offboard.config import load_vehicle_model  # noqa: E402
+
+TRQ = PARAMS / "vehicle" / "trq.yaml"
+
+
+def hover_onset(factors) -> lb.Onset:
+    vm = load_vehicle_model(TRQ)
+    trim = Allocator(vm).command_vector(Allocator(vm).hover())
+    x0 = np.zeros(12)
+    x0[2] = -2.0
+    t = np.arange(0, 201) * 0.01
+    flown = np.tile(np.concatenate([x0, trim]), (2, 1))
+    return lb.Onset(t0_us=12_000_000, x0=x0, y0=trim.copy(), cmd0=trim.copy(),
+                    factors=np.asarray(factors, float), wind=np.zeros(3), ref_t=t,
+                    ref_pos=np.tile(x0[0:3], (len(t), 1)), ref_yaw=np.zeros(len(t)),
+                    flown_t=np.array([0.0, 10.0]), flown_x=flown, n_after=len(t) - 1,
+                    flown_err=np.zeros(len(t) - 1))
+
+
+def run(onset, latency_s, horizon_s=0.6):
+    return lb.bound(onset, TRQ, latency_s, horizon_s, math.radians(5.0))
+
+
+def test_no_fault_the_hover_trim_holds():
+    r = run(hover_onset([1.0, 1.0, 1.0, 1.0]), 0.0)
+    assert r["status"] == "optimal"
+    assert r["rmse_lower_bound_m"] < 1e-3, r
+
+
+@pytest.fixture(scope="module")
+def half_motor():
+    onset = hover_onset([0.5, 1.0, 1.0, 1.0])
+    return {L: run(onset, L) for L in (0.0, 0.06)}
+
+
+def test_a_fault_seen_at_once_costs_little(half_motor):
+    r = half_motor[0.0]
+    assert r["status"] == "optimal"
+    assert r["rmse_lower_bound_m"] < 5e-3, r
+    # the yaw constraint holds: the plan keeps its heading
+    X = r["states"]
+    assert np.all(np.abs(X[8]) <= math.radians(5.0) + 1e-6)
+
+
+def test_latency_costs_position(half_motor):
+    now, late = half_motor[0.0], half_motor[0.06]
+    assert late["status"] == "optimal"
+    # frozen for 60 ms, the weak motor tips the vehicle before any answer
+    assert late["max_tilt_deg"] > 3.0
+    assert late["rmse_lower_bound_m"] > 2.0 * now["rmse_lower_bound_m"]
+    assert late["max_err_m"] > now["max_err_m"]
+
+
+def test_frozen_outputs_follow_the_plants_lag(half_motor):
+    """During the latency the faulted motor's output decays towards factor x command with the
+    motor's time constant (rate limited), as the plant's does."""
+    vm = load_vehicle_model(TRQ)
+    onset = hover_onset([0.5, 1.0, 1.0, 1.0])
+    r = lb.bound(onset, TRQ, 0.5, 0.52, math.radians(5.0))     # frozen for 50 steps
+    y1 = r["frozen"][:, 16]
+    target = 0.5 * onset.cmd0[4]
+    tau = vm.motor_time_constant_s
+    expect = target + (onset.y0[4] - target) * np.exp(-np.arange(len(y1)) * 0.01 / tau)
+    # the plant's exact lag at every sample (its rate limit, 1500 %/s, is not reached:
+    # (77 - 38) / 0.03 = 1300 %/s)
+    assert np.max(np.abs(y1 - expect)) < 1e-6
+    assert abs(y1[-1] - target) < 0.01
+
+
+def test_bad_latency_is_a_usage_error(tmp_path):
+    r = subprocess.run([sys.executable, str(ROOT / "tools" / "latency_bound.py"), str(tmp_path),
+                        "--latency-ms", "10,abc"], capture_output=True, text=True)
+    assert r.returncode == 2 and "--latency-ms" in r.stderr
+    r = subprocess.run([sys.executable, str(ROOT / "tools" / "latency_bound.py"), str(tmp_path),
+                        "--latency-ms", "5000", "--horizon-s", "2"], capture_output=True,
+                       text=True)
+    assert r.returncode == 2 and "[0, 2000) ms" in r.stderr
+
+
+def test_a_flight_without_fault_is_refused(tmp_path):
+    r = subprocess.run([sys.executable, str(ROOT / "tools" / "latency_bound.py"), str(tmp_path)],
+                       capture_output=True, text=True)
+    assert r.returncode == 2 and "flight.csv" in r.stderr
+
+
+def test_frozen_flight_matches_the_plant():
+    """The optimiser's model (10 ms RK4, outputs linear within a step) flown with the frozen
+    commands against the plant's own 1 ms update (lags, rate limits, RK4, drag on the airspeed),
+    with the fault and an 8 m/s wind, for 0.15 s: the weak motor tips the vehicle."""
+    from sil_vehicle.config import load_vehicle
+    from sil_vehicle.dynamics.actuators import first_order_step, lag_factor
+    from sil_vehicle.dynamics.rigid_body import rk4_step
+    from sil_vehicle.dynamics.rotors import body_wrench
+    from sil_vehicle.frames import euler_to_quat, quat_to_euler
+
+    vp = load_vehicle(TRQ)
+    onset = hover_onset([0.5, 1.0, 1.0, 1.0])
+    onset = lb.Onset(**{**onset.__dict__, "wind": np.array([-8.0, 0.0, 0.0])})
+    r = lb.bound(onset, TRQ, 0.15, 0.17, math.radians(5.0))
+    frozen = r["frozen"]                       # 16 samples, 10 ms apart
+    x = (*onset.x0[0:6], *euler_to_quat(*onset.x0[6:9]), *onset.x0[9:12])
+    y = list(onset.y0)
+    target = list(onset.cmd0[0:4]) + [c * f for c, f in zip(onset.cmd0[4:], onset.factors)]
+    fm, fs = lag_factor(vp.motor_time_constant_s, 1e-3), lag_factor(vp.servo_time_constant_s, 1e-3)
+    for _ in range(150):
+        y = ([first_order_step(a, t, fs, vp.servo_rate_limit_rad_s * 1e-3, vp.tilt_min_rad,
+                               vp.tilt_max_rad) for a, t in zip(y[0:4], target[0:4])]
+             + [first_order_step(z, t, fm, vp.motor_rate_limit_pct_s * 1e-3, 0.0, 100.0)
+                for z, t in zip(y[4:8], target[4:8])])
+        x = rk4_step(x, 1e-3, body_wrench(y[4:8], y[0:4], vp), (-8.0, 0.0, 0.0), vp.mass_kg,
+                     vp.inertia_kg_m2, vp.gravity_m_s2, vp.drag_N_s2_m2)
+    euler = np.array(quat_to_euler(*x[6:10]))
+    end = frozen[-1]
+    assert np.degrees(np.abs(euler[0:2])).max() > 10.0          # it did tip
+    np.testing.assert_allclose(end[0:3], x[0:3], atol=5e-3)     # m
+    np.testing.assert_allclose(end[3:6], x[3:6], atol=2e-2)     # m/s
+    np.testing.assert_allclose(end[6:9], euler, atol=math.radians(0.5))
+    np.testing.assert_allclose(end[12:20], y, atol=1e-6)

@@ -1,0 +1,303 @@
+#!/usr/bin/env python3
+"""How well could ANY controller have flown a motor fault, given how late it can react?
+
+    python tools/latency_bound.py out/paper_fault50/trq_nmpc_eso --latency-ms 0,10,20,40,50
+
+A lower bound on the position error after a fault, from a flight's logs (flight.csv and
+controller.csv of a scenario run or of tools/inprocess.py): the best flight an optimiser finds
+for the plant from the vehicle's true state at the fault's onset, knowing the fault exactly and at
+once, whose commands are frozen at the ones being flown for the first `latency` seconds (the time
+a controller needs to see the fault and have its answer reach the actuators: over a link, its round
+trip plus one control period) and free afterwards. Everything is in its favour:
+
+- the plant's model without noise, with the fault's exact size and onset, the wind exactly;
+- its actuators are the plant's first-order lags and rate limits: each optimiser step (10 ms)
+  reaches any output that a target in the throttle or tilt range reaches through the exact lag,
+  at most rate x step away, with the fault's factor on the faulted motor's range; during the
+  latency the outputs follow the plant's own per-tick update; the thrust curve is not clamped at
+  zero (a little more than the plant can do);
+- a new target every step and no lost message; yaw within `--max-yaw-err-deg` of the reference
+  (the task) and roll and pitch within 80 deg (off the Euler singularity), nothing else;
+- the error counts only inside the window (`--horizon-s` from the onset); the flight's other
+  after-fault samples count as zero.
+
+So the RMSE it prints, over as many 10 ms samples as the flight had after its fault, bounds what
+a controller of any kind (not only an NMPC with an observer) could have achieved on that flight
+with that reaction time, up to the optimiser's reach: IPOPT, started from the flown flight, finds
+a local optimum, at or above the global one. Read the other way, it is a flight the plant can fly
+(with the fault known) in the window. Against it the tool prints the flown flight's own RMSE, and
+its RMSE counting only the window.
+
+Pure function of the logs: no clock, no randomness.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+for _p in (str(ROOT), str(ROOT / "tools")):
+    if _p not in sys.path:
+        sys.path.insert(0, _p)
+
+import casadi as ca  # noqa: E402
+
+import metrics as metrics_mod  # noqa: E402
+from sil_vehicle.config import load_vehicle  # noqa: E402
+from sil_vehicle.dynamics.actuators import first_order_step, lag_factor  # noqa: E402
+from trq_offboard.config import load_vehicle_model  # noqa: E402
+from trq_offboard.model.dynamics import PredictionModel, euler_rate_matrix  # noqa: E402
+
+SAMPLE_S = 0.01      # s, the controller's sample period (the metric's samples)
+
+
+class LogError(Exception):
+    """A flight's logs that cannot give a bound (missing, or no fault in them)."""
+
+
+@dataclass(frozen=True)
+class Onset:
+    """The flight at the fault's onset and what the bound needs from its logs."""
+    t0_us: int
+    x0: np.ndarray             # 12: position, velocity (NED), Euler ZYX, body rates
+    y0: np.ndarray             # 8: tilt outputs (rad), throttle outputs (% as produced)
+    cmd0: np.ndarray           # 8: the command being flown (tilts, throttles)
+    factors: np.ndarray        # 4: motor factors after the onset
+    wind: np.ndarray           # 3: NED, m/s
+    ref_t: np.ndarray          # s from the onset, controller samples
+    ref_pos: np.ndarray        # (n, 3)
+    ref_yaw: np.ndarray        # (n,) rad, unwrapped
+    flown_t: np.ndarray        # s from the onset, truth rows (for the optimiser's first guess)
+    flown_x: np.ndarray        # (m, 20): the flown state and actuator outputs at those rows
+    n_after: int               # controller samples after the onset (the metric's count)
+    flown_err: np.ndarray      # position error of the flown samples after the onset (n_after)
+
+
+def read_onset(log_dir: Path) -> Onset:
+    _, truth = metrics_mod.read_csv(log_dir / "flight.csv")
+    _, steps = metrics_mod.read_csv(log_dir / "controller.csv")
+    fac = np.column_stack([truth[f"motor{i}_factor"] for i in range(1, 5)])
+    changed = np.flatnonzero(np.any(fac < 1.0 - 1e-12, axis=1))
+    if not len(changed):
+        raise LogError(f"{log_dir}/flight.csv: no motor fault in this flight (every "
+                       "motor*_factor is 1)")
+    i0 = int(changed[0])
+    t_us = truth["t_us"].astype(np.int64)
+    # the onset: the row before the first faulted one (a row holds the state after its tick;
+    # the fault acts from the next tick on, so the state of that row is the one at the onset)
+    j = max(i0 - 1, 0)
+    t0 = int(t_us[j])
+    x0 = np.array([truth[c][j] for c in ("pos_n_m", "pos_e_m", "pos_d_m", "vel_n_m_s",
+                                         "vel_e_m_s", "vel_d_m_s", "roll_rad", "pitch_rad",
+                                         "yaw_rad", "rate_p_rad_s", "rate_q_rad_s",
+                                         "rate_r_rad_s")])
+    y0 = np.array([truth[f"out_tilt{i}_rad"][j] for i in range(1, 5)]
+                  + [truth[f"out_throttle{i}_pct"][j] for i in range(1, 5)])
+    cmd0 = np.array([truth[f"cmd_tilt{i}_rad"][j] for i in range(1, 5)]
+                    + [truth[f"cmd_throttle{i}_pct"][j] for i in range(1, 5)])
+    wind = np.array([truth[f"wind_{a}_m_s"][j] for a in "ned"])
+    m = metrics_mod.compute("flown", "", truth, steps, t0)
+    stamps = steps["stamp_us"].astype(np.int64)
+    phase = steps["phase"]
+    sel = (stamps >= t0) & np.array([p != "landed" for p in phase], dtype=bool)
+    index = {int(t): i for i, t in enumerate(t_us)}
+    sel &= np.array([int(s) in index for s in stamps], dtype=bool)
+    rows = np.array([index[int(s)] for s in stamps[sel]], dtype=np.int64)
+    ref = np.column_stack([steps[f"ref_pos_{a}_m"][sel] for a in "ned"])
+    pos = np.column_stack([truth[f"pos_{a}_m"][rows] for a in "ned"])
+    err = np.linalg.norm(pos - ref, axis=1)
+    if m.rmse_pos_after_fault_m is None or not len(err):
+        raise LogError(f"{log_dir}/controller.csv: no controller sample after the fault")
+    ref_yaw = np.unwrap(steps["ref_yaw_rad"][sel])
+    cols = ("pos_n_m", "pos_e_m", "pos_d_m", "vel_n_m_s", "vel_e_m_s", "vel_d_m_s", "roll_rad",
+            "pitch_rad", "yaw_rad", "rate_p_rad_s", "rate_q_rad_s", "rate_r_rad_s")
+    flown = np.column_stack([truth[c][j:] for c in cols]
+                            + [truth[f"out_tilt{i}_rad"][j:] for i in range(1, 5)]
+                            + [truth[f"out_throttle{i}_pct"][j:] for i in range(1, 5)])
+    flown[:, 8] = np.unwrap(flown[:, 8])
+    return Onset(t0, x0, y0, cmd0, fac[i0], wind, (stamps[sel] - t0) * 1e-6, ref, ref_yaw,
+                 (t_us[j:] - t0) * 1e-6, flown, len(err), err)
+
+
+def _dynamics(model: PredictionModel, h: float):
+    """One RK4 step of h: F(x20, v8, wind) -> x20. The prediction model's rigid body and rotors
+    with the drag on the air-relative velocity (as the plant's), and the actuator outputs y as
+    states whose rates v are the decision."""
+    x = ca.SX.sym("x", 20)
+    v = ca.SX.sym("v", 8)
+    wind = ca.SX.sym("wind", 3)
+    rb, y = x[0:12], x[12:20]
+    # the model's accelerations; only its drag term reads the velocity: give it the airspeed
+    acc = model._accel(ca.vertcat(rb[0:3], rb[3:6] - wind, rb[6:12]), model.wrench(y))
+    xdot = ca.vertcat(rb[3:6], acc[0:3], euler_rate_matrix(rb[6], rb[7]) @ rb[9:12], acc[3:6],
+                      v)
+    f = ca.Function("f", [x, v, wind], [xdot])
+    k1 = f(x, v, wind)
+    k2 = f(x + h / 2 * k1, v, wind)
+    k3 = f(x + h / 2 * k2, v, wind)
+    k4 = f(x + h * k3, v, wind)
+    return ca.Function("F", [x, v, wind], [x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)])
+
+
+def _plant_outputs(y: np.ndarray, target: np.ndarray, tau: np.ndarray, rate: np.ndarray,
+                   lo: np.ndarray, hi: np.ndarray, dt: float, tick_s: float) -> np.ndarray:
+    """The plant's actuator outputs after dt towards a held target: its own per-tick update
+    (sil_vehicle.dynamics.actuators: exact lag, rate limit per tick, limits)."""
+    y = [float(v) for v in y]
+    n = int(round(dt / tick_s))
+    for i in range(len(y)):
+        f = lag_factor(float(tau[i]), tick_s)
+        for _ in range(n):
+            y[i] = first_order_step(y[i], float(target[i]), f, float(rate[i]) * tick_s,
+                                    float(lo[i]), float(hi[i]))
+    return np.array(y)
+
+
+def bound(onset: Onset, vehicle_file: Path, latency_s: float, horizon_s: float,
+          max_yaw_err_rad: float, max_tilt_rad: float = math.radians(80.0),
+          step_s: float = SAMPLE_S, tick_s: float = 0.001,
+          effort_weight: float = 1e-9) -> dict:
+    vm = load_vehicle_model(vehicle_file)
+    model = PredictionModel(vm)
+    dt = step_s
+    F = _dynamics(model, dt)
+    n = int(round(horizon_s / dt))
+    n_lat = int(math.ceil(latency_s / dt - 1e-9))
+    every = int(round(SAMPLE_S / dt))          # optimiser steps per controller sample
+    tau = np.array([vm.servo_time_constant_s] * 4 + [vm.motor_time_constant_s] * 4)
+    rate = np.array([vm.servo_rate_limit_rad_s] * 4 + [vm.motor_rate_limit_pct_s] * 4)
+    tau_step = dt / -np.expm1(-dt / tau)        # (target - y) = tau_step * (mean rate)
+    lo = np.array([vm.tilt_min_rad] * 4 + list(vm.idle_pct * onset.factors))
+    hi = np.array([vm.tilt_max_rad] * 4 + list(100.0 * onset.factors))
+    target0 = np.concatenate([np.clip(onset.cmd0[:4], vm.tilt_min_rad, vm.tilt_max_rad),
+                              np.clip(onset.cmd0[4:], vm.idle_pct, 100.0) * onset.factors])
+    ref = np.column_stack([np.interp(np.arange(n + 1) * dt, onset.ref_t, onset.ref_pos[:, a])
+                           for a in range(3)])
+    yaw_ref = np.interp(np.arange(n + 1) * dt, onset.ref_t, onset.ref_yaw)
+    x_init = np.concatenate([onset.x0, onset.y0])
+    x_init[8] = onset.flown_x[0, 8]
+
+    # the frozen part: the commands being flown, through the plant's own actuator update; the
+    # optimiser's outputs move linearly within a step, at the rate that ends where the plant's do
+    y_lo = np.array([vm.tilt_min_rad] * 4 + [0.0] * 4)
+    y_hi = np.array([vm.tilt_max_rad] * 4 + [100.0] * 4)
+    xs = [x_init]
+    for _ in range(n_lat):
+        xk = xs[-1]
+        y_end = _plant_outputs(xk[12:20], target0, tau, rate, y_lo, y_hi, dt, tick_s)
+        xs.append(np.asarray(F(xk, (y_end - xk[12:20]) / dt, onset.wind)).ravel())
+    x_free0 = xs[-1]
+    m = n - n_lat
+    opti = ca.Opti()
+    X = opti.variable(20, m + 1)
+    V = opti.variable(8, m)
+    opti.subject_to(X[:, 0] == x_free0)
+    cost = 0
+    for k in range(m):
+        opti.subject_to(X[:, k + 1] == F(X[:, k], V[:, k], onset.wind))
+        yk = X[12:20, k]
+        opti.subject_to(opti.bounded(-rate, V[:, k], rate))
+        # the outputs a step can reach: towards any target in [lo, hi] through the exact lag
+        # (y + (target - y)(1 - exp(-dt/tau))), at most rate * dt
+        opti.subject_to(opti.bounded(lo, yk + tau_step * V[:, k], hi))
+        e = X[0:3, k + 1] - ref[n_lat + k + 1]
+        # keep yaw (the task), and roll and pitch off the Euler singularity (80 deg: no crash)
+        opti.subject_to(opti.bounded(-max_yaw_err_rad, X[8, k + 1] - yaw_ref[n_lat + k + 1],
+                                     max_yaw_err_rad))
+        opti.subject_to(opti.bounded(-max_tilt_rad, X[6:8, k + 1], max_tilt_rad))
+        cost += ca.sumsqr(e) + effort_weight * ca.sumsqr(V[:, k] / rate)
+    opti.minimize(cost)
+    opti.solver("ipopt", {"print_time": False, "expand": True},
+                {"print_level": 0, "sb": "yes", "max_iter": 3000, "tol": 1e-8,
+                 "acceptable_tol": 1e-6})
+    # first guess: the flown flight (state and actuator outputs), its output rates
+    t_free = (n_lat + np.arange(m + 1)) * dt
+    guess = np.column_stack([np.interp(t_free, onset.flown_t, onset.flown_x[:, c])
+                             for c in range(20)]).T
+    guess[:, 0] = x_free0
+    opti.set_initial(X, guess)
+    opti.set_initial(V, np.clip(np.diff(guess[12:20], axis=1) / dt, -rate[:, None],
+                                rate[:, None]))
+    try:
+        sol = opti.solve()
+        status = "optimal"
+    except RuntimeError:
+        sol = opti.debug
+        status = f"not converged ({opti.stats().get('return_status')})"
+    Xs = np.asarray(sol.value(X))
+    frozen = np.array(xs)
+    traj = np.concatenate([frozen[:, 0:3], Xs[0:3, 1:].T], axis=0)   # n + 1 samples
+    err = np.linalg.norm(traj - ref, axis=1)
+    window = err[every::every]              # the samples after the onset inside the window
+    down = traj[:, 2] - ref[:, 2]
+    rmse = math.sqrt(float(np.sum(window ** 2)) / onset.n_after)
+    ang = np.concatenate([frozen[:, 6:8], Xs[6:8, 1:].T], axis=0)
+    return {"latency_ms": latency_s * 1e3, "status": status, "rmse_lower_bound_m": rmse,
+            "max_err_m": float(window.max()), "max_sink_m": float(max(0.0, down.max())),
+            "max_tilt_deg": float(np.degrees(np.abs(ang).max())),
+            "iterations": int(opti.stats().get("iter_count", -1)),
+            "states": Xs, "frozen": frozen}
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("log_dir", type=Path, help="a flight's directory (flight.csv, controller.csv)")
+    ap.add_argument("--latency-ms", default="0,10,20,30,40,50",
+                    help="comma-separated reaction latencies (default %(default)s)")
+    ap.add_argument("--max-yaw-err-deg", type=float, default=5.0,
+                    help="the yaw error the optimal flight may not exceed (default %(default)s; "
+                         "without it a spinning vehicle is the best answer to a motor loss)")
+    ap.add_argument("--step-ms", type=float, default=10.0,
+                    help="the optimiser's RK4 step, a divisor of 10 ms (default %(default)s)")
+    ap.add_argument("--horizon-s", type=float, default=4.0,
+                    help="window after the onset the optimiser flies (default %(default)s)")
+    args = ap.parse_args(argv)
+    try:
+        lat = [float(s) * 1e-3 for s in args.latency_ms.split(",") if s.strip()]
+    except ValueError:
+        print(f"latency_bound: --latency-ms {args.latency_ms!r}: expected numbers in ms, "
+              "comma-separated", file=sys.stderr)
+        return 2
+    if any(v < 0 or v >= args.horizon_s for v in lat) or not lat:
+        print(f"latency_bound: --latency-ms {args.latency_ms!r}: each must be in "
+              f"[0, {args.horizon_s * 1e3:.0f}) ms (the window)", file=sys.stderr)
+        return 2
+    try:
+        for name in ("flight.csv", "controller.csv"):
+            if not (args.log_dir / name).is_file():
+                raise LogError(f"{args.log_dir / name}: not found (a flight's directory from "
+                               "tools/run_scenario.py or tools/inprocess.py is expected)")
+        meta, _ = metrics_mod.read_csv(args.log_dir / "flight.csv")
+        vehicle_file = Path(load_vehicle(meta["vehicle_file"]).file)
+        onset = read_onset(args.log_dir)
+    except LogError as exc:
+        print(f"latency_bound: {exc}", file=sys.stderr)
+        return 2
+    win = onset.ref_t <= args.horizon_s + 1e-9
+    flown = math.sqrt(float(np.mean(onset.flown_err ** 2)))
+    flown_win = math.sqrt(float(np.sum(onset.flown_err[win] ** 2)) / onset.n_after)
+    print(f"flight {args.log_dir}: fault at {onset.t0_us * 1e-6:.3f} s, motor factors "
+          f"{onset.factors.tolist()}, wind {onset.wind.round(2).tolist()} m/s, "
+          f"{onset.n_after} samples after the onset")
+    print(f"flown: RMSE after the fault {flown:.4f} m; counting only the first "
+          f"{args.horizon_s:g} s: {flown_win:.4f} m")
+    print("| latency ms | lower bound on the RMSE after the fault m | max error m | max sink m "
+          "| max roll/pitch deg | IPOPT |")
+    print("|---|---|---|---|---|---|")
+    for L in lat:
+        r = bound(onset, vehicle_file, L, args.horizon_s, math.radians(args.max_yaw_err_deg),
+                  step_s=args.step_ms * 1e-3, tick_s=1.0 / float(meta["physics_rate_hz"]))
+        print(f"| {r['latency_ms']:.0f} | {r['rmse_lower_bound_m']:.4f} | {r['max_err_m']:.3f} | "
+              f"{r['max_sink_m']:.3f} | {r['max_tilt_deg']:.1f} | {r['status']}, "
+              f"{r['iterations']} it |", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
