@@ -134,7 +134,8 @@ def _dynamics(model: PredictionModel, h: float):
     wind = ca.SX.sym("wind", 3)
     rb, y = x[0:12], x[12:20]
     # the model's accelerations; only its drag term reads the velocity: give it the airspeed
-    acc = model._accel(ca.vertcat(rb[0:3], rb[3:6] - wind, rb[6:12]), model.wrench(y))
+    u = y if model.tilting else y[4:8]         # a locked airframe's model takes throttles only
+    acc = model._accel(ca.vertcat(rb[0:3], rb[3:6] - wind, rb[6:12]), model.wrench(u))
     xdot = ca.vertcat(rb[3:6], acc[0:3], euler_rate_matrix(rb[6], rb[7]) @ rb[9:12], acc[3:6],
                       v)
     f = ca.Function("f", [x, v, wind], [xdot])
@@ -173,9 +174,10 @@ def bound(onset: Onset, vehicle_file: Path, latency_s: float, horizon_s: float,
     tau = np.array([vm.servo_time_constant_s] * 4 + [vm.motor_time_constant_s] * 4)
     rate = np.array([vm.servo_rate_limit_rad_s] * 4 + [vm.motor_rate_limit_pct_s] * 4)
     tau_step = dt / -np.expm1(-dt / tau)        # (target - y) = tau_step * (mean rate)
-    lo = np.array([vm.tilt_min_rad] * 4 + list(vm.idle_pct * onset.factors))
-    hi = np.array([vm.tilt_max_rad] * 4 + list(100.0 * onset.factors))
-    target0 = np.concatenate([np.clip(onset.cmd0[:4], vm.tilt_min_rad, vm.tilt_max_rad),
+    t_lo, t_hi = (0.0, 0.0) if vm.tilt_locked else (vm.tilt_min_rad, vm.tilt_max_rad)
+    lo = np.array([t_lo] * 4 + list(vm.idle_pct * onset.factors))
+    hi = np.array([t_hi] * 4 + list(100.0 * onset.factors))
+    target0 = np.concatenate([np.clip(onset.cmd0[:4], t_lo, t_hi),
                               np.clip(onset.cmd0[4:], vm.idle_pct, 100.0) * onset.factors])
     ref = np.column_stack([np.interp(np.arange(n + 1) * dt, onset.ref_t, onset.ref_pos[:, a])
                            for a in range(3)])
@@ -185,8 +187,8 @@ def bound(onset: Onset, vehicle_file: Path, latency_s: float, horizon_s: float,
 
     # the frozen part: the commands being flown, through the plant's own actuator update; the
     # optimiser's outputs move linearly within a step, at the rate that ends where the plant's do
-    y_lo = np.array([vm.tilt_min_rad] * 4 + [0.0] * 4)
-    y_hi = np.array([vm.tilt_max_rad] * 4 + [100.0] * 4)
+    y_lo = np.array([t_lo] * 4 + [0.0] * 4)
+    y_hi = np.array([t_hi] * 4 + [100.0] * 4)
     xs = [x_init]
     for _ in range(n_lat):
         xk = xs[-1]

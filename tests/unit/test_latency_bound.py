@@ -20,9 +20,14 @@ from trq_offboard.config import load_vehicle_model  # noqa: E402
 TRQ = PARAMS / "vehicle" / "trq.yaml"
 
 
-def hover_onset(factors) -> lb.Onset:
-    vm = load_vehicle_model(TRQ)
+QUAD = PARAMS / "vehicle" / "quad.yaml"
+
+
+def hover_onset(factors, vehicle=TRQ) -> lb.Onset:
+    vm = load_vehicle_model(vehicle)
     trim = Allocator(vm).command_vector(Allocator(vm).hover())
+    if vm.tilt_locked:                      # the onset carries tilts (all zero) and throttles
+        trim = np.concatenate([np.zeros(4), trim])
     x0 = np.zeros(12)
     x0[2] = -2.0
     t = np.arange(0, 201) * 0.01
@@ -66,6 +71,16 @@ def test_latency_costs_position(half_motor):
     assert late["max_tilt_deg"] > 3.0
     assert late["rmse_lower_bound_m"] > 2.0 * now["rmse_lower_bound_m"]
     assert late["max_err_m"] > now["max_err_m"]
+
+
+def test_the_fixed_rotor_quad_cannot_hold_yaw_on_half_a_motor(half_motor):
+    """As tools/envelope.py finds (no trim): with yaw held, the quad's best answer tips over."""
+    onset = hover_onset([0.5, 1.0, 1.0, 1.0], QUAD)
+    r = lb.bound(onset, QUAD, 0.0, 0.6, math.radians(5.0))
+    assert np.allclose(r["states"][12:16], 0.0)                     # its tilts stay at zero
+    assert r["max_tilt_deg"] > 30.0
+    assert r["rmse_lower_bound_m"] > 100.0 * half_motor[0.0]["rmse_lower_bound_m"]
+    assert r["rmse_lower_bound_m"] > 0.01
 
 
 def test_frozen_outputs_follow_the_plants_lag(half_motor):
