@@ -93,36 +93,25 @@ def read_onset(log_dir: Path) -> Onset:
     # the fault acts from the next tick on, so the state of that row is the one at the onset)
     j = max(i0 - 1, 0)
     t0 = int(t_us[j])
-    x0 = np.array([truth[c][j] for c in ("pos_n_m", "pos_e_m", "pos_d_m", "vel_n_m_s",
-                                         "vel_e_m_s", "vel_d_m_s", "roll_rad", "pitch_rad",
-                                         "yaw_rad", "rate_p_rad_s", "rate_q_rad_s",
-                                         "rate_r_rad_s")])
-    y0 = np.array([truth[f"out_tilt{i}_rad"][j] for i in range(1, 5)]
-                  + [truth[f"out_throttle{i}_pct"][j] for i in range(1, 5)])
-    cmd0 = np.array([truth[f"cmd_tilt{i}_rad"][j] for i in range(1, 5)]
-                    + [truth[f"cmd_throttle{i}_pct"][j] for i in range(1, 5)])
-    wind = np.array([truth[f"wind_{a}_m_s"][j] for a in "ned"])
-    m = metrics_mod.compute("flown", "", truth, steps, t0)
-    stamps = steps["stamp_us"].astype(np.int64)
-    phase = steps["phase"]
-    sel = (stamps >= t0) & np.array([p != "landed" for p in phase], dtype=bool)
-    index = {int(t): i for i, t in enumerate(t_us)}
-    sel &= np.array([int(s) in index for s in stamps], dtype=bool)
-    rows = np.array([index[int(s)] for s in stamps[sel]], dtype=np.int64)
-    ref = np.column_stack([steps[f"ref_pos_{a}_m"][sel] for a in "ned"])
-    pos = np.column_stack([truth[f"pos_{a}_m"][rows] for a in "ned"])
-    err = np.linalg.norm(pos - ref, axis=1)
-    if m.rmse_pos_after_fault_m is None or not len(err):
+    sm = metrics_mod.samples(truth, steps)          # the metric's samples
+    sel = sm.t_us >= t0
+    if not sel.any():
         raise LogError(f"{log_dir}/controller.csv: no controller sample after the fault")
-    ref_yaw = np.unwrap(steps["ref_yaw_rad"][sel])
+    err = np.linalg.norm(sm.pos[sel] - sm.ref[sel], axis=1)
     cols = ("pos_n_m", "pos_e_m", "pos_d_m", "vel_n_m_s", "vel_e_m_s", "vel_d_m_s", "roll_rad",
             "pitch_rad", "yaw_rad", "rate_p_rad_s", "rate_q_rad_s", "rate_r_rad_s")
     flown = np.column_stack([truth[c][j:] for c in cols]
                             + [truth[f"out_tilt{i}_rad"][j:] for i in range(1, 5)]
                             + [truth[f"out_throttle{i}_pct"][j:] for i in range(1, 5)])
     flown[:, 8] = np.unwrap(flown[:, 8])
-    return Onset(t0, x0, y0, cmd0, fac[i0], wind, (stamps[sel] - t0) * 1e-6, ref, ref_yaw,
-                 (t_us[j:] - t0) * 1e-6, flown, len(err), err)
+    cmd0 = np.array([truth[f"cmd_tilt{i}_rad"][j] for i in range(1, 5)]
+                    + [truth[f"cmd_throttle{i}_pct"][j] for i in range(1, 5)])
+    wind = np.array([truth[f"wind_{a}_m_s"][j] for a in "ned"])
+    ref_yaw = np.unwrap(steps["ref_yaw_rad"][sm.keep][sel])
+    ref_yaw += 2.0 * math.pi * round((flown[0, 8] - ref_yaw[0]) / (2.0 * math.pi))   # nearest turn
+    return Onset(t0, flown[0, 0:12].copy(), flown[0, 12:20].copy(), cmd0, fac[i0], wind,
+                 (sm.t_us[sel] - t0) * 1e-6, sm.ref[sel], ref_yaw, (t_us[j:] - t0) * 1e-6,
+                 flown, len(err), err)
 
 
 def _dynamics(model: PredictionModel, h: float):
@@ -183,7 +172,6 @@ def bound(onset: Onset, vehicle_file: Path, latency_s: float, horizon_s: float,
                            for a in range(3)])
     yaw_ref = np.interp(np.arange(n + 1) * dt, onset.ref_t, onset.ref_yaw)
     x_init = np.concatenate([onset.x0, onset.y0])
-    x_init[8] = onset.flown_x[0, 8]
 
     # the frozen part: the commands being flown, through the plant's own actuator update; the
     # optimiser's outputs move linearly within a step, at the rate that ends where the plant's do

@@ -79,10 +79,20 @@ def wrap_deg(a: np.ndarray) -> np.ndarray:
     return (np.asarray(a) + 180.0) % 360.0 - 180.0
 
 
-def compute(controller: str, vehicle: str, truth: dict[str, np.ndarray],
-            steps: dict[str, np.ndarray], fault_onset_us: int | None,
-            recovery_threshold_m: float = 0.1) -> RunMetrics:
-    """Metrics of one run; `truth` and `steps` as read by read_csv."""
+@dataclass(frozen=True)
+class Samples:
+    """The samples the metrics are taken over: each controller step whose stamp is a truth row,
+    before a crash and before the landed phase."""
+    t_us: np.ndarray            # the steps' stamps
+    rows: np.ndarray            # their truth rows
+    keep: np.ndarray            # which steps (bool, over all of `steps`)
+    pos: np.ndarray             # (n, 3) the vehicle's true position, NED
+    ref: np.ndarray             # (n, 3) the reference (down clamped at the ground)
+    crash_us: int | None
+
+
+def samples(truth: dict[str, np.ndarray], steps: dict[str, np.ndarray]) -> Samples:
+    """The vehicle's truth against the reference at every kept control step."""
     t_truth = truth["t_us"].astype(np.int64)
     crashed_rows = np.flatnonzero(truth["crashed"] > 0.5)
     crash_us = int(t_truth[crashed_rows[0]]) if len(crashed_rows) else None
@@ -100,10 +110,19 @@ def compute(controller: str, vehicle: str, truth: dict[str, np.ndarray],
     # the landing reference aims a little below the ground so that the vehicle settles: the
     # ground (home, down = 0) is where it can get to
     ref[:, 2] = np.minimum(ref[:, 2], GROUND_DOWN_M)
-    err = np.linalg.norm(pos - ref, axis=1)
-    down_err = pos[:, 2] - ref[:, 2]                  # > 0: below the reference
-    yaw_err = wrap_deg(np.degrees(truth["yaw_rad"][rows] - steps["ref_yaw_rad"][keep]))
-    t_us = stamps[keep]
+    return Samples(stamps[keep], rows, keep, pos, ref, crash_us)
+
+
+def compute(controller: str, vehicle: str, truth: dict[str, np.ndarray],
+            steps: dict[str, np.ndarray], fault_onset_us: int | None,
+            recovery_threshold_m: float = 0.1) -> RunMetrics:
+    """Metrics of one run; `truth` and `steps` as read by read_csv."""
+    sm = samples(truth, steps)
+    t_us, crash_us = sm.t_us, sm.crash_us
+    stamps = steps["stamp_us"].astype(np.int64)
+    err = np.linalg.norm(sm.pos - sm.ref, axis=1)
+    down_err = sm.pos[:, 2] - sm.ref[:, 2]            # > 0: below the reference
+    yaw_err = wrap_deg(np.degrees(truth["yaw_rad"][sm.rows] - steps["ref_yaw_rad"][sm.keep]))
 
     def rms(x: np.ndarray) -> float:
         return float(np.sqrt(np.mean(np.square(x)))) if len(x) else math.nan
