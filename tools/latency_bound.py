@@ -254,6 +254,15 @@ def main(argv: list[str] | None = None) -> int:
         print(f"latency_bound: --latency-ms {args.latency_ms!r}: expected numbers in ms, "
               "comma-separated", file=sys.stderr)
         return 2
+    per_sample = SAMPLE_S * 1e3 / args.step_ms if args.step_ms > 0 else 0.0
+    if per_sample < 1.0 or abs(per_sample - round(per_sample)) > 1e-9:
+        print(f"latency_bound: --step-ms {args.step_ms:g}: expected a divisor of "
+              f"{SAMPLE_S * 1e3:g} ms (10, 5, 2, ...)", file=sys.stderr)
+        return 2
+    if not 0.0 < args.horizon_s <= 60.0:
+        print(f"latency_bound: --horizon-s {args.horizon_s:g}: expected a window in (0, 60] s",
+              file=sys.stderr)
+        return 2
     if any(v < 0 or v >= args.horizon_s for v in lat) or not lat:
         print(f"latency_bound: --latency-ms {args.latency_ms!r}: each must be in "
               f"[0, {args.horizon_s * 1e3:.0f}) ms (the window)", file=sys.stderr)

@@ -107,6 +107,9 @@ def test_bad_latency_is_a_usage_error(tmp_path):
                         "--latency-ms", "5000", "--horizon-s", "2"], capture_output=True,
                        text=True)
     assert r.returncode == 2 and "[0, 2000) ms" in r.stderr
+    r = subprocess.run([sys.executable, str(ROOT / "tools" / "latency_bound.py"), str(tmp_path),
+                        "--step-ms", "3"], capture_output=True, text=True)
+    assert r.returncode == 2 and "--step-ms 3" in r.stderr and "divisor" in r.stderr
 
 
 def test_a_flight_without_fault_is_refused(tmp_path):
