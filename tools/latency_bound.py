@@ -88,6 +88,14 @@ def read_onset(log_dir: Path) -> Onset:
         raise LogError(f"{log_dir}/flight.csv: no motor fault in this flight (every "
                        "motor*_factor is 1)")
     i0 = int(changed[0])
+    if np.any(np.abs(fac[i0:] - fac[i0]) > 1e-9):
+        raise LogError(f"{log_dir}/flight.csv: the motor factors change after the onset at row "
+                       f"{i0} (a time-varying, cleared or second fault): the bound takes one "
+                       "constant motor fault")
+    stuck = [f"servo{i}_stuck" for i in range(1, 5) if np.any(truth[f"servo{i}_stuck"] > 0.5)]
+    if stuck:
+        raise LogError(f"{log_dir}/flight.csv: {', '.join(stuck)} set: the bound models motor "
+                       "faults only")
     t_us = truth["t_us"].astype(np.int64)
     # the onset: the row before the first faulted one (a row holds the state after its tick;
     # the fault acts from the next tick on, so the state of that row is the one at the onset)

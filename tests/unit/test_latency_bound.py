@@ -151,3 +151,55 @@ def test_frozen_flight_matches_the_plant():
     np.testing.assert_allclose(end[3:6], x[3:6], atol=2e-2)     # m/s
     np.testing.assert_allclose(end[6:9], euler, atol=math.radians(0.5))
     np.testing.assert_allclose(end[12:20], y, atol=1e-6)
+
+
+def write_logs(d, factors, stuck_servo=None):
+    """A minimal pair of logs (every column the bound reads): 2 s of hover, 100 Hz."""
+    from sil_vehicle.sitl import LOG_COLUMNS
+    n = len(factors)
+    cols = {c: np.zeros(n) for c in LOG_COLUMNS}
+    cols["t_us"] = np.arange(n) * 10_000 + 10_000
+    cols["pos_d_m"][:] = -2.0
+    for i in range(4):
+        cols[f"motor{i + 1}_factor"] = np.asarray(factors, float)[:, i]
+        cols[f"out_throttle{i + 1}_pct"][:] = cols[f"cmd_throttle{i + 1}_pct"][:] = 77.0
+    if stuck_servo is not None:
+        cols[f"servo{stuck_servo}_stuck"][n // 2:] = 1.0
+    with open(d / "flight.csv", "w", encoding="ascii") as f:
+        f.write(f"# vehicle_file: {TRQ}\n# physics_rate_hz: 1000\n")
+        f.write(",".join(LOG_COLUMNS) + "\n")
+        for k in range(n):
+            f.write(",".join(str(int(cols[c][k])) if c == "t_us" else repr(float(cols[c][k]))
+                             for c in LOG_COLUMNS) + "\n")
+    with open(d / "controller.csv", "w", encoding="ascii") as f:
+        f.write("stamp_us,phase,ref_pos_n_m,ref_pos_e_m,ref_pos_d_m,ref_yaw_rad,solve_ms\n")
+        for k in range(n):
+            f.write(f"{int(cols['t_us'][k])},hold,0.0,0.0,-2.0,0.0,1.0\n")
+
+
+def test_logs_of_a_constant_motor_fault_are_read(tmp_path):
+    fac = [[1.0] * 4] * 100 + [[0.5, 1.0, 1.0, 1.0]] * 100
+    write_logs(tmp_path, fac)
+    onset = lb.read_onset(tmp_path)
+    assert onset.t0_us == 1_000_000 and onset.n_after == 101
+    np.testing.assert_allclose(onset.factors, [0.5, 1.0, 1.0, 1.0])
+    np.testing.assert_allclose(onset.x0[2], -2.0)
+
+
+@pytest.mark.parametrize("case, words", [
+    ("varying", "change after the onset"),
+    ("stuck", "servo3_stuck"),
+    ("none", "no motor fault"),
+])
+def test_logs_the_bound_cannot_take_are_refused(tmp_path, case, words):
+    healthy = [[1.0] * 4] * 100
+    if case == "varying":
+        fac = healthy + [[0.5, 1.0, 1.0, 1.0]] * 50 + [[0.7, 1.0, 1.0, 1.0]] * 50
+    else:
+        fac = healthy + ([[0.5, 1.0, 1.0, 1.0]] * 100 if case == "stuck" else healthy)
+    write_logs(tmp_path, fac, stuck_servo=3 if case == "stuck" else None)
+    with pytest.raises(lb.LogError, match=words):
+        lb.read_onset(tmp_path)
+    r = subprocess.run([sys.executable, str(ROOT / "tools" / "latency_bound.py"), str(tmp_path)],
+                       capture_output=True, text=True)
+    assert r.returncode == 2 and words in r.stderr
