@@ -75,8 +75,12 @@ class Onset:
     ref_yaw: np.ndarray        # (n,) rad, unwrapped
     flown_t: np.ndarray        # s from the onset, truth rows (for the optimiser's first guess)
     flown_x: np.ndarray        # (m, 20): the flown state and actuator outputs at those rows
-    n_after: int               # controller samples after the onset (the metric's count)
-    flown_err: np.ndarray      # position error of the flown samples after the onset (n_after)
+    flown_err: np.ndarray      # position error of the flown samples after the onset
+
+    @property
+    def n_after(self) -> int:
+        """Controller samples after the onset (the metric's count)."""
+        return len(self.flown_err)
 
 
 def read_onset(log_dir: Path) -> Onset:
@@ -119,7 +123,7 @@ def read_onset(log_dir: Path) -> Onset:
     ref_yaw += 2.0 * math.pi * round((flown[0, 8] - ref_yaw[0]) / (2.0 * math.pi))   # nearest turn
     return Onset(t0, flown[0, 0:12].copy(), flown[0, 12:20].copy(), cmd0, fac[i0], wind,
                  (sm.t_us[sel] - t0) * 1e-6, sm.ref[sel], ref_yaw, (t_us[j:] - t0) * 1e-6,
-                 flown, len(err), err)
+                 flown, err)
 
 
 def _dynamics(model: PredictionModel, h: float):

@@ -35,7 +35,7 @@ def hover_onset(factors, vehicle=TRQ) -> lb.Onset:
     return lb.Onset(t0_us=12_000_000, x0=x0, y0=trim.copy(), cmd0=trim.copy(),
                     factors=np.asarray(factors, float), wind=np.zeros(3), ref_t=t,
                     ref_pos=np.tile(x0[0:3], (len(t), 1)), ref_yaw=np.zeros(len(t)),
-                    flown_t=np.array([0.0, 10.0]), flown_x=flown, n_after=len(t) - 1,
+                    flown_t=np.array([0.0, 10.0]), flown_x=flown,
                     flown_err=np.zeros(len(t) - 1))
 
 
