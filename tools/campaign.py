@@ -69,6 +69,7 @@ import json
 import math
 import os
 import socket
+import statistics
 import sys
 import time
 import traceback
@@ -613,7 +614,7 @@ def summarise(campaign: Campaign, rows: list[dict]):
         stats[key] = {"n": len(rs), "ok": ok, "rate": ok / len(rs),
                       "crashed": sum(bool(r["crashed"]) for r in rs),
                       "failed": sum(r["status"] == "failed" for r in rs),
-                      "rmse_median": float(sorted(rm)[len(rm) // 2]) if rm else None,
+                      "rmse_median": float(statistics.median(rm)) if rm else None,
                       "rmse_max": max(rm) if rm else None}
     return winds, sevs, stats
 
@@ -723,7 +724,7 @@ def write_report(campaign: Campaign, rows: list[dict], out: Path, run_info: dict
         lines.append(f"| {c} | {len(rs)} | {sum(r['success'] for r in rs) / len(rs):.0%} | "
                      f"{sum(bool(r['crashed']) for r in rs)} | "
                      f"{sum(r['status'] == 'failed' for r in rs)} | "
-                     f"{_fmt(rm[len(rm) // 2] if rm else None)} |")
+                     f"{_fmt(statistics.median(rm) if rm else None)} |")
     lines.append("")
     head = "| wind | " + " | ".join(s[1] for s in sevs) + " |"
     rule = "|---|" + "---|" * len(sevs)

@@ -387,3 +387,16 @@ def test_link_delay_sweep_sweeps_the_one_way_delay():
     delays = sorted(campaign.flight_inputs(f)["link_delay_ms"] for f in plan.flights)
     assert delays == [0.0, 5.0, 10.0, 15.0, 20.0]
     assert {campaign.flight_inputs(f)["link_loss"] for f in plan.flights} == {0.0}
+
+
+def test_summary_median_of_an_even_count_is_the_mean_of_the_middle_two():
+    """Six flights of one cell: the median RMSE is the mean of the 3rd and 4th, not the 4th."""
+    import campaign
+    rmse = [0.043, 0.062, 0.065, 0.068, 0.040, 0.048]
+    rows = [dict(controller="c", fault_kind="motor", severity=0.5, wind_speed_m_s=8.0,
+                 wind_direction_deg=0.0, wind_gusts=False, success=True, crashed=False,
+                 status="ok", rmse_pos_after_fault_m=v) for v in rmse]
+    _, _, stats = campaign.summarise(None, rows)
+    (cell,) = stats.values()
+    assert cell["rmse_median"] == pytest.approx((0.048 + 0.062) / 2)
+    assert cell["rmse_max"] == 0.068
