@@ -300,7 +300,10 @@ def load_vehicle_model(path: Path | str) -> VehicleModel:
 class EsoChannelGains:
     """Gains of one group of channels (translational or rotational)."""
     omega_o_rad_s: float                  # observer bandwidth
-    delta: float                          # fal linear band (m or rad), nonlinear ESO only
+    delta: float                          # fal linear band (m or rad; m/s or rad/s on rates)
+    # what the channels measure: the paper's third-order observer on the output (position,
+    # angles), or one order lower on its measured rate (velocity, body rates)
+    output: str = "position"
 
 
 @dataclass(frozen=True)
@@ -318,10 +321,12 @@ def _eso(k: _Keys, path: Path) -> EsoConfig:
     kind = k.text("kind", ("nonlinear", "linear"))
     alpha = k.vector("alpha", 3, 0.05, 1.0)
     groups = []
-    for name in ("translational", "rotational"):
+    for name, outputs in (("translational", ("position", "velocity")),
+                          ("rotational", ("angles", "rates"))):
         gk = k.sub(name)
         groups.append(EsoChannelGains(gk.number("omega_o_rad_s", 0.1, 500.0),
-                                      gk.number("delta", 1e-6, 10.0)))
+                                      gk.number("delta", 1e-6, 10.0),
+                                      gk.text("output", outputs, default=outputs[0])))
         gk.close()
     sub = k.integer("substeps", 1, 1000)
     lim = k.sub("max_disturbance")

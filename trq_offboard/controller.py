@@ -123,7 +123,7 @@ class Controller:
         self._sent = collections.deque([(float(t_s), self._last_u.copy())], maxlen=32)
         if self.eso is not None:
             eta_dot = np.asarray(self._euler_rate(x)).ravel()
-            self.eso.reset(np.concatenate([x[0:3], x[6:9]]), np.concatenate([x[3:6], eta_dot]))
+            self.eso.reset(self.eso.measurement(x), np.concatenate([x[3:6], eta_dot]))
         self._plan = None
         self._y_act = None
         self._last_t = float(t_s)
@@ -135,13 +135,14 @@ class Controller:
         self.failures = 0
 
     def _b0(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
-        """The observer's b0(u): the nominal model's accelerations (NED, Euler) under u."""
+        """The observer's b0(u): the nominal model's accelerations under u (9: NED, Euler,
+        body angular; the observer picks its channels' with b0_of)."""
         return self.model.b0(x, u)
 
     def _b0_delayed(self, x: np.ndarray, t0: float, t1: float, path=None) -> np.ndarray:
         """b0 averaged over [t0, t1] with each command acting applied_delay_s after it was sent
         (the time of the state it answered): the commands that were really in effect."""
-        total = np.zeros(6)
+        total = np.zeros(9)
         if self._lagged:
             for a, b, y in (path if path is not None else self._actuator_path(t0, t1)):
                 if t0 < 0.5 * (a + b) < t1:        # steps never straddle t0 or t1
@@ -259,14 +260,14 @@ class Controller:
         elif self._act_states:
             y_act = self._actuator_walk(t_act, t_act)[1]
         if self.eso is not None:
-            y = np.concatenate([x[0:3], x[6:9]])
+            y = self.eso.measurement(x)
             if t_s > self._last_t:
                 dt = t_s - self._last_t         # the true gap: samples can be lost or skipped
                 if self.cfg.applied_input == "outputs" and applied is not None:
                     b0 = self._b0(x, u_applied)
                 else:
                     b0 = self._b0_delayed(x, self._last_t, t_s, path)
-                self.eso.update(y, b0, dt)
+                self.eso.update(y, self.eso.b0_of(b0), dt)
             d = self.eso.disturbance(x[6:9])
             out_err = self.eso.output_error(y)
         self._last_t = float(t_s)

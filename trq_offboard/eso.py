@@ -58,25 +58,46 @@ class ExtendedStateObserver:
         self.cfg = cfg
         self.dt = control_dt_s
         self.h = control_dt_s / cfg.substeps
-        w = np.array([cfg.translational.omega_o_rad_s] * 3 + [cfg.rotational.omega_o_rad_s] * 3)
-        self.delta = np.array([cfg.translational.delta] * 3 + [cfg.rotational.delta] * 3)
+        groups = (cfg.translational, cfg.rotational)
+        w = np.repeat([g.omega_o_rad_s for g in groups], 3)
+        self.delta = np.repeat([g.delta for g in groups], 3)
+        # channels one order lower, on the measured rate (velocity, body rates)
+        self.reduced = np.repeat([g.output in ("velocity", "rates") for g in groups], 3)
+        self._angles = np.array([False] * 3 + [cfg.rotational.output != "rates"] * 3)
         c = (3.0, 3.0, 1.0)
         self.linear = cfg.kind == "linear"
         self.alpha = (1.0, 1.0, 1.0) if self.linear else cfg.alpha
-        self.beta = [c[i] * w ** (i + 1) * (1.0 if self.linear
-                                            else self.delta ** (1.0 - self.alpha[i]))
-                     for i in range(3)]
+        scale = [1.0 if self.linear else self.delta ** (1.0 - self.alpha[i]) for i in range(3)]
+        self.beta = [c[i] * w ** (i + 1) * scale[i] for i in range(3)]
+        # reduced channels: x1' = x3 + b0 + 2 w g1(e), x3' = w^2 g2(e) (both poles at -w)
+        self._b1 = np.where(self.reduced, 2.0 * w * scale[0], self.beta[0])
+        self._b3 = np.where(self.reduced, w ** 2 * scale[1], self.beta[2])
         self.z = np.zeros((3, 6))      # rows x1, x2, x3; columns x y z roll pitch yaw
         self._y_prev = np.zeros(6)
         lim_t, lim_r = cfg.max_disturbance
         self._lim = np.array([lim_t] * 3 + [lim_r] * 3)
         self._acol = np.array(self.alpha, float).reshape(3, 1)   # fal's exponent per row
 
+    def measurement(self, x: np.ndarray) -> np.ndarray:
+        """The channels' measured outputs (6) from a state vector (12: position, velocity NED,
+        Euler angles, body rates): position or velocity, angles or body rates."""
+        lin = x[3:6] if self.cfg.translational.output == "velocity" else x[0:3]
+        ang = x[9:12] if self.cfg.rotational.output == "rates" else x[6:9]
+        return np.concatenate([lin, ang])
+
+    def b0_of(self, acc: np.ndarray) -> np.ndarray:
+        """The channels' b0 (6) from the model's accelerations (9: NED linear, Euler, body
+        angular; PredictionModel.b0): the second derivative of a full channel's output, the
+        first of a reduced one's, which is the same linear acceleration for both."""
+        ang = acc[6:9] if self.cfg.rotational.output == "rates" else acc[3:6]
+        return np.concatenate([acc[0:3], ang])
+
     def reset(self, y: np.ndarray, y_rate: np.ndarray, disturbance: np.ndarray | None = None
               ) -> None:
-        """Start at the measured output and its rate; x3 from a known disturbance or zero."""
+        """Start at the measured output and its rate (ignored on reduced channels, whose x2
+        is the output's rate x3 + b0); x3 from a known disturbance or zero."""
         self.z[0] = y
-        self.z[1] = y_rate
+        self.z[1] = np.where(self.reduced, 0.0, y_rate)
         self._y_prev = np.array(y, float)
         self.z[2] = 0.0 if disturbance is None else disturbance
 
@@ -88,31 +109,34 @@ class ExtendedStateObserver:
         return fal(e, self._acol, self.delta)
 
     def update(self, y: np.ndarray, b0: np.ndarray, dt_s: float | None = None) -> None:
-        """Advance by dt_s (default one control period) to the measured output y (6), with
-        b0 (6) held. A longer gap (a lost or skipped sample) is integrated over its true
-        length, with proportionally more substeps so that each stays as short."""
+        """Advance by dt_s (default one control period) to the measured output y (6,
+        `measurement`), with b0 (6, `b0_of`) held. A longer gap (a lost or skipped sample) is
+        integrated over its true length, with proportionally more substeps so that each stays
+        as short."""
         z1, z2, z3 = self.z
         y = np.asarray(y, float)
         b0 = np.asarray(b0, float)
         dt = self.dt if dt_s is None else float(dt_s)
         n = max(1, int(math.ceil(self.cfg.substeps * dt / self.dt - 1e-9)))
         h = dt / n
-        b1, b2, b3 = self.beta
+        b2 = self.beta[1]
+        red, ang = self.reduced, self._angles
         step = y - self._y_prev
-        step[3:6] = _wrap(step[3:6])
+        step[ang] = _wrap(step[ang])
         for i in range(n):
             e = self._y_prev + ((i + 1) / n) * step - z1
-            e[3:6] = _wrap(e[3:6])
+            e[ang] = _wrap(e[ang])
             g = self._g3(e)
-            dz1 = z2 + b1 * g[0]
+            dz1 = np.where(red, z3 + b0, z2) + self._b1 * g[0]
             dz2 = z3 + b2 * g[1] + b0
-            dz3 = b3 * g[2]
+            dz3 = self._b3 * np.where(red, g[1], g[2])
             z1 = z1 + h * dz1
             z2 = z2 + h * dz2
             z3 = z3 + h * dz3
-        z1[3:6] = _wrap(z1[3:6])
+        z1[ang] = _wrap(z1[ang])
         self._y_prev = y.copy()
-        self.z = np.vstack([z1, z2, np.clip(z3, -self._lim, self._lim)])
+        z3 = np.clip(z3, -self._lim, self._lim)
+        self.z = np.vstack([z1, np.where(red, z3 + b0, z2), z3])
 
     @property
     def output_estimate(self) -> np.ndarray:
@@ -121,11 +145,13 @@ class ExtendedStateObserver:
     def output_error(self, y: np.ndarray) -> float:
         """(y_hat - y)^T (y_hat - y) of the current estimate (angles wrapped)."""
         e = self.z[0] - np.asarray(y, float)
-        e[3:6] = _wrap(e[3:6])
+        e[self._angles] = _wrap(e[self._angles])
         return float(e @ e)
 
     def disturbance(self, euler_rad: np.ndarray) -> np.ndarray:
         """d (6) for the prediction model: NED acceleration, body angular acceleration."""
+        if self.cfg.rotational.output == "rates":          # x3 is already a body acceleration
+            return np.clip(self.z[2], -self._lim, self._lim)
         roll, pitch = float(euler_rad[0]), float(euler_rad[1])
         sr, cr = math.sin(roll), math.cos(roll)
         sp, cp = math.sin(pitch), math.cos(pitch)

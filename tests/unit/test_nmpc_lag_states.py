@@ -255,7 +255,8 @@ def test_controller_starts_the_plan_from_the_lagged_actuators():
 
 def test_lag_states_bring_the_lagged_observer_along():
     """lagged_actuators auto is on whenever the NMPC carries the lag states, even without a
-    delay (the observer's b0 must see the same lags); the lockstep default has neither."""
+    delay (the observer's b0 must see the same lags); auto in lockstep has neither. The shipped
+    trq_nmpc_eso sets it on (its observer on body rates needs it), trq_nmpc_eso_paper auto."""
     from trq_offboard.controller import Controller
 
     class _Ocp:
@@ -264,8 +265,11 @@ def test_lag_states_bring_the_lagged_observer_along():
     class _Solver:
         ocp = _Ocp()
 
-    base = load_controller(CTRL / "trq_nmpc_eso.yaml")
-    assert not Controller(base, solver=_Solver())._lagged           # default: lockstep
+    shipped = load_controller(CTRL / "trq_nmpc_eso.yaml")
+    assert Controller(shipped, solver=_Solver())._lagged
+    base = load_controller(CTRL / "trq_nmpc_eso_paper.yaml")
+    assert base.lagged_actuators == "auto"
+    assert not Controller(base, solver=_Solver())._lagged           # auto, lockstep
     forced = dataclasses.replace(base, actuator_states="on")
     ctl = Controller(forced, solver=_Solver())
     assert ctl._lagged and ctl._act_states and ctl.delay_s == 0.0

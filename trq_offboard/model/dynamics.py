@@ -51,7 +51,8 @@ class PredictionModel:
     """Symbolic model of one airframe, built once; all members are casadi Functions.
 
     f(x, u, d) -> dx/dt (12)             wrench(u) -> [F_B (N), tau_B (N m)] body FRD (6)
-    accel(x, u) -> [dv/dt, domega/dt] without d (the ESO's b0)
+    accel(x, u) -> [dv/dt, domega/dt] without d
+    b0(x, u) -> [dv/dt, d^2 eta/dt^2, domega/dt] without d (NumPy; the ESO's b0)
     euler_accel(x, u, d) -> d^2 eta / dt^2 (3)
     discrete(dt, substeps) -> F(x, u, d) -> x_next   (RK4, input and d held)
     """
@@ -77,8 +78,9 @@ class PredictionModel:
         eta_acc = ca.jtimes(eta_dot, x, xdot)
         self.euler_accel = ca.Function("euler_accel", [x, u, d], [eta_acc],
                                        ["x", "u", "d"], ["eta_ddot"])
-        # the observer's b0(x, u): linear and Euler accelerations with d = 0, one call from NumPy
-        b0 = ca.vertcat(acc[0:3], ca.substitute(eta_acc, d, ca.DM.zeros(ND)))
+        # the observer's b0(x, u) with d = 0, one call from NumPy: linear (NED), Euler and body
+        # angular accelerations (9; ExtendedStateObserver.b0_of picks what its channels need)
+        b0 = ca.vertcat(acc[0:3], ca.substitute(eta_acc, d, ca.DM.zeros(ND)), acc[3:6])
         self.b0 = NumpyFunction(ca.Function("b0", [x, u], [b0], ["x", "u"], ["b0"]))
 
     # --- inputs -------------------------------------------------------------------------------
