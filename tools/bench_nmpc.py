@@ -5,7 +5,8 @@
     .venv/bin/python tools/bench_nmpc.py --modes rti-gn,ipopt --json out/bench_nmpc.json
     .venv/bin/python tools/bench_nmpc.py --quick --repeat 3   # median of 3 interleaved runs
 
-The flight (in one process, no MAVLink): trq_nmpc_eso on the SITL plant of params/sim/default.yaml,
+The flight (in one process, no MAVLink): trq_nmpc_eso (--controller: another file of
+params/controller/) on the SITL plant of params/sim/default.yaml,
 8 m/s wind from the north, the helix of params/controller/nmpc.yaml, motor 1 at 50 % from t = 12 s.
 Each step: the controller steps on the measured state, its command is held for the physics ticks
 of one control period, then `Controller.prepare` runs (the RTI's preparation phase; a no-op for
@@ -60,7 +61,7 @@ DEFAULT_MODES = "rti-gn,rti-gn-conic,rti-exact,rti-gn-py,sqp-gn,ipopt"
 FAULT_T_S, EFFECTIVENESS, WIND_M_S = 12.0, 0.5, 8.0
 
 
-def fly(mode: str, seconds: float | None) -> dict:
+def fly(mode: str, seconds: float | None, controller: str = "trq_nmpc_eso") -> dict:
     """Child process: build twice (cold, cached), fly, return the figures."""
     from sil_vehicle.config import load_sim
     from sil_vehicle.frames import quat_to_euler
@@ -72,7 +73,7 @@ def fly(mode: str, seconds: float | None) -> dict:
     from trq_offboard.records import SolveStatus, StateEstimate
     from trq_offboard.reference import Reference
 
-    cfg = load_controller(ROOT / "params" / "controller" / "trq_nmpc_eso.yaml")
+    cfg = load_controller(ROOT / "params" / "controller" / f"{controller}.yaml")
     overrides = dict(MODES[mode])
     cfg = dataclasses.replace(cfg, **overrides.pop("controller", {}))
     cfg = dataclasses.replace(cfg, solver=dataclasses.replace(cfg.solver, **overrides))
@@ -180,10 +181,10 @@ def _qp_line(solver) -> str:
     return f"hpipm direct {solver.hpipm_mode}{opts}, {shim}"
 
 
-def run_mode(mode: str, seconds: float | None) -> dict:
+def run_mode(mode: str, seconds: float | None, controller: str = "trq_nmpc_eso") -> dict:
     with tempfile.TemporaryDirectory(prefix="trq-bench-cache-") as cache_dir:
         env = dict(os.environ, TRQ_CACHE_DIR=cache_dir)
-        cmd = [sys.executable, __file__, "--child", mode]
+        cmd = [sys.executable, __file__, "--child", mode, "--controller", controller]
         if seconds is not None:
             cmd += ["--seconds", str(seconds)]
         out = subprocess.run(cmd, env=env, capture_output=True, text=True)
@@ -274,23 +275,30 @@ def main(argv=None) -> int:
     ap.add_argument("--repeat", type=int, default=1,
                     help="fly every mode K times, interleaved (A B C A B C ...), and report the "
                          "median of each figure over the K runs (a shared machine drifts)")
+    ap.add_argument("--controller", default="trq_nmpc_eso",
+                    help="a controller file of params/controller/ without .yaml (default: "
+                         "trq_nmpc_eso; the README's tables before the observer measured rates: "
+                         "trq_nmpc_eso_paper)")
     ap.add_argument("--child", default=None, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
+    if not (ROOT / "params" / "controller" / f"{args.controller}.yaml").is_file():
+        ap.error(f"--controller {args.controller}: no params/controller/{args.controller}.yaml")
     seconds = args.seconds if args.seconds is not None else (16.0 if args.quick else None)
     if args.child:
-        print(json.dumps(fly(args.child, seconds)), flush=True)
+        print(json.dumps(fly(args.child, seconds, args.controller)), flush=True)
         return 0
     modes = [m.strip() for m in args.modes.split(",") if m.strip()]
     unknown = [m for m in modes if m not in MODES]
     if unknown:
         ap.error(f"unknown mode(s) {unknown}; known: {', '.join(MODES)}")
     print(machine_line(), flush=True)
+    print(f"controller: params/controller/{args.controller}.yaml", flush=True)
     if args.repeat < 1:
         ap.error(f"--repeat {args.repeat}: expected at least 1")
     runs: dict[str, list[dict]] = {m: [] for m in modes}
     for k in range(args.repeat):
         for m in modes:       # one after the other: the modes do not share the cores
-            r = run_mode(m, seconds)
+            r = run_mode(m, seconds, args.controller)
             runs[m].append(r)
             print(f"  {m}{f' (run {k + 1})' if args.repeat > 1 else ''}: {r['steps']} steps, "
                   f"crashed {r['crashed']}, build {r['build_mode']}, compilations cold/cached "

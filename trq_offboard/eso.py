@@ -1,4 +1,5 @@
-"""Extended state observers (paper eq. 10-11): one third-order observer per channel.
+"""Extended state observers (paper eq. 10-11): one third-order observer per channel, or one
+order lower on a measured rate.
 
 Channels: x, y, z position (NED, m) and roll, pitch, yaw (ZYX Euler angles, rad). Per channel
     e    = y - x1                      (angles: wrapped to (-pi, pi])
@@ -9,6 +10,18 @@ x1 estimates the output, x2 its rate, x3 the total disturbance on its second der
 b0(u) is the nominal model's second derivative of the output for the applied command at the
 measured state (model/dynamics.py, d = 0): dv/dt for the position channels and d^2 eta/dt^2
 for the angle channels.
+
+Reduced channels (EsoChannelGains.output velocity / rates): the group measures its output's
+rate instead (NED velocity, body FRD rates), one order lower:
+    e    = y - x1                      (y: the measured rate)
+    x1' = x3 + b0(u) + beta1 g1(e)
+    x3' =              beta3 g2(e)     (beta1 = 2 w, beta3 = w^2: both poles at -w; the
+                                        nonlinear observer scales them by delta^(1 - alpha_i)
+                                        as below, with g1, g2 its first two fal corrections)
+x2 is kept as x3 + b0 (the rate's derivative); b0 is then the body angular acceleration, and
+d[3:6] = x3 with no conversion. A fault is a step in an acceleration, which the measured rate
+shows one integration sooner than the position or angle: the observer can be several times
+faster (params/controller/eso.yaml).
 
 Observers
     nonlinear (Han): g_i = fal(e, alpha_i, delta) = e / delta^(1 - alpha_i) for |e| <= delta,

@@ -44,10 +44,11 @@ def _state():
 
 
 def test_auto_follows_the_delay_predictor():
+    paper = load_controller(CTRL / "trq_nmpc_eso_paper.yaml")
+    assert paper.actuator_states == "off"                    # nmpc.yaml's default (measured)
+    assert not dataclasses.replace(paper, applied_delay_s=0.04).nmpc_actuator_states
     cfg = load_controller(CTRL / "trq_nmpc_eso.yaml")
-    assert cfg.actuator_states == "off"                      # the default (nmpc.yaml: measured)
-    assert not dataclasses.replace(cfg, applied_delay_s=0.04).nmpc_actuator_states
-    cfg = dataclasses.replace(cfg, actuator_states="auto")
+    assert cfg.actuator_states == "auto"                     # with the observer on rates
     assert not cfg.nmpc_actuator_states                      # lockstep: no delay, no states
     assert dataclasses.replace(cfg, applied_delay_s=0.04).nmpc_actuator_states
     assert not dataclasses.replace(cfg, applied_delay_s=0.005).nmpc_actuator_states  # < period

@@ -1,0 +1,37 @@
+"""The impaired-link flight (issue 6): paper_fault50_lossy, the paper's fault over an offboard link
+that loses 10 % of the messages and delays each by 20 ms each way, flown by trq_nmpc_eso in one
+process (tools/inprocess.py: the lockstep vehicle and controller joined by an in-memory link of
+MAVLink bytes, the same flight as the two daemons; about 30 s here).
+
+It must not crash, must land, and must stay within the fault campaigns' success bar (position RMSE
+after the fault below 0.1 m) with its yaw within 10 deg. The paper's observer as written
+(trq_nmpc_eso_paper) flies it at 0.18 m and 15.6 deg, and failed this test; trq_nmpc_eso flies
+0.032 m and 3.6 deg. The scenario's own target, 2x the clean link (0.016 m), is not met yet
+(README, Reliability).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+
+from conftest import PARAMS, ROOT
+
+ENV = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+
+
+def test_lossy_link_flight_keeps_position_and_yaw(tmp_path):
+    out = tmp_path / "lossy"
+    r = subprocess.run([sys.executable, str(ROOT / "tools" / "inprocess.py"),
+                        str(PARAMS / "scenarios" / "paper_fault50_lossy.yaml"), "--out", str(out),
+                        "--only", "trq_nmpc_eso"],
+                       cwd=ROOT, env=ENV, capture_output=True, text=True, timeout=600)
+    assert r.returncode in (0, 1), r.stderr[-3000:]      # 1: a scenario target missed
+    (run,) = json.loads((out / "metrics.json").read_text())["runs"]
+    assert run["controller"] == "trq_nmpc_eso"
+    assert run["crashed"] is False
+    assert run["rmse_pos_after_fault_m"] < 0.1, run
+    assert run["max_yaw_err_deg"] < 10.0, run
+    assert "landed" in r.stdout + r.stderr
