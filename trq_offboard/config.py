@@ -303,7 +303,7 @@ class EsoChannelGains:
     delta: float                          # fal linear band (m or rad; m/s or rad/s on rates)
     # what the channels measure: the paper's third-order observer on the output (position,
     # angles), or one order lower on its measured rate (velocity, body rates)
-    output: str = "position"
+    output: str
 
 
 @dataclass(frozen=True)
@@ -540,6 +540,17 @@ def _controller(k: _Keys, path: Path) -> ControllerConfig:
     reference = _reference(k.sub("reference"))
     if step_s < 1.0 / rate - 1e-12:
         raise k.error("horizon.step_s", step_s, f"at least one control period ({1.0 / rate:g} s)")
+    if eso is not None:
+        # the observer's explicit Euler substeps: w h <= 1 keeps them stable with a margin (the
+        # triple pole's discrete eigenvalue is 1 - w h; 2 is the edge)
+        for group, gains in (("translational", eso.translational), ("rotational", eso.rotational)):
+            w_max = eso.substeps * rate
+            if gains.omega_o_rad_s > w_max:
+                raise ConfigError(
+                    f"{eso.file}: key '{group}.omega_o_rad_s': got {gains.omega_o_rad_s!r}, "
+                    f"expected at most substeps x control_rate_hz = {eso.substeps} x {rate} = "
+                    f"{w_max:g} rad/s (explicit Euler substeps of {1e3 / w_max:g} ms; raise "
+                    f"substeps for a faster observer) for {path}")
     return ControllerConfig(str(path), name, vehicle, observer, eso, rate, steps, step_s,
                             weights, max_tilt, max_rate, solver, reference, applied_input,
                             applied_delay, delay_comp, lagged, act_states, tilt_rate_limit)

@@ -135,3 +135,24 @@ def test_output_key_is_checked(tmp_path, group, value):
     bad.write_text(yaml.safe_dump(data))
     with pytest.raises(ConfigError, match=rf"{group}\.output.*{value}"):
         load_eso(bad)
+
+
+def test_observer_too_fast_for_its_substeps_is_refused(tmp_path):
+    """w h <= 1 on the explicit Euler substeps: 300 rad/s at 100 Hz needs at least 3 substeps;
+    the error names the observer file, the key, the value and the bound."""
+    import yaml
+    from trq_offboard.config import ConfigError, load_controller
+    data = yaml.safe_load(ESO.read_text())
+    data["substeps"] = 2
+    eso = tmp_path / "eso.yaml"
+    eso.write_text(yaml.safe_dump(data))
+    ctrl = tmp_path / "c.yaml"
+    ctrl.write_text(f"extends: {ESO.with_name('trq_nmpc_eso.yaml')}\n"
+                    f"vehicle: {ESO.parents[1] / 'vehicle' / 'trq.yaml'}\n"
+                    f"observer: {{kind: nonlinear, file: {eso}}}\n")
+    with pytest.raises(ConfigError, match=r"eso\.yaml: key 'rotational\.omega_o_rad_s': got "
+                                          r"300\.0, expected at most .* 200 rad/s"):
+        load_controller(ctrl)
+    data["substeps"] = 3
+    eso.write_text(yaml.safe_dump(data))
+    assert load_controller(ctrl).eso.substeps == 3
