@@ -543,8 +543,8 @@ def _controller(k: _Keys, path: Path) -> ControllerConfig:
     if eso is not None:
         # the observer's explicit Euler substeps: w h <= 1 keeps them stable with a margin (the
         # triple pole's discrete eigenvalue is 1 - w h; 2 is the edge)
+        w_max = eso.substeps * rate
         for group, gains in (("translational", eso.translational), ("rotational", eso.rotational)):
-            w_max = eso.substeps * rate
             if gains.omega_o_rad_s > w_max:
                 raise ConfigError(
                     f"{eso.file}: key '{group}.omega_o_rad_s': got {gains.omega_o_rad_s!r}, "

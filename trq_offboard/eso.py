@@ -75,8 +75,15 @@ class ExtendedStateObserver:
         w = np.repeat([g.omega_o_rad_s for g in groups], 3)
         self.delta = np.repeat([g.delta for g in groups], 3)
         # channels one order lower, on the measured rate (velocity, body rates)
-        self.reduced = np.repeat([g.output in ("velocity", "rates") for g in groups], 3)
-        self._angles = np.array([False] * 3 + [cfg.rotational.output != "rates"] * 3)
+        velocity, rates = cfg.translational.output == "velocity", cfg.rotational.output == "rates"
+        self.reduced = np.repeat([velocity, rates], 3)
+        self._angles = np.array([False] * 3 + [not rates] * 3)
+        self._rates = rates
+        # where each channel's output sits in the state vector (12: position, velocity NED, Euler
+        # angles, body rates) and its b0 in the model's accelerations (9: NED, Euler, body)
+        lin, ang = (3 if velocity else 0), (9 if rates else 6)
+        self._y_index = np.r_[lin:lin + 3, ang:ang + 3]
+        self._b0_index = np.r_[0:3, (6 if rates else 3) + np.arange(3)]
         c = (3.0, 3.0, 1.0)
         self.linear = cfg.kind == "linear"
         self.alpha = (1.0, 1.0, 1.0) if self.linear else cfg.alpha
@@ -94,16 +101,13 @@ class ExtendedStateObserver:
     def measurement(self, x: np.ndarray) -> np.ndarray:
         """The channels' measured outputs (6) from a state vector (12: position, velocity NED,
         Euler angles, body rates): position or velocity, angles or body rates."""
-        lin = x[3:6] if self.cfg.translational.output == "velocity" else x[0:3]
-        ang = x[9:12] if self.cfg.rotational.output == "rates" else x[6:9]
-        return np.concatenate([lin, ang])
+        return np.asarray(x, float)[self._y_index]
 
     def b0_of(self, acc: np.ndarray) -> np.ndarray:
         """The channels' b0 (6) from the model's accelerations (9: NED linear, Euler, body
         angular; PredictionModel.b0): the second derivative of a full channel's output, the
         first of a reduced one's, which is the same linear acceleration for both."""
-        ang = acc[6:9] if self.cfg.rotational.output == "rates" else acc[3:6]
-        return np.concatenate([acc[0:3], ang])
+        return np.asarray(acc, float)[self._b0_index]
 
     def reset(self, y: np.ndarray, y_rate: np.ndarray, disturbance: np.ndarray | None = None
               ) -> None:
@@ -163,7 +167,7 @@ class ExtendedStateObserver:
 
     def disturbance(self, euler_rad: np.ndarray) -> np.ndarray:
         """d (6) for the prediction model: NED acceleration, body angular acceleration."""
-        if self.cfg.rotational.output == "rates":          # x3 is already a body acceleration
+        if self._rates:                                     # x3 is already a body acceleration
             return np.clip(self.z[2], -self._lim, self._lim)
         roll, pitch = float(euler_rad[0]), float(euler_rad[1])
         sr, cr = math.sin(roll), math.cos(roll)
