@@ -25,7 +25,7 @@ from typing import Any, Callable
 import yaml
 
 __all__ = ["ConfigError", "RotorGeometry", "Curve", "VehicleModel", "EsoChannelGains",
-           "EsoConfig", "Weights", "SolverConfig", "ReferenceConfig", "ControllerConfig",
+           "EsoConfig", "EffectivenessConfig", "Weights", "SolverConfig", "ReferenceConfig", "ControllerConfig",
            "load_vehicle_model", "load_eso", "load_controller", "PARAMS_DIR"]
 
 PARAMS_DIR = Path(__file__).resolve().parent.parent / "params"
@@ -307,6 +307,15 @@ class EsoChannelGains:
 
 
 @dataclass(frozen=True)
+class EffectivenessConfig:
+    """The motor effectiveness observer (trq_offboard/effectiveness.py): controller key
+    motor_effectiveness."""
+    bandwidth_rad_s: float                # both poles of each motor's observer at -p
+    min_effectiveness: float              # the estimate's floor (a motor the NMPC may still use)
+    substeps: int                         # explicit Euler substeps per control period
+
+
+@dataclass(frozen=True)
 class EsoConfig:
     file: str
     kind: str                             # "nonlinear" | "linear"
@@ -417,6 +426,7 @@ class ControllerConfig:
                                           # stage state carries the actuators' lag states
     tilt_rate_limit: str = "horizon"      # horizon | first_step: where the NMPC enforces the
                                           # servos' rate limit (nmpc/ocp.py)
+    effectiveness: EffectivenessConfig | None = None   # motor_effectiveness (None: off)
 
     @property
     def predicts_delay(self) -> bool:
@@ -508,6 +518,23 @@ def _reference(k: _Keys) -> ReferenceConfig:
     return r
 
 
+def _effectiveness(k: _Keys, observer: str) -> EffectivenessConfig | None:
+    """motor_effectiveness: {estimate: on | off, bandwidth_rad_s (250), min (0.1), substeps
+    (10)}; it reads the observer's disturbance, so it needs one."""
+    if "motor_effectiveness" not in k._left:
+        return None
+    ek = k.sub("motor_effectiveness")
+    on = ek.text("estimate", ("on", "off")) == "on"
+    cfg = EffectivenessConfig(ek.number("bandwidth_rad_s", 1.0, 2000.0, default=250.0),
+                              ek.number("min", 0.01, 1.0, default=0.1),
+                              ek.integer("substeps", 1, 1000, default=10))
+    ek.close()
+    if on and observer == "none":
+        raise ek.error("estimate", "on", "off with observer.kind none (the motor effectiveness "
+                       "observer reads the extended state observer's disturbance)")
+    return cfg if on else None
+
+
 def _controller(k: _Keys, path: Path) -> ControllerConfig:
     name = k.text("name")
     vehicle = load_vehicle_model(path.parent / k.text("vehicle"))
@@ -521,6 +548,7 @@ def _controller(k: _Keys, path: Path) -> ControllerConfig:
     lagged = k.text("lagged_actuators", ("on", "off", "auto"), default="auto")
     act_states = k.text("actuator_states", ("on", "off", "auto"), default="auto")
     tilt_rate_limit = k.text("tilt_rate_limit", ("horizon", "first_step"), default="horizon")
+    effectiveness = _effectiveness(k, observer)
     eso = None
     if observer != "none":
         base = load_eso(path.parent / eso_file)
@@ -551,9 +579,16 @@ def _controller(k: _Keys, path: Path) -> ControllerConfig:
                     f"expected at most substeps x control_rate_hz = {eso.substeps} x {rate} = "
                     f"{w_max:g} rad/s (explicit Euler substeps of {1e3 / w_max:g} ms; raise "
                     f"substeps for a faster observer) for {path}")
+    if effectiveness is not None and effectiveness.bandwidth_rad_s > effectiveness.substeps * rate:
+        raise ConfigError(
+            f"{path}: key 'motor_effectiveness.bandwidth_rad_s': got "
+            f"{effectiveness.bandwidth_rad_s!r}, expected at most substeps x control_rate_hz = "
+            f"{effectiveness.substeps} x {rate} = {effectiveness.substeps * rate:g} rad/s "
+            "(explicit Euler substeps; raise substeps for a faster observer)")
     return ControllerConfig(str(path), name, vehicle, observer, eso, rate, steps, step_s,
                             weights, max_tilt, max_rate, solver, reference, applied_input,
-                            applied_delay, delay_comp, lagged, act_states, tilt_rate_limit)
+                            applied_delay, delay_comp, lagged, act_states, tilt_rate_limit,
+                            effectiveness)
 
 
 def load_controller(path: Path | str) -> ControllerConfig:

@@ -34,6 +34,7 @@ import numpy as np
 
 from trq_offboard.allocation import Allocator
 from trq_offboard.config import ControllerConfig, load_controller
+from trq_offboard.effectiveness import MotorEffectivenessObserver
 from trq_offboard.eso import ExtendedStateObserver
 from trq_offboard.model import PredictionModel
 from trq_offboard.nmpc.solver import Solver, make_solver
@@ -81,7 +82,18 @@ class Controller:
         # auto: also whenever the NMPC carries the lag states, which must not meet an observer
         # whose b0 ignores the lags (paper_fault50 with actuator_states on: 0.206 m with the
         # observer's b0 unlagged, 0.022 m lagged)
-        self._lagged = cfg.lagged_actuators == "on" or (
+        # the motor effectiveness observer (motor_effectiveness): reads the observer's d as motor
+        # outputs; it needs the actuators' lags (its motor model is the lag)
+        self.effectiveness = (MotorEffectivenessObserver(cfg.effectiveness,
+                                                         vm.motor_time_constant_s)
+                              if cfg.effectiveness is not None and self.eso is not None else None)
+        self._nt = 4 if self.model.tilting else 0         # where the throttles start in u
+        if self.effectiveness is not None and not hasattr(getattr(self.solver, "ocp", None),
+                                                          "set_throttle_scale"):
+            raise ValueError(f"{cfg.file}: motor_effectiveness needs a solver on nmpc/ocp.py's "
+                             "Ocp (its throttle bounds follow the estimate)")
+        self._scale = np.ones(self.model.nu)              # plan (effective) = scale x command
+        self._lagged = self.effectiveness is not None or cfg.lagged_actuators == "on" or (
             cfg.lagged_actuators == "auto"
             and ((predict and self.delay_s > 0.0) or cfg.nmpc_actuator_states))
         tilts = 4 if self.model.tilting else 0
@@ -124,6 +136,9 @@ class Controller:
         if self.eso is not None:
             eta_dot = np.asarray(self._euler_rate(x)).ravel()
             self.eso.reset(self.eso.measurement(x), np.concatenate([x[3:6], eta_dot]))
+        if self.effectiveness is not None:
+            self.effectiveness.reset(self._last_u[self._nt:])
+        self._scale = np.ones(self.model.nu)
         self._plan = None
         self._y_act = None
         self._last_t = float(t_s)
@@ -181,9 +196,11 @@ class Controller:
         return self._actuator_walk(t0, t1, cut)[0]
 
     def _actuator_walk(self, t0: float, t1: float, cut: float | None = None):
-        """(_actuator_path(t0, t1, cut), the actuators' outputs at t1)."""
+        """(_actuator_path(t0, t1, cut), the actuators' outputs at t1, at `cut` (None without
+        one))."""
         segs = self._in_effect(-math.inf, t1)
         y = segs[0][2].copy()
+        y_cut = y.copy() if cut is not None and cut <= segs[0][0] else None
         path = []
         for lo, hi, u in segs:
             cuts = [lo] + [c for c in (t0, cut) if c is not None and lo < c < hi] + [hi]
@@ -197,6 +214,25 @@ class Controller:
                         end = b if i == n - 1 else a + (i + 1) * h
                         path.append((a + i * h, end, self._lag(y, u, 0.5 * h)))
                     y = self._lag(y, u, h)
+                if cut is not None and b == cut:
+                    y_cut = y.copy()
+        if cut is not None and y_cut is None:
+            y_cut = y.copy()
+        return path, y, y_cut
+
+    def _walk_from(self, y0: np.ndarray, t0: float, t1: float, scale: np.ndarray):
+        """(path, outputs at t1) of the actuators from y0 at t0 under the commands in effect
+        over [t0, t1], each scaled by `scale` (the motors' effectiveness: the effective
+        throttle), as _actuator_path's steps."""
+        y, path = np.asarray(y0, float).copy(), []
+        for lo, hi, u in self._in_effect(t0, t1):
+            n = max(1, math.ceil((hi - lo) / PREDICT_STEP_S - 1e-9))
+            h = (hi - lo) / n
+            ue = u * scale
+            for i in range(n):
+                end = hi if i == n - 1 else lo + (i + 1) * h
+                path.append((lo + i * h, end, self._lag(y, ue, 0.5 * h)))
+                y = self._lag(y, ue, h)
         return path, y
 
     def _predict(self, x: np.ndarray, t0: float, t1: float, d: np.ndarray,
@@ -254,9 +290,10 @@ class Controller:
         # the actuators through their lags from the last step to when this command acts: one
         # path for the observer (before t_s) and the predictor (after it)
         t_act = t_s + self.delay_s
-        path, y_act = None, None
+        path, y_act, y_now = None, None, None
+        t_prev = self._last_t
         if self._lagged:
-            path, y_act = self._actuator_walk(min(self._last_t, t_s), t_act, t_s)
+            path, y_act, y_now = self._actuator_walk(min(self._last_t, t_s), t_act, t_s)
         elif self._act_states:
             y_act = self._actuator_walk(t_act, t_act)[1]
         if self.eso is not None:
@@ -270,6 +307,8 @@ class Controller:
                 self.eso.update(y, self.eso.b0_of(b0), dt)
             d = self.eso.disturbance(x[6:9])
             out_err = self.eso.output_error(y)
+            if self.effectiveness is not None:
+                d, path, y_act = self._effective(x, d, y_now, t_prev, t_s, t_act)
         self._last_t = float(t_s)
         self._last_d = d
 
@@ -285,7 +324,7 @@ class Controller:
         if info.status is SolveStatus.OK and np.all(np.isfinite(u_plan)) \
                 and np.all(np.isfinite(x_plan)):
             self._plan, self._plan_t = (u_plan, x_plan), t_act
-            u, source = u_plan[0], CommandSource.NMPC
+            u, source = u_plan[0] / self._scale, CommandSource.NMPC
         else:
             self.failures += 1
             if info.status is SolveStatus.OK:      # finite-status but non-finite plan
@@ -293,6 +332,47 @@ class Controller:
                                  float("nan"), "non-finite plan")
             u, source = self._fallback(t_act)
         return self._finish(u, source, info, d, out_err)
+
+    def _effective(self, x, d, y_nom, t0, t1, t_act):
+        """With the motor effectiveness observer: advance it over [t0, t1] and return (d less
+        the motors' share, the predictor's actuator path over [t1, t_act] and the actuators'
+        outputs at t_act, both in effective throttles). y_nom: the actuators' outputs at t1 if
+        the motors were healthy (the observer's b0 flies those)."""
+        nt, eff = self._nt, self.effectiveness
+        jac = self.model.motor_jacobian(x, y_nom).reshape(4, 4, order="F")[0:3]
+        r = d[2:5]
+        # one motor at a time: the deficit of motor i alone that best explains the vertical,
+        # roll and pitch disturbances; the motor whose pattern explains most of it (a deficit,
+        # < 0) takes it
+        num = jac.T @ r
+        den = np.maximum(np.einsum("ij,ij->j", jac, jac), 1e-12)
+        fit = np.where(num < 0.0, num * num / den, -1.0)
+        i = int(np.argmax(fit))
+        dz = np.zeros(4)
+        if fit[i] > 0.0:
+            # the thrust is quadratic in the throttle: the exact deficit uses the secant, the
+            # slope at the midpoint between the healthy and the true output (two refinements)
+            delta = num[i] / den[i]
+            u_mid = y_nom.copy()
+            for _ in range(2):
+                u_mid[nt + i] = y_nom[nt + i] + 0.5 * delta
+                col = self.model.motor_jacobian(x, u_mid).reshape(4, 4, order="F")[0:3, i]
+                delta = float(col @ r) / max(float(col @ col), 1e-12)
+            dz[i] = min(0.0, delta)
+        if t1 > t0:
+            segs = [(hi - lo, u[nt:]) for lo, hi, u in self._in_effect(t0, t1)]
+            e = eff.update(y_nom[nt:] + dz, segs, t1 - t0)
+        else:
+            e = eff.e.copy()
+        self._scale = np.ones(self.model.nu)
+        self._scale[nt:] = e
+        self.solver.ocp.set_throttle_scale(e)
+        y_true = y_nom.copy()
+        y_true[nt:] = eff.y
+        share = self._b0(x, y_true) - self._b0(x, y_nom)
+        d = d - share[[0, 1, 2, 6, 7, 8]]
+        path, y_act = self._walk_from(y_true, t1, t_act, self._scale)
+        return d, path, y_act
 
     def prepare(self, reference) -> None:
         """Preparation phase for the next step (t + one control period): the solver linearises
@@ -310,7 +390,7 @@ class Controller:
         guess = self._guess(t_next, x_pred, self._last_d)
         if self._act_states and self._y_act is not None:
             # the actuators one period on, under the command just sent (it acts from t_act)
-            y_next = self._lag(self._y_act, self._last_u, self.cfg.control_dt_s)
+            y_next = self._lag(self._y_act, self._last_u * self._scale, self.cfg.control_dt_s)
             prep(x_ref, self._last_d, self._last_u, guess, y0=y_next)
         else:
             prep(x_ref, self._last_d, self._last_u, guess)
@@ -357,7 +437,7 @@ class Controller:
             elapsed = t_s - self._plan_t
             k = int(elapsed / self.h + 1e-9)
             if k < self.N:
-                return self._plan[0][k], CommandSource.SHIFTED_PLAN
+                return self._plan[0][k] / self._scale, CommandSource.SHIFTED_PLAN
         return self.u_trim.copy(), CommandSource.HOVER
 
     def _finish(self, u, source, info, d, out_err) -> tuple[ActuatorCommand, StepInfo]:
@@ -372,7 +452,8 @@ class Controller:
         self._sent.append((self._last_t, clipped_u.copy()))   # sent for the state at _last_t
         cmd = self.allocator.command_of(clipped_u)
         info = StepInfo(source, info, tuple(float(v) for v in d), out_err, n_clip,
-                        self.clip_count, self.failures)
+                        self.clip_count, self.failures,
+                        tuple(float(v) for v in self._scale[self._nt:]))
         return cmd, info
 
     def _emergency(self, t_s, why) -> tuple[ActuatorCommand, StepInfo]:

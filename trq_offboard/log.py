@@ -20,7 +20,8 @@ COLUMNS = (
     + [f"cmd_throttle{i}_pct" for i in range(1, 5)] + [f"cmd_tilt{i}_rad" for i in range(1, 5)]
     + [f"applied_throttle{i}_pct" for i in range(1, 5)]
     + [f"applied_tilt{i}_rad" for i in range(1, 5)]
-    + ["solve_ms", "iterations", "status", "source", "output_error", "cost"])
+    + ["solve_ms", "iterations", "status", "source", "output_error", "cost"]
+    + [f"eff_motor{i}" for i in range(1, 5)])
 
 
 class ControllerLog:
@@ -45,7 +46,8 @@ class ControllerLog:
                + list(applied.tilt_rad if applied else nan4)
                + ([info.solve.solve_time_s * 1e3, info.solve.iterations, info.solve.status.value,
                    info.source.value, info.output_error, info.solve.cost] if info else
-                  [math.nan, 0, "none", "none", math.nan, math.nan]))
+                  [math.nan, 0, "none", "none", math.nan, math.nan])
+               + list(info.effectiveness if info else nan4))
         self._f.write(",".join(v if isinstance(v, str) else repr(float(v)) if isinstance(v, float)
                                else str(v) for v in row) + "\n")
         self._n += 1

@@ -76,3 +76,5 @@ class StepInfo:
     clipped: int                       # actuator values clipped by the last line of defence
     clip_count_total: int
     failures_total: int
+    # the motors' estimated effectiveness (motor_effectiveness; 1 without its observer)
+    effectiveness: tuple[float, float, float, float] = (1.0, 1.0, 1.0, 1.0)

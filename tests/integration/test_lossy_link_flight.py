@@ -12,6 +12,7 @@ after the fault below 0.1 m) with its yaw within 10 deg. The paper's observer as
 
 from __future__ import annotations
 
+import csv
 import json
 import os
 import subprocess
@@ -35,3 +36,17 @@ def test_lossy_link_flight_keeps_position_and_yaw(tmp_path):
     assert run["rmse_pos_after_fault_m"] < 0.1, run
     assert run["max_yaw_err_deg"] < 10.0, run
     assert "landed" in r.stdout + r.stderr
+    # the motor effectiveness observer: no motor judged faulty before the fault (motor 1 at 50 %
+    # from 12 s, vehicle time: the states' stamps), then motor 1 and only motor 1 at about 0.5
+    with open(out / "trq_nmpc_eso" / "controller.csv", encoding="ascii") as f:
+        rows = list(csv.DictReader(line for line in f if not line.startswith("#")))
+    stamps = [int(r["stamp_us"]) for r in rows]
+    eff = [[float(r[f"eff_motor{i}"]) for i in range(1, 5)] for r in rows]
+    before = [e for s, e in zip(stamps, eff) if 2_000_000 < s < 12_000_000]
+    settled = [e for s, e in zip(stamps, eff) if 13_000_000 < s < 30_000_000]
+    assert before and settled
+    assert min(min(e) for e in before) > 0.9
+    m1 = sorted(e[0] for e in settled)[len(settled) // 2]
+    assert abs(m1 - 0.5) < 0.05, m1
+    for i in (1, 2, 3):
+        assert sorted(e[i] for e in settled)[len(settled) // 2] > 0.97

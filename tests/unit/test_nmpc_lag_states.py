@@ -230,6 +230,9 @@ def test_controller_starts_the_plan_from_the_lagged_actuators():
     class _Ocp:
         n_lag = 8
 
+        def set_throttle_scale(self, e):     # trq_nmpc_eso estimates the motors' effectiveness
+            pass
+
     class _Solver:
         ocp = _Ocp()
 
@@ -242,12 +245,15 @@ def test_controller_starts_the_plan_from_the_lagged_actuators():
     ctl._sent = collections.deque([(-0.01 * k, hover) for k in range(32, 0, -1)]
                                   + [(0.0, up)], maxlen=32)
     # the step command (sent for the state at 0) acts from 0.04; at 0.07 it has lagged 30 ms
-    path, y = ctl._actuator_walk(0.0, 0.07)
+    path, y, y_cut = ctl._actuator_walk(0.0, 0.07, 0.05)
     tau = cfg.vehicle.motor_time_constant_s
     expect = up[4:8] + (hover[4:8] - up[4:8]) * math.exp(-0.03 / tau)
     np.testing.assert_allclose(y[4:8], expect, rtol=0, atol=1e-9)
+    # and at the cut (the observer's side of the path ends there): 10 ms of lag
+    expect = up[4:8] + (hover[4:8] - up[4:8]) * math.exp(-0.01 / tau)
+    np.testing.assert_allclose(y_cut[4:8], expect, rtol=0, atol=1e-9)
     np.testing.assert_allclose(y[0:4], hover[0:4], atol=1e-12)
-    again = ctl._actuator_path(0.0, 0.07)
+    again = ctl._actuator_path(0.0, 0.07, 0.05)
     assert len(path) == len(again)
     for (a, b, ym), (a2, b2, ym2) in zip(path, again):
         assert (a, b) == (a2, b2)
@@ -262,6 +268,9 @@ def test_lag_states_bring_the_lagged_observer_along():
 
     class _Ocp:
         n_lag = 8
+
+        def set_throttle_scale(self, e):     # trq_nmpc_eso estimates the motors' effectiveness
+            pass
 
     class _Solver:
         ocp = _Ocp()

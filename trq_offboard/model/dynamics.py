@@ -53,6 +53,7 @@ class PredictionModel:
     f(x, u, d) -> dx/dt (12)             wrench(u) -> [F_B (N), tau_B (N m)] body FRD (6)
     accel(x, u) -> [dv/dt, domega/dt] without d
     b0(x, u) -> [dv/dt, d^2 eta/dt^2, domega/dt] without d (NumPy; the ESO's b0)
+    motor_jacobian(x, u) -> d[dv_z/dt, domega/dt] / d zeta (4x4 column-major flat, NumPy)
     euler_accel(x, u, d) -> d^2 eta / dt^2 (3)
     discrete(dt, substeps) -> F(x, u, d) -> x_next   (RK4, input and d held)
     """
@@ -82,6 +83,12 @@ class PredictionModel:
         # angular accelerations (9; ExtendedStateObserver.b0_of picks what its channels need)
         b0 = ca.vertcat(acc[0:3], ca.substitute(eta_acc, d, ca.DM.zeros(ND)), acc[3:6])
         self.b0 = NumpyFunction(ca.Function("b0", [x, u], [b0], ["x", "u"], ["b0"]))
+        # the sensitivity of the vertical (NED z) and the body angular accelerations to each
+        # motor's throttle (%), 4x4 (the motor effectiveness observer's J; NumPy, column-major)
+        zeta = u[4:8] if self.tilting else u[0:4]
+        self.motor_jacobian = NumpyFunction(ca.Function(
+            "motor_jacobian", [x, u], [ca.densify(ca.jacobian(acc[2:6], zeta))], ["x", "u"],
+            ["J"]))
 
     # --- inputs -------------------------------------------------------------------------------
     def split(self, u):

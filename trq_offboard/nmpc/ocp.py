@@ -152,6 +152,7 @@ class Ocp:
     lag_gain: np.ndarray | None = None  # (n_lag,) 1 - exp(-h/T) (scaled units, as v)
     tilt_states: bool = False          # TRQ: tilts as states a_k, servo rates as inputs
     tilt_step0: float = 0.0            # tilt_rate_limit first_step: |alpha_0 - alpha_prev| bound
+    _c_bounds: tuple | None = None     # set_throttle_scale: (indices, healthy lbw, healthy ubw)
 
     @staticmethod
     def build(cfg: ControllerConfig, model: PredictionModel) -> "Ocp":
@@ -213,6 +214,19 @@ class Ocp:
                    ca.Function("cost", [wv, p], [cost]), int(p.shape[0]), n_lag,
                    Stage.lag_gain(cfg, model, h) if n_lag else None, stage.tilt_states,
                    rate * cfg.control_dt_s)
+
+    def set_throttle_scale(self, e) -> None:
+        """Bound the throttles of every stage to [e idle, e 100 %] (e (4): the motors'
+        effectiveness, 1 healthy): the plan's throttles are then the effective ones, e times the
+        command (controller.py divides them back). Changes lbw / ubw in place."""
+        e = np.asarray(e, float).reshape(4)
+        if self._c_bounds is None:
+            cols = slice(4, 8) if self.tilting else slice(0, 4)
+            idx = self.v_index[:, cols]
+            self._c_bounds = (idx, self.lbw[idx].copy(), self.ubw[idx].copy())
+        idx, lo, hi = self._c_bounds
+        self.lbw[idx] = lo * e
+        self.ubw[idx] = hi * e
 
     # --- packing (all NumPy) ------------------------------------------------------------------
     def params(self, x_ref, u_trim, d) -> np.ndarray:

@@ -221,7 +221,6 @@ class RtiSolver:
         self._cost_w = (q2 / 2.0, np.array(([wts.tilt] * 4 if o.tilting else [])
                                            + [wts.throttle] * 4),
                         wts.terminal_factor, wts.tilt_rate)
-        self._free_lbw, self._free_ubw = o.lbw.copy(), o.ubw.copy()   # s_0 rows: state bounds
         self._prepared: _Prepared | None = None
         self.last_prepare_s = 0.0
         self.qp_iterations = 0
@@ -245,7 +244,7 @@ class RtiSolver:
         a_prev = np.asarray(u_prev, float)[0:4] if o.tilting else None
         if o.n_lag and y0 is None:
             y0 = u_prev
-        w = np.clip(o.pack(guess[1], guess[0], a_prev, y0), self._free_lbw, self._free_ubw)
+        w = np.clip(o.pack(guess[1], guess[0], a_prev, y0), o.lbw, o.ubw)
         x_ref = np.asarray(x_ref, float).reshape(self._N + 1, self._nx)
         d = np.asarray(d, float).reshape(6)
         if self.qp_interface == "direct":

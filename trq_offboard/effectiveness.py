@@ -1,0 +1,90 @@
+"""Motor effectiveness observer: what fraction e_i of its command each motor produces.
+
+The vehicle's motor i answers a throttle command c_i with an output y_i that follows
+    y_i' = (e_i c_i - y_i) / T          (T: the motor time constant of the vehicle file)
+where e_i = 1 for a healthy motor and e_i < 1 for a loss of effectiveness (the paper's fault:
+the throttle actually produced is e_i times the command). The extended state observer (eso.py)
+already sees what a fault does, as a disturbance d on the accelerations; an additive d cannot tell
+the NMPC that the motor's loss will keep growing as its output falls behind, nor that raising its
+command buys only e_i of the thrust. This observer reads the same d as motor outputs and estimates
+e_i, so that the NMPC can plan with it (controller.py: the effective throttle e_i c_i).
+
+Per control step (controller.py):
+  1. the outputs the motors should produce if healthy, y_nom (the commands in effect through the
+     motors' lags, as the observer's b0 uses them), and the model's sensitivity of the vertical
+     (NED z) and the three body angular accelerations to each motor's throttle, J (4x4) at y_nom;
+  2. the outputs the disturbance says they produce: y_meas = y_nom + J^-1 [d_z, d_p, d_q, d_r]
+     (a fault moves these four together in one motor's pattern; wind mostly moves the horizontal
+     force, which is left out);
+  3. per motor, a second-order observer of the first-order motor model with e as an unknown
+     constant gain, both poles at -p (p: bandwidth_rad_s):
+         yh' = (eh c - yh) / T + l1 (y_meas - yh)          l1 = 2 p - 1 / T
+         eh' = l2 (y_meas - yh)                            l2 = p^2 T / c
+     integrated over the control period in `substeps` Euler steps with the commands in effect
+     (c >= idle > 0) and y_meas interpolated linearly; eh is kept in [e_min, 1] (held at the bound
+     while the correction pushes past it).
+A step in e first shows as a change in the *slope* of y (the motor starts lagging towards e c):
+the observer reads the fault's size from the slope before the output has fallen, so the NMPC
+plans for the whole loss about one motor time constant sooner than an additive estimate.
+
+Pure: `update` is a function of the observer's state and its arguments.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from trq_offboard.config import EffectivenessConfig
+
+__all__ = ["MotorEffectivenessObserver"]
+
+
+class MotorEffectivenessObserver:
+    def __init__(self, cfg: EffectivenessConfig, motor_time_constant_s: float,
+                 n_motors: int = 4) -> None:
+        if motor_time_constant_s <= 0.0:
+            raise ValueError("the motor effectiveness observer needs a motor time constant > 0 "
+                             f"(got {motor_time_constant_s!r} s in the vehicle file)")
+        self.cfg = cfg
+        self.T = float(motor_time_constant_s)
+        p = cfg.bandwidth_rad_s
+        self.l1 = 2.0 * p - 1.0 / self.T
+        self.l2T = p * p * self.T                 # l2 = l2T / c
+        self.n = n_motors
+        self.e = np.ones(n_motors)                # estimated effectiveness
+        self.y = np.zeros(n_motors)               # estimated motor outputs (throttle %)
+        self._y_meas_prev: np.ndarray | None = None
+
+    def reset(self, y_outputs: np.ndarray) -> None:
+        """Healthy motors producing y_outputs (throttle %)."""
+        self.e = np.ones(self.n)
+        self.y = np.array(y_outputs, float).reshape(self.n)
+        self._y_meas_prev = self.y.copy()
+
+    def update(self, y_meas: np.ndarray, segments, dt_s: float) -> np.ndarray:
+        """Advance over dt_s to the measured outputs y_meas (4, %), with `segments` the commands
+        in effect as (duration_s, c (4, %)) pieces covering dt_s. Returns e (4)."""
+        y_meas = np.asarray(y_meas, float).reshape(self.n)
+        if self._y_meas_prev is None:
+            self.reset(y_meas)
+        lo, T, sub = self.cfg.min_effectiveness, self.T, self.cfg.substeps
+        y, e, y0 = self.y.copy(), self.e.copy(), self._y_meas_prev
+        t = 0.0
+        for dur, c in segments:
+            if dur <= 0.0:
+                continue
+            c = np.maximum(np.asarray(c, float).reshape(self.n), 1e-6)
+            n = max(1, int(math.ceil(sub * dur / dt_s - 1e-9)))
+            h = dur / n
+            for _ in range(n):
+                t += h
+                err = y0 + (min(t, dt_s) / dt_s) * (y_meas - y0) - y
+                dy = (e * c - y) / T + self.l1 * err
+                de = (self.l2T / c) * err
+                y = y + h * dy
+                e = np.clip(e + h * de, lo, 1.0)
+        self.y, self.e = y, e
+        self._y_meas_prev = y_meas.copy()
+        return e.copy()
