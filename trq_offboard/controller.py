@@ -11,7 +11,11 @@ reference.ConstantReference for a fixed target); the NMPC samples it at t_s + k 
 the one this controller returned last).
 
 Per step: (1) the observer (if any) is advanced one control period with the measurement and
-the applied command and gives d; (2) the NMPC is solved from the measured state with d held
+the applied command and gives d; with motor_effectiveness, the motor effectiveness observer
+(effectiveness.py) reads d as one motor's output deficit and estimates each motor's
+effectiveness e: the NMPC then plans the effective throttles (e x command, bounded by
+[e idle, e 100]; the command sent is the plan / e), from the motors' estimated outputs, with d
+less the motors' share; (2) the NMPC is solved from the measured state with d held
 over the horizon, warm-started from the previous plan shifted by the elapsed time (first step:
 the allocation's hover trim, rolled out through the model); (3) on a solver failure the previous
 plan shifted in time is flown while it lasts, then the allocation's hover command; (4) the
@@ -85,7 +89,8 @@ class Controller:
         # the motor effectiveness observer (motor_effectiveness): reads the observer's d as motor
         # outputs; it needs the actuators' lags (its motor model is the lag)
         self.effectiveness = (MotorEffectivenessObserver(cfg.effectiveness,
-                                                         vm.motor_time_constant_s)
+                                                         vm.motor_time_constant_s,
+                                                         cfg.control_dt_s)
                               if cfg.effectiveness is not None and self.eso is not None else None)
         self._nt = 4 if self.model.tilting else 0         # where the throttles start in u
         if self.effectiveness is not None and not hasattr(getattr(self.solver, "ocp", None),
@@ -136,9 +141,10 @@ class Controller:
         if self.eso is not None:
             eta_dot = np.asarray(self._euler_rate(x)).ravel()
             self.eso.reset(self.eso.measurement(x), np.concatenate([x[3:6], eta_dot]))
+        self._scale = np.ones(self.model.nu)
         if self.effectiveness is not None:
             self.effectiveness.reset(self._last_u[self._nt:])
-        self._scale = np.ones(self.model.nu)
+            self.solver.ocp.set_throttle_scale(np.ones(4))
         self._plan = None
         self._y_act = None
         self._last_t = float(t_s)
@@ -333,32 +339,41 @@ class Controller:
             u, source = self._fallback(t_act)
         return self._finish(u, source, info, d, out_err)
 
-    def _effective(self, x, d, y_nom, t0, t1, t_act):
-        """With the motor effectiveness observer: advance it over [t0, t1] and return (d less
-        the motors' share, the predictor's actuator path over [t1, t_act] and the actuators'
-        outputs at t_act, both in effective throttles). y_nom: the actuators' outputs at t1 if
-        the motors were healthy (the observer's b0 flies those)."""
-        nt, eff = self._nt, self.effectiveness
+    def _motor_deficit(self, x: np.ndarray, d: np.ndarray, y_nom: np.ndarray) -> np.ndarray:
+        """The motors' outputs less their healthy ones y_nom (4, throttle %) that explain the
+        disturbance d: one motor at a time, the one whose pattern (the model's sensitivity of
+        the vertical, roll and pitch accelerations to its throttle) explains most of d[2:5]
+        with a deficit; the others 0."""
+        nt = self._nt
         jac = self.model.motor_jacobian(x, y_nom).reshape(4, 4, order="F")[0:3]
         r = d[2:5]
-        # one motor at a time: the deficit of motor i alone that best explains the vertical,
-        # roll and pitch disturbances; the motor whose pattern explains most of it (a deficit,
-        # < 0) takes it
+        # the least-squares deficit of each motor alone; the largest share of |r|^2 explained
         num = jac.T @ r
         den = np.maximum(np.einsum("ij,ij->j", jac, jac), 1e-12)
         fit = np.where(num < 0.0, num * num / den, -1.0)
         i = int(np.argmax(fit))
         dz = np.zeros(4)
         if fit[i] > 0.0:
-            # the thrust is quadratic in the throttle: the exact deficit uses the secant, the
-            # slope at the midpoint between the healthy and the true output (two refinements)
+            # the thrust and torque curves are quadratic in the throttle: Gauss-Newton on
+            # |A(y + delta) - A(y) - r| (the change A is the mean of the two end slopes times
+            # delta, exactly), from the tangent's estimate; quadratic convergence, 3 steps
             delta = num[i] / den[i]
-            u_mid = y_nom.copy()
-            for _ in range(2):
-                u_mid[nt + i] = y_nom[nt + i] + 0.5 * delta
-                col = self.model.motor_jacobian(x, u_mid).reshape(4, 4, order="F")[0:3, i]
-                delta = float(col @ r) / max(float(col @ col), 1e-12)
+            col0, u_end = jac[:, i], y_nom.copy()
+            for _ in range(3):
+                u_end[nt + i] = y_nom[nt + i] + delta
+                col1 = self.model.motor_jacobian(x, u_end).reshape(4, 4, order="F")[0:3, i]
+                rho = 0.5 * (col0 + col1) * delta - r
+                delta -= float(col1 @ rho) / max(float(col1 @ col1), 1e-12)
             dz[i] = min(0.0, delta)
+        return dz
+
+    def _effective(self, x, d, y_nom, t0, t1, t_act):
+        """With the motor effectiveness observer: advance it over [t0, t1] and return (d less
+        the motors' share, the predictor's actuator path over [t1, t_act] and the actuators'
+        outputs at t_act, both in effective throttles). y_nom: the actuators' outputs at t1 if
+        the motors were healthy (the observer's b0 flies those)."""
+        nt, eff = self._nt, self.effectiveness
+        dz = self._motor_deficit(x, d, y_nom)
         if t1 > t0:
             segs = [(hi - lo, u[nt:]) for lo, hi, u in self._in_effect(t0, t1)]
             e = eff.update(y_nom[nt:] + dz, segs, t1 - t0)

@@ -10,12 +10,18 @@ command buys only e_i of the thrust. This observer reads the same d as motor out
 e_i, so that the NMPC can plan with it (controller.py: the effective throttle e_i c_i).
 
 Per control step (controller.py):
-  1. the outputs the motors should produce if healthy, y_nom (the commands in effect through the
-     motors' lags, as the observer's b0 uses them), and the model's sensitivity of the vertical
-     (NED z) and the three body angular accelerations to each motor's throttle, J (4x4) at y_nom;
-  2. the outputs the disturbance says they produce: y_meas = y_nom + J^-1 [d_z, d_p, d_q, d_r]
-     (a fault moves these four together in one motor's pattern; wind mostly moves the horizontal
-     force, which is left out);
+  1. the outputs the motors would produce if healthy, y_nom (the commands in effect through the
+     motors' lags: what the observer's b0 flies), and the model's sensitivity of the vertical
+     (NED z) and the body roll and pitch accelerations to each motor's throttle at y_nom;
+  2. isolation (Controller._motor_deficit): the deficit of each motor alone that best explains
+     the disturbance's vertical, roll and pitch parts in least squares; the motor whose deficit
+     (< 0) explains the largest share takes it, refined by Gauss-Newton on the quadratic thrust
+     and torque curves (exact to 1e-3 % of throttle); the other motors get none. So
+     y_meas = y_nom + that deficit. Yaw is left out (the rotors' drag torque moves it little: a
+     small yaw disturbance would read as a large deficit) and so is the horizontal force (wind).
+     One fault at a time: a second motor's loss stays in the additive d; and a torque from
+     elsewhere (a gust's moment) reads as a small deficit of the motor that would cause it (in
+     the paper's 8 m/s wind the healthy estimates stay above 0.94);
   3. per motor, a second-order observer of the first-order motor model with e as an unknown
      constant gain, both poles at -p (p: bandwidth_rad_s):
          yh' = (eh c - yh) / T + l1 (y_meas - yh)          l1 = 2 p - 1 / T
@@ -23,6 +29,9 @@ Per control step (controller.py):
      integrated over the control period in `substeps` Euler steps with the commands in effect
      (c >= idle > 0) and y_meas interpolated linearly; eh is kept in [e_min, 1] (held at the bound
      while the correction pushes past it).
+  4. the controller hands the NMPC the effective throttles: bounds [e idle, e 100] %, the command
+     sent is the plan / e, the actuators start from the estimated outputs (y_nom with yh for
+     the motors) and d loses the motors' share, b0(yh) - b0(y_nom).
 A step in e first shows as a change in the *slope* of y (the motor starts lagging towards e c):
 the observer reads the fault's size from the slope before the output has fallen, so the NMPC
 plans for the whole loss about one motor time constant sooner than an additive estimate.
@@ -43,12 +52,13 @@ __all__ = ["MotorEffectivenessObserver"]
 
 class MotorEffectivenessObserver:
     def __init__(self, cfg: EffectivenessConfig, motor_time_constant_s: float,
-                 n_motors: int = 4) -> None:
+                 control_dt_s: float, n_motors: int = 4) -> None:
         if motor_time_constant_s <= 0.0:
             raise ValueError("the motor effectiveness observer needs a motor time constant > 0 "
                              f"(got {motor_time_constant_s!r} s in the vehicle file)")
         self.cfg = cfg
         self.T = float(motor_time_constant_s)
+        self.h_max = control_dt_s / cfg.substeps      # the longest Euler substep
         p = cfg.bandwidth_rad_s
         self.l1 = 2.0 * p - 1.0 / self.T
         self.l2T = p * p * self.T                 # l2 = l2T / c
@@ -65,18 +75,20 @@ class MotorEffectivenessObserver:
 
     def update(self, y_meas: np.ndarray, segments, dt_s: float) -> np.ndarray:
         """Advance over dt_s to the measured outputs y_meas (4, %), with `segments` the commands
-        in effect as (duration_s, c (4, %)) pieces covering dt_s. Returns e (4)."""
+        in effect as (duration_s, c (4, %)) pieces covering dt_s. Returns e (4). A gap longer
+        than a control period (lost samples) gets proportionally more substeps, each at most
+        control period / substeps."""
         y_meas = np.asarray(y_meas, float).reshape(self.n)
         if self._y_meas_prev is None:
             self.reset(y_meas)
-        lo, T, sub = self.cfg.min_effectiveness, self.T, self.cfg.substeps
+        lo, T = self.cfg.min_effectiveness, self.T
         y, e, y0 = self.y.copy(), self.e.copy(), self._y_meas_prev
         t = 0.0
         for dur, c in segments:
             if dur <= 0.0:
                 continue
             c = np.maximum(np.asarray(c, float).reshape(self.n), 1e-6)
-            n = max(1, int(math.ceil(sub * dur / dt_s - 1e-9)))
+            n = max(1, int(math.ceil(dur / self.h_max - 1e-9)))
             h = dur / n
             for _ in range(n):
                 t += h
