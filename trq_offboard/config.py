@@ -549,6 +549,10 @@ def _controller(k: _Keys, path: Path) -> ControllerConfig:
     act_states = k.text("actuator_states", ("on", "off", "auto"), default="auto")
     tilt_rate_limit = k.text("tilt_rate_limit", ("horizon", "first_step"), default="horizon")
     effectiveness = _effectiveness(k, observer)
+    if effectiveness is not None and applied_input == "outputs":
+        raise k.error("applied_input", applied_input, "commanded with motor_effectiveness on (the "
+                      "outputs the vehicle reports already carry the motors' loss: the observer "
+                      "would see no fault to estimate)")
     eso = None
     if observer != "none":
         base = load_eso(path.parent / eso_file)

@@ -83,9 +83,6 @@ class Controller:
         # period; below it the observer's delayed b0 alone does better (nmpc.yaml: measured)
         predict = cfg.predicts_delay
         self.delay_s = cfg.applied_delay_s if predict else 0.0
-        # auto: also whenever the NMPC carries the lag states, which must not meet an observer
-        # whose b0 ignores the lags (paper_fault50 with actuator_states on: 0.206 m with the
-        # observer's b0 unlagged, 0.022 m lagged)
         # the motor effectiveness observer (motor_effectiveness): reads the observer's d as motor
         # outputs; it needs the actuators' lags (its motor model is the lag)
         self.effectiveness = (MotorEffectivenessObserver(cfg.effectiveness,
@@ -98,6 +95,9 @@ class Controller:
             raise ValueError(f"{cfg.file}: motor_effectiveness needs a solver on nmpc/ocp.py's "
                              "Ocp (its throttle bounds follow the estimate)")
         self._scale = np.ones(self.model.nu)              # plan (effective) = scale x command
+        # auto: also whenever the NMPC carries the lag states, which must not meet an observer
+        # whose b0 ignores the lags (paper_fault50 with actuator_states on: 0.206 m with the
+        # observer's b0 unlagged, 0.022 m lagged); always with the effectiveness observer
         self._lagged = self.effectiveness is not None or cfg.lagged_actuators == "on" or (
             cfg.lagged_actuators == "auto"
             and ((predict and self.delay_s > 0.0) or cfg.nmpc_actuator_states))

@@ -95,8 +95,8 @@ def test_controller_keys(tmp_path):
     src["vehicle"] = str(PARAMS / "vehicle/trq.yaml")
     src["observer"]["file"] = str(PARAMS / "controller/eso.yaml")
 
-    def load(block, observer="nonlinear"):
-        d = dict(src, motor_effectiveness=block,
+    def load(block, observer="nonlinear", applied_input="commanded"):
+        d = dict(src, motor_effectiveness=block, applied_input=applied_input,
                  observer=dict(src["observer"], kind=observer))
         p = tmp_path / "c.yaml"
         p.write_text(yaml.safe_dump(d))
@@ -113,6 +113,8 @@ def test_controller_keys(tmp_path):
         load(dict(good, min=0.0))
     with pytest.raises(ConfigError, match=r"motor_effectiveness\.gain.*unknown"):
         load(dict(good, gain=2.0))
+    with pytest.raises(ConfigError, match=r"applied_input.*outputs.*motor_effectiveness"):
+        load(good, applied_input="outputs")
 
 
 def test_a_long_gap_stays_stable():
