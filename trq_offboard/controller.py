@@ -292,6 +292,7 @@ class Controller:
                      if applied is not None and self.cfg.applied_input == "outputs"
                      else self._last_u)
         d = np.zeros(6)
+        d_obs = d                               # the observer's own estimate (logged)
         out_err = 0.0
         # the actuators through their lags from the last step to when this command acts: one
         # path for the observer (before t_s) and the predictor (after it)
@@ -311,7 +312,7 @@ class Controller:
                 else:
                     b0 = self._b0_delayed(x, self._last_t, t_s, path)
                 self.eso.update(y, self.eso.b0_of(b0), dt)
-            d = self.eso.disturbance(x[6:9])
+            d = d_obs = self.eso.disturbance(x[6:9])
             out_err = self.eso.output_error(y)
             if self.effectiveness is not None:
                 d, path, y_act = self._effective(x, d, y_now, t_prev, t_s, t_act)
@@ -337,7 +338,7 @@ class Controller:
                 info = SolveInfo(SolveStatus.FAILED, info.iterations, info.solve_time_s,
                                  float("nan"), "non-finite plan")
             u, source = self._fallback(t_act)
-        return self._finish(u, source, info, d, out_err)
+        return self._finish(u, source, info, d_obs, out_err)
 
     def _motor_deficit(self, x: np.ndarray, d: np.ndarray, y_nom: np.ndarray) -> np.ndarray:
         """The motors' outputs less their healthy ones y_nom (4, throttle %) that explain the

@@ -71,7 +71,8 @@ class CommandSource(enum.Enum):
 class StepInfo:
     source: CommandSource
     solve: SolveInfo
-    disturbance: tuple[float, ...]     # d (6) used in the prediction model
+    disturbance: tuple[float, ...]     # d (6): the observer's estimate (the prediction model gets
+                                       # it less the motors' share with motor_effectiveness)
     output_error: float                # (y_hat - y)^T (y_hat - y) of the observer (0 if none)
     clipped: int                       # actuator values clipped by the last line of defence
     clip_count_total: int

@@ -24,8 +24,9 @@ class _NoSolver:
 
 
 def controller(lagged: str, delay_s: float = DELAY_S) -> Controller:
+    # the predictor alone: without the motor effectiveness observer (which needs an NMPC)
     cfg = dataclasses.replace(load_controller(CTRL), applied_delay_s=delay_s,
-                              lagged_actuators=lagged)
+                              lagged_actuators=lagged, effectiveness=None)
     assert cfg.delay_compensation == "auto"
     return Controller(cfg, solver=_NoSolver())
 
@@ -105,7 +106,8 @@ def test_no_delay_no_prediction():
     short = controller("auto", delay_s=0.005)
     assert short.delay_s == 0.0 and not short._lagged
     cfg = dataclasses.replace(load_controller(CTRL), applied_delay_s=0.005,
-                              delay_compensation="predict", lagged_actuators="auto")
+                              delay_compensation="predict", lagged_actuators="auto",
+                              effectiveness=None)
     forced = Controller(cfg, solver=_NoSolver())
     assert forced.delay_s == 0.005 and forced._lagged
 
