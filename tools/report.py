@@ -4,6 +4,8 @@
                        and Fig. 7 for a time-varying fault)
     observer.png       the observer's disturbance estimate against the true disturbance (Fig. 5)
     errors.png         position and attitude errors over time, fault onset marked (Fig. 6)
+    effectiveness.png  each motor's estimated effectiveness against the true one (controllers
+                       with motor_effectiveness on), with a zoom on the fault's first 0.2 s
 """
 
 from __future__ import annotations
@@ -200,6 +202,39 @@ def figures(scenario, runs, out: Path) -> list[Path]:
         axes[2, 1].set_xlabel("vehicle time s")
         fig.suptitle(f"{scenario.name}: disturbance seen by the observer of {name}")
         path = out / "observer.png"
+        fig.savefig(path, dpi=110, bbox_inches="tight")
+        plt.close(fig)
+        made.append(path)
+
+    # --- motor effectiveness: the estimate against the truth ---
+    estimated = [(n, tr, st) for n, tr, st in data if "eff_motor1" in st
+                 and np.nanmin(np.concatenate([st[f"eff_motor{i}"] for i in range(1, 5)])) < 1.0]
+    if estimated:
+        zoom = onset_s is not None
+        fig, axes = plt.subplots(1, 2 if zoom else 1, figsize=(12 if zoom else 7, 4), squeeze=False)
+        for k, (name, truth, steps) in enumerate(estimated):
+            t = steps["stamp_us"] * 1e-6
+            tt = truth["t_us"] * 1e-6
+            for i in range(1, 5):
+                # the whole flight in s; the zoom in ms from the onset
+                for a, (t0, unit) in zip(axes[0], ((0.0, 1.0), (onset_s or 0.0, 1e3))):
+                    a.plot((tt - t0) * unit, truth[f"motor{i}_factor"], color=f"C{i - 1}", ls=":",
+                           lw=1, label=f"motor {i} true" if k == 0 else None)
+                    a.plot((t - t0) * unit, steps[f"eff_motor{i}"], color=f"C{i - 1}", lw=1,
+                           label=f"motor {i} {name}")
+        axes[0, 0].set_ylabel("effectiveness")
+        axes[0, 0].set_xlabel("vehicle time s")
+        for a in axes[0]:
+            a.grid(alpha=0.3)
+        if zoom:
+            axes[0, 0].axvline(onset_s, color="red", ls=":", lw=1)
+            axes[0, 1].axvline(0.0, color="red", ls=":", lw=1)
+            axes[0, 1].set_xlim(-20.0, 200.0)
+            axes[0, 1].set_xlabel("ms from the fault's onset")
+            axes[0, 1].set_title("the fault's first 0.2 s (estimates every control period)")
+        axes[0, 0].legend(fontsize=7)
+        fig.suptitle(f"{scenario.name}: the motors' estimated effectiveness against the truth")
+        path = out / "effectiveness.png"
         fig.savefig(path, dpi=110, bbox_inches="tight")
         plt.close(fig)
         made.append(path)

@@ -15,7 +15,7 @@ import pytest
 from conftest import PARAMS, ROOT
 
 ENV = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
-FIGURES = ("trajectories.png", "errors.png", "observer.png")
+FIGURES = ("trajectories.png", "errors.png", "observer.png", "effectiveness.png")
 
 
 def run_scenario(*args: str, cwd, timeout: float):
