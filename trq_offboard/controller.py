@@ -213,13 +213,7 @@ class Controller:
             for a, b in zip(cuts[:-1], cuts[1:]):
                 if b <= a or not math.isfinite(a):
                     continue
-                n = max(1, math.ceil((b - a) / PREDICT_STEP_S - 1e-9)) if a >= t0 else 1
-                h = (b - a) / n
-                for i in range(n):
-                    if a >= t0:
-                        end = b if i == n - 1 else a + (i + 1) * h
-                        path.append((a + i * h, end, self._lag(y, u, 0.5 * h)))
-                    y = self._lag(y, u, h)
+                y = self._walk_segment(y, u, a, b, path if a >= t0 else None)
                 if cut is not None and b == cut:
                     y_cut = y.copy()
         if cut is not None and y_cut is None:
@@ -232,14 +226,22 @@ class Controller:
         throttle), as _actuator_path's steps."""
         y, path = np.asarray(y0, float).copy(), []
         for lo, hi, u in self._in_effect(t0, t1):
-            n = max(1, math.ceil((hi - lo) / PREDICT_STEP_S - 1e-9))
-            h = (hi - lo) / n
-            ue = u * scale
-            for i in range(n):
-                end = hi if i == n - 1 else lo + (i + 1) * h
-                path.append((lo + i * h, end, self._lag(y, ue, 0.5 * h)))
-                y = self._lag(y, ue, h)
+            y = self._walk_segment(y, u * scale, lo, hi, path)
         return path, y
+
+    def _walk_segment(self, y: np.ndarray, u: np.ndarray, a: float, b: float,
+                      path: list | None) -> np.ndarray:
+        """The actuators y after [a, b] under the command u: steps of at most PREDICT_STEP_S,
+        each appended to `path` as (start, end, y_mid); None: one step, nothing recorded (the
+        history before the path starts)."""
+        n = max(1, math.ceil((b - a) / PREDICT_STEP_S - 1e-9)) if path is not None else 1
+        h = (b - a) / n
+        for i in range(n):
+            if path is not None:
+                end = b if i == n - 1 else a + (i + 1) * h
+                path.append((a + i * h, end, self._lag(y, u, 0.5 * h)))
+            y = self._lag(y, u, h)
+        return y
 
     def _predict(self, x: np.ndarray, t0: float, t1: float, d: np.ndarray,
                  path=None) -> np.ndarray:
