@@ -25,8 +25,8 @@ from typing import Any, Callable
 import yaml
 
 __all__ = ["ConfigError", "RotorGeometry", "Curve", "VehicleModel", "EsoChannelGains",
-           "EsoConfig", "EffectivenessConfig", "Weights", "SolverConfig", "ReferenceConfig", "ControllerConfig",
-           "load_vehicle_model", "load_eso", "load_controller", "PARAMS_DIR"]
+           "EsoConfig", "EffectivenessConfig", "Weights", "SolverConfig", "ReferenceConfig",
+           "ControllerConfig", "load_vehicle_model", "load_eso", "load_controller", "PARAMS_DIR"]
 
 PARAMS_DIR = Path(__file__).resolve().parent.parent / "params"
 
