@@ -302,7 +302,10 @@ class Controller:
         path, y_act, y_now = None, None, None
         t_prev = self._last_t
         if self._lagged:
-            path, y_act, y_now = self._actuator_walk(min(self._last_t, t_s), t_act, t_s)
+            # with the effectiveness observer the predictor's part (after t_s) is walked in
+            # effective throttles by _effective: the healthy walk stops at t_s
+            t_end = t_s if self.effectiveness is not None else t_act
+            path, y_act, y_now = self._actuator_walk(min(self._last_t, t_s), t_end, t_s)
         elif self._act_states:
             y_act = self._actuator_walk(t_act, t_act)[1]
         if self.eso is not None:
