@@ -18,7 +18,7 @@ from sil_vehicle.yamlcheck import ConfigError, Section, load_with_extends
 __all__ = ["ConfigError", "VehicleParams", "SimParams", "RotorParams", "load_vehicle", "load_sim",
            "STREAMS", "PARAMS_DIR"]
 
-PARAMS_DIR = Path(__file__).resolve().parent.parent / "params"
+from trq_params import DIR as PARAMS_DIR  # noqa: E402  (the shipped parameter files)
 
 # Telemetry streams the vehicle can send, by MAVLink message name.
 STREAMS = ("HEARTBEAT", "SYS_STATUS", "ODOMETRY", "ATTITUDE", "LOCAL_POSITION_NED",

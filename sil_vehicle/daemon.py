@@ -21,7 +21,8 @@ import time
 from pathlib import Path
 
 from sil_vehicle.clock import RealTimePacer
-from sil_vehicle.config import PARAMS_DIR, ConfigError, SimParams, load_sim, parse_endpoint
+import trq_params
+from sil_vehicle.config import ConfigError, SimParams, load_sim, parse_endpoint
 from sil_vehicle.faultscript import load_script
 from sil_vehicle.log import FlightLog, Tlog
 from sil_vehicle.mavlink.codec import Codec
@@ -277,11 +278,11 @@ def build_parser() -> argparse.ArgumentParser:
         prog="trq-sil-vehicle",
         description="SIL tilt-rotor (or fixed-rotor) vehicle speaking MAVLink 2 over UDP like a "
                     "PX4 SITL autopilot (system 1, component 1). See sil_vehicle/PROTOCOL.md.")
-    p.add_argument("--sim", type=Path, default=PARAMS_DIR / "sim" / "default.yaml",
-                   help="simulation settings YAML (default: params/sim/default.yaml)")
-    p.add_argument("--vehicle", type=Path, default=None,
-                   help="airframe YAML, overriding the one the settings name "
-                        "(params/vehicle/trq.yaml or quad.yaml)")
+    p.add_argument("--sim", default="default",
+                   help="simulation settings: a built-in name (default) or a YAML path")
+    p.add_argument("--vehicle", default=None,
+                   help="airframe, overriding the one the settings name: a built-in name "
+                        "(trq, quad) or a YAML path")
     p.add_argument("--mode", choices=("lockstep", "realtime"), default=None,
                    help="clock mode (default: from the settings)")
     p.add_argument("--speed-up", type=float, default=None,
@@ -308,8 +309,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="with a key: still serve unsigned read-only requests (heartbeat, "
                         "parameter reads) on the ground-station link")
     p.add_argument("--gusts", action="store_true", help="turn Dryden gusts on")
-    p.add_argument("--faults", type=Path, default=None,
-                   help="fault script YAML (params/faults/*.yaml) played in vehicle time")
+    p.add_argument("--faults", default=None,
+                   help="fault script played in vehicle time: a built-in name (motor1_50, ...) "
+                        "or a YAML path")
     p.add_argument("--log-dir", type=Path, default=None,
                    help="directory for flight.csv and vehicle.tlog (default: logs/vehicle-<time>)")
     p.add_argument("--no-log", action="store_true", help="write no logs")
@@ -361,14 +363,16 @@ def main(argv: list[str] | None = None) -> int:
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO,
                         format="%(asctime)s %(name)s %(levelname)s %(message)s")
     try:
-        sim = apply_overrides(load_sim(args.sim, args.vehicle), args)
+        sim = apply_overrides(load_sim(trq_params.resolve("sim", args.sim),
+                                       None if args.vehicle is None else
+                                       trq_params.resolve("vehicle", args.vehicle)), args)
         events = ()
         if args.faults is not None:
             vp = sim.vehicle
-            events = load_script(args.faults, (math.degrees(vp.tilt_min_rad),
+            events = load_script(trq_params.resolve("faults", args.faults), (math.degrees(vp.tilt_min_rad),
                                                math.degrees(vp.tilt_max_rad)))
         key = load_key(args.signing_key_file) if args.signing_key_file else None
-    except (ConfigError, SigningKeyError) as exc:
+    except (ConfigError, SigningKeyError, trq_params.UnknownName) as exc:
         print(f"trq-sil-vehicle: {exc}", file=sys.stderr)
         return 2
     log_dir = None

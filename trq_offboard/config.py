@@ -28,7 +28,7 @@ __all__ = ["ConfigError", "RotorGeometry", "Curve", "VehicleModel", "EsoChannelG
            "EsoConfig", "EffectivenessConfig", "Weights", "SolverConfig", "ReferenceConfig",
            "ControllerConfig", "load_vehicle_model", "load_eso", "load_controller", "PARAMS_DIR"]
 
-PARAMS_DIR = Path(__file__).resolve().parent.parent / "params"
+from trq_params import DIR as PARAMS_DIR  # noqa: E402  (the shipped parameter files)
 
 
 class ConfigError(ValueError):

@@ -19,7 +19,8 @@ import sys
 import time
 from pathlib import Path
 
-from trq_offboard.config import PARAMS_DIR, ConfigError, load_controller
+import trq_params
+from trq_offboard.config import ConfigError, load_controller
 from trq_offboard.link.signing import read_key_file
 from trq_offboard.link.udp import Connection, MavlinkUdp
 from trq_offboard.link.wire import HOME_GROUND_DOWN_M, tilt_half_range
@@ -30,11 +31,8 @@ log = logging.getLogger("trq_offboard")
 
 
 def resolve_controller(text: str) -> Path:
-    """A path, or the name of a file in params/controller/ (trq_nmpc_eso, trq_nmpc, quad_nmpc)."""
-    path = Path(text)
-    if path.suffix in (".yaml", ".yml") or path.exists():
-        return path
-    return PARAMS_DIR / "controller" / f"{text}.yaml"
+    """A path, or the name of a built-in controller file (trq_nmpc_eso, trq_nmpc, quad_nmpc)."""
+    return trq_params.resolve("controller", text)
 
 
 def build_parser() -> argparse.ArgumentParser:
