@@ -18,7 +18,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-__all__ = ["DIR", "KINDS", "builtin", "resolve", "names", "UnknownName"]
+__all__ = ["DIR", "KINDS", "builtin", "resolve", "exists", "names", "is_name", "UnknownName"]
 
 DIR = Path(__file__).resolve().parent
 """The folder of the shipped files (wheels install unzipped, so this is a real folder)."""
@@ -62,3 +62,11 @@ def resolve(kind: str, name_or_path: str | Path) -> Path:
     if isinstance(name_or_path, Path) or not is_name(name_or_path):
         return Path(name_or_path)
     return builtin(kind, name_or_path)
+
+
+def exists(kind: str, name_or_path: str | Path) -> bool:
+    """Whether `resolve` would find a file (a built-in name, or a path to a file)."""
+    try:
+        return resolve(kind, name_or_path).is_file()
+    except UnknownName:
+        return False

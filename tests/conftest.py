@@ -9,14 +9,21 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parent.parent
-if str(ROOT) not in sys.path:          # the package is importable even when not installed
-    sys.path.insert(0, str(ROOT))
+import trq_params
 
-PARAMS = ROOT / "params"
+ROOT = Path(__file__).resolve().parent.parent
+PARAMS = trq_params.DIR
 SIM_DEFAULT = PARAMS / "sim" / "default.yaml"
 TRQ_YAML = PARAMS / "vehicle" / "trq.yaml"
 QUAD_YAML = PARAMS / "vehicle" / "quad.yaml"
+
+
+def cli(command: str) -> list[str]:
+    """The argv prefix of an installed console script (trq-scenario, ...): the one beside this
+    interpreter, as a user of this environment runs it."""
+    path = Path(sys.executable).parent / command
+    assert path.is_file(), f"{command} is not installed beside {sys.executable}: pip install -e ."
+    return [str(path)]
 
 
 def free_udp_port() -> int:

@@ -1,5 +1,5 @@
-"""Fault campaigns on Dask (tools/campaign.py) and the in-process flight they are made of
-(tools/inprocess.py).
+"""Fault campaigns on Dask (trq-campaign) and the in-process flight they are made of
+(trq_lab.harness).
 
 - the smoke campaign runs on a LocalCluster of 2 workers and writes flights.csv, report.md and
   the heat maps; deleting one result and running again flies that flight only;
@@ -28,20 +28,16 @@ from pathlib import Path
 
 import pytest
 
-from conftest import PARAMS, ROOT
+from conftest import PARAMS, ROOT, cli
 
 pytest.importorskip("distributed")
 
-TOOLS = ROOT / "tools"
-if str(TOOLS) not in sys.path:
-    sys.path.insert(0, str(TOOLS))
-
-ENV = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+ENV = dict(os.environ)
 SMOKE = PARAMS / "campaigns" / "smoke.yaml"
 
 
 def run_campaign(*args: str, timeout: float = 180.0) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, str(TOOLS / "campaign.py"), *map(str, args)],
+    return subprocess.run([*cli("trq-campaign"), *map(str, args)],
                           cwd=ROOT, env=ENV, capture_output=True, text=True, timeout=timeout)
 
 
@@ -64,7 +60,7 @@ def test_smoke_campaign_runs_on_two_workers(smoke):
     assert "2 worker(s)" in r.stderr
     assert "flights/hour" in r.stdout
     assert "8/8 flights, 0 failed" in r.stderr           # the progress bar's last line
-    import campaign
+    from trq_lab import campaign
     plan = campaign.load_campaign(SMOKE)
     assert len(plan.flights) == 8
     assert set(flight_files(out)) == {f["id"] for f in plan.flights}
@@ -185,7 +181,7 @@ def test_failed_flights_are_recorded_and_max_flights_resumes(tmp_path):
     (lambda t: t.replace("at_s: 1.5", "onset_s: 1.5"), "grid.fault.onset_s", "unknown key"),
 ])
 def test_bad_campaign_names_file_and_key(tmp_path, edit, key, words):
-    import campaign
+    from trq_lab import campaign
     from sil_vehicle.yamlcheck import ConfigError
 
     bad = tmp_path / "typo.yaml"
@@ -208,7 +204,7 @@ def test_bad_campaign_exits_2_before_flying(tmp_path):
 
 
 def test_sampled_campaign_is_seeded(tmp_path):
-    import campaign
+    from trq_lab import campaign
 
     text = SMOKE.read_text().split("grid:")[0] + (
         "sample:\n  n: 5\n  seed: 3\n"
@@ -229,7 +225,7 @@ def test_link_axis_impairs_the_offboard_link(tmp_path):
     ids and seeds of a campaign without the axis; an impaired one reaches the flight (its truth
     log differs from the clean flight's with the same seed) and the controller is told the
     round trip; a bad key is refused with its name."""
-    import campaign
+    from trq_lab import campaign
     from sil_vehicle.yamlcheck import ConfigError
 
     base = SMOKE.read_text().replace("effectiveness: [1.0, 0.6]", "effectiveness: 0.6").replace(
@@ -249,7 +245,7 @@ def test_link_axis_impairs_the_offboard_link(tmp_path):
 
     lossy = dict(lossy, seed=clean["seed"])          # the same seed: only the link differs
     logs = tmp_path / "logs"
-    recs = [campaign.run_flight(spec, str(ROOT), str(logs)) for spec in (clean, lossy)]
+    recs = [campaign.run_flight(spec, str(logs)) for spec in (clean, lossy)]
     assert [r["error"] for r in recs] == [None, None]
     assert all(r["metrics"] is not None for r in recs)
     truth = [(logs / spec["id"] / "flight.csv").read_text() for spec in (clean, lossy)]
@@ -264,10 +260,10 @@ def test_link_axis_impairs_the_offboard_link(tmp_path):
 # --- the in-process flight against the daemons over UDP ---------------------------------------
 
 def _udp_lockstep_flight(out: Path, scenario) -> None:
-    """The two daemons over UDP, set up as run_scenario.py does, with the controller listening
+    """The two daemons over UDP, set up as trq-scenario does, with the controller listening
     before the vehicle starts (and the vehicle never free-running on wall time): the ideal
     lockstep flight, with which the in-process flight must agree."""
-    import run_scenario
+    from trq_lab import scenario as run_scenario
 
     c = scenario.controllers[0]
     ctrl_yaml, sim_yaml, vehicle_file, _ = run_scenario.prepare(scenario, c, out)
@@ -310,9 +306,9 @@ def _udp_lockstep_flight(out: Path, scenario) -> None:
 
 
 def test_inprocess_flight_reproduces_the_udp_flight(tmp_path):
-    import inprocess
-    import metrics
-    import run_scenario
+    from trq_lab import harness as inprocess
+    from trq_lab import metrics, overlays
+    from trq_lab import scenario as run_scenario
     from sil_vehicle.faultscript import load_script
     from trq_offboard.config import load_controller
 
@@ -330,7 +326,7 @@ def test_inprocess_flight_reproduces_the_udp_flight(tmp_path):
     udp_thread = threading.Thread(target=udp_flight)
     udp_thread.start()
 
-    cfg = load_controller(inprocess.controller_file(c))
+    cfg = load_controller(overlays.controller_file(c))
     sim = inprocess.sim_params(cfg.vehicle.file, cfg.control_rate_hz, seed=sc.seed,
                                wind_speed_m_s=sc.wind_speed_m_s, wind_from_deg=sc.wind_from_deg,
                                gusts=sc.gusts)
@@ -373,7 +369,7 @@ def test_inprocess_flight_reproduces_the_udp_flight(tmp_path):
 def test_every_shipped_campaign_loads(path):
     """The campaign files in params/campaigns/ load (strict keys, controllers that build) and
     expand to flights with distinct ids."""
-    import campaign
+    from trq_lab import campaign
 
     plan = campaign.load_campaign(path)
     ids = [f["id"] for f in plan.flights]
@@ -381,7 +377,7 @@ def test_every_shipped_campaign_loads(path):
 
 
 def test_link_delay_sweep_sweeps_the_one_way_delay():
-    import campaign
+    from trq_lab import campaign
 
     plan = campaign.load_campaign(PARAMS / "campaigns" / "link_delay_sweep.yaml")
     delays = sorted(campaign.flight_inputs(f)["link_delay_ms"] for f in plan.flights)
@@ -391,7 +387,7 @@ def test_link_delay_sweep_sweeps_the_one_way_delay():
 
 def test_summary_median_of_an_even_count_is_the_mean_of_the_middle_two():
     """Six flights of one cell: the median RMSE is the mean of the 3rd and 4th, not the 4th."""
-    import campaign
+    from trq_lab import campaign
     rmse = [0.043, 0.062, 0.065, 0.068, 0.040, 0.048]
     rows = [dict(controller="c", fault_kind="motor", severity=0.5, wind_speed_m_s=8.0,
                  wind_direction_deg=0.0, wind_gusts=False, success=True, crashed=False,

@@ -23,11 +23,10 @@ from pymavlink import mavutil
 from conftest import free_udp_port
 
 ROOT = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(ROOT / "tools"))
-import metrics  # noqa: E402
-from mavclient import MavClient  # noqa: E402
+from trq_lab import metrics
+from trq_lab.gcs.client import MavClient
 
-ENV = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+ENV = dict(os.environ)
 AUTO_LAND = (4 << 16) | (6 << 24)
 
 

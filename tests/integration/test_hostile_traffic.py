@@ -1,4 +1,4 @@
-"""Hostile and malformed traffic over real UDP (issue 6), at CI size; tools/stress.py is the same
+"""Hostile and malformed traffic over real UDP (issue 6), at CI size; trq-stress is the same
 traffic at a large size.
 
 A real-time vehicle subprocess on free ports; a ground station on its telemetry target measures
@@ -24,8 +24,7 @@ import time
 
 from conftest import ROOT, free_udp_port
 
-sys.path.insert(0, str(ROOT / "tools"))
-import stress  # noqa: E402
+from trq_lab import stress
 
 QUIET_S = 2.0
 ATTACK_S = 3.0

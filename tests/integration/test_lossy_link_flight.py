@@ -1,6 +1,6 @@
 """The impaired-link flight (issue 6): paper_fault50_lossy, the paper's fault over an offboard link
 that loses 10 % of the messages and delays each by 20 ms each way, flown by trq_nmpc_eso in one
-process (tools/inprocess.py: the lockstep vehicle and controller joined by an in-memory link of
+process (trq_lab.harness: the lockstep vehicle and controller joined by an in-memory link of
 MAVLink bytes, the same flight as the two daemons; about 30 s here).
 
 It must not crash, must land, and must stay within the fault campaigns' success bar (position RMSE
@@ -18,14 +18,14 @@ import os
 import subprocess
 import sys
 
-from conftest import PARAMS, ROOT
+from conftest import PARAMS, ROOT, cli
 
-ENV = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+ENV = dict(os.environ)
 
 
 def test_lossy_link_flight_keeps_position_and_yaw(tmp_path):
     out = tmp_path / "lossy"
-    r = subprocess.run([sys.executable, str(ROOT / "tools" / "inprocess.py"),
+    r = subprocess.run([*cli("trq-inprocess"),
                         str(PARAMS / "scenarios" / "paper_fault50_lossy.yaml"), "--out", str(out),
                         "--only", "trq_nmpc_eso"],
                        cwd=ROOT, env=ENV, capture_output=True, text=True, timeout=600)

@@ -1,5 +1,5 @@
 """Both daemons over real UDP: `python -m sil_vehicle` and `python -m trq_offboard` as separate
-processes on free ports, exactly as run_scenario.py starts them.
+processes on free ports, exactly as trq-scenario starts them.
 
 (1) lockstep, no wind, no fault, a short helix: trq_nmpc_eso and trq_nmpc fly in parallel (two
     process pairs); each exits 0 with a landed-and-disarmed summary, tracks the reference within
@@ -28,11 +28,10 @@ import pytest
 
 from conftest import ROOT, free_udp_port
 
-sys.path.insert(0, str(ROOT / "tools"))
-import metrics  # noqa: E402
-from overlays import write_controller_overlay  # noqa: E402
+from trq_lab import metrics
+from trq_lab.overlays import write_controller_overlay
 
-ENV = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+ENV = dict(os.environ)
 STARTUP_S = 60.0               # the controller builds its NMPC before it listens
 FLIGHT_TIMEOUT_S = 120.0        # a ~32 s simulated flight takes ~25 s of wall time here
 HELIX = {"kind": "helix", "hold_s": 1.0, "duration_s": 12.0, "ramp_s": 2.0}

@@ -1,4 +1,4 @@
-"""End to end over UDP: tools/run_scenario.py flies params/scenarios/smoke.yaml (the vehicle and
+"""End to end over UDP: trq-scenario flies params/scenarios/smoke.yaml (the vehicle and
 the controller as separate processes, in lockstep) and writes metrics, report, figures and logs
 that the rest of the toolchain (and pymavlink) can read. About 15-30 s."""
 
@@ -12,14 +12,14 @@ import sys
 
 import pytest
 
-from conftest import PARAMS, ROOT
+from conftest import PARAMS, ROOT, cli
 
-ENV = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+ENV = dict(os.environ)
 FIGURES = ("trajectories.png", "errors.png", "observer.png", "effectiveness.png")
 
 
 def run_scenario(*args: str, cwd, timeout: float):
-    return subprocess.run([sys.executable, str(ROOT / "tools" / "run_scenario.py"), *args],
+    return subprocess.run([*cli("trq-scenario"), *args],
                           cwd=cwd, env=ENV, capture_output=True, text=True, timeout=timeout)
 
 

@@ -19,7 +19,7 @@ from pymavlink.dialects.v20 import common as mavlink
 from conftest import free_udp_port
 
 ROOT = Path(__file__).resolve().parents[2]
-ENV = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+ENV = dict(os.environ)
 KEY_HEX = "5a" * 32
 WRONG = bytes.fromhex("a5" * 32)
 

@@ -1,7 +1,7 @@
 """The tools against a real vehicle over UDP: `python -m sil_vehicle --mode realtime` as a
-subprocess on free ports (one for the module), driven by tools/inject_fault.py and watched by
-tools/monitor.py, both run as subprocesses the way a user runs them, and checked with
-tools/mavclient.MavClient. Plus tools/envelope.py's analysis, called directly.
+subprocess on free ports (one for the module), driven by trq-inject-fault and watched by
+trq-monitor, both run as subprocesses the way a user runs them, and checked with
+trq_lab.gcs.client.MavClient. Plus trq-envelope's analysis, called directly.
 
 Every subprocess has a wall-clock timeout and the vehicle is stopped in a finally.
 """
@@ -18,14 +18,13 @@ from pathlib import Path
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
-from conftest import PARAMS, ROOT, free_udp_port
+from conftest import PARAMS, ROOT, cli, free_udp_port
 
-sys.path.insert(0, str(ROOT / "tools"))
-from mavclient import MavClient, NoAnswer  # noqa: E402
+from trq_lab.gcs.client import MavClient, NoAnswer
 
 STARTUP_S = 15.0            # a cold interpreter imports numpy and pymavlink
 TOOL_TIMEOUT_S = 30.0
-ENV = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+ENV = dict(os.environ)
 
 
 class Vehicle:
@@ -69,12 +68,12 @@ def vehicle(tmp_path_factory):
 
 
 def run_tool(tool: str, *args: str, cwd: Path, timeout: float = TOOL_TIMEOUT_S):
-    return subprocess.run([sys.executable, str(ROOT / "tools" / tool), *args], cwd=cwd, env=ENV,
+    return subprocess.run([*cli(tool), *args], cwd=cwd, env=ENV,
                           capture_output=True, text=True, timeout=timeout)
 
 
 def inject(vehicle: Vehicle, *args: str, cwd: Path):
-    return run_tool("inject_fault.py", "--connect", vehicle.connect, *args, cwd=cwd)
+    return run_tool("trq-inject-fault", "--connect", vehicle.connect, *args, cwd=cwd)
 
 
 def params(vehicle: Vehicle) -> dict[str, float]:
@@ -139,7 +138,7 @@ def test_script_tour(vehicle, tmp_path):
 def test_bad_script_is_a_usage_error(tmp_path):
     bad = tmp_path / "bad.yaml"
     bad.write_text("events: [{at_s: 1, motor: 5, stopped: true}]\n")
-    r = run_tool("inject_fault.py", "--connect", "udpout:127.0.0.1:9", "script", str(bad),
+    r = run_tool("trq-inject-fault", "--connect", "udpout:127.0.0.1:9", "script", str(bad),
                  cwd=tmp_path)
     assert r.returncode == 2
     assert "bad.yaml" in r.stderr and "events[0].motor" in r.stderr
@@ -148,7 +147,7 @@ def test_bad_script_is_a_usage_error(tmp_path):
 def test_nobody_listening(tmp_path):
     port = free_udp_port()
     t0 = time.monotonic()
-    r = run_tool("inject_fault.py", "--connect", f"udpout:127.0.0.1:{port}", "--timeout", "1",
+    r = run_tool("trq-inject-fault", "--connect", f"udpout:127.0.0.1:{port}", "--timeout", "1",
                  "motor", "1", "off", cwd=tmp_path)
     elapsed = time.monotonic() - t0
     assert r.returncode == 1
@@ -166,7 +165,7 @@ def test_monitor_once(vehicle, tmp_path):
                               mavlink.FAILURE_TYPE_STUCK, 4, 12.0) == mavlink.MAV_RESULT_ACCEPTED
     try:
         time.sleep(0.3)                   # the stuck servo slews there (300 deg/s)
-        r = run_tool("monitor.py", "--once", "--connect", vehicle.connect, cwd=tmp_path)
+        r = run_tool("trq-monitor", "--once", "--connect", vehicle.connect, cwd=tmp_path)
     finally:
         with vehicle.client() as client:
             client.hello(5.0)
@@ -195,7 +194,7 @@ def test_monitor_once(vehicle, tmp_path):
 
 def test_monitor_without_vehicle(tmp_path):
     t0 = time.monotonic()
-    r = run_tool("monitor.py", "--once", "--timeout", "1", "--connect",
+    r = run_tool("trq-monitor", "--once", "--timeout", "1", "--connect",
                  f"udpout:127.0.0.1:{free_udp_port()}", cwd=tmp_path)
     assert r.returncode == 1
     assert "no heartbeat" in r.stderr
@@ -203,7 +202,7 @@ def test_monitor_without_vehicle(tmp_path):
 
 
 def test_monitor_conversions():
-    import monitor
+    from trq_lab.gcs import monitor
     assert monitor.throttle_pct(1000) == 0.0 and monitor.throttle_pct(1773) == 77.3
     assert monitor.tilt_deg(1500, 30.0) == 0.0 and monitor.tilt_deg(2000, 30.0) == 30.0
     assert monitor.tilt_deg(1250, 30.0) == -15.0
@@ -213,7 +212,7 @@ def test_monitor_conversions():
 
 @pytest.fixture(scope="module")
 def envelope():
-    import envelope
+    from trq_lab.analysis import envelope
     return envelope
 
 

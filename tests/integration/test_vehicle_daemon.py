@@ -101,7 +101,7 @@ def start_vehicle(tmp_path: Path, name: str, gcs_target: int, offboard_target: i
            "--offboard-bind", f"127.0.0.1:{off_bind}",
            "--offboard-target", f"127.0.0.1:{offboard_target}",
            "--log-dir", str(log_dir), *extra]
-    env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    env = dict(os.environ)
     out = open(log_dir / "stdout.txt", "wb")
     proc = subprocess.Popen(cmd, cwd=tmp_path, env=env, stdout=out, stderr=subprocess.STDOUT)
     out.close()

@@ -11,7 +11,7 @@
 (c) the controller's link (`MavlinkUdp.datagram_received`) on arbitrary bytes, with and without
     signing: it never raises and hands on only whole messages from the vehicle.
 
-The large-size version of the same traffic over real sockets is tools/stress.py.
+The large-size version of the same traffic over real sockets is trq-stress.
 """
 
 from __future__ import annotations

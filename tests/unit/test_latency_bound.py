@@ -1,4 +1,4 @@
-"""tools/latency_bound.py: the optimal flight after a fault, given a reaction latency (the lower
+"""trq-latency-bound: the optimal flight after a fault, given a reaction latency (the lower
 bound quoted for the lossy-link scenario), on a synthetic onset: a hover with no wind."""
 
 from __future__ import annotations
@@ -10,12 +10,11 @@ import sys
 import numpy as np
 import pytest
 
-from conftest import PARAMS, ROOT
+from conftest import PARAMS, ROOT, cli
 
-sys.path.insert(0, str(ROOT / "tools"))
-import latency_bound as lb  # noqa: E402
-from trq_offboard.allocation import Allocator  # noqa: E402
-from trq_offboard.config import load_vehicle_model  # noqa: E402
+from trq_lab.analysis import latency_bound as lb
+from trq_offboard.allocation import Allocator
+from trq_offboard.config import load_vehicle_model
 
 TRQ = PARAMS / "vehicle" / "trq.yaml"
 
@@ -74,7 +73,7 @@ def test_latency_costs_position(half_motor):
 
 
 def test_the_fixed_rotor_quad_cannot_hold_yaw_on_half_a_motor(half_motor):
-    """As tools/envelope.py finds (no trim): with yaw held, the quad's best answer tips over."""
+    """As trq-envelope finds (no trim): with yaw held, the quad's best answer tips over."""
     onset = hover_onset([0.5, 1.0, 1.0, 1.0], QUAD)
     r = lb.bound(onset, QUAD, 0.0, 0.6, math.radians(5.0))
     assert np.allclose(r["states"][12:16], 0.0)                     # its tilts stay at zero
@@ -100,20 +99,20 @@ def test_frozen_outputs_follow_the_plants_lag(half_motor):
 
 
 def test_bad_latency_is_a_usage_error(tmp_path):
-    r = subprocess.run([sys.executable, str(ROOT / "tools" / "latency_bound.py"), str(tmp_path),
+    r = subprocess.run([*cli("trq-latency-bound"), str(tmp_path),
                         "--latency-ms", "10,abc"], capture_output=True, text=True)
     assert r.returncode == 2 and "--latency-ms" in r.stderr
-    r = subprocess.run([sys.executable, str(ROOT / "tools" / "latency_bound.py"), str(tmp_path),
+    r = subprocess.run([*cli("trq-latency-bound"), str(tmp_path),
                         "--latency-ms", "5000", "--horizon-s", "2"], capture_output=True,
                        text=True)
     assert r.returncode == 2 and "[0, 2000) ms" in r.stderr
-    r = subprocess.run([sys.executable, str(ROOT / "tools" / "latency_bound.py"), str(tmp_path),
+    r = subprocess.run([*cli("trq-latency-bound"), str(tmp_path),
                         "--step-ms", "3"], capture_output=True, text=True)
     assert r.returncode == 2 and "--step-ms 3" in r.stderr and "divisor" in r.stderr
 
 
 def test_a_flight_without_fault_is_refused(tmp_path):
-    r = subprocess.run([sys.executable, str(ROOT / "tools" / "latency_bound.py"), str(tmp_path)],
+    r = subprocess.run([*cli("trq-latency-bound"), str(tmp_path)],
                        capture_output=True, text=True)
     assert r.returncode == 2 and "flight.csv" in r.stderr
 
@@ -200,6 +199,6 @@ def test_logs_the_bound_cannot_take_are_refused(tmp_path, case, words):
     write_logs(tmp_path, fac, stuck_servo=3 if case == "stuck" else None)
     with pytest.raises(lb.LogError, match=words):
         lb.read_onset(tmp_path)
-    r = subprocess.run([sys.executable, str(ROOT / "tools" / "latency_bound.py"), str(tmp_path)],
+    r = subprocess.run([*cli("trq-latency-bound"), str(tmp_path)],
                        capture_output=True, text=True)
     assert r.returncode == 2 and words in r.stderr

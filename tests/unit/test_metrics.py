@@ -1,4 +1,4 @@
-"""Flight metrics (tools/metrics.py) on synthetic logs with hand-computed answers: RMSE and
+"""Flight metrics (trq_lab.metrics) on synthetic logs with hand-computed answers: RMSE and
 maximum of the position error, the error after the fault onset, yaw wrapping, recovery time,
 truncation at a crash, the landed rows and the landing reference below ground, solve-time
 percentiles; read_csv against the two real log writers; the true disturbance of the observer
@@ -14,8 +14,7 @@ import pytest
 
 from conftest import ROOT
 
-sys.path.insert(0, str(ROOT / "tools"))
-import metrics  # noqa: E402
+from trq_lab import metrics
 
 STEP_US = 20_000            # 50 Hz control steps
 N_STEPS = 100               # 2 s of flight

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-import metrics as metrics_mod
+from trq_lab import metrics as metrics_mod
 
 COLUMNS = [("controller", "controller", "{}"), ("vehicle", "vehicle", "{}"),
            ("crashed", "crashed", "{}"), ("flight_s", "flight s", "{:.1f}"),
@@ -44,7 +44,7 @@ def table(results: list[dict]) -> str:
 def envelope_text(envelopes: list[dict]) -> list[str]:
     lines = ["## The physical envelope", "",
              "Hover trim and the wrench margin left at it, under this wind and the worst motor "
-             "effectiveness of the fault script (`tools/envelope.py`): how much more force (N) "
+             "effectiveness of the fault script (`trq-envelope`): how much more force (N) "
              "or torque (N m) the actuators can add on each body axis while the rest of the "
              "wrench keeps its trim value.", ""]
     for e in envelopes:

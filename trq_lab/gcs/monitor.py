@@ -2,9 +2,9 @@
 """A live terminal view of a running SIL vehicle (or any vehicle speaking sil_vehicle/PROTOCOL.md)
 from its ground-station port.
 
-    monitor.py                                   udpout:127.0.0.1:18570, about 5 frames a second
-    monitor.py --once                            one snapshot, no escape codes (tests, logs)
-    monitor.py --duration 30 --vehicle params/vehicle/quad.yaml
+    trq-monitor                                   udpout:127.0.0.1:18570, about 5 frames a second
+    trq-monitor --once                            one snapshot, no escape codes (tests, logs)
+    trq-monitor --duration 30 --vehicle params/vehicle/quad.yaml
 
 Shows the vehicle time, armed / on the ground / crashed (HEARTBEAT), position and velocity NED
 (LOCAL_POSITION_NED), attitude in degrees (ATTITUDE), the eight actuator outputs
@@ -30,13 +30,11 @@ from pathlib import Path
 
 from pymavlink.dialects.v20 import common as mavlink
 
-ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
-sys.path.insert(0, str(ROOT / "tools"))
 
-from mavclient import MavClient, NoAnswer  # noqa: E402
-from sil_vehicle.config import load_vehicle  # noqa: E402
-from sil_vehicle.yamlcheck import ConfigError  # noqa: E402
+from trq_lab.gcs.client import MavClient, NoAnswer
+from sil_vehicle.config import load_vehicle
+from sil_vehicle.yamlcheck import ConfigError
+import trq_params
 
 CLEAR_HOME = "\x1b[2J\x1b[H"
 RATE_WINDOW_S = 2.0
@@ -221,13 +219,14 @@ class Monitor:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0],
+    p = argparse.ArgumentParser(prog="trq-monitor", description=__doc__.splitlines()[0],
                                 formatter_class=argparse.RawDescriptionHelpFormatter,
                                 epilog="\n".join(__doc__.splitlines()[2:]))
     p.add_argument("--connect", default="udpout:127.0.0.1:18570",
                    help="the vehicle's ground-station port (default udpout:127.0.0.1:18570)")
-    p.add_argument("--vehicle", type=Path, default=ROOT / "params" / "vehicle" / "trq.yaml",
-                   help="airframe YAML, for the tilt servos' half-range")
+    p.add_argument("--vehicle", default="trq",
+                   help="airframe, for the tilt servos' half-range: a built-in name (trq, quad) "
+                        "or a vehicle YAML path (default trq)")
     p.add_argument("--once", action="store_true", help="print one snapshot and exit")
     p.add_argument("--duration", type=float, default=None, help="stop after S seconds")
     p.add_argument("--timeout", type=float, default=5.0,
@@ -243,7 +242,7 @@ def main(argv: list[str] | None = None) -> int:
               file=sys.stderr)
         return 2
     try:
-        vp = load_vehicle(args.vehicle)
+        vp = load_vehicle(trq_params.resolve("vehicle", args.vehicle))
         client = MavClient(args.connect)
     except (ConfigError, ValueError) as exc:
         print(f"monitor: {exc}", file=sys.stderr)

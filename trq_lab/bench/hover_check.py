@@ -5,7 +5,7 @@ and check what the vehicle reports. No controller: the vehicle is symmetric and 
 so with equal throttles it climbs and holds level; this checks the plant, the lockstep and the
 MAVLink links end to end.
 
-    python tools/hover_check.py [--vehicle params/vehicle/trq.yaml] [--out DIR]
+    trq-hover-check [--vehicle params/vehicle/trq.yaml] [--out DIR]
 """
 
 from __future__ import annotations
@@ -20,10 +20,9 @@ from pathlib import Path
 
 from pymavlink.dialects.v20 import common as mavlink
 
-ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
 
-from sil_vehicle.config import load_vehicle  # noqa: E402
+from sil_vehicle.config import load_vehicle
+import trq_params
 
 
 def free_port() -> int:
@@ -47,12 +46,13 @@ def throttle_profile(t_s: float, trim_pct: float) -> float:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--vehicle", type=Path, default=ROOT / "params/vehicle/trq.yaml")
-    ap.add_argument("--out", type=Path, default=ROOT / "out/hover_check")
+    ap = argparse.ArgumentParser(prog="trq-hover-check", description=__doc__.splitlines()[0])
+    ap.add_argument("--vehicle", default="trq",
+                    help="airframe: a built-in name (trq, quad) or a vehicle YAML path (default trq)")
+    ap.add_argument("--out", type=Path, default=Path("out/hover_check"))
     ap.add_argument("--duration", type=float, default=10.0, help="simulated seconds")
     args = ap.parse_args(argv)
-    vp = load_vehicle(args.vehicle)
+    vp = load_vehicle(trq_params.resolve("vehicle", args.vehicle))
     trim = vp.hover_throttle_pct
     off_port, gcs_port = free_port(), free_port()
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -63,7 +63,7 @@ def main(argv: list[str] | None = None) -> int:
            "--offboard-bind", f"127.0.0.1:{off_port}", "--offboard-target", f"127.0.0.1:{my_port}",
            "--gcs-bind", f"127.0.0.1:{gcs_port}", "--gcs-target", "127.0.0.1:9",
            "--log-dir", str(args.out), "--duration", str(args.duration)]
-    proc = subprocess.Popen(cmd, cwd=ROOT)
+    proc = subprocess.Popen(cmd)
     mav = mavlink.MAVLink(None, srcSystem=255, srcComponent=190)
     rx = mavlink.MAVLink(None)
     dest = ("127.0.0.1", off_port)

@@ -7,8 +7,8 @@ from __future__ import annotations
 from pathlib import Path
 
 import yaml
+import trq_params
 
-ROOT = Path(__file__).resolve().parent.parent
 
 
 def controller_file(controller: str | Path) -> Path:
@@ -16,7 +16,7 @@ def controller_file(controller: str | Path) -> Path:
     path = Path(controller)
     if path.suffix in (".yaml", ".yml"):
         return path.resolve()
-    return ROOT / "params" / "controller" / f"{controller}.yaml"
+    return trq_params.resolve("controller", controller)
 
 
 def write_controller_overlay(controller: str | Path, reference: dict | None, out_dir: Path,
@@ -29,7 +29,7 @@ def write_controller_overlay(controller: str | Path, reference: dict | None, out
     cfg = load_controller(base)
     overlay = {"extends": str(base), "vehicle": str(Path(cfg.vehicle.file).resolve()),
                "observer": {"file": str(Path(cfg.eso.file).resolve()) if cfg.eso else
-                            str(ROOT / "params" / "controller" / "eso.yaml")}}
+                            str(trq_params.builtin("controller", "eso"))}}
     if reference:
         overlay["reference"] = dict(reference)
     out_dir.mkdir(parents=True, exist_ok=True)

@@ -3,7 +3,7 @@
 and torque margin the actuators have left (an allocation problem under the actuator limits,
 solved with CasADi + IPOPT on the simulator's own rotor model).
 
-    python tools/envelope.py [--vehicle params/vehicle/trq.yaml] [--motor 1 --eff 0.5]
+    trq-envelope [--vehicle params/vehicle/trq.yaml] [--motor 1 --eff 0.5]
                              [--wind 8 --wind-dir 0] [--json PATH]
 
 The trim holds position at constant yaw: roll and pitch are free (a fixed-rotor quadcopter must
@@ -24,11 +24,10 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
 
-from sil_vehicle.config import VehicleParams, load_vehicle  # noqa: E402
-from sil_vehicle.frames import wind_from_to_ned  # noqa: E402
+from sil_vehicle.config import VehicleParams, load_vehicle
+from sil_vehicle.frames import wind_from_to_ned
+import trq_params
 
 AXES = ("Fx", "Fy", "Fz", "Mx", "My", "Mz")
 
@@ -116,15 +115,16 @@ def analyse(vp: VehicleParams, factors: list[float], wind_speed: float, wind_fro
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--vehicle", type=Path, default=ROOT / "params/vehicle/trq.yaml")
+    ap = argparse.ArgumentParser(prog="trq-envelope", description=__doc__.splitlines()[0])
+    ap.add_argument("--vehicle", default="trq",
+                    help="airframe: a built-in name (trq, quad) or a vehicle YAML path (default trq)")
     ap.add_argument("--motor", type=int, default=None, help="faulty motor 1..4")
     ap.add_argument("--eff", type=float, default=1.0, help="its effectiveness 0..1")
     ap.add_argument("--wind", type=float, default=0.0, help="wind speed m/s")
     ap.add_argument("--wind-dir", type=float, default=0.0, help="wind from, deg")
     ap.add_argument("--json", type=Path, default=None)
     args = ap.parse_args(argv)
-    vp = load_vehicle(args.vehicle)
+    vp = load_vehicle(trq_params.resolve("vehicle", args.vehicle))
     factors = [1.0] * 4
     if args.motor is not None:
         if not 1 <= args.motor <= 4 or not 0.0 <= args.eff <= 1.0:

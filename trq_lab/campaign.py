@@ -2,14 +2,14 @@
 """Fault campaigns at scale: a grid and/or a seeded random sample of flights over fault, wind,
 trajectory and controller, flown on Dask (a LocalCluster by default, or an existing cluster).
 
-    python tools/campaign.py params/campaigns/smoke.yaml --out out/campaign_smoke --workers 2
-    python tools/campaign.py CAMPAIGN.yaml --out DIR [--workers N | --scheduler tcp://HOST:8786]
+    trq-campaign smoke --out out/campaign_smoke --workers 2
+    trq-campaign CAMPAIGN.yaml --out DIR [--workers N | --scheduler tcp://HOST:8786]
                              [--max-flights N] [--retry-failed] [--keep-logs] [--report-only]
                              [--dry-run]
 
 Each flight is the scenario runner's lockstep vehicle and controller code, flown in one process
-(tools/inprocess.py: `Sitl` and `OffboardFlight` joined by an in-memory link carrying the same
-MAVLink bytes), and measured by tools/metrics.py as the scenario runner measures a run.
+(trq_lab.harness: `Sitl` and `OffboardFlight` joined by an in-memory link carrying the same
+MAVLink bytes), and measured by trq_lab.metrics as the scenario runner measures a run.
 
 Outputs in DIR:
     flights/<id>.json   one per flight flown (inputs, metrics, status, error traceback if any),
@@ -29,7 +29,7 @@ Campaign file (strict: an unknown or misspelt key is an error naming the file an
                               # trajectory and repeat (all controllers of a cell share a seed)
     controllers: [trq_nmpc_eso, quad_nmpc]      # names in params/controller/ (or YAML paths)
     success_rmse_m: 0.1       # success: not crashed and position RMSE after the fault below this
-    recovery_threshold_m: 0.1 # tools/metrics.py's recovery time threshold
+    recovery_threshold_m: 0.1 # trq_lab.metrics's recovery time threshold
     timeout_s: 120            # simulated seconds; a flight still flying then is a 'timeout'
     repeats: 1                # optional: fly every cell with this many seeds
     grid:                     # every combination; in an axis a list of values is a dimension
@@ -77,14 +77,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-ROOT = Path(__file__).resolve().parent.parent
-for _p in (str(ROOT), str(ROOT / "tools")):
-    if _p not in sys.path:
-        sys.path.insert(0, _p)
+import trq_params
+from sil_vehicle.yamlcheck import ConfigError, Section, load_yaml
 
-from sil_vehicle.yamlcheck import ConfigError, Section, load_yaml  # noqa: E402
-
-PARAMS = ROOT / "params"
+PARAMS = trq_params.DIR
 AXES = ("fault", "wind", "trajectory", "link")
 REFERENCE_KINDS = ("hover", "step", "circle", "helix", "figure8")
 
@@ -278,7 +274,8 @@ def _file_digest(paths) -> str:
 def controller_inputs(name: str) -> tuple[Path, str]:
     """(controller file, digest of every parameter file a flight with it reads: the file and the
     files it extends, its airframe, its observer gains, the default sim settings)."""
-    from inprocess import SIM_DEFAULT, controller_file
+    from trq_lab.harness import SIM_DEFAULT
+    from trq_lab.overlays import controller_file
     from trq_offboard.config import load_controller
 
     path = controller_file(name)
@@ -316,8 +313,7 @@ def load_campaign(path: Path) -> Campaign:
         raise top.fail("controllers", controllers, "a non-empty list of distinct controller names")
     digests = {}
     for i, c in enumerate(controllers):
-        from inprocess import controller_file
-        if not controller_file(c).exists():
+        if not trq_params.exists("controller", c):
             raise ConfigError(f"{path}: key 'controllers[{i}]': got {c!r}, expected a file name in "
                               "params/controller/ without .yaml, or a controller YAML path")
         try:
@@ -417,20 +413,16 @@ def flight_inputs(spec: dict) -> dict:
     return row
 
 
-def run_flight(spec: dict, root: str | None = None, log_dir: str | None = None) -> dict:
-    """Fly one campaign flight (tools/inprocess.py) and return its record; never raises: an
-    error is recorded with its traceback."""
-    root = root if root and Path(root).exists() else os.environ.get("TRQ_FTC_ROOT", str(ROOT))
-    for p in (root, str(Path(root) / "tools")):
-        if p not in sys.path:
-            sys.path.insert(0, p)
+def run_flight(spec: dict, log_dir: str | None = None) -> dict:
+    """Fly one campaign flight (trq_lab.harness) and return its record; never raises: an
+    error is recorded with its traceback. A worker needs only the installed packages."""
     import tempfile
 
     wall0, cpu0 = time.perf_counter(), time.thread_time()
     record = {"id": spec["id"], "spec": spec, "status": "failed", "error": None, "metrics": None,
               "wall_s": None, "sim_s": None, "worker": f"{socket.gethostname()}:{os.getpid()}"}
     try:
-        import inprocess
+        from trq_lab import harness as inprocess
         from trq_offboard.config import load_controller
 
         with tempfile.TemporaryDirectory(prefix=f"flight-{spec['id']}-") as tmp:
@@ -439,7 +431,7 @@ def run_flight(spec: dict, root: str | None = None, log_dir: str | None = None) 
             cfg = load_controller(ctl_yaml)
             link = spec.get("link")
             if link:            # the controller is told the link's round trip, as by the runner
-                import run_scenario
+                from trq_lab import scenario as run_scenario
                 cfg = dataclasses.replace(
                     cfg, applied_delay_s=run_scenario.command_delay_s(link, False))
             record["applied_delay_s"] = cfg.applied_delay_s
@@ -824,17 +816,6 @@ class Progress:
             self.stream.flush()
 
 
-def _register_by_value() -> None:
-    """Ship this module's code to remote workers with the task (cloudpickle by value), so that
-    a worker only needs the project's packages, not this file on its path."""
-    try:
-        import cloudpickle
-        mod = sys.modules[__name__]
-        if __name__ != "__main__":
-            cloudpickle.register_pickle_by_value(mod)
-    except Exception:  # an older cloudpickle: workers import the module by name
-        pass
-
 
 def run_campaign(campaign: Campaign, out: Path, *, workers: int | None = None,
                  scheduler: str | None = None, max_flights: int | None = None,
@@ -868,7 +849,6 @@ def run_campaign(campaign: Campaign, out: Path, *, workers: int | None = None,
                                dashboard_address=None, silence_logs=logging.ERROR)
         client = Client(cluster)
     try:
-        _register_by_value()
         nworkers = len(client.scheduler_info()["workers"])
         info["workers"] = nworkers
         info["cluster_start_s"] = round(time.monotonic() - t_start, 2)
@@ -876,7 +856,7 @@ def run_campaign(campaign: Campaign, out: Path, *, workers: int | None = None,
               flush=True)
         log_dir = str(out / "logs") if keep_logs else None
         t0 = time.monotonic()
-        futures = [client.submit(run_flight, spec, str(ROOT), log_dir, key=f"flight-{spec['id']}",
+        futures = [client.submit(run_flight, spec, log_dir, key=f"flight-{spec['id']}",
                                  pure=False) for spec in todo]
         by_key = {f.key: s for f, s in zip(futures, todo)}
         progress = Progress(len(todo), stream)
@@ -911,8 +891,9 @@ def run_campaign(campaign: Campaign, out: Path, *, workers: int | None = None,
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("campaign", type=Path, help="campaign YAML (params/campaigns/*.yaml)")
+    ap = argparse.ArgumentParser(prog="trq-campaign", description=__doc__.splitlines()[0])
+    ap.add_argument("campaign", help="a built-in campaign by name (" + ", ".join(
+        trq_params.names("campaigns")) + ") or a campaign YAML by path")
     ap.add_argument("--out", type=Path, required=True, help="output directory (resumable)")
     ap.add_argument("--workers", type=int, default=None,
                     help="LocalCluster worker processes, one thread each (default: all cores)")
@@ -935,7 +916,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.max_flights is not None and args.max_flights < 0:
         ap.error("--max-flights: expected 0 or more")
     try:
-        campaign = load_campaign(args.campaign)
+        campaign = load_campaign(trq_params.resolve("campaigns", args.campaign))
     except ConfigError as exc:
         print(f"campaign: {exc}", file=sys.stderr)
         return 2

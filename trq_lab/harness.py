@@ -3,8 +3,8 @@
 and the offboard controller's flight loop (`trq_offboard.loop.OffboardFlight`), joined by an
 in-memory link that carries the same MAVLink 2 bytes the two daemons exchange over UDP.
 
-    python tools/inprocess.py params/scenarios/smoke.yaml --out out/smoke_inprocess
-    python tools/inprocess.py SCENARIO.yaml --out DIR [--only CONTROLLER]
+    trq-inprocess smoke --out out/smoke_inprocess
+    trq_lab.harness SCENARIO.yaml --out DIR [--only CONTROLLER]
 
 Nothing here is a second implementation of either side: the vehicle is `Sitl` (the code the
 vehicle daemon drives), the controller is `Controller` + `Reference` driven by `OffboardFlight`
@@ -28,7 +28,7 @@ noise draws as in the daemon) but are not encoded: nobody listens.
 The flight ends when `OffboardFlight.run()` returns (landed and disarmed), or `crash_grace_s`
 simulated seconds after a crash, or at `timeout_s` of simulated time. It writes `flight.csv`
 (`sil_vehicle.log.FlightLog`, columns `sil_vehicle.sitl.LOG_COLUMNS`) and `controller.csv`
-(`trq_offboard.log.ControllerLog`) in `out_dir`, so `tools/metrics.py` computes the same metrics
+(`trq_offboard.log.ControllerLog`) in `out_dir`, so `trq_lab.metrics` computes the same metrics
 as for a scenario run. The controller's solve goes through `run_in_executor`, on an executor
 that runs it inline by default (one thread per flight; `inline_solve=False`: a worker thread,
 as in the daemon).
@@ -48,14 +48,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterable
 
-ROOT = Path(__file__).resolve().parent.parent
-for _p in (str(ROOT), str(ROOT / "tools")):
-    if _p not in sys.path:
-        sys.path.insert(0, _p)
 
-from pymavlink.dialects.v20 import common as mavlink  # noqa: E402
+from pymavlink.dialects.v20 import common as mavlink
+import trq_params
 
-PARAMS = ROOT / "params"
+PARAMS = trq_params.DIR
 SIM_DEFAULT = PARAMS / "sim" / "default.yaml"
 SENDER = ("in-process", 0)          # the controller's 'address' as the vehicle sees it
 
@@ -134,35 +131,27 @@ class InMemoryLink:
             self.on_message(msg)
 
 
-# --- configuration, as tools/run_scenario.py prepares it ------------------------------------------
+# --- configuration, as trq-scenario prepares it ------------------------------------------
 
 def _yaml_dump(data: dict) -> str:
     import yaml
     return yaml.safe_dump(data, sort_keys=False)
 
 
-def controller_file(name_or_path: str | Path) -> Path:
-    """A path to a controller YAML, or a name in params/controller/."""
-    p = Path(name_or_path)
-    if p.suffix in (".yaml", ".yml") or p.exists():
-        return p.resolve()
-    return PARAMS / "controller" / f"{name_or_path}.yaml"
-
-
 def prepare_controller(controller: str | Path, reference: dict | None, out_dir: Path) -> Path:
     """Write the flight's controller overlay (the base file with `reference` over it) exactly as
     run_scenario.prepare does, and return its path. Raises ConfigError if it is invalid."""
-    from overlays import write_controller_overlay
+    from trq_lab.overlays import controller_file, write_controller_overlay
 
     return write_controller_overlay(controller_file(controller), reference, out_dir,
-                                    "written by tools/inprocess.py")
+                                    "written by trq_lab.harness")
 
 
 def sim_params(vehicle_file: Path | str, control_rate_hz: int, *, seed: int,
                wind_speed_m_s: float = 0.0, wind_from_deg: float = 0.0, gusts: bool = False,
                gust_sigma_m_s: float | None = None, sim_file: Path | str = SIM_DEFAULT,
                offboard_impair: dict[str, float] | None = None):
-    """The vehicle's settings as run_scenario.py gives them to the daemon: the default sim file,
+    """The vehicle's settings as trq-scenario gives them to the daemon: the default sim file,
     the control rate (and offboard ODOMETRY rate) of the controller, its airframe, the seed and
     the wind (the daemon's --seed, --wind-speed, --wind-dir, --gusts), and a scenario's
     offboard_link impairment."""
@@ -296,7 +285,7 @@ def fly_inprocess(controller, sim, fault_events=(), seed: int | None = None, *,
 
     controller: a ControllerConfig, or a controller YAML path / name in params/controller/
         (then `reference`, a mapping of reference settings, is laid over it as
-        run_scenario.py does);
+        trq-scenario does);
     sim: the vehicle's SimParams (see `sim_params`); `seed` replaces its seed if given;
     fault_events: sil_vehicle.faultscript Events, played by the vehicle in its own time.
     """
@@ -364,9 +353,9 @@ def fly_inprocess(controller, sim, fault_events=(), seed: int | None = None, *,
 
 def flight_metrics(log_dir: Path, controller: str, fault_onset_us: int | None,
                    recovery_threshold_m: float) -> dict:
-    """The scenario runner's metrics (tools/metrics.py) of a flight, from the two logs in
+    """The scenario runner's metrics (trq_lab.metrics) of a flight, from the two logs in
     log_dir (flight.csv and controller.csv, in process or from the daemons)."""
-    import metrics as metrics_mod
+    from trq_lab import metrics as metrics_mod
     from sil_vehicle.config import load_vehicle
 
     meta, truth = metrics_mod.read_csv(Path(log_dir) / "flight.csv")
@@ -386,13 +375,13 @@ def fingerprint(path: Path) -> str:
 def main(argv: list[str] | None = None) -> int:
     import argparse
 
-    import run_scenario
+    from trq_lab import scenario as run_scenario
     from sil_vehicle.faultscript import load_script
     from sil_vehicle.yamlcheck import ConfigError
     from trq_offboard.config import load_controller
 
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("scenario", type=Path, help="a scenario file (params/scenarios/*.yaml)")
+    ap = argparse.ArgumentParser(prog="trq-inprocess", description=__doc__.splitlines()[0])
+    ap.add_argument("scenario", help="a built-in scenario by name or a scenario YAML by path")
     ap.add_argument("--out", type=Path, required=True, help="output directory")
     ap.add_argument("--only", action="append", default=None,
                     help="fly only this controller (repeatable)")
@@ -400,9 +389,9 @@ def main(argv: list[str] | None = None) -> int:
                     help="solve in a worker thread (as the daemon) instead of inline")
     args = ap.parse_args(argv)
     try:
-        sc = run_scenario.load_scenario(args.scenario)
+        sc = run_scenario.load_scenario(trq_params.resolve("scenarios", args.scenario))
         events = load_script(sc.faults) if sc.faults else ()
-    except ConfigError as exc:
+    except (ConfigError, trq_params.UnknownName) as exc:
         print(f"inprocess: {exc}", file=sys.stderr)
         return 2
     onset = events[0].at_us if events else None
@@ -430,7 +419,7 @@ def main(argv: list[str] | None = None) -> int:
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "metrics.json").write_text(json.dumps({"scenario": sc.name, "runs": runs},
                                                       indent=2) + "\n")
-    import report
+    from trq_lab import report
     print(report.table(runs))
     return 0 if all(r["status"] == "done" for r in runs) else 1
 

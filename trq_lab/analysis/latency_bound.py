@@ -1,10 +1,10 @@
 #!/usr/bin/env python3
 """How well could ANY controller have flown a motor fault, given how late it can react?
 
-    python tools/latency_bound.py out/paper_fault50/trq_nmpc_eso --latency-ms 0,10,20,40,50
+    trq-latency-bound out/paper_fault50/trq_nmpc_eso --latency-ms 0,10,20,40,50
 
 A lower bound on the position error after a fault, from a flight's logs (flight.csv and
-controller.csv of a scenario run or of tools/inprocess.py): the best flight an optimiser finds
+controller.csv of a scenario run or of trq_lab.harness): the best flight an optimiser finds
 for the plant from the vehicle's true state at the fault's onset, knowing the fault exactly and at
 once, whose commands are frozen at the ones being flown for the first `latency` seconds (the time
 a controller needs to see the fault and have its answer reach the actuators: over a link, its round
@@ -41,18 +41,15 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parent.parent
-for _p in (str(ROOT), str(ROOT / "tools")):
-    if _p not in sys.path:
-        sys.path.insert(0, _p)
 
-import casadi as ca  # noqa: E402
+import casadi as ca
 
-import metrics as metrics_mod  # noqa: E402
-from sil_vehicle.config import load_vehicle  # noqa: E402
-from sil_vehicle.dynamics.actuators import first_order_step, lag_factor  # noqa: E402
-from trq_offboard.config import load_vehicle_model  # noqa: E402
-from trq_offboard.model.dynamics import PredictionModel, euler_rate_matrix  # noqa: E402
+from trq_lab import metrics as metrics_mod
+from sil_vehicle.config import load_vehicle
+from sil_vehicle.dynamics.actuators import first_order_step, lag_factor
+from trq_offboard.config import load_vehicle_model
+from trq_offboard.model.dynamics import PredictionModel, euler_rate_matrix
+import trq_params
 
 SAMPLE_S = 0.01      # s, the controller's sample period (the metric's samples)
 
@@ -248,7 +245,7 @@ def bound(onset: Onset, vehicle_file: Path, latency_s: float, horizon_s: float,
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(prog="trq-latency-bound", description=__doc__.splitlines()[0])
     ap.add_argument("log_dir", type=Path, help="a flight's directory (flight.csv, controller.csv)")
     ap.add_argument("--latency-ms", default="0,10,20,30,40,50",
                     help="comma-separated reaction latencies (default %(default)s)")
@@ -283,7 +280,7 @@ def main(argv: list[str] | None = None) -> int:
         for name in ("flight.csv", "controller.csv"):
             if not (args.log_dir / name).is_file():
                 raise LogError(f"{args.log_dir / name}: not found (a flight's directory from "
-                               "tools/run_scenario.py or tools/inprocess.py is expected)")
+                               "trq-scenario or trq_lab.harness is expected)")
         meta, _ = metrics_mod.read_csv(args.log_dir / "flight.csv")
         vehicle_file = Path(load_vehicle(meta["vehicle_file"]).file)
         onset = read_onset(args.log_dir)

@@ -3,10 +3,10 @@
 at a large size: what was thrown, what the vehicle says it dropped, what it applied, whether its
 telemetry kept its rate, whether anything crashed, and how the flight ended.
 
-    python tools/stress.py                       # starts a real-time vehicle, 10 s of attack
-    python tools/stress.py --seconds 60 --rate 20000 --kinds random,flood
-    python tools/stress.py --fly                 # a trq_nmpc controller hovering under attack
-    python tools/stress.py --vehicle-port 14580 --gcs-port 18570     # a vehicle already running
+    trq-stress                       # starts a real-time vehicle, 10 s of attack
+    trq-stress --seconds 60 --rate 20000 --kinds random,flood
+    trq-stress --fly                 # a trq_nmpc controller hovering under attack
+    trq-stress --vehicle-port 14580 --gcs-port 18570     # a vehicle already running
 
 Kinds of traffic (--kinds, comma separated; default all), sent alternately to the vehicle's
 ground-station and offboard ports:
@@ -45,13 +45,12 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
 
-from pymavlink.dialects.v10 import common as mav1  # noqa: E402
-from pymavlink.dialects.v20 import common as mavlink  # noqa: E402
+from pymavlink.dialects.v10 import common as mav1
+from pymavlink.dialects.v20 import common as mavlink
+import trq_params
 
-ENV = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+ENV = dict(os.environ)
 BAD_KINDS = ("random", "truncated", "bad_crc", "mavlink1", "unknown_id", "other_system",
              "bad_target")
 KINDS = BAD_KINDS + ("flood",)
@@ -384,7 +383,7 @@ def start_vehicle(out: Path, gcs_target: int, offboard_target: int, *extra: str)
 
 def write_overlay(out: Path, controller: str, reference: dict) -> Path:
     """A controller file extending params/controller/<controller>.yaml with the reference."""
-    from overlays import write_controller_overlay
+    from trq_lab.overlays import write_controller_overlay
 
     return write_controller_overlay(controller, reference, out)
 
@@ -403,9 +402,8 @@ def wait_bound(port: int, proc: subprocess.Popen, timeout_s: float) -> bool:
 
 def check_flight_log(path: Path, tilt_min: float, tilt_max: float) -> dict:
     """What the vehicle applied, from its flight.csv: commands finite and in range, crashes."""
-    sys.path.insert(0, str(ROOT / "tools"))
     import numpy as np
-    import metrics
+    from trq_lab import metrics
 
     _, cols = metrics.read_csv(path)
     thr = np.column_stack([cols[f"cmd_throttle{i}_pct"] for i in range(1, 5)])
@@ -608,7 +606,7 @@ def run(args: argparse.Namespace) -> int:
             print(f"  vehicle log: {exit_line}")
         if vehicle.log_dir is not None and (vehicle.log_dir / "flight.csv").exists():
             from sil_vehicle.config import load_sim
-            vp = load_sim(ROOT / "params" / "sim" / "default.yaml").vehicle
+            vp = load_sim(trq_params.builtin("sim", "default")).vehicle
             f = check_flight_log(vehicle.log_dir / "flight.csv", vp.tilt_min_rad, vp.tilt_max_rad)
             print(f"  flight.csv: {f['rows']} rows, commands finite: {f['finite']}, in range: "
                   f"{f['in_range']} (throttle {f['throttle'][0]:.1f}..{f['throttle'][1]:.1f} %, "
@@ -638,7 +636,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0],
+    p = argparse.ArgumentParser(prog="trq-stress", description=__doc__.splitlines()[0],
                                 formatter_class=argparse.RawDescriptionHelpFormatter,
                                 epilog="\n".join(__doc__.splitlines()[1:]))
     p.add_argument("--seconds", type=float, default=10.0, help="attack duration (default 10)")

@@ -1,9 +1,9 @@
 """Benchmark of the NMPC solver modes on the paper's fault flight, side by side in one run.
 
-    .venv/bin/python tools/bench_nmpc.py                 # all modes, the whole flight
-    .venv/bin/python tools/bench_nmpc.py --quick         # 16 s (4 s after the fault)
-    .venv/bin/python tools/bench_nmpc.py --modes rti-gn,ipopt --json out/bench_nmpc.json
-    .venv/bin/python tools/bench_nmpc.py --quick --repeat 3   # median of 3 interleaved runs
+    trq-bench-nmpc                 # all modes, the whole flight
+    trq-bench-nmpc --quick         # 16 s (4 s after the fault)
+    trq-bench-nmpc --modes rti-gn,ipopt --json out/bench_nmpc.json
+    trq-bench-nmpc --quick --repeat 3   # median of 3 interleaved runs
 
 The flight (in one process, no MAVLink): trq_nmpc_eso (--controller: another file of
 params/controller/) on the SITL plant of params/sim/default.yaml,
@@ -37,9 +37,8 @@ import time
 from pathlib import Path
 
 import numpy as np
+import trq_params
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path[:0] = [str(ROOT)]
 
 MODES = {     # name: solver overrides of params/controller/trq_nmpc_eso.yaml (and in "controller"
               # overrides of the controller's own keys)
@@ -73,7 +72,7 @@ def fly(mode: str, seconds: float | None, controller: str = "trq_nmpc_eso") -> d
     from trq_offboard.records import SolveStatus, StateEstimate
     from trq_offboard.reference import Reference
 
-    cfg = load_controller(ROOT / "params" / "controller" / f"{controller}.yaml")
+    cfg = load_controller(trq_params.resolve("controller", controller))
     overrides = dict(MODES[mode])
     cfg = dataclasses.replace(cfg, **overrides.pop("controller", {}))
     cfg = dataclasses.replace(cfg, solver=dataclasses.replace(cfg.solver, **overrides))
@@ -86,7 +85,7 @@ def fly(mode: str, seconds: float | None, controller: str = "trq_nmpc_eso") -> d
     build_cached = time.perf_counter() - t0
     compiled_cached = cache.COUNTS["compiled"] - compiled_cold
 
-    sim = load_sim(ROOT / "params" / "sim" / "default.yaml", cfg.vehicle.file)
+    sim = load_sim(trq_params.builtin("sim", "default"), cfg.vehicle.file)
     sitl = Sitl(sim)
     v = sitl.vehicle
     v.set_wind(WIND_M_S, 0.0, False, 1.0, 50.0)
@@ -184,7 +183,7 @@ def _qp_line(solver) -> str:
 def run_mode(mode: str, seconds: float | None, controller: str = "trq_nmpc_eso") -> dict:
     with tempfile.TemporaryDirectory(prefix="trq-bench-cache-") as cache_dir:
         env = dict(os.environ, TRQ_CACHE_DIR=cache_dir)
-        cmd = [sys.executable, __file__, "--child", mode, "--controller", controller]
+        cmd = [sys.executable, "-m", "trq_lab.bench.nmpc", "--child", mode, "--controller", controller]
         if seconds is not None:
             cmd += ["--seconds", str(seconds)]
         out = subprocess.run(cmd, env=env, capture_output=True, text=True)
@@ -266,7 +265,7 @@ def machine_line() -> str:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(prog="trq-bench-nmpc", description=__doc__.splitlines()[0])
     ap.add_argument("--modes", default=DEFAULT_MODES,
                     help=f"comma-separated, of {', '.join(MODES)} (default: {DEFAULT_MODES})")
     ap.add_argument("--quick", action="store_true", help="fly 16 s (4 s after the fault)")
@@ -281,7 +280,7 @@ def main(argv=None) -> int:
                          "trq_nmpc_eso_paper)")
     ap.add_argument("--child", default=None, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
-    if not (ROOT / "params" / "controller" / f"{args.controller}.yaml").is_file():
+    if not (trq_params.resolve("controller", args.controller)).is_file():
         ap.error(f"--controller {args.controller}: no params/controller/{args.controller}.yaml")
     seconds = args.seconds if args.seconds is not None else (16.0 if args.quick else None)
     if args.child:

@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Benchmark of the SIL vehicle: how fast the plant and the daemon run on this machine.
 
-    python tools/bench_sim.py [--steps 20000] [--sim-seconds 20] [--json out/bench_sim.json]
+    trq-bench-sim [--steps 20000] [--sim-seconds 20] [--json out/bench_sim.json]
 
 Each figure for both physics cores (`physics_core`: the compiled tick and the Python reference,
 which give bit-identical flights), with their ratio:
@@ -37,14 +37,13 @@ import numpy as np
 import yaml
 from pymavlink.dialects.v20 import common as mavlink
 
-ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
 
-from sil_vehicle import compiled  # noqa: E402
-from sil_vehicle.config import PARAMS_DIR, load_sim  # noqa: E402
-from sil_vehicle.mavlink.codec import Codec  # noqa: E402
-from sil_vehicle.sitl import LINKS, Sitl  # noqa: E402
-from sil_vehicle.vehicle import ActuatorCommand, Vehicle  # noqa: E402
+from sil_vehicle import compiled
+from sil_vehicle.config import PARAMS_DIR, load_sim
+from sil_vehicle.mavlink.codec import Codec
+from sil_vehicle.sitl import LINKS, Sitl
+from sil_vehicle.vehicle import ActuatorCommand, Vehicle
+import trq_params
 
 TARGET_RTF = 20.0
 SIM_DEFAULT = PARAMS_DIR / "sim" / "default.yaml"
@@ -153,9 +152,9 @@ def lockstep_run(sim_yaml: Path, sim_seconds: float,
            "--offboard-target", f"127.0.0.1:{sock.getsockname()[1]}",
            "--gcs-bind", f"127.0.0.1:{free_port()}", "--gcs-target", "127.0.0.1:9",
            "--log-dir", str(log_dir), "--duration", str(sim_seconds)]
-    env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    env = dict(os.environ)
     usage0 = resource.getrusage(resource.RUSAGE_CHILDREN)
-    proc = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=subprocess.DEVNULL,
+    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL,
                             stderr=subprocess.DEVNULL)
     mav = mavlink.MAVLink(None, srcSystem=255, srcComponent=190)
     rx = mavlink.MAVLink(None)
@@ -226,7 +225,7 @@ def machine() -> dict[str, object]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(prog="trq-bench-sim", description=__doc__.splitlines()[0])
     ap.add_argument("--steps", type=int, default=20_000, help="ticks per run of (1) and (2)")
     ap.add_argument("--sim-seconds", type=float, default=20.0,
                     help="simulated seconds per daemon run of (3)")

@@ -2,8 +2,8 @@
 """Run a scenario: the SIL vehicle and the offboard controller as separate processes over UDP,
 once per controller under the same wind, faults and seed; then metrics, report and figures.
 
-    python tools/run_scenario.py params/scenarios/paper_fault50.yaml --out out/paper_fault50
-    python tools/run_scenario.py SCENARIO.yaml --out DIR [--realtime] [--jobs N] [--only NAME]
+    trq-scenario paper_fault50 --out out/paper_fault50
+    trq-scenario SCENARIO.yaml --out DIR [--realtime] [--jobs N] [--only NAME]
 
 Writes DIR/metrics.json, DIR/report.md, DIR/*.png and, per controller, DIR/<controller>/ with
 flight.csv and vehicle.tlog (the vehicle), controller.csv and offboard.tlog (the controller) and
@@ -28,15 +28,13 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
-sys.path.insert(0, str(ROOT / "tools"))
 
-import metrics as metrics_mod  # noqa: E402
-from overlays import write_controller_overlay  # noqa: E402
-from sil_vehicle.config import load_vehicle  # noqa: E402
-from sil_vehicle.faultscript import load_script  # noqa: E402
-from sil_vehicle.yamlcheck import ConfigError, Section, load_yaml  # noqa: E402
+from trq_lab import metrics as metrics_mod
+from trq_lab.overlays import write_controller_overlay
+from sil_vehicle.config import load_vehicle
+from sil_vehicle.faultscript import load_script
+from sil_vehicle.yamlcheck import ConfigError, Section, load_yaml
+import trq_params
 
 REALTIME_LATENCY_S = 0.005    # what a command waits in real time (measured: 2 and 3 ms worse,
                               # a crash at 3 ms, with the solve at about 1 ms; README)
@@ -88,8 +86,10 @@ def load_scenario(path: Path) -> Scenario:
     faults = None
     if faults_ref is not None:
         if not isinstance(faults_ref, str):
-            raise top.fail("faults", faults_ref, "a fault script file name or null")
-        faults = (path.parent / faults_ref).resolve()
+            raise top.fail("faults", faults_ref, "a fault script (a built-in name or a path "
+                                                 "relative to this file) or null")
+        faults = (trq_params.builtin("faults", faults_ref) if trq_params.is_name(faults_ref)
+                  else (path.parent / faults_ref).resolve())
         load_script(faults)     # fail now, with the script's own message, if it is bad
     reference = top.raw("reference")
     if not isinstance(reference, dict):
@@ -99,7 +99,7 @@ def load_scenario(path: Path) -> Scenario:
             not all(isinstance(c, str) for c in controllers):
         raise top.fail("controllers", controllers, "a non-empty list of controller names")
     for c in controllers:
-        if not (ROOT / "params" / "controller" / f"{c}.yaml").exists():
+        if not trq_params.exists("controller", c):
             raise top.fail("controllers", c, "a file name in params/controller/ without .yaml")
     impair: dict[str, float] = {}
     if top.has("offboard_link"):
@@ -169,13 +169,13 @@ def prepare(scenario: Scenario, controller: str, out: Path) -> tuple[Path, Path,
     file, control rate)."""
     from trq_offboard.config import load_controller
 
-    cfg = load_controller(ROOT / "params" / "controller" / f"{controller}.yaml")
+    cfg = load_controller(trq_params.resolve("controller", controller))
     # valid before anything starts (raises otherwise)
     ctrl_yaml = write_controller_overlay(controller, scenario.reference, out,
-                                         f"written by run_scenario.py for {scenario.name}")
+                                         f"written by trq-scenario for {scenario.name}")
     rate = cfg.control_rate_hz
     sim_yaml = out / "sim.yaml"
-    sim_overlay = {"extends": str(ROOT / "params" / "sim" / "default.yaml"),
+    sim_overlay = {"extends": str(trq_params.builtin("sim", "default")),
                    "control_rate_hz": rate, "telemetry": {"offboard": {"ODOMETRY": rate}}}
     if scenario.offboard_impair:
         sim_overlay["links"] = {"offboard": {"impair": dict(scenario.offboard_impair)}}
@@ -206,13 +206,12 @@ def fly(scenario: Scenario, run: Run, realtime: bool, lock: threading.Lock,
     if signing_key_file is not None:
         vcmd += ["--signing-key-file", str(signing_key_file)]
         ccmd += ["--signing-key-file", str(signing_key_file)]
-    env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    env = dict(os.environ)
     (run.out / "command.txt").write_text(" ".join(vcmd) + "\n" + " ".join(ccmd) + "\n")
     wall0 = time.monotonic()
     with open(run.out / "vehicle.out", "w") as vout, open(run.out / "controller.out", "w") as cout:
-        vehicle = subprocess.Popen(vcmd, stdout=vout, stderr=subprocess.STDOUT, env=env, cwd=ROOT)
-        controller = subprocess.Popen(ccmd, stdout=cout, stderr=subprocess.STDOUT, env=env,
-                                      cwd=ROOT)
+        vehicle = subprocess.Popen(vcmd, stdout=vout, stderr=subprocess.STDOUT, env=env)
+        controller = subprocess.Popen(ccmd, stdout=cout, stderr=subprocess.STDOUT, env=env)
         run.status = "flying"
         try:
             while controller.poll() is None:
@@ -336,8 +335,8 @@ def worst_motor_factors(scenario: Scenario) -> list[float]:
 
 def envelope_of(scenario: Scenario, runs: list[Run]) -> list[dict]:
     """The hover trim and wrench margins of each airframe flown, under the scenario's wind and
-    its worst fault (tools/envelope.py)."""
-    import envelope
+    its worst fault (trq-envelope)."""
+    from trq_lab.analysis import envelope
     out = []
     seen = set()
     factors = worst_motor_factors(scenario)
@@ -362,8 +361,9 @@ def prepare_vehicle_file(run: Run) -> Path:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("scenario", type=Path)
+    ap = argparse.ArgumentParser(prog="trq-scenario", description=__doc__.splitlines()[0])
+    ap.add_argument("scenario", help="a built-in scenario by name (" + ", ".join(
+        trq_params.names("scenarios")) + ") or a scenario YAML file by path")
     ap.add_argument("--out", type=Path, required=True, help="output directory")
     ap.add_argument("--realtime", action="store_true", help="fly against the wall clock")
     ap.add_argument("--jobs", type=int, default=None,
@@ -375,31 +375,31 @@ def main(argv: list[str] | None = None) -> int:
                     help="fly with MAVLink 2 signing (both daemons get the key file)")
     args = ap.parse_args(argv)
     try:
-        scenario = load_scenario(args.scenario)
-    except ConfigError as exc:
-        print(f"run_scenario: {exc}", file=sys.stderr)
+        scenario = load_scenario(trq_params.resolve("scenarios", args.scenario))
+    except (ConfigError, trq_params.UnknownName) as exc:
+        print(f"trq-scenario: {exc}", file=sys.stderr)
         return 2
     names = [c for c in scenario.controllers if not args.only or c in args.only]
     try:    # every run's settings must be valid before anything starts
         from trq_offboard.config import ConfigError as ControllerConfigError
         from trq_offboard.config import load_controller
         for c in names:
-            vp = load_vehicle(load_controller(ROOT / "params" / "controller" / f"{c}.yaml")
+            vp = load_vehicle(load_controller(trq_params.resolve("controller", c))
                               .vehicle.file)
             if scenario.faults:
                 load_script(scenario.faults, (math.degrees(vp.tilt_min_rad),
                                               math.degrees(vp.tilt_max_rad)))
     except (ConfigError, ControllerConfigError) as exc:
-        print(f"run_scenario: {exc}", file=sys.stderr)
+        print(f"trq-scenario: {exc}", file=sys.stderr)
         return 2
     if not names:
-        print(f"run_scenario: --only {args.only} matches none of {scenario.controllers}",
+        print(f"trq-scenario: --only {args.only} matches none of {scenario.controllers}",
               file=sys.stderr)
         return 2
     args.out.mkdir(parents=True, exist_ok=True)
     runs = [Run(c, i, args.out / c) for i, c in enumerate(names)]
     jobs = max(1, min(args.jobs or os.cpu_count() or 1, len(runs)))
-    print(f"run_scenario: {scenario.name}: {scenario.description}")
+    print(f"trq-scenario: {scenario.name}: {scenario.description}")
     print(f"  {len(runs)} flight(s) {'in real time' if args.realtime else 'in lockstep'}, "
           f"{jobs} at a time, seed {scenario.seed}, wind {scenario.wind_speed_m_s:g} m/s from "
           f"{scenario.wind_from_deg:g} deg{' with gusts' if scenario.gusts else ''}, faults "
@@ -423,7 +423,7 @@ def main(argv: list[str] | None = None) -> int:
             time.sleep(0.2)
     except KeyboardInterrupt:
         interrupted = True
-        print("run_scenario: interrupted, stopping the flights", file=sys.stderr)
+        print("trq-scenario: interrupted, stopping the flights", file=sys.stderr)
         for t in active:
             t.join()
     finally:
@@ -434,7 +434,7 @@ def main(argv: list[str] | None = None) -> int:
     results, failures = evaluate(scenario, runs)
     doc = {"scenario": scenario.name, "runs": results}
     (args.out / "metrics.json").write_text(json.dumps(doc, indent=2) + "\n")
-    import report
+    from trq_lab import report
     figures = [] if args.no_figures else report.figures(scenario, runs, args.out)
     envelopes = envelope_of(scenario, runs)
     doc["envelope"] = envelopes
@@ -446,7 +446,7 @@ def main(argv: list[str] | None = None) -> int:
     print()
     for f in failures:
         print(f"  TARGET MISSED: {f}")
-    print(f"run_scenario: metrics {args.out / 'metrics.json'}, report {args.out / 'report.md'}"
+    print(f"trq-scenario: metrics {args.out / 'metrics.json'}, report {args.out / 'report.md'}"
           + (f", figures {', '.join(str(p) for p in figures)}" if figures else ""))
     return 1 if (failures or interrupted
                  or any(r.status not in ("done", "crashed") for r in runs)) else 0

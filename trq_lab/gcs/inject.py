@@ -1,15 +1,15 @@
 #!/usr/bin/env python3
 """Inject faults and wind into a running SIL vehicle over MAVLink, and wait for its answer.
 
-    inject_fault.py motor 1 off            motor 1 stops (MAV_CMD_INJECT_FAILURE)
-    inject_fault.py motor 1 on             motor 1 restored
-    inject_fault.py motor 1 eff 0.5        motor 1 effectiveness 0.5 (parameter SIM_MOT1_EFF)
-    inject_fault.py motor 1 tv 0.8 0.2 0.01 [PHI]   effectiveness 0.8 - 0.2 sin(0.01 t + PHI)
-    inject_fault.py servo 2 stuck 10       tilt servo 2 stuck at 10 deg ("here": where it is)
-    inject_fault.py servo 2 free
-    inject_fault.py wind 8 [DIR_DEG] [--gusts on|off] [--sigma S]
-    inject_fault.py clear                  every motor and servo healthy
-    inject_fault.py script params/faults/motor1_50.yaml   timed events, in vehicle time
+    trq-inject-fault motor 1 off            motor 1 stops (MAV_CMD_INJECT_FAILURE)
+    trq-inject-fault motor 1 on             motor 1 restored
+    trq-inject-fault motor 1 eff 0.5        motor 1 effectiveness 0.5 (parameter SIM_MOT1_EFF)
+    trq-inject-fault motor 1 tv 0.8 0.2 0.01 [PHI]   effectiveness 0.8 - 0.2 sin(0.01 t + PHI)
+    trq-inject-fault servo 2 stuck 10       tilt servo 2 stuck at 10 deg ("here": where it is)
+    trq-inject-fault servo 2 free
+    trq-inject-fault wind 8 [DIR_DEG] [--gusts on|off] [--sigma S]
+    trq-inject-fault clear                  every motor and servo healthy
+    trq-inject-fault script params/faults/motor1_50.yaml   timed events, in vehicle time
 
 Each action waits for the vehicle's acknowledgement (COMMAND_ACK ACCEPTED, or the PARAM_VALUE
 that confirms the new value); without one the tool exits 1 with the reason. Script times
@@ -26,15 +26,13 @@ from pathlib import Path
 
 from pymavlink.dialects.v20 import common as mavlink
 
-ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
-sys.path.insert(0, str(ROOT / "tools"))
 
-from mavclient import MavClient, NoAnswer  # noqa: E402
-from sil_vehicle.faultscript import (MOTOR, SERVO, TYPE_OFF, TYPE_OK, TYPE_STUCK,  # noqa: E402
+from trq_lab.gcs.client import MavClient, NoAnswer
+from sil_vehicle.faultscript import (MOTOR, SERVO, TYPE_OFF, TYPE_OK, TYPE_STUCK,
                                      Event, InjectAction, ParamAction, load_script)
-from sil_vehicle.mavlink.signing import SigningKeyError, load_key  # noqa: E402
-from sil_vehicle.yamlcheck import ConfigError  # noqa: E402
+from sil_vehicle.mavlink.signing import SigningKeyError, load_key
+from sil_vehicle.yamlcheck import ConfigError
+import trq_params
 
 RESULTS = {v.name.removeprefix("MAV_RESULT_"): k for k, v in mavlink.enums["MAV_RESULT"].items()}
 
@@ -127,7 +125,7 @@ def play(client: MavClient, events: tuple[Event, ...], *, timeout_s: float = 30.
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0],
+    p = argparse.ArgumentParser(prog="trq-inject-fault", description=__doc__.splitlines()[0],
                                 formatter_class=argparse.RawDescriptionHelpFormatter,
                                 epilog="\n".join(__doc__.splitlines()[2:]))
     p.add_argument("--connect", default="udpout:127.0.0.1:18570",
@@ -151,7 +149,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.what == "script":
             if not args.n:
                 raise SystemExit2("script FILE: a fault script is needed")
-            events = load_script(args.n)
+            events = load_script(trq_params.resolve("faults", args.n))
             actions, text = None, f"script {args.n} ({len(events)} events)"
         elif args.what == "clear":
             events = load_script_from_text("clear")

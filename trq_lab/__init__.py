@@ -1,0 +1,25 @@
+"""trq_lab: the experiment layer above the two daemons.
+
+What goes in: scenario, campaign and fault files (built-in ones by name, through `trq_params`, or
+a user's by path), and the two daemons (`sil_vehicle`, `trq_offboard`) as they are installed.
+What comes out: flights (over the wire or in one process), their logs, metrics, reports, figures,
+and the figures of the benchmarks and analyses. It never changes how either daemon flies: every
+flight here is one that the daemons fly the same way on their own.
+
+    scenario        a scenario file (`params/scenarios/`): both daemons as processes over UDP,
+                    one flight per controller, metrics.json, report.md, figures (trq-scenario)
+    harness         the one closed loop in one process: the vehicle's `Sitl` and the controller's
+                    `OffboardFlight` joined by an in-memory link of the same MAVLink bytes
+                    (trq-inprocess; the campaigns, the benchmark and the tests fly it)
+    overlays        the controller overlay every flight flies (a reference over a controller file)
+    metrics         a flight's metrics from its two logs (pure functions of arrays)
+    report          a scenario's report.md and figures
+    results         the README's results tables, generated from result files (trq-results)
+    campaign        grids and seeded samples of flights on Dask, resumable (trq-campaign)
+    stress          hostile and malformed traffic against both daemons (trq-stress)
+    analysis/       envelope (trim and margins, trq-envelope), latency_bound (the best any
+                    controller could fly after a fault, given its reaction time, trq-latency-bound)
+    gcs/            client (a small blocking MAVLink client), inject (trq-inject-fault), monitor
+                    (trq-monitor): what a ground station does, from the command line
+    bench/          nmpc (trq-bench-nmpc), sim (trq-bench-sim), hover_check (trq-hover-check)
+"""

@@ -1,0 +1,7 @@
+"""Analyses of what is physically possible, independent of any controller.
+
+    envelope        airframe + motor fault + wind -> the hover trim and the force and torque
+                    margins left to the actuators (CasADi + IPOPT on the simulator's rotor model)
+    latency_bound   a flight's logs + a reaction latency -> the smallest position error any
+                    controller could have flown after the fault (an optimal control problem)
+"""
