@@ -78,6 +78,7 @@ from pathlib import Path
 from typing import Any
 
 import trq_params
+
 from sil_vehicle.yamlcheck import ConfigError, Section, load_yaml
 
 PARAMS = trq_params.DIR

@@ -48,9 +48,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterable
 
-
-from pymavlink.dialects.v20 import common as mavlink
 import trq_params
+from pymavlink.dialects.v20 import common as mavlink
 
 PARAMS = trq_params.DIR
 SIM_DEFAULT = PARAMS / "sim" / "default.yaml"
@@ -355,8 +354,8 @@ def flight_metrics(log_dir: Path, controller: str, fault_onset_us: int | None,
                    recovery_threshold_m: float) -> dict:
     """The scenario runner's metrics (trq_lab.metrics) of a flight, from the two logs in
     log_dir (flight.csv and controller.csv, in process or from the daemons)."""
-    from trq_lab import metrics as metrics_mod
     from sil_vehicle.config import load_vehicle
+    from trq_lab import metrics as metrics_mod
 
     meta, truth = metrics_mod.read_csv(Path(log_dir) / "flight.csv")
     _, steps = metrics_mod.read_csv(Path(log_dir) / "controller.csv")
@@ -375,9 +374,9 @@ def fingerprint(path: Path) -> str:
 def main(argv: list[str] | None = None) -> int:
     import argparse
 
-    from trq_lab import scenario as run_scenario
     from sil_vehicle.faultscript import load_script
     from sil_vehicle.yamlcheck import ConfigError
+    from trq_lab import scenario as run_scenario
     from trq_offboard.config import load_controller
 
     ap = argparse.ArgumentParser(prog="trq-inprocess", description=__doc__.splitlines()[0])

@@ -28,7 +28,6 @@ from pathlib import Path
 
 import numpy as np
 
-
 GROUND_DOWN_M = 0.0
 
 

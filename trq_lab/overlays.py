@@ -6,9 +6,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import yaml
 import trq_params
-
+import yaml
 
 
 def controller_file(controller: str | Path) -> Path:

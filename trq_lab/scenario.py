@@ -28,13 +28,14 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+import trq_params
 
-from trq_lab import metrics as metrics_mod
-from trq_lab.overlays import write_controller_overlay
 from sil_vehicle.config import load_vehicle
 from sil_vehicle.faultscript import load_script
 from sil_vehicle.yamlcheck import ConfigError, Section, load_yaml
-import trq_params
+from trq_lab import metrics as metrics_mod
+from trq_lab import procs
+from trq_lab.overlays import write_controller_overlay
 
 REALTIME_LATENCY_S = 0.005    # what a command waits in real time (measured: 2 and 3 ms worse,
                               # a crash at 3 ms, with the solve at about 1 ms; README)
@@ -233,13 +234,7 @@ def fly(scenario: Scenario, run: Run, realtime: bool, lock: threading.Lock,
                 time.sleep(0.5)
         finally:
             for proc in (controller, vehicle):
-                if proc.poll() is None:
-                    proc.send_signal(signal.SIGINT)
-                    try:
-                        proc.wait(10)
-                    except subprocess.TimeoutExpired:
-                        proc.kill()
-                        proc.wait()
+                procs.stop(proc)
     run.returncode = controller.returncode
     run.wall_s = time.monotonic() - wall0
     run.t_s = _last_time(run.out / "controller.csv")

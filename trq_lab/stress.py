@@ -45,10 +45,11 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-
+import trq_params
 from pymavlink.dialects.v10 import common as mav1
 from pymavlink.dialects.v20 import common as mavlink
-import trq_params
+
+from trq_lab import procs
 
 ENV = dict(os.environ)
 BAD_KINDS = ("random", "truncated", "bad_crc", "mavlink1", "unknown_id", "other_system",
@@ -388,21 +389,10 @@ def write_overlay(out: Path, controller: str, reference: dict) -> Path:
     return write_controller_overlay(controller, reference, out)
 
 
-def wait_bound(port: int, proc: subprocess.Popen, timeout_s: float) -> bool:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline and proc.poll() is None:
-        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-            try:
-                s.bind(("127.0.0.1", port))
-            except OSError:
-                return True
-        time.sleep(0.05)
-    return False
-
-
 def check_flight_log(path: Path, tilt_min: float, tilt_max: float) -> dict:
     """What the vehicle applied, from its flight.csv: commands finite and in range, crashes."""
     import numpy as np
+
     from trq_lab import metrics
 
     _, cols = metrics.read_csv(path)
@@ -485,7 +475,7 @@ def run(args: argparse.Namespace) -> int:
             with open(out / "controller.out", "wb") as f:
                 controller = subprocess.Popen(ccmd, cwd=out, env=ENV, stdout=f,
                                               stderr=subprocess.STDOUT)
-            if not wait_bound(ctrl_port, controller, 90.0):
+            if not procs.wait_bound(ctrl_port, controller, 90.0):
                 print(f"stress: the controller did not start (see {out / 'controller.out'})",
                       file=sys.stderr)
                 controller.kill()

@@ -18,16 +18,12 @@ from __future__ import annotations
 import json
 import math
 import os
-import signal
-import socket
 import subprocess
 import sys
 import threading
-import time
 from pathlib import Path
 
 import pytest
-
 from conftest import PARAMS, ROOT, cli
 
 pytest.importorskip("distributed")
@@ -181,8 +177,8 @@ def test_failed_flights_are_recorded_and_max_flights_resumes(tmp_path):
     (lambda t: t.replace("at_s: 1.5", "onset_s: 1.5"), "grid.fault.onset_s", "unknown key"),
 ])
 def test_bad_campaign_names_file_and_key(tmp_path, edit, key, words):
-    from trq_lab import campaign
     from sil_vehicle.yamlcheck import ConfigError
+    from trq_lab import campaign
 
     bad = tmp_path / "typo.yaml"
     text = SMOKE.read_text()
@@ -225,8 +221,8 @@ def test_link_axis_impairs_the_offboard_link(tmp_path):
     ids and seeds of a campaign without the axis; an impaired one reaches the flight (its truth
     log differs from the clean flight's with the same seed) and the controller is told the
     round trip; a bad key is refused with its name."""
-    from trq_lab import campaign
     from sil_vehicle.yamlcheck import ConfigError
+    from trq_lab import campaign
 
     base = SMOKE.read_text().replace("effectiveness: [1.0, 0.6]", "effectiveness: 0.6").replace(
         "speed_m_s: [0.0, 4.0]", "speed_m_s: 0.0").replace(
@@ -263,6 +259,7 @@ def _udp_lockstep_flight(out: Path, scenario) -> None:
     """The two daemons over UDP, set up as trq-scenario does, with the controller listening
     before the vehicle starts (and the vehicle never free-running on wall time): the ideal
     lockstep flight, with which the in-process flight must agree."""
+    from trq_lab import procs
     from trq_lab import scenario as run_scenario
 
     c = scenario.controllers[0]
@@ -276,14 +273,7 @@ def _udp_lockstep_flight(out: Path, scenario) -> None:
         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=ENV, cwd=ROOT)
     vehicle = None
     try:
-        deadline = time.monotonic() + 60
-        while time.monotonic() < deadline:           # the controller's socket is bound
-            with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-                try:
-                    s.bind(("127.0.0.1", p_ctrl))
-                except OSError:
-                    break
-            time.sleep(0.1)
+        procs.wait_bound(p_ctrl, ctrl, 60.0)         # the controller's socket is bound
         vehicle = subprocess.Popen(
             [sys.executable, "-m", "sil_vehicle", "--sim", str(sim_yaml), "--vehicle",
              str(vehicle_file), "--seed", str(scenario.seed), "--wind-speed",
@@ -296,20 +286,14 @@ def _udp_lockstep_flight(out: Path, scenario) -> None:
         assert ctrl.wait(120) == 0
     finally:
         for proc in (ctrl, vehicle):
-            if proc is not None and proc.poll() is None:
-                proc.send_signal(signal.SIGINT)
-                try:
-                    proc.wait(10)
-                except subprocess.TimeoutExpired:
-                    proc.kill()
-                    proc.wait()
+            procs.stop(proc)
 
 
 def test_inprocess_flight_reproduces_the_udp_flight(tmp_path):
+    from sil_vehicle.faultscript import load_script
     from trq_lab import harness as inprocess
     from trq_lab import metrics, overlays
     from trq_lab import scenario as run_scenario
-    from sil_vehicle.faultscript import load_script
     from trq_offboard.config import load_controller
 
     sc = run_scenario.load_scenario(PARAMS / "scenarios" / "smoke.yaml")

@@ -24,7 +24,7 @@ import time
 
 from conftest import ROOT, free_udp_port
 
-from trq_lab import stress
+from trq_lab import procs, stress
 
 QUIET_S = 2.0
 ATTACK_S = 3.0
@@ -57,7 +57,7 @@ def test_hostile_traffic(tmp_path):
              "--connect-timeout", "3", "--no-log"],
             cwd=tmp_path, env=stress.ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
             text=True)
-        assert stress.wait_bound(ctrl_port, controller, 30.0), controller.communicate()
+        assert procs.wait_bound(ctrl_port, controller, 30.0), controller.communicate()
         vports = [vehicle.gcs_port, vehicle.offboard_port]
         drops0 = stress.kernel_drops(vports)
         sent = stress.attack(vports, ATTACK_S, list(stress.KINDS), FLOOD_RATE, BAD_RATE, arsenal,

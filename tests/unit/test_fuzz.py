@@ -17,7 +17,6 @@ The large-size version of the same traffic over real sockets is trq-stress.
 from __future__ import annotations
 
 import math
-import struct
 
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
@@ -26,6 +25,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from sil_vehicle.mavlink.codec import Codec
 from sil_vehicle.sitl import Sitl
+from trq_lab.stress import frame_v2
 from trq_offboard.link.udp import Connection, MavlinkUdp
 
 FUZZ = settings(max_examples=150, deadline=None,
@@ -54,15 +54,6 @@ commands = st.one_of(st.sampled_from([
     mavlink.MAV_CMD_INJECT_FAILURE, mavlink.MAV_CMD_SET_MESSAGE_INTERVAL,
     mavlink.MAV_CMD_REQUEST_MESSAGE, mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES,
     mavlink.MAV_CMD_NAV_TAKEOFF]), u16)
-
-
-def frame_v2(msg_id: int, payload: bytes, crc_extra: int, seq: int = 0, system: int = 255,
-             component: int = 190) -> bytes:
-    """A MAVLink 2 frame with a correct checksum around any payload (the CRC extra given)."""
-    header = struct.pack("<BBBBBBB", len(payload), 0, 0, seq, system, component,
-                         msg_id & 0xFF) + struct.pack("<H", msg_id >> 8)
-    crc = mavlink.x25crc(header + payload + bytes([crc_extra])).crc
-    return b"\xfd" + header + payload + struct.pack("<H", crc)
 
 
 DIALECT = sorted(mavlink.mavlink_map.items())

@@ -23,11 +23,10 @@ from pathlib import Path
 
 import casadi as ca
 import numpy as np
-
+import trq_params
 
 from sil_vehicle.config import VehicleParams, load_vehicle
 from sil_vehicle.frames import wind_from_to_ned
-import trq_params
 
 AXES = ("Fx", "Fy", "Fz", "Mx", "My", "Mz")
 

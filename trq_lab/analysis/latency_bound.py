@@ -39,17 +39,14 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
+import casadi as ca
 import numpy as np
 
-
-import casadi as ca
-
-from trq_lab import metrics as metrics_mod
 from sil_vehicle.config import load_vehicle
 from sil_vehicle.dynamics.actuators import first_order_step, lag_factor
+from trq_lab import metrics as metrics_mod
 from trq_offboard.config import load_vehicle_model
 from trq_offboard.model.dynamics import PredictionModel, euler_rate_matrix
-import trq_params
 
 SAMPLE_S = 0.01      # s, the controller's sample period (the metric's samples)
 

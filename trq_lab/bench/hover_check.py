@@ -18,11 +18,10 @@ import sys
 import time
 from pathlib import Path
 
+import trq_params
 from pymavlink.dialects.v20 import common as mavlink
 
-
 from sil_vehicle.config import load_vehicle
-import trq_params
 
 
 def free_port() -> int:

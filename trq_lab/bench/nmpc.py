@@ -39,7 +39,6 @@ from pathlib import Path
 import numpy as np
 import trq_params
 
-
 MODES = {     # name: solver overrides of params/controller/trq_nmpc_eso.yaml (and in "controller"
               # overrides of the controller's own keys)
     "rti-gn": dict(kind="rti", hessian="gauss_newton", max_iterations=1),

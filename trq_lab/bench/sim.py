@@ -37,13 +37,11 @@ import numpy as np
 import yaml
 from pymavlink.dialects.v20 import common as mavlink
 
-
 from sil_vehicle import compiled
 from sil_vehicle.config import PARAMS_DIR, load_sim
 from sil_vehicle.mavlink.codec import Codec
 from sil_vehicle.sitl import LINKS, Sitl
 from sil_vehicle.vehicle import ActuatorCommand, Vehicle
-import trq_params
 
 TARGET_RTF = 20.0
 SIM_DEFAULT = PARAMS_DIR / "sim" / "default.yaml"

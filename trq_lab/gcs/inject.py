@@ -24,15 +24,23 @@ import sys
 import time
 from pathlib import Path
 
+import trq_params
 from pymavlink.dialects.v20 import common as mavlink
 
-
-from trq_lab.gcs.client import MavClient, NoAnswer
-from sil_vehicle.faultscript import (MOTOR, SERVO, TYPE_OFF, TYPE_OK, TYPE_STUCK,
-                                     Event, InjectAction, ParamAction, load_script)
+from sil_vehicle.faultscript import (
+    MOTOR,
+    SERVO,
+    TYPE_OFF,
+    TYPE_OK,
+    TYPE_STUCK,
+    Event,
+    InjectAction,
+    ParamAction,
+    load_script,
+)
 from sil_vehicle.mavlink.signing import SigningKeyError, load_key
 from sil_vehicle.yamlcheck import ConfigError
-import trq_params
+from trq_lab.gcs.client import MavClient, NoAnswer
 
 RESULTS = {v.name.removeprefix("MAV_RESULT_"): k for k, v in mavlink.enums["MAV_RESULT"].items()}
 

@@ -26,15 +26,13 @@ import math
 import sys
 import time
 from collections import deque
-from pathlib import Path
 
+import trq_params
 from pymavlink.dialects.v20 import common as mavlink
 
-
-from trq_lab.gcs.client import MavClient, NoAnswer
 from sil_vehicle.config import load_vehicle
 from sil_vehicle.yamlcheck import ConfigError
-import trq_params
+from trq_lab.gcs.client import MavClient, NoAnswer
 
 CLEAR_HOME = "\x1b[2J\x1b[H"
 RATE_WINDOW_S = 2.0
