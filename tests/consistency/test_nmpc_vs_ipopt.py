@@ -4,37 +4,20 @@ the real-time budget (3 iterations, warm-started) close to it along a short clos
 from __future__ import annotations
 
 import dataclasses
-from pathlib import Path
 
 import numpy as np
 import pytest
+import trq_params
+from ocp_problem import ocp_problem
 
-from trq_offboard.allocation import Allocator
 from trq_offboard.config import load_controller
-from trq_offboard.model import PredictionModel
 from trq_offboard.nmpc.solver import IpoptSolver, SqpSolver
 from trq_offboard.records import SolveStatus
 
-CTRL = Path(__file__).resolve().parents[2] / "params" / "controller"
-
 
 def _problem(name):
-    cfg = load_controller(CTRL / f"{name}.yaml")
-    model = PredictionModel(cfg.vehicle)
-    alloc = Allocator(cfg.vehicle)
-    u_trim = alloc.command_vector(alloc.hover())
-    N = cfg.horizon_steps
-    x0 = np.zeros(12)
-    x0[0:3] = (0.3, -0.2, -1.8)
-    x0[3:6] = (0.2, 0.1, 0.0)
-    x0[6:9] = (0.05, -0.03, 0.1)
-    x_ref = np.zeros((N + 1, 12))
-    x_ref[:, 2] = -2.0
-    x_ref[:, 3] = 0.3
-    x_ref[:, 0] = 0.3 * cfg.step_s * np.arange(N + 1)
-    d = np.array([0.5, -0.2, 0.3, 1.0, -2.0, 0.5])
-    guess = (np.tile(u_trim, (N, 1)), np.tile(x0, (N + 1, 1)))
-    return cfg, model, u_trim, x0, x_ref, d, guess
+    cfg = load_controller(trq_params.builtin("controller", name))
+    return (cfg, *ocp_problem(cfg))
 
 
 @pytest.mark.parametrize("name,hessian", [("trq_nmpc_eso", "gauss_newton"),

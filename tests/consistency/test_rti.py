@@ -7,12 +7,12 @@ from __future__ import annotations
 
 import dataclasses
 import warnings
-from pathlib import Path
 
 import numpy as np
 import pytest
+import trq_params
+from ocp_problem import ocp_problem
 
-from trq_offboard.allocation import Allocator
 from trq_offboard.config import load_controller
 from trq_offboard.model import PredictionModel
 from trq_offboard.nmpc import cache
@@ -20,7 +20,7 @@ from trq_offboard.nmpc.rti import RtiSolver
 from trq_offboard.nmpc.solver import IpoptSolver
 from trq_offboard.records import SolveStatus
 
-CTRL = Path(__file__).resolve().parents[2] / "params" / "controller"
+CTRL = trq_params.DIR / "controller"
 
 
 @pytest.fixture(scope="module")
@@ -40,22 +40,6 @@ def _cfg(name="trq_nmpc_eso", tilt_rate_limit="horizon", **solver):
         cfg.solver, kind="rti", **solver))
 
 
-def _problem(cfg):
-    model = PredictionModel(cfg.vehicle)
-    alloc = Allocator(cfg.vehicle)
-    u_trim = alloc.command_vector(alloc.hover())
-    N = cfg.horizon_steps
-    x0 = np.zeros(12)
-    x0[0:3] = (0.3, -0.2, -1.8)
-    x0[3:6] = (0.2, 0.1, 0.0)
-    x0[6:9] = (0.05, -0.03, 0.1)
-    x_ref = np.zeros((N + 1, 12))
-    x_ref[:, 2] = -2.0
-    x_ref[:, 3] = 0.3
-    x_ref[:, 0] = 0.3 * cfg.step_s * np.arange(N + 1)
-    d = np.array([0.5, -0.2, 0.3, 1.0, -2.0, 0.5])
-    guess = (np.tile(u_trim, (N, 1)), np.tile(x0, (N + 1, 1)))
-    return model, u_trim, x0, x_ref, d, guess
 
 
 def _has_compiler() -> bool:
@@ -74,7 +58,7 @@ def test_rti_steps_at_fixed_state_converge_to_ipopt(cache_env, hessian, codegen,
     through casadi.conic, and with either place for the servos' rate limit."""
     cfg = _cfg(hessian=hessian, codegen=codegen, hpipm_interface=interface,
                tilt_rate_limit=tilt_rate_limit)
-    model, u_trim, x0, x_ref, d, guess = _problem(cfg)
+    model, u_trim, x0, x_ref, d, guess = ocp_problem(cfg)
     u_r, x_r, info_r = IpoptSolver(cfg, model, u_trim).solve(x0, x_ref, d, u_trim, guess)
     assert info_r.status is SolveStatus.OK
     rti = RtiSolver(cfg, model, u_trim, hessian)
@@ -111,7 +95,7 @@ def test_direct_hpipm_step_equals_the_conic_one(cache_env, hessian):
     plans = {}
     for interface, shim in (("conic", True), ("direct", True), ("direct", False)):
         cfg = _cfg(hessian=hessian, codegen="off", hpipm_interface=interface)
-        model, u_trim, x0, x_ref, d, guess = _problem(cfg)
+        model, u_trim, x0, x_ref, d, guess = ocp_problem(cfg)
         rti = RtiSolver(cfg, model, u_trim, hessian)
         if interface == "direct" and not shim:
             rti._hqp._shim = None
@@ -134,7 +118,7 @@ def test_direct_hpipm_missing_falls_back_to_conic(cache_env, monkeypatch):
     from trq_offboard.nmpc import hpipm
     monkeypatch.setattr(hpipm, "available", lambda: (False, "libhpipm not found (test)"))
     cfg = _cfg(codegen="off")
-    model, u_trim, x0, x_ref, d, guess = _problem(cfg)
+    model, u_trim, x0, x_ref, d, guess = ocp_problem(cfg)
     with pytest.warns(RuntimeWarning, match="libhpipm not found"):
         rti = RtiSolver(cfg, model, u_trim)
     assert rti.qp_interface == "conic"
@@ -146,7 +130,7 @@ def test_first_step_tilt_rate_limit(cache_env):
     """tilt_rate_limit first_step: the tilts are inputs and only the first command is limited
     against the applied tilt (rate x control period); later steps move farther."""
     cfg = _cfg(codegen="off", tilt_rate_limit="first_step")
-    model, u_trim, x0, x_ref, d, guess = _problem(cfg)
+    model, u_trim, x0, x_ref, d, guess = ocp_problem(cfg)
     rti = RtiSolver(cfg, model, u_trim)
     assert (rti.ocp.ns, rti.ocp.nv) == (12, 8)
     u_prev = u_trim.copy()
@@ -172,7 +156,7 @@ def test_cache_is_reused_and_invalidated(cache_env, monkeypatch):
 
     monkeypatch.setattr(cache.subprocess, "run", spy)
     cfg = _cfg(hessian="gauss_newton")
-    model, u_trim, *_ = _problem(cfg)
+    model, u_trim, *_ = ocp_problem(cfg)
     libs_before = set(cache_env.glob("rti_lin_*.so"))
     first = RtiSolver(cfg, model, u_trim)
     n_first = len(calls)       # 0 if an earlier test of this module already compiled it
@@ -202,7 +186,7 @@ def test_pure_python_fallback_without_compiler(cache_env, monkeypatch):
     monkeypatch.delenv("CC", raising=False)
     assert cache.find_compiler() is None
     cfg = _cfg(name="quad_nmpc", hessian="gauss_newton")
-    model, u_trim, x0, x_ref, d, guess = _problem(cfg)
+    model, u_trim, x0, x_ref, d, guess = ocp_problem(cfg)
     with pytest.warns(RuntimeWarning, match="no C compiler"):
         rti = RtiSolver(cfg, model, u_trim)
     assert rti.build_mode == "interpreted"
@@ -219,7 +203,7 @@ def test_rti_and_sqp_with_actuator_lag_states_converge_to_ipopt(cache_env, name)
     from trq_offboard.nmpc.solver import SqpSolver
 
     cfg = dataclasses.replace(_cfg(name=name, hessian="gauss_newton"), actuator_states="on")
-    model, u_trim, x0, x_ref, d, guess = _problem(cfg)
+    model, u_trim, x0, x_ref, d, guess = ocp_problem(cfg)
     y0 = u_trim.copy()
     y0[-4:] -= 4.0                                   # throttles 4 % below the command
     if model.tilting:
@@ -254,7 +238,7 @@ def test_unwritable_cache_runs_interpreted(tmp_path, monkeypatch):
     blocker.write_text("a file where the cache directory should be")
     monkeypatch.setenv("TRQ_CACHE_DIR", str(blocker / "cache"))
     cfg = _cfg()
-    model, u_trim, x0, x_ref, d, guess = _problem(cfg)
+    model, u_trim, x0, x_ref, d, guess = ocp_problem(cfg)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         rti = RtiSolver(cfg, model, u_trim)
