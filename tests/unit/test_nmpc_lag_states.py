@@ -221,23 +221,27 @@ def test_ocp_packs_and_fixes_the_actuators():
     assert jsp.size1() == N * ns
 
 
+class _LagOcp:
+    """The part of the NMPC's OCP the controller asks about when it is built: it carries the
+    actuators' lag states, and takes the motors' effectiveness estimates."""
+    n_lag = 8
+
+    def set_throttle_scale(self, e):
+        pass
+
+
+class _LagSolver:
+    ocp = _LagOcp()
+
+
 def test_controller_starts_the_plan_from_the_lagged_actuators():
     """With a 40 ms round trip the controller builds the lag-state NMPC (auto) and starts its
     plan from the actuators' outputs predicted for t + delay: the lag of the commands in
     flight, as its delay predictor computes them."""
     from trq_offboard.controller import Controller
 
-    class _Ocp:
-        n_lag = 8
-
-        def set_throttle_scale(self, e):     # trq_nmpc_eso estimates the motors' effectiveness
-            pass
-
-    class _Solver:
-        ocp = _Ocp()
-
     cfg = dataclasses.replace(load_controller(CTRL / "trq_nmpc_eso.yaml"), applied_delay_s=0.04)
-    ctl = Controller(cfg, solver=_Solver())
+    ctl = Controller(cfg, solver=_LagSolver())
     assert ctl._act_states and ctl._lagged and ctl.delay_s == 0.04
     hover = ctl.u_trim
     up = hover.copy()
@@ -266,25 +270,16 @@ def test_lag_states_bring_the_lagged_observer_along():
     trq_nmpc_eso sets it on (its observer on body rates needs it), trq_nmpc_eso_paper auto."""
     from trq_offboard.controller import Controller
 
-    class _Ocp:
-        n_lag = 8
-
-        def set_throttle_scale(self, e):     # trq_nmpc_eso estimates the motors' effectiveness
-            pass
-
-    class _Solver:
-        ocp = _Ocp()
-
     shipped = load_controller(CTRL / "trq_nmpc_eso.yaml")
-    assert Controller(shipped, solver=_Solver())._lagged
+    assert Controller(shipped, solver=_LagSolver())._lagged
     base = load_controller(CTRL / "trq_nmpc_eso_paper.yaml")
     assert base.lagged_actuators == "auto"
-    assert not Controller(base, solver=_Solver())._lagged           # auto, lockstep
+    assert not Controller(base, solver=_LagSolver())._lagged           # auto, lockstep
     forced = dataclasses.replace(base, actuator_states="on")
-    ctl = Controller(forced, solver=_Solver())
+    ctl = Controller(forced, solver=_LagSolver())
     assert ctl._lagged and ctl._act_states and ctl.delay_s == 0.0
     off = dataclasses.replace(forced, lagged_actuators="off")
-    assert not Controller(off, solver=_Solver())._lagged
+    assert not Controller(off, solver=_LagSolver())._lagged
 
 
 def test_bare_yaml_on_off_read_as_words(tmp_path):
