@@ -11,6 +11,7 @@ Every wait has a timeout and raises `NoAnswer` with what was expected.
 
 from __future__ import annotations
 
+import argparse
 import math
 import socket
 import time
@@ -163,3 +164,14 @@ _BOOT_MS_STAMPED = ("ATTITUDE", "LOCAL_POSITION_NED", "GLOBAL_POSITION_INT")
 
 def _name(param_id) -> str:
     return param_id if isinstance(param_id, str) else param_id.decode(errors="replace")
+
+
+def gcs_parser(prog: str, doc: str) -> argparse.ArgumentParser:
+    """The command line every ground-station tool starts with: its docstring as description and
+    epilog, and --connect (the vehicle's ground-station port, as MavClient takes it)."""
+    p = argparse.ArgumentParser(prog=prog, description=doc.splitlines()[0],
+                                formatter_class=argparse.RawDescriptionHelpFormatter,
+                                epilog="\n".join(doc.splitlines()[2:]))
+    p.add_argument("--connect", default="udpout:127.0.0.1:18570",
+                   help="the vehicle's ground-station port (default udpout:127.0.0.1:18570)")
+    return p

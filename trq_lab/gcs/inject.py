@@ -40,7 +40,7 @@ from sil_vehicle.faultscript import (
 )
 from sil_vehicle.mavlink.signing import SigningKeyError, load_key
 from sil_vehicle.yamlcheck import ConfigError
-from trq_lab.gcs.client import MavClient, NoAnswer
+from trq_lab.gcs.client import MavClient, NoAnswer, gcs_parser
 
 RESULTS = {v.name.removeprefix("MAV_RESULT_"): k for k, v in mavlink.enums["MAV_RESULT"].items()}
 
@@ -133,16 +133,13 @@ def play(client: MavClient, events: tuple[Event, ...], *, timeout_s: float = 30.
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="trq-inject-fault", description=__doc__.splitlines()[0],
-                                formatter_class=argparse.RawDescriptionHelpFormatter,
-                                epilog="\n".join(__doc__.splitlines()[2:]))
-    p.add_argument("--connect", default="udpout:127.0.0.1:18570",
-                   help="the vehicle's ground-station port (default udpout:127.0.0.1:18570)")
+    p = gcs_parser("trq-inject-fault", __doc__)
     p.add_argument("--timeout", type=float, default=5.0, help="seconds to wait for the vehicle")
     p.add_argument("--signing-key-file", type=Path, default=None,
                    help="sign the commands (MAVLink 2 signing, 64 hex characters)")
     p.add_argument("what", choices=("motor", "servo", "wind", "clear", "script"))
-    p.add_argument("n", nargs="?", help="motor or servo number 1..4; wind speed m/s; script file")
+    p.add_argument("n", nargs="?", help="motor or servo number 1..4; wind speed m/s; script: a built-in name "
+                                "(motor1_50, tour, ...) or a fault script path")
     p.add_argument("action", nargs="?", help="motor: off|on|eff|tv; servo: stuck|free; "
                                              "wind: direction deg")
     p.add_argument("values", nargs="*")

@@ -32,7 +32,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from sil_vehicle.config import load_vehicle
 from sil_vehicle.yamlcheck import ConfigError
-from trq_lab.gcs.client import MavClient, NoAnswer
+from trq_lab.gcs.client import MavClient, NoAnswer, gcs_parser
 
 CLEAR_HOME = "\x1b[2J\x1b[H"
 RATE_WINDOW_S = 2.0
@@ -217,11 +217,7 @@ class Monitor:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="trq-monitor", description=__doc__.splitlines()[0],
-                                formatter_class=argparse.RawDescriptionHelpFormatter,
-                                epilog="\n".join(__doc__.splitlines()[2:]))
-    p.add_argument("--connect", default="udpout:127.0.0.1:18570",
-                   help="the vehicle's ground-station port (default udpout:127.0.0.1:18570)")
+    p = gcs_parser("trq-monitor", __doc__)
     p.add_argument("--vehicle", default="trq",
                    help="airframe, for the tilt servos' half-range: a built-in name (trq, quad) "
                         "or a vehicle YAML path (default trq)")
