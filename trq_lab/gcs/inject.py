@@ -138,8 +138,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--signing-key-file", type=Path, default=None,
                    help="sign the commands (MAVLink 2 signing, 64 hex characters)")
     p.add_argument("what", choices=("motor", "servo", "wind", "clear", "script"))
-    p.add_argument("n", nargs="?", help="motor or servo number 1..4; wind speed m/s; script: a built-in name "
-                                "(motor1_50, tour, ...) or a fault script path")
+    p.add_argument("n", nargs="?", help="motor or servo number 1..4; wind speed m/s; script: "
+                                        "a built-in name (motor1_50, tour, ...) or a path")
     p.add_argument("action", nargs="?", help="motor: off|on|eff|tv; servo: stuck|free; "
                                              "wind: direction deg")
     p.add_argument("values", nargs="*")
