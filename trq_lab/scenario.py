@@ -37,8 +37,9 @@ from trq_lab import metrics as metrics_mod
 from trq_lab import procs
 from trq_lab.overlays import write_controller_overlay
 
-REALTIME_LATENCY_S = 0.005    # what a command waits in real time (measured: 2 and 3 ms worse,
-                              # a crash at 3 ms, with the solve at about 1 ms; README)
+# what a command waits in real time, about one NMPC step (docs/decisions/
+# 2026-12-02-realtime-command-latency.md: how it was chosen)
+REALTIME_LATENCY_S = 0.005
 
 TARGET_KEYS = {"crashed": bool, "rmse_pos_m": float, "rmse_pos_after_fault_m": float,
                "max_pos_err_m": float, "max_yaw_err_deg": float, "rmse_yaw_deg": float,
