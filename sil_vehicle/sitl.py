@@ -323,6 +323,13 @@ class Sitl:
                              sender)]
         if kind == "PARAM_SET":
             return self._param_set(link, msg, sender)
+        if kind == "TIMESYNC":
+            # as PX4 answers: a request (tc1 = 0) gets tc1 = the vehicle's time in ns (here the
+            # simulated clock) and its own ts1 back; an answer (tc1 != 0) is not ours to answer
+            if msg.tc1 != 0:
+                return []
+            return [Outgoing(link, mavlink.MAVLink_timesync_message(self.t_us * 1000, msg.ts1),
+                             sender)]
         if kind == "MISSION_REQUEST_LIST":
             return [Outgoing(link, codec.mission_count(msg.get_srcSystem(), msg.get_srcComponent()),
                              sender)]

@@ -95,6 +95,19 @@ def test_param_request_list(sitl):
     encodes(out)
 
 
+def test_timesync_request_is_answered_with_the_simulated_clock(sitl):
+    fly_lockstep(sitl, 37)                      # the clock is past zero
+    now_ns = sitl.t_us * 1000
+    out = sitl.handle("offboard", wire(mavlink.MAVLink_timesync_message(0, 123456789)), ("c", 2))
+    (reply,) = of(out, "TIMESYNC")
+    assert (reply.tc1, reply.ts1) == (now_ns, 123456789) and now_ns > 0
+    assert [o.to for o in out] == [("c", 2)]
+    encodes(out)
+    # an answer (tc1 set) is not a request: no reply, so two autopilots never ping-pong
+    assert of(sitl.handle("gcs", wire(mavlink.MAVLink_timesync_message(5, 6)), ("h", 1)),
+              "TIMESYNC") == []
+
+
 def test_param_request_read(sitl):
     out = sitl.handle("gcs", wire(mavlink.MAVLink_param_request_read_message(1, 1, b"SIM_GUST_LEN",
                                                                              -1)))
