@@ -156,9 +156,10 @@ def _yaml_dump(data: dict) -> str:
 
 @dataclass
 class Run:
-    controller: str
+    controller: str                 # its name in the results (a file's stem)
     index: int
     out: Path
+    source: str = ""                # the controller as given: a built-in name or a YAML path
     status: str = "pending"
     t_s: float = 0.0
     wall_s: float = 0.0
@@ -187,7 +188,8 @@ def prepare(scenario: Scenario, controller: str, out: Path) -> tuple[Path, Path,
 
 def fly(scenario: Scenario, run: Run, realtime: bool, lock: threading.Lock,
         signing_key_file: Path | None = None) -> None:
-    ctrl_yaml, sim_yaml, vehicle_file, _ = prepare(scenario, run.controller, run.out)
+    ctrl_yaml, sim_yaml, vehicle_file, _ = prepare(scenario, run.source or run.controller,
+                                                   run.out)
     p_vehicle, p_ctrl, p_gcs = free_ports(3)
     vcmd = [sys.executable, "-m", "sil_vehicle", "--sim", str(sim_yaml), "--vehicle",
             str(vehicle_file), "--seed", str(scenario.seed), "--wind-speed",
@@ -296,7 +298,8 @@ def evaluate(scenario: Scenario, runs: list[Run]) -> tuple[list[dict], list[str]
             got = m.get(key)
             ok = (got == want) if isinstance(want, bool) else (got is not None and got <= want)
             if not ok:
-                failures.append(f"{name}: {key} = {got} (target {'=' if isinstance(want, bool) else '<='} {want})")
+                op = "=" if isinstance(want, bool) else "<="
+                failures.append(f"{name}: {key} = {got} (target {op} {want})")
     for better, worse, metric in scenario.better:
         if better not in by_name or worse not in by_name:
             continue
@@ -365,7 +368,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--jobs", type=int, default=None,
                     help="flights in parallel (default: the number of CPUs, at most the runs)")
     ap.add_argument("--only", action="append", default=None,
-                    help="fly only this controller (repeatable)")
+                    help="fly only this controller of the scenario's (repeatable)")
+    ap.add_argument("--controller", action="append", default=None,
+                    help="fly this controller instead of the scenario's: a built-in name or a "
+                         "controller YAML path, e.g. a file of your own that extends a built-in "
+                         "one (repeatable; the scenario's targets apply to the names it has)")
     ap.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     ap.add_argument("--signing-key-file", type=Path, default=None,
                     help="fly with MAVLink 2 signing (both daemons get the key file)")
@@ -375,17 +382,23 @@ def main(argv: list[str] | None = None) -> int:
     except (ConfigError, trq_params.UnknownName) as exc:
         print(f"trq-scenario: {exc}", file=sys.stderr)
         return 2
-    names = [c for c in scenario.controllers if not args.only or c in args.only]
+    sources = args.controller or list(scenario.controllers)
+    sources = [c for c in sources if not args.only or c in args.only]
+    names = [Path(c).stem if not trq_params.is_name(c) else c for c in sources]
+    if len(set(names)) != len(names):
+        print(f"trq-scenario: --controller: two controllers named alike: {sources}",
+              file=sys.stderr)
+        return 2
     try:    # every run's settings must be valid before anything starts
         from trq_offboard.config import ConfigError as ControllerConfigError
         from trq_offboard.config import load_controller
-        for c in names:
+        for c in sources:
             vp = load_vehicle(load_controller(trq_params.resolve("controller", c))
                               .vehicle.file)
             if scenario.faults:
                 load_script(scenario.faults, (math.degrees(vp.tilt_min_rad),
                                               math.degrees(vp.tilt_max_rad)))
-    except (ConfigError, ControllerConfigError) as exc:
+    except (ConfigError, ControllerConfigError, trq_params.UnknownName) as exc:
         print(f"trq-scenario: {exc}", file=sys.stderr)
         return 2
     if not names:
@@ -393,7 +406,7 @@ def main(argv: list[str] | None = None) -> int:
               file=sys.stderr)
         return 2
     args.out.mkdir(parents=True, exist_ok=True)
-    runs = [Run(c, i, args.out / c) for i, c in enumerate(names)]
+    runs = [Run(c, i, args.out / c, s) for i, (c, s) in enumerate(zip(names, sources))]
     jobs = max(1, min(args.jobs or os.cpu_count() or 1, len(runs)))
     print(f"trq-scenario: {scenario.name}: {scenario.description}")
     print(f"  {len(runs)} flight(s) {'in real time' if args.realtime else 'in lockstep'}, "
