@@ -19,6 +19,7 @@ import argparse
 import json
 import math
 import os
+import shlex
 import signal
 import socket
 import subprocess
@@ -187,7 +188,8 @@ def prepare(scenario: Scenario, controller: str, out: Path) -> tuple[Path, Path,
 
 
 def fly(scenario: Scenario, run: Run, realtime: bool, lock: threading.Lock,
-        signing_key_file: Path | None = None) -> None:
+        signing_key_file: Path | None = None, controller_prefix: tuple[str, ...] = (),
+        vehicle_prefix: tuple[str, ...] = ()) -> None:
     ctrl_yaml, sim_yaml, vehicle_file, _ = prepare(scenario, run.source or run.controller,
                                                    run.out)
     p_vehicle, p_ctrl, p_gcs = free_ports(3)
@@ -210,6 +212,7 @@ def fly(scenario: Scenario, run: Run, realtime: bool, lock: threading.Lock,
     if signing_key_file is not None:
         vcmd += ["--signing-key-file", str(signing_key_file)]
         ccmd += ["--signing-key-file", str(signing_key_file)]
+    vcmd, ccmd = [*vehicle_prefix, *vcmd], [*controller_prefix, *ccmd]
     env = dict(os.environ)
     (run.out / "command.txt").write_text(" ".join(vcmd) + "\n" + " ".join(ccmd) + "\n")
     wall0 = time.monotonic()
@@ -374,6 +377,11 @@ def main(argv: list[str] | None = None) -> int:
                          "controller YAML path, e.g. a file of your own that extends a built-in "
                          "one (repeatable; the scenario's targets apply to the names it has)")
     ap.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
+    ap.add_argument("--controller-prefix", default=None, metavar="CMD",
+                    help="run each controller process under this command, e.g. 'taskset -c 1' "
+                         "or 'nice -n 10' (trq-bench-cpu-budget uses it for a CPU quota)")
+    ap.add_argument("--vehicle-prefix", default=None, metavar="CMD",
+                    help="run each vehicle process under this command, e.g. 'taskset -c 0'")
     ap.add_argument("--signing-key-file", type=Path, default=None,
                     help="fly with MAVLink 2 signing (both daemons get the key file)")
     args = ap.parse_args(argv)
@@ -425,8 +433,10 @@ def main(argv: list[str] | None = None) -> int:
             active = [t for t in active if t.is_alive()]
             while pending and len(active) < jobs:
                 run = pending.pop(0)
-                t = threading.Thread(target=fly, args=(scenario, run, args.realtime, lock,
-                                                       args.signing_key_file))
+                t = threading.Thread(target=fly, args=(
+                    scenario, run, args.realtime, lock, args.signing_key_file,
+                    tuple(shlex.split(args.controller_prefix or "")),
+                    tuple(shlex.split(args.vehicle_prefix or ""))))
                 t.start()
                 active.append(t)
             time.sleep(0.2)
