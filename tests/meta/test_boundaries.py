@@ -2,6 +2,8 @@
 modules except the two argparse builders):
 
 - the wire is the only coupling: trq_offboard never imports sil_vehicle, and the reverse;
+- trq_wire, the wire's shared arithmetic and file formats, imports neither daemon, and neither
+  daemon defines again a function or class that trq_wire defines (one place for each);
 - one clock: the simulator's core never reads the wall clock, sleeps, or uses unseeded randomness
   (only daemon.py, clock.py and log.py may touch the wall clock);
 - every command-line option of both daemons has a help text.
@@ -43,12 +45,37 @@ def imported_modules(tree: ast.Module) -> list[str]:
 
 
 @pytest.mark.parametrize("package, forbidden", [("trq_offboard", "sil_vehicle"),
-                                                ("sil_vehicle", "trq_offboard")])
+                                                ("sil_vehicle", "trq_offboard"),
+                                                ("trq_wire", "sil_vehicle"),
+                                                ("trq_wire", "trq_offboard")])
 def test_the_daemons_do_not_import_each_other(package, forbidden):
     offenders = [f"{path.relative_to(ROOT)}: import {name}"
                  for path in sources(package)
                  for name in imported_modules(parse(path))
                  if name.split(".")[0] == forbidden]
+    assert not offenders, offenders
+
+
+def defined_names(tree: ast.Module) -> set[str]:
+    """Module-level functions and classes (not imports: a re-export defines nothing)."""
+    return {node.name for node in tree.body
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef))}
+
+
+def test_both_daemons_use_trq_wire():
+    for package in ("sil_vehicle", "trq_offboard"):
+        users = [p for p in sources(package)
+                 if any(n.split(".")[0] == "trq_wire" for n in imported_modules(parse(p)))]
+        assert len(users) >= 3, f"{package}: only {users} import trq_wire"
+
+
+def test_what_trq_wire_defines_is_not_defined_again_in_a_daemon():
+    shared = set().union(*(defined_names(parse(p)) for p in sources("trq_wire")))
+    shared -= {n for n in shared if n.startswith("_")}
+    assert {"load_key", "SignatureCheck", "to_pwm", "CsvLog", "cache_dir"} <= shared
+    offenders = [f"{p.relative_to(ROOT)}: {name}"
+                 for package in ("sil_vehicle", "trq_offboard") for p in sources(package)
+                 for name in sorted(defined_names(parse(p)) & shared)]
     assert not offenders, offenders
 
 
