@@ -369,8 +369,8 @@ def main(argv: list[str] | None = None) -> int:
         events = ()
         if args.faults is not None:
             vp = sim.vehicle
-            events = load_script(trq_params.resolve("faults", args.faults), (math.degrees(vp.tilt_min_rad),
-                                               math.degrees(vp.tilt_max_rad)))
+            events = load_script(trq_params.resolve("faults", args.faults),
+                                 (math.degrees(vp.tilt_min_rad), math.degrees(vp.tilt_max_rad)))
         key = load_key(args.signing_key_file) if args.signing_key_file else None
     except (ConfigError, SigningKeyError, trq_params.UnknownName) as exc:
         print(f"trq-sil-vehicle: {exc}", file=sys.stderr)

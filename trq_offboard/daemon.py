@@ -116,7 +116,9 @@ def main(argv: list[str] | None = None) -> int:
         link, controller, lambda state, airborne=False: Reference(
             cfg.reference, state.pos_ned_m, state.euler_rad[2], airborne=airborne,
             ground_down_m=HOME_GROUND_DOWN_M if airborne else None),
-        name=cfg.name, tilt_limit_rad=tilt_half_range(cfg.vehicle.tilt_min_rad, cfg.vehicle.tilt_max_rad), record=clog,
+        name=cfg.name,
+        tilt_limit_rad=tilt_half_range(cfg.vehicle.tilt_min_rad, cfg.vehicle.tilt_max_rad),
+        record=clog,
         connect_timeout_s=args.connect_timeout)
 
     async def _main() -> int:

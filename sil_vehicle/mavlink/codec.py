@@ -212,7 +212,8 @@ def gps_raw_int(m: Measured, home: tuple[float, float, float]) -> mavlink.MAVLin
     lat, lon, alt_mm = _geo(m, home)
     vn, ve = m.vel_ned_m_s[0], m.vel_ned_m_s[1]
     speed = math.hypot(vn, ve)
-    cog = int(round(math.degrees(math.atan2(ve, vn)) % 360.0 * 100.0)) % 36000 if speed > 0.2 else 65535
+    cog = (int(round(math.degrees(math.atan2(ve, vn)) % 360.0 * 100.0)) % 36000
+           if speed > 0.2 else 65535)
     return mavlink.MAVLink_gps_raw_int_message(
         m.t_us, mavlink.GPS_FIX_TYPE_3D_FIX, lat, lon, alt_mm, 80, 120,
         int(round(speed * 100.0)), cog, 14)

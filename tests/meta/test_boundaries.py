@@ -5,7 +5,8 @@ modules except the two argparse builders):
 - trq_wire, the wire's shared arithmetic and file formats, imports neither daemon, and neither
   daemon defines again a function or class that trq_wire defines (one place for each);
 - one clock: the simulator's core never reads the wall clock, sleeps, or uses unseeded randomness
-  (only daemon.py, clock.py and log.py may touch the wall clock);
+  (only daemon.py, clock.py and log.py may touch the wall clock), nor does trq_wire outside
+  signing.py and logfile.py;
 - every command-line option of both daemons has a help text.
 """
 
@@ -132,6 +133,17 @@ def test_simulator_core_has_no_wall_clock_sleep_or_unseeded_random():
             if not (p.parent == ROOT / "sil_vehicle" and p.name in WALL_CLOCK_ALLOWED)]
     assert any(p.name == "vehicle.py" for p in core) and any(p.name == "sitl.py" for p in core)
     offenders = [f"{p.relative_to(ROOT)} {use}" for p in core
+                 for use in clock_and_random_uses(parse(p))]
+    assert not offenders, offenders
+
+
+def test_trq_wire_reads_the_wall_clock_only_for_signing_and_the_tlog():
+    """The signing clock and the .tlog stamps are wall-clock time by their formats' definition;
+    nothing else shared by the daemons may read a clock, sleep or draw random numbers."""
+    allowed = {"signing.py", "logfile.py"}
+    files = sources("trq_wire")
+    assert {p.name for p in files} >= allowed | {"actuators.py", "cache.py"}
+    offenders = [f"{p.relative_to(ROOT)} {use}" for p in files if p.name not in allowed
                  for use in clock_and_random_uses(parse(p))]
     assert not offenders, offenders
 

@@ -39,7 +39,8 @@ def quat_to_euler(w: float, x: float, y: float, z: float) -> tuple[float, float,
 
 def parse_odometry(msg) -> Odometry | None:
     """ODOMETRY in LOCAL_NED with NED velocity (child frame LOCAL_NED). None if unusable."""
-    if msg.frame_id != mavlink.MAV_FRAME_LOCAL_NED or msg.child_frame_id != mavlink.MAV_FRAME_LOCAL_NED:
+    if msg.frame_id != mavlink.MAV_FRAME_LOCAL_NED \
+            or msg.child_frame_id != mavlink.MAV_FRAME_LOCAL_NED:
         return None
     values = (msg.x, msg.y, msg.z, msg.vx, msg.vy, msg.vz, *msg.q, msg.rollspeed,
               msg.pitchspeed, msg.yawspeed)
