@@ -8,6 +8,9 @@ Layers (each importing only the ones above it):
     faults, vehicle     the plant, one physics tick at a time (no I/O, injected RNG)
     clock               lockstep and real-time pacing
     mavlink/            codec (bytes <-> messages), parameters, commands, telemetry
-    log                 flight log (CSV) and .tlog writers
     daemon              the only loop: wires clock, vehicle and links
+
+What the controller must compute identically (signing, actuator scaling, the log files, the
+compiled-code cache) is trq_wire's, imported here and by trq_offboard; `log` and
+`mavlink.signing` only re-export it for older callers.
 """

@@ -39,11 +39,3 @@ class RealTimePacer:
         wall = self._now() - self._wall0
         return (sim_us - self._sim0_us) * 1e-6 / wall if wall > 0 else 0.0
 
-
-_EPOCH_2015_S = 1_420_070_400
-
-
-def signing_now_10us(wall: Callable[[], float] = time.time) -> int:
-    """MAVLink signing time: 10 us units since 2015-01-01 00:00:00 UTC (the wall clock, as the
-    signing specification asks; it never enters the simulation)."""
-    return int((wall() - _EPOCH_2015_S) * 100_000)

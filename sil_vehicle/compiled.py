@@ -12,8 +12,8 @@ them to equality. The Python code stays the reference and the readable statement
 the compiled tick is a faster way of running the same arithmetic (about five times faster per
 tick, `tools/bench_sim.py` prints both).
 
-Cache: $TRQ_CACHE_DIR, else ~/.cache/trq-ftc (as the controller's compiled functions), one library
-per hash of the source, compiler and flags, written to a temporary name and renamed into place
+Cache: trq_wire.cache (the folder the controller's compiled functions use too), one library per
+hash of the source, compiler and flags, written to a temporary name and renamed into place
 (concurrent processes never load a half-written file). Never committed.
 """
 
@@ -22,12 +22,11 @@ from __future__ import annotations
 import ctypes
 import hashlib
 import os
-import shutil
-import subprocess
-import tempfile
 import warnings
 from functools import lru_cache
 from pathlib import Path
+
+from trq_wire.cache import build_library, cache_dir, find_compiler
 
 __all__ = ["CompiledCore", "load_core", "find_compiler", "CFLAGS", "IMPACT", "ATTITUDE"]
 
@@ -42,21 +41,6 @@ P_SIZE = 17 + 3 + 3 + 28
 S_X, S_MOTOR, S_TILT, S_LANDED, S_CRASHED, S_RUNNING, S_T = 0, 13, 17, 21, 22, 23, 24
 S_CMD_THROTTLE, S_CMD_TILT, S_WIND, S_MOTOR_FAULT, S_SERVO_FAULT = 25, 29, 33, 36, 56
 S_IMPACT_SPEED, S_SIZE = 64, 65
-
-
-def cache_dir() -> Path:
-    env = os.environ.get("TRQ_CACHE_DIR")
-    return Path(env).expanduser() if env else Path.home() / ".cache" / "trq-ftc"
-
-
-def find_compiler() -> str | None:
-    """Absolute path of a C compiler on PATH ($CC, gcc, cc, clang), or None."""
-    for name in (os.environ.get("CC"), "gcc", "cc", "clang"):
-        if name:
-            path = shutil.which(name)
-            if path:
-                return path
-    return None
 
 
 class CompiledCore:
@@ -101,18 +85,12 @@ def _build(cc: str) -> Path:
     for part in (os.path.basename(cc).encode(), " ".join(CFLAGS).encode(), src):
         h.update(part)
         h.update(b"\0")
-    root = cache_dir()
-    lib = root / f"sil_tick_{h.hexdigest()[:20]}.so"
+    lib = cache_dir() / f"sil_tick_{h.hexdigest()[:20]}.so"
     if lib.exists():
         return lib
-    root.mkdir(parents=True, exist_ok=True)
-    with tempfile.TemporaryDirectory(dir=root, prefix=".build-") as tmp:
-        out = Path(tmp) / lib.name
-        res = subprocess.run([cc, *CFLAGS, str(SOURCE), "-o", str(out), "-lm"],
-                             capture_output=True, text=True)
-        if res.returncode != 0:
-            raise RuntimeError(f"{cc} failed on {SOURCE}: {res.stderr.strip()[:400]}")
-        os.replace(out, lib)
+    error = build_library(cc, list(CFLAGS), src.decode("ascii"), lib, ["-lm"])
+    if error is not None:
+        raise RuntimeError(f"{cc} failed on {SOURCE}: {error}")
     return lib
 
 

@@ -24,11 +24,11 @@ from sil_vehicle.clock import RealTimePacer
 import trq_params
 from sil_vehicle.config import ConfigError, SimParams, load_sim, parse_endpoint
 from sil_vehicle.faultscript import load_script
-from sil_vehicle.log import FlightLog, Tlog
 from sil_vehicle.mavlink.codec import Codec
-from sil_vehicle.mavlink.signing import SignatureCheck, SigningKeyError, load_key, sign_outgoing
 from sil_vehicle.sitl import LINKS, LOG_COLUMNS, Outgoing, Sitl
 from sil_vehicle.yamlcheck import Section
+from trq_wire.logfile import CsvLog, Tlog
+from trq_wire.signing import SignatureCheck, SigningKeyError, load_key, sign_outgoing
 
 log = logging.getLogger("sil_vehicle")
 
@@ -72,8 +72,8 @@ class VehicleDaemon:
                     "sim_file": sim.file, "seed": sim.seed, "physics_rate_hz": sim.physics_rate_hz,
                     "physics_core": self.sitl.vehicle.core_name,
                     "clock": sim.clock_mode, "frames": "world NED, body FRD, quaternion wxyz"}
-            self.flight_log = FlightLog(log_dir / "flight.csv", LOG_COLUMNS, meta,
-                                        flush_every=max(1, sim.log_rate_hz))
+            self.flight_log = CsvLog(log_dir / "flight.csv", LOG_COLUMNS, meta,
+                                     flush_every=max(1, sim.log_rate_hz))
             self.tlog = Tlog(log_dir / "vehicle.tlog")
             self.sitl.log_sink = self.flight_log
         self.codecs = {name: Codec(counters=self.sitl.counters[name]) for name in LINKS}
@@ -369,8 +369,8 @@ def main(argv: list[str] | None = None) -> int:
         events = ()
         if args.faults is not None:
             vp = sim.vehicle
-            events = load_script(trq_params.resolve("faults", args.faults), (math.degrees(vp.tilt_min_rad),
-                                               math.degrees(vp.tilt_max_rad)))
+            events = load_script(trq_params.resolve("faults", args.faults),
+                                 (math.degrees(vp.tilt_min_rad), math.degrees(vp.tilt_max_rad)))
         key = load_key(args.signing_key_file) if args.signing_key_file else None
     except (ConfigError, SigningKeyError, trq_params.UnknownName) as exc:
         print(f"trq-sil-vehicle: {exc}", file=sys.stderr)

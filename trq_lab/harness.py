@@ -27,7 +27,7 @@ noise draws as in the daemon) but are not encoded: nobody listens.
 
 The flight ends when `OffboardFlight.run()` returns (landed and disarmed), or `crash_grace_s`
 simulated seconds after a crash, or at `timeout_s` of simulated time. It writes `flight.csv`
-(`sil_vehicle.log.FlightLog`, columns `sil_vehicle.sitl.LOG_COLUMNS`) and `controller.csv`
+(`trq_wire.logfile.CsvLog`, columns `sil_vehicle.sitl.LOG_COLUMNS`) and `controller.csv`
 (`trq_offboard.log.ControllerLog`) in `out_dir`, so `trq_lab.metrics` computes the same metrics
 as for a scenario run. The controller's solve goes through `run_in_executor`, on an executor
 that runs it inline by default (one thread per flight; `inline_solve=False`: a worker thread,
@@ -288,14 +288,14 @@ def fly_inprocess(controller, sim, fault_events=(), seed: int | None = None, *,
     sim: the vehicle's SimParams (see `sim_params`); `seed` replaces its seed if given;
     fault_events: sil_vehicle.faultscript Events, played by the vehicle in its own time.
     """
-    from sil_vehicle.log import FlightLog
     from sil_vehicle.mavlink.codec import Codec
     from sil_vehicle.sitl import LOG_COLUMNS, Sitl
     from trq_offboard.config import ControllerConfig, load_controller
-    from trq_offboard.link.wire import tilt_half_range
     from trq_offboard.log import ControllerLog
     from trq_offboard.loop import OffboardFlight
     from trq_offboard.reference import Reference
+    from trq_wire.actuators import tilt_half_range
+    from trq_wire.logfile import CsvLog as FlightLog
 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)

@@ -28,6 +28,8 @@ from pathlib import Path
 
 import numpy as np
 
+from trq_wire.logfile import read_header
+
 GROUND_DOWN_M = 0.0
 
 
@@ -55,14 +57,8 @@ class RunMetrics:
 
 def read_csv(path: Path) -> tuple[dict[str, str], dict[str, np.ndarray]]:
     """(metadata, columns) of a log with '# key: value' header lines. Text columns stay text."""
-    meta: dict[str, str] = {}
     with open(path, encoding="ascii") as f:
-        line = f.readline()
-        while line.startswith("#"):
-            key, _, value = line[2:].rstrip("\n").partition(": ")
-            meta[key] = value
-            line = f.readline()
-        names = line.rstrip("\n").split(",")
+        meta, names = read_header(f)
         rows = [r.rstrip("\n").split(",") for r in f if r.strip()]
     cols: dict[str, np.ndarray] = {}
     for i, name in enumerate(names):

@@ -21,11 +21,13 @@ from pathlib import Path
 
 import trq_params
 from trq_offboard.config import ConfigError, load_controller
-from trq_offboard.link.signing import read_key_file
 from trq_offboard.link.udp import Connection, MavlinkUdp
-from trq_offboard.link.wire import HOME_GROUND_DOWN_M, tilt_half_range
-from trq_offboard.log import ControllerLog, Tlog
+from trq_offboard.link.wire import HOME_GROUND_DOWN_M
+from trq_offboard.log import ControllerLog
 from trq_offboard.loop import FlightError, OffboardFlight
+from trq_wire.actuators import tilt_half_range
+from trq_wire.logfile import Tlog
+from trq_wire.signing import load_key
 
 log = logging.getLogger("trq_offboard")
 
@@ -83,7 +85,7 @@ def main(argv: list[str] | None = None) -> int:
             import dataclasses
             cfg = dataclasses.replace(cfg, applied_delay_s=args.applied_delay_s)
         connection = Connection.parse(args.connect)
-        key = read_key_file(args.signing_key_file) if args.signing_key_file else None
+        key = load_key(args.signing_key_file) if args.signing_key_file else None
     except (ConfigError, ValueError) as exc:
         print(f"trq-offboard: {exc}", file=sys.stderr)
         return 2
@@ -114,7 +116,9 @@ def main(argv: list[str] | None = None) -> int:
         link, controller, lambda state, airborne=False: Reference(
             cfg.reference, state.pos_ned_m, state.euler_rad[2], airborne=airborne,
             ground_down_m=HOME_GROUND_DOWN_M if airborne else None),
-        name=cfg.name, tilt_limit_rad=tilt_half_range(cfg.vehicle.tilt_min_rad, cfg.vehicle.tilt_max_rad), record=clog,
+        name=cfg.name,
+        tilt_limit_rad=tilt_half_range(cfg.vehicle.tilt_min_rad, cfg.vehicle.tilt_max_rad),
+        record=clog,
         connect_timeout_s=args.connect_timeout)
 
     async def _main() -> int:

@@ -1,8 +1,9 @@
-"""The MAVLink codec: bytes <-> typed messages, and every MAVLink integer scaling of the vehicle.
+"""The MAVLink codec: bytes <-> typed messages, and the vehicle's MAVLink field scalings.
 
 pymavlink's generated `common` dialect packs and parses; framing of a UDP datagram, error
-counting and the conversion of physical quantities to MAVLink fields (degE7, mm, cm/s, cdeg,
-PWM microseconds, normalised actuator values) live here and nowhere else.
+counting and the conversion of physical quantities to MAVLink fields (degE7, mm, cm/s, cdeg)
+live here and nowhere else. The actuator scalings (PWM microseconds, normalised values) are
+shared with the controller and live in trq_wire.actuators; signing in trq_wire.signing.
 """
 
 from __future__ import annotations
@@ -14,7 +15,8 @@ from typing import Iterable
 from pymavlink.dialects.v20 import common as mavlink
 
 from sil_vehicle.frames import ned_to_geodetic, quat_to_euler
-from sil_vehicle.mavlink.signing import SignatureCheck
+from trq_wire import actuators
+from trq_wire.signing import SignatureCheck
 
 SYSTEM_ID = 1
 COMPONENT_ID = 1  # MAV_COMP_ID_AUTOPILOT1
@@ -113,27 +115,7 @@ def _next_marker(data: bytes, start: int) -> int:
     return len(data)
 
 
-# --- scalings -----------------------------------------------------------------------------
-
-PWM_MIN_US, PWM_MAX_US, PWM_MID_US = 1000, 2000, 1500
-
-
-def throttle_to_pwm(throttle_pct: float) -> int:
-    return int(round(PWM_MIN_US + 10.0 * min(max(throttle_pct, 0.0), 100.0)))
-
-
-def tilt_to_pwm(tilt_rad: float, limit_rad: float) -> int:
-    norm = min(max(tilt_rad / limit_rad, -1.0), 1.0)
-    return int(round(PWM_MID_US + 500.0 * norm))
-
-
-def pwm_to_throttle(pwm_us: int) -> float:
-    return (pwm_us - PWM_MIN_US) / 10.0
-
-
-def pwm_to_tilt(pwm_us: int, limit_rad: float) -> float:
-    return (pwm_us - PWM_MID_US) / 500.0 * limit_rad
-
+# --- actuator targets ----------------------------------------------------------------------
 
 @dataclass(frozen=True)
 class Target:
@@ -149,12 +131,10 @@ def decode_target(msg: mavlink.MAVLink_message, tilt_limit_rad: float) -> Target
     if msg.group_mlx != 0:
         return None
     c = msg.controls
-    if len(c) != 8 or not all(math.isfinite(v) for v in c):
+    if not actuators.controls_in_range(c):
         return None
-    if not all(0.0 <= v <= 1.0 for v in c[:4]) or not all(-1.0 <= v <= 1.0 for v in c[4:8]):
-        return None
-    return Target(int(msg.time_usec), tuple(100.0 * v for v in c[:4]),
-                  tuple(tilt_limit_rad * v for v in c[4:8]))
+    throttle_pct, tilt_rad = actuators.from_normalised(c, tilt_limit_rad)
+    return Target(int(msg.time_usec), throttle_pct, tilt_rad)
 
 
 # --- telemetry builders --------------------------------------------------------------------
@@ -232,7 +212,8 @@ def gps_raw_int(m: Measured, home: tuple[float, float, float]) -> mavlink.MAVLin
     lat, lon, alt_mm = _geo(m, home)
     vn, ve = m.vel_ned_m_s[0], m.vel_ned_m_s[1]
     speed = math.hypot(vn, ve)
-    cog = int(round(math.degrees(math.atan2(ve, vn)) % 360.0 * 100.0)) % 36000 if speed > 0.2 else 65535
+    cog = (int(round(math.degrees(math.atan2(ve, vn)) % 360.0 * 100.0)) % 36000
+           if speed > 0.2 else 65535)
     return mavlink.MAVLink_gps_raw_int_message(
         m.t_us, mavlink.GPS_FIX_TYPE_3D_FIX, lat, lon, alt_mm, 80, 120,
         int(round(speed * 100.0)), cog, 14)
@@ -247,13 +228,13 @@ def home_position(home: tuple[float, float, float], t_us: int) -> mavlink.MAVLin
 
 def servo_output_raw(t_us: int, motor_pct: Iterable[float], tilt_rad: Iterable[float],
                      limit_rad: float) -> mavlink.MAVLink_message:
-    pwm = [throttle_to_pwm(v) for v in motor_pct] + [tilt_to_pwm(a, limit_rad) for a in tilt_rad]
+    pwm = actuators.to_pwm(motor_pct, tilt_rad, limit_rad)
     return mavlink.MAVLink_servo_output_raw_message(t_us & 0xFFFFFFFF, 0, *pwm, *([0] * 8))
 
 
 def actuator_output_status(t_us: int, motor_pct: Iterable[float], tilt_rad: Iterable[float],
                            limit_rad: float) -> mavlink.MAVLink_message:
-    values = [v / 100.0 for v in motor_pct] + [a / limit_rad for a in tilt_rad]
+    values = actuators.to_normalised(motor_pct, tilt_rad, limit_rad)
     return mavlink.MAVLink_actuator_output_status_message(
         t_us, len(values), values + [0.0] * (32 - len(values)))
 

@@ -1,5 +1,6 @@
 """The real-time iteration (trq_offboard/nmpc/rti.py) against the converged reference, and its
-compiled-function cache (trq_offboard/nmpc/cache.py): reuse, invalidation, no-compiler fallback.
+compiled-function cache (trq_offboard/nmpc/cache.py, building through trq_wire/cache.py): reuse,
+invalidation, no-compiler fallback.
 
 Every test builds into a temporary cache directory ($TRQ_CACHE_DIR), never the user's."""
 
@@ -13,6 +14,7 @@ import pytest
 import trq_params
 from ocp_problem import ocp_problem
 
+import trq_wire.cache
 from trq_offboard.config import load_controller
 from trq_offboard.model import PredictionModel
 from trq_offboard.nmpc import cache
@@ -148,13 +150,13 @@ def test_first_step_tilt_rate_limit(cache_env):
 @pytest.mark.skipif(not _has_compiler(), reason="no C compiler")
 def test_cache_is_reused_and_invalidated(cache_env, monkeypatch):
     calls = []
-    real_run = cache.subprocess.run
+    real_run = trq_wire.cache.subprocess.run
 
     def spy(*a, **k):
         calls.append(a[0][0])
         return real_run(*a, **k)
 
-    monkeypatch.setattr(cache.subprocess, "run", spy)
+    monkeypatch.setattr(trq_wire.cache.subprocess, "run", spy)
     cfg = _cfg(hessian="gauss_newton")
     model, u_trim, *_ = ocp_problem(cfg)
     libs_before = set(cache_env.glob("rti_lin_*.so"))

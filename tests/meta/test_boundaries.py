@@ -2,8 +2,11 @@
 modules except the two argparse builders):
 
 - the wire is the only coupling: trq_offboard never imports sil_vehicle, and the reverse;
+- trq_wire, the wire's shared arithmetic and file formats, imports neither daemon, and neither
+  daemon defines again a function or class that trq_wire defines (one place for each);
 - one clock: the simulator's core never reads the wall clock, sleeps, or uses unseeded randomness
-  (only daemon.py, clock.py and log.py may touch the wall clock);
+  (only daemon.py, clock.py and log.py may touch the wall clock), nor does trq_wire outside
+  signing.py and logfile.py;
 - every command-line option of both daemons has a help text.
 """
 
@@ -43,12 +46,37 @@ def imported_modules(tree: ast.Module) -> list[str]:
 
 
 @pytest.mark.parametrize("package, forbidden", [("trq_offboard", "sil_vehicle"),
-                                                ("sil_vehicle", "trq_offboard")])
+                                                ("sil_vehicle", "trq_offboard"),
+                                                ("trq_wire", "sil_vehicle"),
+                                                ("trq_wire", "trq_offboard")])
 def test_the_daemons_do_not_import_each_other(package, forbidden):
     offenders = [f"{path.relative_to(ROOT)}: import {name}"
                  for path in sources(package)
                  for name in imported_modules(parse(path))
                  if name.split(".")[0] == forbidden]
+    assert not offenders, offenders
+
+
+def defined_names(tree: ast.Module) -> set[str]:
+    """Module-level functions and classes (not imports: a re-export defines nothing)."""
+    return {node.name for node in tree.body
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef))}
+
+
+def test_both_daemons_use_trq_wire():
+    for package in ("sil_vehicle", "trq_offboard"):
+        users = [p for p in sources(package)
+                 if any(n.split(".")[0] == "trq_wire" for n in imported_modules(parse(p)))]
+        assert len(users) >= 3, f"{package}: only {users} import trq_wire"
+
+
+def test_what_trq_wire_defines_is_not_defined_again_in_a_daemon():
+    shared = set().union(*(defined_names(parse(p)) for p in sources("trq_wire")))
+    shared -= {n for n in shared if n.startswith("_")}
+    assert {"load_key", "SignatureCheck", "to_pwm", "CsvLog", "cache_dir"} <= shared
+    offenders = [f"{p.relative_to(ROOT)}: {name}"
+                 for package in ("sil_vehicle", "trq_offboard") for p in sources(package)
+                 for name in sorted(defined_names(parse(p)) & shared)]
     assert not offenders, offenders
 
 
@@ -105,6 +133,17 @@ def test_simulator_core_has_no_wall_clock_sleep_or_unseeded_random():
             if not (p.parent == ROOT / "sil_vehicle" and p.name in WALL_CLOCK_ALLOWED)]
     assert any(p.name == "vehicle.py" for p in core) and any(p.name == "sitl.py" for p in core)
     offenders = [f"{p.relative_to(ROOT)} {use}" for p in core
+                 for use in clock_and_random_uses(parse(p))]
+    assert not offenders, offenders
+
+
+def test_trq_wire_reads_the_wall_clock_only_for_signing_and_the_tlog():
+    """The signing clock and the .tlog stamps are wall-clock time by their formats' definition;
+    nothing else shared by the daemons may read a clock, sleep or draw random numbers."""
+    allowed = {"signing.py", "logfile.py"}
+    files = sources("trq_wire")
+    assert {p.name for p in files} >= allowed | {"actuators.py", "cache.py"}
+    offenders = [f"{p.relative_to(ROOT)} {use}" for p in files if p.name not in allowed
                  for use in clock_and_random_uses(parse(p))]
     assert not offenders, offenders
 

@@ -1,5 +1,7 @@
 """The MAVLink codec (sil_vehicle.mavlink.codec): framing, error counting, target decoding and
-every integer scaling, against hand-computed values."""
+the telemetry fields' integer scalings, against hand-computed values. The actuator scalings
+are trq_wire.actuators' (tests/unit/test_wire_actuators.py), signing trq_wire.signing's
+(test_wire_signing.py); here only how the codec uses them."""
 
 from __future__ import annotations
 
@@ -14,6 +16,7 @@ from pymavlink.dialects.v20 import common as mavlink
 from sil_vehicle.frames import euler_to_quat
 from sil_vehicle.mavlink import codec
 from sil_vehicle.mavlink.codec import Codec, Measured
+from trq_wire.signing import SignatureCheck, sign_outgoing
 
 LIMIT = math.radians(30.0)
 
@@ -142,14 +145,10 @@ def test_decode_target_scales():
     assert t.tilt_rad == pytest.approx((-LIMIT, -LIMIT / 2, 0.0, LIMIT))
 
 
-@pytest.mark.parametrize("bad_index, bad_value", [
-    (0, math.nan), (3, math.inf), (5, -math.inf), (7, math.nan),
-    (1, 1.01), (2, -0.01), (4, 1.5), (6, -1.0001),
-])
-def test_decode_target_rejects_the_whole_message(bad_index, bad_value):
-    controls = [0.5] * 4 + [0.2] * 4
-    controls[bad_index] = bad_value
-    assert codec.decode_target(target_msg(controls), LIMIT) is None
+def test_decode_target_rejects_the_whole_message():
+    """One bad value (trq_wire.actuators.controls_in_range) and nothing of it is applied."""
+    assert codec.decode_target(target_msg([0.5] * 4 + [0.2, 0.2, math.nan, 0.2]), LIMIT) is None
+    assert codec.decode_target(target_msg([0.5, 1.01] + [0.5] * 2 + [0.2] * 4), LIMIT) is None
 
 
 def test_decode_target_rejects_other_groups():
@@ -165,27 +164,7 @@ def test_decode_target_after_the_wire():
     assert t.tilt_rad[3] == pytest.approx(0.4 * LIMIT, rel=1e-6)         # float32 on the wire
 
 
-# --- scalings ---------------------------------------------------------------------------------
-
-@pytest.mark.parametrize("pct, pwm", [(0, 1000), (100, 2000), (50, 1500), (76.82, 1768),
-                                      (-5, 1000), (150, 2000), (0.04, 1000)])
-def test_throttle_to_pwm(pct, pwm):
-    assert codec.throttle_to_pwm(pct) == pwm
-
-
-@pytest.mark.parametrize("tilt, pwm", [(0.0, 1500), (LIMIT, 2000), (-LIMIT, 1000),
-                                       (LIMIT / 2, 1750), (2 * LIMIT, 2000), (-3 * LIMIT, 1000)])
-def test_tilt_to_pwm(tilt, pwm):
-    assert codec.tilt_to_pwm(tilt, LIMIT) == pwm
-
-
-def test_pwm_inverses():
-    for pwm in (1000, 1234, 1500, 2000):
-        assert codec.throttle_to_pwm(codec.pwm_to_throttle(pwm)) == pwm
-        assert codec.tilt_to_pwm(codec.pwm_to_tilt(pwm, LIMIT), LIMIT) == pwm
-    assert codec.pwm_to_throttle(1768) == pytest.approx(76.8)
-    assert codec.pwm_to_tilt(1750, LIMIT) == pytest.approx(LIMIT / 2)
-
+# --- actuator outputs ------------------------------------------------------------------------
 
 def test_servo_output_raw_and_actuator_output_status():
     msg = codec.servo_output_raw(5_000_000_123, (0.0, 50.0, 100.0, 10.0),
@@ -232,3 +211,14 @@ def test_statustext_truncated_to_50():
     msg = codec.statustext(mavlink.MAV_SEVERITY_INFO, "x" * 80)
     (back,) = Codec().decode(Codec().encode(msg))
     assert back.text == "x" * 50
+
+
+def test_signing_check_counts_unauthenticated_frames():
+    key, now = bytes(range(32)), 300_000_000_000
+    c = Codec(check=SignatureCheck(key, clock_10us=lambda: now))
+    signed = mavlink.MAVLink(None, srcSystem=255, srcComponent=190)
+    sign_outgoing(signed, key, 0, clock_10us=lambda: now)
+    msg = mavlink.MAVLink_param_request_list_message(1, 1)
+    assert len(c.decode(bytes(msg.pack(signed)))) == 1
+    assert c.decode(client_bytes(msg)) == []
+    assert c.counters.unauthenticated == 1 and c.counters.messages == 1

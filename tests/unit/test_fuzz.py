@@ -198,7 +198,7 @@ KEY = bytes(range(32))
 def test_codec_with_signing_never_raises_nor_trusts_unsigned(parts, read_only, data):
     """Signing on: anything unsigned (or signed with another key, or truncated) is refused,
     except read-only requests where allowed; nothing raises."""
-    from sil_vehicle.mavlink.signing import READ_ONLY_IDS, SignatureCheck, sign_outgoing
+    from trq_wire.signing import READ_ONLY_IDS, SignatureCheck, sign_outgoing
 
     forger = mavlink.MAVLink(None, srcSystem=255, srcComponent=190)
     sign_outgoing(forger, bytes(32), 0)                  # the wrong key

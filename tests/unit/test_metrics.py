@@ -212,7 +212,7 @@ def test_solve_percentiles():
 # --- read_csv against the writers -------------------------------------------------------------
 
 def test_read_csv_round_trips_the_vehicle_log(tmp_path):
-    from sil_vehicle.log import FlightLog
+    from trq_wire.logfile import CsvLog as FlightLog
     from sil_vehicle.sitl import LOG_COLUMNS
 
     path = tmp_path / "flight.csv"

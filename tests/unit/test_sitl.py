@@ -432,7 +432,8 @@ def test_log_row_matches_columns(sim):
 
 
 def test_flight_log_round_trip_with_gusts(sim, tmp_path):
-    from sil_vehicle.log import FlightLog, read_flight_log
+    from trq_wire.logfile import CsvLog as FlightLog
+    from trq_wire.logfile import read_csv_log as read_flight_log
     from sil_vehicle.sitl import LOG_COLUMNS
     path = tmp_path / "flight.csv"
     log = FlightLog(path, LOG_COLUMNS, {"seed": 5})

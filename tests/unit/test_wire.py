@@ -1,5 +1,7 @@
 """The controller's MAVLink codec (trq_offboard/link/wire.py) and connection strings (udp.py),
-against hand-computed values and pymavlink's own packing and parsing (PROTOCOL.md scalings)."""
+against hand-computed values and pymavlink's own packing and parsing. The actuator scalings
+themselves are trq_wire.actuators' (tests/unit/test_wire_actuators.py); here only which
+message fields they are applied to, and the controller's clipping."""
 
 from __future__ import annotations
 
@@ -138,12 +140,6 @@ def test_parse_servo_output_raw():
 
 def test_parse_actuator_outputs_ignores_other_messages():
     assert wire.parse_actuator_outputs(odometry(), LIMIT) is None
-
-
-def test_tilt_half_range():
-    assert wire.tilt_half_range(math.radians(-20), math.radians(30)) == pytest.approx(LIMIT)
-    assert wire.tilt_half_range(math.radians(-35), math.radians(30)) == \
-        pytest.approx(math.radians(35))
 
 
 # --- ActuatorCommand -> SET_ACTUATOR_CONTROL_TARGET ------------------------------------------

@@ -41,7 +41,7 @@ class MavClient:
             self.peer = (host, int(port))
         self.mav = mavlink.MAVLink(None, srcSystem=system_id, srcComponent=component_id)
         if signing_key is not None:            # MAVLink 2 signing of everything this tool sends
-            from sil_vehicle.mavlink.signing import sign_outgoing
+            from trq_wire.signing import sign_outgoing
             sign_outgoing(self.mav, signing_key, link_id)
         self.target = (target_system, target_component)
         self.vehicle_time_us = 0

@@ -38,9 +38,9 @@ from sil_vehicle.faultscript import (
     ParamAction,
     load_script,
 )
-from sil_vehicle.mavlink.signing import SigningKeyError, load_key
 from sil_vehicle.yamlcheck import ConfigError
 from trq_lab.gcs.client import MavClient, NoAnswer, gcs_parser
+from trq_wire.signing import SigningKeyError, load_key
 
 RESULTS = {v.name.removeprefix("MAV_RESULT_"): k for k, v in mavlink.enums["MAV_RESULT"].items()}
 

@@ -1,2 +1,3 @@
 """The controller's side of the wire: MAVLink messages in and out (wire), and the UDP endpoint
-(udp). Nothing here knows about the simulator; see sil_vehicle/PROTOCOL.md for the contract."""
+(udp), with signing and the actuator scalings from trq_wire. Nothing here knows about the
+simulator; see sil_vehicle/PROTOCOL.md for the contract."""

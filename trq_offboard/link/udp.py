@@ -20,7 +20,7 @@ from typing import Callable
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from trq_offboard.link.signing import Verifier, enable_signing
+from trq_wire.signing import SignatureCheck, sign_outgoing
 
 log = logging.getLogger("trq_offboard.link")
 
@@ -62,9 +62,9 @@ class MavlinkUdp(asyncio.DatagramProtocol):
         self.on_message = on_message
         self.stats = LinkStats()
         self._tx = mavlink.MAVLink(None, srcSystem=system_id, srcComponent=component_id)
-        self._verifier = Verifier(signing_key) if signing_key is not None else None
+        self._verifier = SignatureCheck(signing_key) if signing_key is not None else None
         if signing_key is not None:
-            enable_signing(self._tx, signing_key)
+            sign_outgoing(self._tx, signing_key)
         self._transport: asyncio.DatagramTransport | None = None
         self.peer: tuple[str, int] | None = (
             (connection.host, connection.port) if connection.mode == "udpout" else None)
@@ -95,7 +95,7 @@ class MavlinkUdp(asyncio.DatagramProtocol):
                 continue
             if msg.get_srcSystem() != 1:
                 continue
-            if self._verifier is not None and not self._verifier.trusted(bytes(msg.get_msgbuf())):
+            if self._verifier is not None and not self._verifier.accept(bytes(msg.get_msgbuf())):
                 self.stats.bad += 1            # unsigned, forged or replayed: not trusted
                 continue
             if self.connection.mode == "udpin" and not self._from_peer(tuple(addr[:2])):

@@ -1,9 +1,10 @@
 """MAVLink messages of the offboard link, converted to and from the controller's records.
 
-Every MAVLink scaling the controller needs lives here: ODOMETRY to `StateEstimate`,
-ACTUATOR_OUTPUT_STATUS / SERVO_OUTPUT_RAW to the applied `ActuatorCommand`, and the
-`ActuatorCommand` to SET_ACTUATOR_CONTROL_TARGET (group 0: throttles 0..1, tilts -1..1 of the
-servo half-range). A target that would carry a NaN or an out-of-range value is never built.
+ODOMETRY to `StateEstimate`, ACTUATOR_OUTPUT_STATUS / SERVO_OUTPUT_RAW to the applied
+`ActuatorCommand`, and the `ActuatorCommand` to SET_ACTUATOR_CONTROL_TARGET (group 0: throttles
+0..1, tilts -1..1 of the servo half-range). The actuator scalings themselves are shared with the
+vehicle and live in trq_wire.actuators. A target that would carry a NaN is never built; values
+out of range are clipped.
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ from dataclasses import dataclass
 from pymavlink.dialects.v20 import common as mavlink
 
 from trq_offboard.records import ActuatorCommand, StateEstimate
+from trq_wire import actuators
 
 VEHICLE_SYSTEM = 1
 HOME_GROUND_DOWN_M = 0.0     # PROTOCOL.md: the NED origin is home, on the ground
@@ -27,11 +29,6 @@ class Odometry:
     state: StateEstimate
 
 
-def tilt_half_range(tilt_min_rad: float, tilt_max_rad: float) -> float:
-    """The angle a normalised tilt of 1 stands for (PROTOCOL.md: max(|min|, max))."""
-    return max(abs(tilt_min_rad), abs(tilt_max_rad))
-
-
 def quat_to_euler(w: float, x: float, y: float, z: float) -> tuple[float, float, float]:
     roll = math.atan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y))
     pitch = math.asin(max(-1.0, min(1.0, 2.0 * (w * y - z * x))))
@@ -41,7 +38,8 @@ def quat_to_euler(w: float, x: float, y: float, z: float) -> tuple[float, float,
 
 def parse_odometry(msg) -> Odometry | None:
     """ODOMETRY in LOCAL_NED with NED velocity (child frame LOCAL_NED). None if unusable."""
-    if msg.frame_id != mavlink.MAV_FRAME_LOCAL_NED or msg.child_frame_id != mavlink.MAV_FRAME_LOCAL_NED:
+    if msg.frame_id != mavlink.MAV_FRAME_LOCAL_NED \
+            or msg.child_frame_id != mavlink.MAV_FRAME_LOCAL_NED:
         return None
     values = (msg.x, msg.y, msg.z, msg.vx, msg.vy, msg.vz, *msg.q, msg.rollspeed,
               msg.pitchspeed, msg.yawspeed)
@@ -63,13 +61,11 @@ def parse_actuator_outputs(msg, tilt_limit_rad: float) -> ActuatorCommand | None
         a = msg.actuator
         if msg.active < 8 or not all(math.isfinite(v) for v in a[:8]):
             return None
-        return ActuatorCommand(tuple(100.0 * v for v in a[:4]),
-                               tuple(tilt_limit_rad * v for v in a[4:8]))
+        return ActuatorCommand(*actuators.from_normalised(a, tilt_limit_rad))
     if kind == "SERVO_OUTPUT_RAW":
         pwm = [msg.servo1_raw, msg.servo2_raw, msg.servo3_raw, msg.servo4_raw, msg.servo5_raw,
                msg.servo6_raw, msg.servo7_raw, msg.servo8_raw]
-        return ActuatorCommand(tuple((p - 1000) / 10.0 for p in pwm[:4]),
-                               tuple((p - 1500) / 500.0 * tilt_limit_rad for p in pwm[4:]))
+        return ActuatorCommand(*actuators.from_pwm(pwm, tilt_limit_rad))
     return None
 
 
@@ -79,9 +75,8 @@ def actuator_target(stamp_us: int, cmd: ActuatorCommand, tilt_limit_rad: float):
     # check before clipping: min/max would turn an infinity into a limit (and may hide a NaN)
     if not all(math.isfinite(v) for v in (*cmd.throttle_pct, *cmd.tilt_rad)):
         raise ValueError(f"non-finite actuator command {cmd}")
-    throttles = [min(max(v / 100.0, 0.0), 1.0) for v in cmd.throttle_pct]
-    tilts = [min(max(v / tilt_limit_rad, -1.0), 1.0) for v in cmd.tilt_rad]
-    controls = throttles + tilts
+    controls = actuators.clip_controls(
+        actuators.to_normalised(cmd.throttle_pct, cmd.tilt_rad, tilt_limit_rad))
     return mavlink.MAVLink_set_actuator_control_target_message(
         stamp_us, 0, VEHICLE_SYSTEM, VEHICLE_COMPONENT, controls)
 

@@ -8,8 +8,9 @@ version, the compiler and its flags: the source already contains the whole formu
 parameter baked in as a literal (mass, inertia, rotor geometry, step, weights), so any change of
 formulation or parameters gives a new key and a new library, and nothing else does.
 
-Cache directory: $TRQ_CACHE_DIR, else ~/.cache/trq-ftc. A library is written to a temporary name
-and renamed into place, so concurrent processes never load a half-written file.
+Cache directory, compiler and the build of a library: trq_wire.cache ($TRQ_CACHE_DIR, else
+~/.cache/trq-ftc; a library is written to a temporary name and renamed into place, so concurrent
+processes never load a half-written file).
 
 No C compiler (none of $CC, gcc, cc, clang on PATH), or a failed compilation: the function is
 returned as it is (CasADi's interpreter, the pure-Python path) with a RuntimeWarning.
@@ -19,35 +20,19 @@ from __future__ import annotations
 
 import hashlib
 import os
-import shutil
-import subprocess
-import tempfile
 import warnings
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import casadi as ca
 
+from trq_wire.cache import build_library, cache_dir, find_compiler
+
 __all__ = ["cache_dir", "find_compiler", "compiled", "compiled_many", "compiled_c", "COUNTS",
            "CFLAGS"]
 
 CFLAGS = ("-O1", "-fPIC", "-shared")   # -O1: 2-3x faster to build than -O2, same speed here
 COUNTS = {"compiled": 0, "cached": 0, "interpreted": 0}   # per process, for tests and benches
-
-
-def cache_dir() -> Path:
-    env = os.environ.get("TRQ_CACHE_DIR")
-    return Path(env).expanduser() if env else Path.home() / ".cache" / "trq-ftc"
-
-
-def find_compiler() -> str | None:
-    """Absolute path of a C compiler on PATH, or None."""
-    for name in (os.environ.get("CC"), "gcc", "cc", "clang"):
-        if name:
-            path = shutil.which(name)
-            if path:
-                return path
-    return None
 
 
 def _source(fn: ca.Function) -> str:
@@ -64,26 +49,6 @@ def _key(source: str, cc: str) -> str:
     return h.hexdigest()[:20]
 
 
-def _compile(cc: str, flags: list[str], source: str, lib: Path, after: list[str]) -> str | None:
-    """Compile `source` into the shared library `lib` (built under a temporary name in its
-    directory, then renamed into place). None on success, else what went wrong: the compiler's
-    error, or an OSError (an unwritable cache directory, a vanished compiler)."""
-    try:
-        lib.parent.mkdir(parents=True, exist_ok=True)
-        with tempfile.TemporaryDirectory(dir=lib.parent, prefix=".build-") as tmp:
-            c_file = Path(tmp) / lib.with_suffix(".c").name
-            c_file.write_text(source)
-            out = Path(tmp) / lib.name
-            res = subprocess.run([cc, *flags, str(c_file), "-o", str(out), *after],
-                                 capture_output=True, text=True)
-            if res.returncode != 0:
-                return res.stderr.strip()[:300]
-            os.replace(out, lib)
-    except OSError as exc:
-        return f"{lib.parent}: {exc}"
-    return None
-
-
 def _build(fn: ca.Function, cc: str | None) -> tuple[ca.Function, str]:
     if cc is None:
         warnings.warn(f"no C compiler found (tried $CC, gcc, cc, clang): {fn.name()} runs in "
@@ -96,7 +61,7 @@ def _build(fn: ca.Function, cc: str | None) -> tuple[ca.Function, str]:
     if lib.exists():
         COUNTS["cached"] += 1
         return ca.external(fn.name(), str(lib)), "cached"
-    error = _compile(cc, list(CFLAGS), src, lib, ["-lm"])
+    error = build_library(cc, list(CFLAGS), src, lib, ["-lm"])
     if error is not None:
         warnings.warn(f"building {fn.name()} failed ({error}): it runs in CasADi's interpreter",
                       RuntimeWarning, stacklevel=3)
@@ -137,7 +102,7 @@ def compiled_c(name: str, source: str, link_args: tuple[str, ...] = ()) -> Path 
     if lib.exists():
         COUNTS["cached"] += 1
         return lib
-    error = _compile(cc, ["-O2", "-fPIC", "-shared"], source, lib, list(link_args))
+    error = build_library(cc, ["-O2", "-fPIC", "-shared"], source, lib, list(link_args))
     if error is not None:
         warnings.warn(f"building {name} failed ({error})", RuntimeWarning, stacklevel=2)
         return None

@@ -1,0 +1,55 @@
+"""The cache of generated and compiled code, shared by the vehicle's compiled physics tick and
+the controller's compiled CasADi functions (STYLE principle 10: cached, never committed).
+
+Folder: $TRQ_CACHE_DIR, else ~/.cache/trq-ftc. Compiler: the first of $CC, gcc, cc, clang found
+on PATH. A library is built under a temporary name in the cache folder and renamed into place,
+so concurrent processes never load a half-written file. What goes into a cache key is each
+caller's business; this module only says where files live and how they land there.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import tempfile
+from pathlib import Path
+
+__all__ = ["cache_dir", "find_compiler", "build_library"]
+
+
+def cache_dir() -> Path:
+    env = os.environ.get("TRQ_CACHE_DIR")
+    return Path(env).expanduser() if env else Path.home() / ".cache" / "trq-ftc"
+
+
+def find_compiler() -> str | None:
+    """Absolute path of a C compiler on PATH ($CC, gcc, cc, clang), or None."""
+    for name in (os.environ.get("CC"), "gcc", "cc", "clang"):
+        if name:
+            path = shutil.which(name)
+            if path:
+                return path
+    return None
+
+
+def build_library(cc: str, flags: list[str], source: str, lib: Path,
+                  after: list[str]) -> str | None:
+    """Compile C `source` into the shared library `lib` (`cc flags file.c -o lib after`, built
+    under a temporary name in lib's directory, then renamed into place). None on success, else
+    what went wrong: the compiler's error, or an OSError (an unwritable cache directory, a
+    vanished compiler)."""
+    try:
+        lib.parent.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryDirectory(dir=lib.parent, prefix=".build-") as tmp:
+            c_file = Path(tmp) / lib.with_suffix(".c").name
+            c_file.write_text(source)
+            out = Path(tmp) / lib.name
+            res = subprocess.run([cc, *flags, str(c_file), "-o", str(out), *after],
+                                 capture_output=True, text=True)
+            if res.returncode != 0:
+                return res.stderr.strip()[:300]
+            os.replace(out, lib)
+    except OSError as exc:
+        return f"{lib.parent}: {exc}"
+    return None
