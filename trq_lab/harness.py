@@ -44,8 +44,9 @@ The same loop serves the tests and the benchmark (`trq_lab.bench.nmpc`):
   vehicle's truth state after every lockstep period (for tracking errors against the
   reference), and the events the vehicle played; `on_step` is called with each sample as it
   is complete (after `prepare`);
-- the times come from an injected `Timer` (default `PerfTimer`: perf_counter, thread_time);
-  the loop itself reads no clock. The controller's period runs from the vehicle's hand-over
+- the times come from an injected `Timer` (default `PerfTimer`: perf_counter, thread_time),
+  the harness's only clock in the loop (OffboardFlight's summary and asyncio's timeouts keep
+  their own). The controller's period runs from the vehicle's hand-over
   (the end of its ticks) to the end of `prepare`, less the time the vehicle spends inside the
   controller's sends (decoding and handling the target): the telemetry's parse, the flight
   loop's turn, the step, the target's encode, the log and `prepare`. It is measured in the
@@ -67,12 +68,16 @@ import json
 import math
 import sys
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Iterable, Protocol
+from typing import TYPE_CHECKING, Callable, Iterable, Protocol
 
 from pymavlink.dialects.v20 import common as mavlink
 import trq_params
+
+if TYPE_CHECKING:
+    from sil_vehicle.vehicle import VehicleState
+    from trq_offboard.records import ActuatorCommand, ReferenceSample, StateEstimate, StepInfo
 
 PARAMS = trq_params.DIR
 SIM_DEFAULT = PARAMS / "sim" / "default.yaml"
@@ -125,11 +130,11 @@ class StepSample:
     """One controller step of a traced flight (times in seconds of the Timer)."""
     t_s: float                   # the controller's time (0 at the first state after arming)
     stamp_us: int                # the ODOMETRY stamp it answered (vehicle time)
-    state: object                # StateEstimate: what the controller saw
-    ref: object                  # ReferenceSample at t_s
-    cmd: object                  # ActuatorCommand sent
-    applied: object              # ActuatorCommand the vehicle reported flying (or None)
-    info: object                 # StepInfo (source, SolveInfo, disturbance, ...)
+    state: StateEstimate         # what the controller saw
+    ref: ReferenceSample         # the reference at t_s
+    cmd: ActuatorCommand         # what it sent
+    applied: ActuatorCommand | None   # what the vehicle reported flying
+    info: StepInfo               # source, SolveInfo, disturbance, ...
     step_wall_s: float           # Controller.step
     step_cpu_s: float
     prepare_wall_s: float        # Controller.prepare after the command was sent
@@ -142,15 +147,16 @@ class StepSample:
 class Trace:
     """What a traced flight returns besides its logs."""
     steps: list[StepSample]
-    truth: list                  # VehicleState at t = 0 and after every lockstep period
+    truth: list[VehicleState]    # at t = 0 and after every lockstep period
     events_played: list[tuple[int, str]]     # (vehicle time us, text) of the scripted events
+    _by_t_us: dict = field(init=False, repr=False, compare=False)
 
-    def truth_at(self, stamp_us: int):
+    def __post_init__(self) -> None:
+        self._by_t_us = {s.t_us: s for s in self.truth}
+
+    def truth_at(self, stamp_us: int) -> VehicleState:
         """The truth state at a lockstep stamp (every ODOMETRY stamp is one)."""
-        index = getattr(self, "_index", None)
-        if index is None or len(index) != len(self.truth):
-            index = self._index = {s.t_us: s for s in self.truth}
-        return index[stamp_us]
+        return self._by_t_us[stamp_us]
 
 
 class _Meter:
