@@ -195,8 +195,9 @@ class _Meter:
             self.on_step(sample)
 
 
-class _MeteredController:
-    """The controller as `OffboardFlight` sees it (reset, step, prepare), timing each call."""
+class _MeteredStep:
+    """A controller without `prepare` as `OffboardFlight` sees it (reset, step), timing the
+    step; its sample is complete with the step's record."""
 
     def __init__(self, inner, meter: _Meter) -> None:
         self.inner = inner
@@ -213,14 +214,23 @@ class _MeteredController:
         self._meter.step = (w1 - w0, c1 - c0)
         return out
 
+
+class _MeteredController(_MeteredStep):
+    """A controller with `prepare` (as `Controller`): the sample is complete after it."""
+
     def prepare(self, reference) -> None:
         timer = self._meter.timer
         w0, c0 = timer.wall_s(), timer.cpu_s()
-        prep = getattr(self.inner, "prepare", None)
-        if prep is not None:
-            prep(reference)
+        self.inner.prepare(reference)
         w1, c1 = timer.wall_s(), timer.cpu_s()
         self._meter.close(w1 - w0, c1 - c0, (w1, c1))
+
+
+def _metered(ctl, meter: _Meter):
+    """`ctl` timed, offering `prepare` only if it has one: OffboardFlight awaits a prepare
+    that exists, and an extra await would change the order of the loop's callbacks."""
+    cls = _MeteredController if hasattr(ctl, "prepare") else _MeteredStep
+    return cls(ctl, meter)
 
 
 class InMemoryLink:
@@ -536,17 +546,22 @@ def fly_inprocess(controller, sim, fault_events=(), seed: int | None = None, *,
              if trace or on_step is not None else None)
     record = clog
     if meter is not None:
+        has_prepare = hasattr(ctl, "prepare")
+
         def record(r) -> None:
             if clog is not None:
                 clog(r)
             meter.record = r
+            if not has_prepare:
+                end = (timer.wall_s(), timer.cpu_s())
+                meter.close(0.0, 0.0, end)
     try:
         sitl.log_sink = flight_log
         sitl.schedule(fault_events)
         link = InMemoryLink(sitl, Codec(counters=sitl.counters["offboard"]), lambda: None,
                             meter)
         flight = OffboardFlight(
-            link, ctl if meter is None else _MeteredController(ctl, meter),
+            link, ctl if meter is None else _metered(ctl, meter),
             lambda state, airborne=False: Reference(
                 cfg.reference, state.pos_ned_m, state.euler_rad[2], airborne=airborne,
                 ground_down_m=0.0 if airborne else None),
