@@ -32,6 +32,30 @@ simulated seconds after a crash, or at `timeout_s` of simulated time. It writes 
 as for a scenario run. The controller's solve goes through `run_in_executor`, on an executor
 that runs it inline by default (one thread per flight; `inline_solve=False`: a worker thread,
 as in the daemon).
+
+The same loop serves the tests and the benchmark (`trq_lab.bench.nmpc`):
+
+- `controller` may be an already built `Controller` (a test's, with a wrapped solver), flown as
+  it is (its `cfg` gives the reference and the rates);
+- `out_dir=None` writes no logs;
+- `trace=True` returns a `Trace`: one `StepSample` per controller step (what the controller
+  saw, its command, its StepInfo with the SolveInfo, and the wall and CPU time of
+  `Controller.step`, of `Controller.prepare` and of the controller's whole period), the
+  vehicle's truth state after every lockstep period (for tracking errors against the
+  reference), and the events the vehicle played; `on_step` is called with each sample as it
+  is complete (after `prepare`);
+- the times come from an injected `Timer` (default `PerfTimer`: perf_counter, thread_time),
+  the harness's only clock in the loop (OffboardFlight's summary and asyncio's timeouts keep
+  their own). The controller's period runs from the vehicle's hand-over
+  (the end of its ticks) to the end of `prepare`, less the time the vehicle spends inside the
+  controller's sends (decoding and handling the target): the telemetry's parse, the flight
+  loop's turn, the step, the target's encode, the log and `prepare`. It is measured in the
+  loop's thread (`inline_solve=True`; with a worker thread it is NaN, as the vehicle then flies
+  while the controller prepares);
+- scripted events (`script`: the mappings of a fault script's `events`, wind or faults at a
+  time) are played by the vehicle itself, as `--faults` files are.
+
+Measuring changes nothing that is flown: a traced flight is bit for bit the untraced one.
 """
 
 from __future__ import annotations
@@ -44,12 +68,16 @@ import json
 import math
 import sys
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Iterable
+from typing import TYPE_CHECKING, Callable, Iterable, Protocol
 
 import trq_params
 from pymavlink.dialects.v20 import common as mavlink
+
+if TYPE_CHECKING:
+    from sil_vehicle.vehicle import VehicleState
+    from trq_offboard.records import ActuatorCommand, ReferenceSample, StateEstimate, StepInfo
 
 PARAMS = trq_params.DIR
 SIM_DEFAULT = PARAMS / "sim" / "default.yaml"
@@ -79,11 +107,137 @@ class _InlineExecutor(concurrent.futures.ThreadPoolExecutor):
         return fut
 
 
+class Timer(Protocol):
+    """What a traced flight measures its times with (seconds, any origin)."""
+
+    def wall_s(self) -> float: ...        # monotonic wall-clock time
+
+    def cpu_s(self) -> float: ...         # CPU time of the calling thread
+
+
+class PerfTimer:
+    """`time.perf_counter` and `time.thread_time`."""
+
+    def wall_s(self) -> float:
+        return time.perf_counter()
+
+    def cpu_s(self) -> float:
+        return time.thread_time()
+
+
+@dataclass(frozen=True)
+class StepSample:
+    """One controller step of a traced flight (times in seconds of the Timer)."""
+    t_s: float                   # the controller's time (0 at the first state after arming)
+    stamp_us: int                # the ODOMETRY stamp it answered (vehicle time)
+    state: StateEstimate         # what the controller saw
+    ref: ReferenceSample         # the reference at t_s
+    cmd: ActuatorCommand         # what it sent
+    applied: ActuatorCommand | None   # what the vehicle reported flying
+    info: StepInfo               # source, SolveInfo, disturbance, ...
+    step_wall_s: float           # Controller.step
+    step_cpu_s: float
+    prepare_wall_s: float        # Controller.prepare after the command was sent
+    prepare_cpu_s: float
+    period_wall_s: float         # the controller's whole period (see the module docstring)
+    period_cpu_s: float
+
+
+@dataclass
+class Trace:
+    """What a traced flight returns besides its logs."""
+    steps: list[StepSample]
+    truth: list[VehicleState]    # at t = 0 and after every lockstep period
+    events_played: list[tuple[int, str]]     # (vehicle time us, text) of the scripted events
+    _by_t_us: dict = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        self._by_t_us = {s.t_us: s for s in self.truth}
+
+    def truth_at(self, stamp_us: int) -> VehicleState:
+        """The truth state at a lockstep stamp (every ODOMETRY stamp is one)."""
+        return self._by_t_us[stamp_us]
+
+
+class _Meter:
+    """The timing of a traced flight: the controller's step and prepare (through
+    `_MeteredController`), the vehicle's share of the controller's sends (`InMemoryLink`), the
+    period's opening (the vehicle's hand-over); builds a StepSample at the end of prepare."""
+
+    def __init__(self, timer: Timer, samples: list | None, on_step, inline: bool) -> None:
+        self.timer = timer
+        self.samples = samples
+        self.on_step = on_step
+        self.inline = inline                 # the step runs in the loop's thread
+        self.open = (math.nan, math.nan)
+        self.vehicle = [0.0, 0.0]            # wall, cpu of the vehicle inside the window
+        self.step = (math.nan, math.nan)
+        self.record = None                   # the flight's StepRecord of the step
+
+    def hand_over(self) -> None:
+        self.open = (self.timer.wall_s(), self.timer.cpu_s())
+        self.vehicle = [0.0, 0.0]
+
+    def close(self, prep_wall: float, prep_cpu: float, end: tuple[float, float]) -> None:
+        r, self.record = self.record, None
+        if r is None:
+            return
+        if self.inline:
+            period = (end[0] - self.open[0] - self.vehicle[0],
+                      end[1] - self.open[1] - self.vehicle[1])
+        else:
+            period = (math.nan, math.nan)
+        sample = StepSample(r.t_s, r.stamp_us, r.state, r.ref, r.cmd, r.applied, r.info,
+                            self.step[0], self.step[1], prep_wall, prep_cpu, *period)
+        if self.samples is not None:
+            self.samples.append(sample)
+        if self.on_step is not None:
+            self.on_step(sample)
+
+
+class _MeteredStep:
+    """A controller without `prepare` as `OffboardFlight` sees it (reset, step), timing the
+    step; its sample is complete with the step's record."""
+
+    def __init__(self, inner, meter: _Meter) -> None:
+        self.inner = inner
+        self._meter = meter
+
+    def reset(self, *args, **kwargs):
+        return self.inner.reset(*args, **kwargs)
+
+    def step(self, *args):
+        timer = self._meter.timer
+        w0, c0 = timer.wall_s(), timer.cpu_s()
+        out = self.inner.step(*args)
+        w1, c1 = timer.wall_s(), timer.cpu_s()
+        self._meter.step = (w1 - w0, c1 - c0)
+        return out
+
+
+class _MeteredController(_MeteredStep):
+    """A controller with `prepare` (as `Controller`): the sample is complete after it."""
+
+    def prepare(self, reference) -> None:
+        timer = self._meter.timer
+        w0, c0 = timer.wall_s(), timer.cpu_s()
+        self.inner.prepare(reference)
+        w1, c1 = timer.wall_s(), timer.cpu_s()
+        self._meter.close(w1 - w0, c1 - c0, (w1, c1))
+
+
+def _metered(ctl, meter: _Meter):
+    """`ctl` timed, offering `prepare` only if it has one: OffboardFlight awaits a prepare
+    that exists, and an extra await would change the order of the loop's callbacks."""
+    cls = _MeteredController if hasattr(ctl, "prepare") else _MeteredStep
+    return cls(ctl, meter)
+
+
 class InMemoryLink:
     """The controller's end of the link (`.send`, `.connection`, `.on_message`), wired to the
     vehicle's `Sitl` through MAVLink bytes."""
 
-    def __init__(self, sitl, codec, on_answer) -> None:
+    def __init__(self, sitl, codec, on_answer, meter: _Meter | None = None) -> None:
         self.connection = _Connection()
         self.on_message = lambda msg: None
         self.on_frame = None
@@ -95,6 +249,7 @@ class InMemoryLink:
         self.sent = 0
         self.received = 0
         self.bytes = 0
+        self._meter = meter
 
     # controller -> vehicle
     def send(self, msg) -> bool:
@@ -102,8 +257,14 @@ class InMemoryLink:
         self._tx.seq = (self._tx.seq + 1) % 256
         self.sent += 1
         self.bytes += len(data)
+        meter = self._meter
+        if meter is not None:                   # the vehicle's share of the send
+            w0, c0 = meter.timer.wall_s(), meter.timer.cpu_s()
         for decoded in self._codec.decode(data):
             self.deliver(self._sitl.handle("offboard", decoded, SENDER))
+        if meter is not None:
+            meter.vehicle[0] += meter.timer.wall_s() - w0
+            meter.vehicle[1] += meter.timer.cpu_s() - c0
         if self._sitl.answered:
             self._on_answer()
         return True
@@ -196,10 +357,29 @@ def build_controller(cfg):
     ctl = _CONTROLLERS.get(key)
     if ctl is None:
         ctl = _CONTROLLERS[key] = Controller(cfg)
+    _zero_multipliers(ctl)
+    return ctl
+
+
+def _zero_multipliers(ctl) -> None:
     lam = getattr(ctl.solver, "_lam", None)
     if lam is not None:
         lam[:] = 0.0
-    return ctl
+
+
+# --- scripted events -------------------------------------------------------------------------
+
+def script(*events: dict, tilt_range_deg: tuple[float, float] = (-90.0, 90.0)) -> tuple:
+    """sil_vehicle.faultscript Events from mappings written as a fault script's `events`, e.g.
+    script({"at_s": 2.0, "wind": {"speed_m_s": 8.0, "direction_deg": 0.0}},
+           {"at_s": 6.0, "motor": 1, "effectiveness": 0.5});
+    sorted by time as load_script does. Raises ConfigError naming the event and the key."""
+    from sil_vehicle.faultscript import parse_event
+    from sil_vehicle.yamlcheck import Section
+
+    parsed = [parse_event(Section(e, "trq_lab.harness.script", f"events[{i}]."), tilt_range_deg)
+              for i, e in enumerate(events)]
+    return tuple(sorted(parsed, key=lambda e: e.at_us))
 
 
 # --- one flight ------------------------------------------------------------------------------
@@ -211,13 +391,15 @@ class FlightResult:
     wall_s: float
     steps: int               # controller steps recorded
     summary: str             # OffboardFlight's summary line (or why there is none)
-    out_dir: Path
-    flight_csv: Path
-    controller_csv: Path
+    out_dir: Path | None
+    flight_csv: Path | None          # None: flown without logs (out_dir None)
+    controller_csv: Path | None
     messages: tuple[int, int, int]   # (controller -> vehicle, vehicle -> controller, bytes)
+    trace: Trace | None = None       # with trace=True
 
 
-async def _fly(sitl, flight, link, *, timeout_us: int, crash_grace_us: int) -> tuple[str, str]:
+async def _fly(sitl, flight, link, *, timeout_us: int, crash_grace_us: int,
+               meter: _Meter | None = None, truth: list | None = None) -> tuple[str, str]:
     answered = asyncio.Event()
     link._on_answer = answered.set
     loop = asyncio.get_running_loop()
@@ -228,6 +410,10 @@ async def _fly(sitl, flight, link, *, timeout_us: int, crash_grace_us: int) -> t
     async def vehicle() -> None:
         nonlocal ended
         link.deliver(sitl.telemetry_due())          # as the daemon does before its loop
+        if truth is not None:
+            truth.append(sitl.state)
+        if meter is not None:
+            meter.hand_over()
         crash_us = None
         while True:
             if not sitl.answered:       # wait for the answer to the latest stamp (an answer to
@@ -241,10 +427,16 @@ async def _fly(sitl, flight, link, *, timeout_us: int, crash_grace_us: int) -> t
                     # the vehicle's first HEARTBEAT waits for it, and time stands still): after
                     # resend_s the latest telemetry again, bypassing the simulated impairment
                     link.deliver(sitl.telemetry_due(everything=True, resend=True))
+                    if meter is not None:
+                        meter.hand_over()
                 answered.clear()
                 continue
             for _ in range(ticks):
                 link.deliver(sitl.step())
+            if truth is not None:
+                truth.append(sitl.state)
+            if meter is not None:
+                meter.hand_over()
             if sitl.state.crashed and crash_us is None:
                 crash_us = sitl.t_us
             if crash_us is not None and sitl.t_us - crash_us >= crash_grace_us:
@@ -277,17 +469,26 @@ async def _fly(sitl, flight, link, *, timeout_us: int, crash_grace_us: int) -> t
 
 
 def fly_inprocess(controller, sim, fault_events=(), seed: int | None = None, *,
-                  out_dir: Path, reference: dict | None = None, timeout_s: float = 600.0,
-                  crash_grace_s: float = 1.0, inline_solve: bool = True,
-                  name: str | None = None) -> FlightResult:
-    """Fly one lockstep flight in this process and write out_dir/flight.csv and controller.csv.
+                  out_dir: Path | None = None, reference: dict | None = None,
+                  timeout_s: float = 600.0, crash_grace_s: float = 1.0,
+                  inline_solve: bool = True, name: str | None = None, trace: bool = False,
+                  on_step: Callable[[StepSample], None] | None = None,
+                  timer: Timer | None = None) -> FlightResult:
+    """Fly one lockstep flight in this process; with out_dir, write out_dir/flight.csv and
+    controller.csv.
 
-    controller: a ControllerConfig, or a controller YAML path / name in params/controller/
-        (then `reference`, a mapping of reference settings, is laid over it as
-        trq-scenario does);
+    controller: a built Controller (flown as it is: its cfg gives reference and rates), a
+        ControllerConfig (its Controller is built once per process, `build_controller`), or a
+        controller YAML path / name in params/controller/ (then `reference`, a mapping of
+        reference settings, is laid over it as trq-scenario does);
     sim: the vehicle's SimParams (see `sim_params`); `seed` replaces its seed if given;
-    fault_events: sil_vehicle.faultscript Events, played by the vehicle in its own time.
+    fault_events: sil_vehicle.faultscript Events (`script`, `load_script`), played by the
+        vehicle in its own time;
+    trace: return a Trace in FlightResult.trace; on_step: called with each StepSample;
+    timer: what the samples' times and FlightResult.wall_s are measured with (PerfTimer).
     """
+    import tempfile
+
     from sil_vehicle.mavlink.codec import Codec
     from sil_vehicle.sitl import LOG_COLUMNS, Sitl
     from trq_offboard.config import ControllerConfig, load_controller
@@ -297,12 +498,22 @@ def fly_inprocess(controller, sim, fault_events=(), seed: int | None = None, *,
     from trq_wire.actuators import tilt_half_range
     from trq_wire.logfile import CsvLog as FlightLog
 
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    timer = timer if timer is not None else PerfTimer()
+    if out_dir is not None:
+        out_dir = Path(out_dir)
+        out_dir.mkdir(parents=True, exist_ok=True)
+    built = None
     if isinstance(controller, ControllerConfig):
         cfg = controller
         if reference:
             raise ValueError("reference: give it in the ControllerConfig")
+    elif hasattr(controller, "step") and hasattr(controller, "cfg"):
+        built, cfg = controller, controller.cfg
+        if reference:
+            raise ValueError("reference: give it in the Controller's config")
+    elif out_dir is None:
+        with tempfile.TemporaryDirectory(prefix="trq-harness-") as tmp:
+            cfg = load_controller(prepare_controller(controller, reference, Path(tmp)))
     else:
         cfg = load_controller(prepare_controller(controller, reference, out_dir))
     if seed is not None:
@@ -310,44 +521,73 @@ def fly_inprocess(controller, sim, fault_events=(), seed: int | None = None, *,
     if sim.control_rate_hz != cfg.control_rate_hz:
         raise ValueError(f"sim control_rate_hz {sim.control_rate_hz} != controller's "
                          f"{cfg.control_rate_hz}")
-    wall0 = time.perf_counter()
-    ctl = build_controller(cfg)
+    wall0 = timer.wall_s()
+    if built is None:
+        ctl = build_controller(cfg)
+    else:
+        ctl = built
+        _zero_multipliers(ctl)
     sitl = Sitl(sim)
-    meta = {"vehicle": sim.vehicle.name, "vehicle_file": sim.vehicle.file, "sim_file": sim.file,
-            "seed": sim.seed, "physics_rate_hz": sim.physics_rate_hz, "clock": sim.clock_mode,
-            "frames": "world NED, body FRD, quaternion wxyz", "link": "in-process MAVLink bytes",
-            "physics_core": sitl.vehicle.core_name}
-    flight_log = FlightLog(out_dir / "flight.csv", LOG_COLUMNS, meta,
-                           flush_every=max(1, sim.log_rate_hz))
-    clog = ControllerLog(out_dir / "controller.csv",
-                         {"controller": cfg.name, "controller_file": cfg.file,
-                          "vehicle_file": cfg.vehicle.file, "connect": "in-process",
-                          "frames": "world NED, body FRD"})
+    flight_log = clog = None
+    if out_dir is not None:
+        meta = {"vehicle": sim.vehicle.name, "vehicle_file": sim.vehicle.file,
+                "sim_file": sim.file, "seed": sim.seed, "physics_rate_hz": sim.physics_rate_hz,
+                "clock": sim.clock_mode, "frames": "world NED, body FRD, quaternion wxyz",
+                "link": "in-process MAVLink bytes", "physics_core": sitl.vehicle.core_name}
+        flight_log = FlightLog(out_dir / "flight.csv", LOG_COLUMNS, meta,
+                               flush_every=max(1, sim.log_rate_hz))
+        clog = ControllerLog(out_dir / "controller.csv",
+                             {"controller": cfg.name, "controller_file": cfg.file,
+                              "vehicle_file": cfg.vehicle.file, "connect": "in-process",
+                              "frames": "world NED, body FRD"})
+    samples: list[StepSample] | None = [] if trace else None
+    truth: list | None = [] if trace else None
+    meter = (_Meter(timer, samples, on_step, inline_solve)
+             if trace or on_step is not None else None)
+    record = clog
+    if meter is not None:
+        has_prepare = hasattr(ctl, "prepare")
+
+        def record(r) -> None:
+            if clog is not None:
+                clog(r)
+            meter.record = r
+            if not has_prepare:
+                end = (timer.wall_s(), timer.cpu_s())
+                meter.close(0.0, 0.0, end)
     try:
         sitl.log_sink = flight_log
         sitl.schedule(fault_events)
-        link = InMemoryLink(sitl, Codec(counters=sitl.counters["offboard"]), lambda: None)
+        link = InMemoryLink(sitl, Codec(counters=sitl.counters["offboard"]), lambda: None,
+                            meter)
         flight = OffboardFlight(
-            link, ctl, lambda state, airborne=False: Reference(
+            link, ctl if meter is None else _metered(ctl, meter),
+            lambda state, airborne=False: Reference(
                 cfg.reference, state.pos_ned_m, state.euler_rad[2], airborne=airborne,
                 ground_down_m=0.0 if airborne else None),
             name=name or cfg.name,
             tilt_limit_rad=tilt_half_range(cfg.vehicle.tilt_min_rad, cfg.vehicle.tilt_max_rad),
-            record=clog)
+            record=record)
 
         async def main() -> tuple[str, str]:
             if inline_solve:
                 asyncio.get_running_loop().set_default_executor(_InlineExecutor(max_workers=1))
             return await _fly(sitl, flight, link, timeout_us=int(round(timeout_s * 1e6)),
-                              crash_grace_us=int(round(crash_grace_s * 1e6)))
+                              crash_grace_us=int(round(crash_grace_s * 1e6)), meter=meter,
+                              truth=truth)
 
         status, summary = asyncio.run(main())
     finally:
-        flight_log.close()
-        clog.close()
-    return FlightResult(status, sitl.t_us * 1e-6, time.perf_counter() - wall0,
-                        flight.summary.steps, summary, out_dir, out_dir / "flight.csv",
-                        out_dir / "controller.csv", (link.sent, link.received, link.bytes))
+        if flight_log is not None:
+            flight_log.close()
+        if clog is not None:
+            clog.close()
+    logs = (out_dir / "flight.csv", out_dir / "controller.csv") if out_dir is not None \
+        else (None, None)
+    return FlightResult(status, sitl.t_us * 1e-6, timer.wall_s() - wall0,
+                        flight.summary.steps, summary, out_dir, *logs,
+                        (link.sent, link.received, link.bytes),
+                        Trace(samples, truth, list(sitl.events_played)) if trace else None)
 
 
 def flight_metrics(log_dir: Path, controller: str, fault_onset_us: int | None,

@@ -5,20 +5,28 @@
     trq-bench-nmpc --modes rti-gn,ipopt --json out/bench_nmpc.json
     trq-bench-nmpc --quick --repeat 3   # median of 3 interleaved runs
 
-The flight (in one process, no MAVLink): trq_nmpc_eso (--controller: another file of
-params/controller/) on the SITL plant of params/sim/default.yaml,
-8 m/s wind from the north, the helix of params/controller/nmpc.yaml, motor 1 at 50 % from t = 12 s.
-Each step: the controller steps on the measured state, its command is held for the physics ticks
-of one control period, then `Controller.prepare` runs (the RTI's preparation phase; a no-op for
-the other solvers).
+The flight is trq_lab.harness's (`fly_inprocess`, the loop the campaigns and tests fly): the
+vehicle's `Sitl` and the controller's `OffboardFlight` in one process, joined by an in-memory link
+carrying the daemons' MAVLink bytes, in lockstep, the solve inline. trq_nmpc_eso (--controller:
+another file of params/controller/) arms, takes off and flies the helix of its reference on the
+SITL plant of params/sim/default.yaml (its seed and telemetry noise), 8 m/s wind from the north
+from the start, motor 1 at 50 % from t = 12 s of vehicle time (a fault script the vehicle plays).
+Each step: the controller steps on the ODOMETRY it receives, its target goes back over the link
+and the vehicle flies it for one control period, while `Controller.prepare` runs (the RTI's
+preparation phase; a no-op for the other solvers).
 
 Each mode runs in its own subprocess (so that peak memory, ru_maxrss, is its own) with its own
 empty cache directory: the first controller construction is the cold build (code generation and
 compilation), the second the cached build; the flight is flown with the second. Step times:
 `solve` is the solver call inside Controller.step (SolveInfo.solve_time_s: for RTI the feedback
 phase, the latency from state to command), `prep` the preparation after the command, `total` their
-sum (the solver work per control period); wall times from time.perf_counter, CPU times from
-time.thread_time. The machine is shared: compare medians and the ratios to the fastest mode.
+sum (the solver work per control period); `ctl period` everything the controller does per control
+period in this loop (the telemetry's MAVLink parse, the flight loop's turn, Controller.step with
+its observer, the target's MAVLink encode, prepare; not the vehicle's work, no log written: the
+harness's StepSample.period_wall_s). Wall times from time.perf_counter, CPU times from
+time.thread_time (the harness's PerfTimer). Tracking errors: the vehicle's truth position at each
+step's stamp against the reference there. The machine is shared: compare medians and the ratios
+to the fastest mode.
 """
 
 from __future__ import annotations
@@ -60,91 +68,62 @@ FAULT_T_S, EFFECTIVENESS, WIND_M_S = 12.0, 0.5, 8.0
 
 
 def fly(mode: str, seconds: float | None, controller: str = "trq_nmpc_eso") -> dict:
-    """Child process: build twice (cold, cached), fly, return the figures."""
+    """Child process: build twice (cold, cached), fly on the harness, return the figures."""
     from sil_vehicle.config import load_sim
-    from sil_vehicle.frames import quat_to_euler
-    from sil_vehicle.sitl import Sitl
-    from sil_vehicle.vehicle import ActuatorCommand as PlantCmd
+    from trq_lab import harness
     from trq_offboard.config import load_controller
     from trq_offboard.controller import Controller
     from trq_offboard.nmpc import cache
-    from trq_offboard.records import SolveStatus, StateEstimate
-    from trq_offboard.reference import Reference
+    from trq_offboard.records import SolveStatus
 
+    timer = harness.PerfTimer()
     cfg = load_controller(trq_params.resolve("controller", controller))
     overrides = dict(MODES[mode])
     cfg = dataclasses.replace(cfg, **overrides.pop("controller", {}))
     cfg = dataclasses.replace(cfg, solver=dataclasses.replace(cfg.solver, **overrides))
-    t0 = time.perf_counter()
+    t0 = timer.wall_s()
     Controller(cfg)
-    build_cold = time.perf_counter() - t0
+    build_cold = timer.wall_s() - t0
     compiled_cold = cache.COUNTS["compiled"]
-    t0 = time.perf_counter()
+    t0 = timer.wall_s()
     ctl = Controller(cfg)
-    build_cached = time.perf_counter() - t0
+    build_cached = timer.wall_s() - t0
     compiled_cached = cache.COUNTS["compiled"] - compiled_cold
 
-    sim = load_sim(trq_params.builtin("sim", "default"), cfg.vehicle.file)
-    sitl = Sitl(sim)
-    v = sitl.vehicle
-    v.set_wind(WIND_M_S, 0.0, False, 1.0, 50.0)
-    rate = cfg.control_rate_hz
-    ticks = sim.physics_rate_hz // rate
-
-    def measured() -> StateEstimate:
-        m = sitl.measured()
-        return StateEstimate(m.pos_ned_m, m.vel_ned_m_s, quat_to_euler(*m.quat_wxyz),
-                             m.rates_frd_rad_s)
-
-    st = measured()
-    ref = Reference(cfg.reference, st.pos_ned_m, st.euler_rad[2])
-    ctl.reset(0.0, st)
-    v.set_armed(True)
-    fault_us = round(FAULT_T_S * 1e6)
-    end = ref.end_time_s if seconds is None else seconds
-    rows = []      # solve wall, step cpu, prep wall, prep cpu, iterations, qp iterations
+    seed = load_sim(harness.SIM_DEFAULT, cfg.vehicle.file).seed
+    sim = harness.sim_params(cfg.vehicle.file, cfg.control_rate_hz, seed=seed,
+                             wind_speed_m_s=WIND_M_S, wind_from_deg=0.0)
+    events = harness.script({"at_s": FAULT_T_S, "motor": 1, "effectiveness": EFFECTIVENESS}) \
+        if EFFECTIVENESS < 1 else ()
+    qp_iterations = []          # the QP's iterations of each step (read after its prepare)
+    res = harness.fly_inprocess(
+        ctl, sim, events, timeout_s=seconds if seconds is not None else 600.0, trace=True,
+        timer=timer, name=mode,
+        on_step=lambda sample: qp_iterations.append(getattr(ctl.solver, "qp_iterations", 0)))
+    if res.status.startswith("failed"):
+        raise RuntimeError(f"{mode}: {res.summary}")
+    steps = res.trace.steps
+    rows = np.array([(s.info.solve.solve_time_s, s.step_cpu_s, s.prepare_wall_s, s.prepare_cpu_s,
+                      s.info.solve.iterations, q, s.period_wall_s, s.period_cpu_s)
+                     for s, q in zip(steps, qp_iterations)])
+    failures = sum(s.info.solve.status is not SolveStatus.OK for s in steps)
     errs, yerr, times = [], [], []
-    failures = 0
-    k = 0
-    t = 0.0
-    while t < end:
-        st = measured()
-        c0 = time.thread_time()
-        cmd, info = ctl.step(t, st, None, ref)
-        c1 = time.thread_time()
-        v.command = PlantCmd(tuple(cmd.throttle_pct), tuple(cmd.tilt_rad))
-        # the target is delivered in-process, not over MAVLink: feed the SITL's offboard-loss
-        # watchdog (COM_OF_LOSS_T) as a received SET_ACTUATOR_CONTROL_TARGET would
-        sitl._last_target_us = sitl.t_us
-        p0, pc0 = time.perf_counter(), time.thread_time()
-        ctl.prepare(ref)
-        prep_wall, prep_cpu = time.perf_counter() - p0, time.thread_time() - pc0
-        failures += info.solve.status is not SolveStatus.OK
-        rows.append((info.solve.solve_time_s, c1 - c0, prep_wall, prep_cpu,
-                     info.solve.iterations, getattr(ctl.solver, "qp_iterations", 0)))
-        for _ in range(ticks):
-            if sitl.t_us == fault_us and EFFECTIVENESS < 1:
-                v.faults = v.faults.with_motor(0, effectiveness=EFFECTIVENESS)
-            sitl.step()
-        k += 1
-        t = k / rate
-        s = v.state
-        r = ref.sample(t)
-        rp = np.array(r.pos_ned_m)
+    for s in steps:
+        truth = res.trace.truth_at(s.stamp_us)
+        rp = np.array(s.ref.pos_ned_m)
         rp[2] = min(rp[2], 0.0)
-        errs.append(float(np.linalg.norm(np.array(s.x[0:3]) - rp)))
-        times.append(t)
-        yerr.append(math.degrees((s.euler_rad[2] - r.yaw_rad + math.pi) % (2 * math.pi)
+        errs.append(float(np.linalg.norm(np.array(truth.pos_ned_m) - rp)))
+        times.append(s.stamp_us * 1e-6)
+        yerr.append(math.degrees((truth.euler_rad[2] - s.ref.yaw_rad + math.pi) % (2 * math.pi)
                                  - math.pi))
-        if s.crashed:
-            break
-    a = np.array(rows)
+    a = rows
     errs, times, yerr = map(np.array, (errs, times, yerr))
     after = times >= FAULT_T_S
     ms = 1e3
     total = a[:, 0] + a[:, 2]
+    crashed = res.status == "crashed" or any(t.crashed for t in res.trace.truth)
     return dict(
-        name=mode, steps=len(rows), flight_s=float(t), crashed=bool(v.state.crashed),
+        name=mode, steps=len(steps), flight_s=float(res.sim_s), crashed=bool(crashed),
         median_ms=float(np.median(a[:, 0]) * ms), p99_ms=float(np.percentile(a[:, 0], 99) * ms),
         max_ms=float(a[:, 0].max() * ms),
         step_cpu_median_ms=float(np.median(a[:, 1]) * ms),
@@ -153,6 +132,9 @@ def fly(mode: str, seconds: float | None, controller: str = "trq_nmpc_eso") -> d
         prep_cpu_median_ms=float(np.median(a[:, 3]) * ms),
         total_median_ms=float(np.median(total) * ms),
         total_p99_ms=float(np.percentile(total, 99) * ms),
+        period_median_ms=float(np.median(a[:, 6]) * ms),
+        period_p99_ms=float(np.percentile(a[:, 6], 99) * ms),
+        period_cpu_median_ms=float(np.median(a[:, 7]) * ms),
         iterations_median=float(np.median(a[:, 4])), iterations_max=int(a[:, 4].max()),
         qp_iterations_median=float(np.median(a[:, 5])), qp_iterations_max=int(a[:, 5].max()),
         failures=int(failures),
@@ -182,7 +164,8 @@ def _qp_line(solver) -> str:
 def run_mode(mode: str, seconds: float | None, controller: str = "trq_nmpc_eso") -> dict:
     with tempfile.TemporaryDirectory(prefix="trq-bench-cache-") as cache_dir:
         env = dict(os.environ, TRQ_CACHE_DIR=cache_dir)
-        cmd = [sys.executable, "-m", "trq_lab.bench.nmpc", "--child", mode, "--controller", controller]
+        cmd = [sys.executable, "-m", "trq_lab.bench.nmpc", "--child", mode,
+               "--controller", controller]
         if seconds is not None:
             cmd += ["--seconds", str(seconds)]
         out = subprocess.run(cmd, env=env, capture_output=True, text=True)
@@ -209,7 +192,8 @@ def combine(runs: list[dict]) -> dict:
 def table(results: list[dict]) -> str:
     fastest = min(r["total_median_ms"] for r in results)
     head = ("| mode | solve p50 ms | solve p99 ms | solve max ms | step CPU p50 ms | prep p50 ms "
-            "| solve+prep p50 ms | solve+prep p99 ms | x fastest | SQP it | QP it p50/max "
+            "| solve+prep p50 ms | solve+prep p99 ms | ctl period p50 ms | ctl period p99 ms "
+            "| x fastest | SQP it | QP it p50/max "
             "| failures | pos RMSE m | RMSE after fault m | max yaw err deg | build cold s "
             "| build cached s | peak RSS MB |")
     lines = [head, "|" + "---|" * head.count(" | ") + "---|"]
@@ -218,6 +202,7 @@ def table(results: list[dict]) -> str:
             f"| {r['name']} | {r['median_ms']:.2f} | {r['p99_ms']:.2f} | {r['max_ms']:.1f} "
             f"| {r['step_cpu_median_ms']:.2f} | {r['prep_median_ms']:.2f} "
             f"| {r['total_median_ms']:.2f} | {r['total_p99_ms']:.2f} "
+            f"| {r['period_median_ms']:.2f} | {r['period_p99_ms']:.2f} "
             f"| {r['total_median_ms'] / fastest:.1f} | {r['iterations_median']:.0f} "
             f"| {r['qp_iterations_median']:.0f}/{r['qp_iterations_max']} | {r['failures']} "
             f"| {r['rmse_pos_m']:.4f} | {r['rmse_after_fault_m']:.4f} "
@@ -301,7 +286,8 @@ def main(argv=None) -> int:
             print(f"  {m}{f' (run {k + 1})' if args.repeat > 1 else ''}: {r['steps']} steps, "
                   f"crashed {r['crashed']}, build {r['build_mode']}, compilations cold/cached "
                   f"{r['compilations_cold']}/{r['compilations_cached']}, QP {r['qp']}, solve "
-                  f"p50/p99 {r['median_ms']:.2f}/{r['p99_ms']:.2f} ms", flush=True)
+                  f"p50/p99 {r['median_ms']:.2f}/{r['p99_ms']:.2f} ms, controller period "
+                  f"p50 {r['period_median_ms']:.2f} ms", flush=True)
     results = [combine(runs[m]) for m in modes]
     if args.repeat > 1:
         print(f"median of {args.repeat} interleaved runs per mode; solve p50 and p99 ranges:")
