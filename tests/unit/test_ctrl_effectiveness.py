@@ -13,6 +13,7 @@ import yaml
 
 from sil_vehicle.dynamics.actuators import first_order_step, lag_factor
 from trq_offboard.config import ConfigError, EffectivenessConfig, load_controller
+from trq_params.loader import read_yaml     # the loader's YAML 1.2 dialect: `off` stays a string
 from trq_offboard.effectiveness import MotorEffectivenessObserver
 
 PARAMS = Path(__file__).resolve().parents[2] / "params"
@@ -91,7 +92,7 @@ def test_needs_a_motor_lag():
 
 
 def test_controller_keys(tmp_path):
-    src = yaml.safe_load((PARAMS / "controller/nmpc.yaml").read_text())
+    src = read_yaml(PARAMS / "controller/nmpc.yaml")
     src["vehicle"] = str(PARAMS / "vehicle/trq.yaml")
     src["observer"]["file"] = str(PARAMS / "controller/eso.yaml")
 
