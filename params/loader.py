@@ -48,7 +48,7 @@ BUILTIN = "builtin:"
 
 
 class ConfigError(ValueError):
-    """A parameter file is wrong. The message names the file, the key, the value, the expectation."""
+    """A parameter file is wrong; the message names the file, key, value and expectation."""
 
 
 class Invalid(Exception):
@@ -162,15 +162,23 @@ def load(path: Path | str, model: type[M], *, context: Any = None) -> M:
     return validate(model, read(path, path_keys(model)), path, context=context)
 
 
-def validate(model: type[M], data: Any, file: Path | str, *, context: Any = None) -> M:
-    """Validate a mapping as `model`; errors are ConfigErrors naming `file`."""
+def validate(model: type[M], data: Any, file: Path | str, *, prefix: str = "",
+             context: Any = None) -> M:
+    """Validate a mapping as `model`; errors are ConfigErrors naming `file` and the dotted key,
+    which starts with `prefix` when the mapping is a part of a file (`events[2]`)."""
     try:
         return model.model_validate(data, context=context)
     except ValidationError as exc:
-        raise _translate(exc, model, file) from None
+        raise _translate(exc, model, file, prefix) from None
     except Invalid as exc:
-        raise ConfigError(f"{file}: key '{exc.key}': got {exc.value!r}, "
+        raise ConfigError(f"{file}: key '{_join(prefix, exc.key)}': got {exc.value!r}, "
                           f"expected {exc.expected}") from None
+
+
+def _join(prefix: str, key: str) -> str:
+    if not prefix or not key:
+        return prefix or key
+    return prefix + key if key.startswith("[") else f"{prefix}.{key}"
 
 
 def dotted(loc: tuple[Any, ...]) -> str:
@@ -181,17 +189,18 @@ def dotted(loc: tuple[Any, ...]) -> str:
     return out
 
 
-def _translate(exc: ValidationError, model: type[BaseModel], file: Path | str) -> ConfigError:
+def _translate(exc: ValidationError, model: type[BaseModel], file: Path | str,
+               prefix: str = "") -> ConfigError:
     """pydantic's first error (its loc, input and msg) as a ConfigError."""
     err = exc.errors(include_url=False)[0]
     loc = tuple(p for p in err["loc"] if not (isinstance(p, str) and p.startswith("function-")))
-    key, kind, value = dotted(loc) or "top level", err["type"], err.get("input")
+    key, kind, value = _join(prefix, dotted(loc)) or "top level", err["type"], err.get("input")
     if kind == "missing":
         return ConfigError(f"{file}: key '{key}' is missing")
     if kind == "extra_forbidden":
         owner = _model_at(model, loc[:-1])
         known = f": expected one of {', '.join(owner.model_fields)}" if owner else ""
-        return ConfigError(f"{file}: key '{key}' is unknown (value {value!r}){known}")
+        return ConfigError(f"{file}: unknown key '{key}' (value {value!r}){known}")
     if kind == "expected":
         expected = err["ctx"]["expected"]
     elif kind in ("model_type", "model_attributes_type", "dict_type"):

@@ -240,7 +240,7 @@ class ControllerConfig:
     max_rate_rad_s: float                 # body-rate state bound
     solver: SolverConfig
     reference: ReferenceConfig
-    applied_input: str = "commanded"      # commanded | outputs: what the controller takes as applied
+    applied_input: str = "commanded"      # commanded | outputs: taken as the applied input
     applied_delay_s: float = 0.0          # how long a command takes to act (observer's b0)
     delay_compensation: str = "auto"      # predict | none | auto (predict from one control
                                           # period of delay): plan from the state at t + delay
