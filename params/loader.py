@@ -42,7 +42,8 @@ from pydantic_core import PydanticCustomError
 import trq_params
 
 __all__ = ["ConfigError", "Invalid", "load", "validate", "read", "read_yaml", "path_keys",
-           "PathStr", "Num", "Int", "Flag", "Text", "Choice", "Vec", "expect", "BUILTIN"]
+           "PathStr", "Num", "Int", "Flag", "Text", "Choice", "Vec", "Items", "expect", "merge",
+           "BUILTIN"]
 
 BUILTIN = "builtin:"
 
