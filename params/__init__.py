@@ -2,8 +2,8 @@
 
 In a checkout this is the `params/` folder; in an installed wheel it is the package `trq_params`
 (the same files, package data). Nothing here reads a file's content: that is the loader's job
-(`trq_params.loader`). What goes in: a kind of file and a name, or a path. What comes out: the
-path of the file.
+(`trq_params.loader`, against the schemas of `trq_params.schema`). What goes in: a kind of file and
+a name, or a path. What comes out: the path of the file.
 
     builtin("controller", "trq_nmpc_eso")   -> .../controller/trq_nmpc_eso.yaml
     resolve("vehicle", "quad")              -> the built-in quad.yaml

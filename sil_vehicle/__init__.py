@@ -2,7 +2,7 @@
 interface that behaves like a PX4 SITL autopilot. See PROTOCOL.md for the wire contract.
 
 Layers (each importing only the ones above it):
-    config, yamlcheck   frozen parameter records from params/*.yaml
+    config              frozen parameter records from params/*.yaml (trq_params.loader)
     frames              every frame and unit conversion
     dynamics/           pure physics (rotors, actuators, environment, rigid body)
     faults, vehicle     the plant, one physics tick at a time (no I/O, injected RNG)

@@ -26,7 +26,6 @@ from sil_vehicle.config import ConfigError, SimParams, load_sim, parse_endpoint
 from sil_vehicle.faultscript import load_script
 from sil_vehicle.mavlink.codec import Codec
 from sil_vehicle.sitl import LINKS, LOG_COLUMNS, Outgoing, Sitl
-from sil_vehicle.yamlcheck import Section
 from trq_wire.logfile import CsvLog, Tlog
 from trq_wire.signing import SignatureCheck, SigningKeyError, load_key, sign_outgoing
 
@@ -351,8 +350,7 @@ def apply_overrides(sim: SimParams, args: argparse.Namespace) -> SimParams:
         for end in ("bind", "target"):
             text = getattr(args, f"{link.name}_{end}")
             if text is not None:
-                updates[end] = parse_endpoint(text, Section({}, "command line"),
-                                              f"--{link.name}-{end}")
+                updates[end] = parse_endpoint(text, f"command line: --{link.name}-{end}")
         links.append(dataclasses.replace(link, **updates))
     changes["links"] = tuple(links)
     return sim.with_changes(**changes)

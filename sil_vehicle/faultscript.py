@@ -11,15 +11,22 @@
 Each event becomes MAVLink actions: parameter sets (`SIM_*`, PROTOCOL.md) or
 MAV_CMD_INJECT_FAILURE commands, so a script means the same thing whether the vehicle plays it
 itself (deterministic, `--faults FILE`) or `tools/inject_fault.py` sends it over the wire.
-Errors name the file, the event index, the key, the value and what was expected.
+Each event is validated by `trq_params.loader` against its kind's schema (below: the first of
+motor, servo, wind, clear it holds decides): errors name the file, the event index, the key, the
+value and what was expected.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any, Optional
 
-from sil_vehicle.yamlcheck import ConfigError, Section, load_yaml
+from pydantic import ValidationInfo, field_validator, model_validator
+
+from trq_params.loader import (ConfigError, Flag, Int, Invalid, Num, expect, read_yaml,
+                               validate)
+from trq_params.schema import Strict
 
 MOTOR = 101          # FAILURE_UNIT_SYSTEM_MOTOR
 SERVO = 102          # FAILURE_UNIT_SYSTEM_SERVO
@@ -50,84 +57,149 @@ class Event:
     text: str            # what the event does, for logs and reports
 
 
-def parse_event(sec: Section, tilt_range_deg: tuple[float, float] = (-90.0, 90.0)) -> Event:
-    at_s = sec.float("at_s", 0.0, 1e6)
+class _Event(Strict):
+    at_s: Num(0.0, 1e6)
+
+
+class _TimeVarying(Strict):
+    a: Num(0.0, 1.0)
+    b: Num(0.0, 1.0)
+    w: Num(0.0, 1000.0)
+    phi: Num(-10.0, 10.0) = 0.0
+
+
+class MotorEvent(_Event):
+    motor: Int(1, 4)
+    effectiveness: Optional[Num(0.0, 1.0)] = None
+    time_varying: Optional[_TimeVarying] = None
+    stopped: Optional[Flag] = None      # (not "off": a bare off would read as a key or a string)
+
+    @model_validator(mode="after")
+    def _acts(self) -> "MotorEvent":
+        if self.effectiveness is None and self.time_varying is None and self.stopped is None:
+            raise Invalid("motor", self.motor, "with effectiveness, time_varying or stopped")
+        return self
+
+
+class ServoEvent(_Event):
+    servo: Int(1, 4)
+    stuck_deg: Any          # null frees the servo; the angle's range is the vehicle's tilt range
+
+    @field_validator("stuck_deg", mode="before")
+    @classmethod
+    def _angle(cls, value: Any, info: ValidationInfo) -> Any:
+        lo, hi = info.context or (-90.0, 90.0)
+        if value is not None and (isinstance(value, bool) or not isinstance(value, (int, float))
+                                  or not lo <= value <= hi):
+            raise expect(f"null or an angle in [{lo:g}, {hi:g}] deg")
+        return value
+
+
+class _Wind(Strict):
+    speed_m_s: Optional[Num(0.0, 40.0)] = None
+    direction_deg: Optional[Num(-360.0, 360.0)] = None
+    gusts: Optional[Flag] = None
+    gust_sigma_m_s: Optional[Num(0.0, 20.0)] = None
+
+
+class WindEvent(_Event):
+    wind: _Wind
+
+    @model_validator(mode="after")
+    def _acts(self) -> "WindEvent":
+        if not self.wind.model_fields_set:
+            raise Invalid("wind", {}, "speed_m_s, direction_deg, gusts or gust_sigma_m_s")
+        return self
+
+
+class ClearEvent(_Event):
+    clear: Flag
+
+    @model_validator(mode="after")
+    def _true(self) -> "ClearEvent":
+        if not self.clear:
+            raise Invalid("clear", False, "true")
+        return self
+
+
+# an event's kind is the first of these keys it has
+_KINDS = (("motor", MotorEvent), ("servo", ServoEvent), ("wind", WindEvent),
+          ("clear", ClearEvent))
+
+
+def parse_event(event: Any, tilt_range_deg: tuple[float, float] = (-90.0, 90.0), *,
+                file: str = "command line", key: str = "") -> Event:
+    """One event mapping (`key`: where it sits in `file`, e.g. `events[2]`) -> Event."""
+    if hasattr(event, "_data") and hasattr(event, "prefix"):
+        # a tools/ caller still hands a yamlcheck.Section (until tools/ use the loader)
+        event, file, key = event._data, event.file, event.prefix.rstrip(".")
+    if not isinstance(event, dict):
+        raise ConfigError(f"{file}: key '{key}': got {event!r}, expected a mapping")
+    model = next((m for k, m in _KINDS if k in event), None)
+    if model is None:
+        raise ConfigError(f"{file}: key '{key}': an event needs one of motor, servo, wind, clear")
+    ev = validate(model, event, file, prefix=key, context=tuple(tilt_range_deg))
     actions: list[Action] = []
     text = []
-    if sec.has("motor"):
-        n = sec.int("motor", 1, 4)
-        if sec.has("effectiveness"):
-            e = sec.float("effectiveness", 0.0, 1.0)
+    if isinstance(ev, MotorEvent):
+        n = ev.motor
+        if ev.effectiveness is not None:
+            e = ev.effectiveness
             actions += [ParamAction(f"SIM_MOT{n}_EFF", e), ParamAction(f"SIM_MOT{n}_TVB", 0.0)]
             text.append(f"motor {n} effectiveness {e:g}")
-        if sec.has("time_varying"):
-            tv = sec.section("time_varying")
-            a, b = tv.float("a", 0.0, 1.0), tv.float("b", 0.0, 1.0)
-            w, phi = tv.float("w", 0.0, 1000.0), tv.float("phi", -10.0, 10.0, default=0.0)
-            tv.done()
+        if ev.time_varying is not None:
+            a, b, w, phi = (ev.time_varying.a, ev.time_varying.b, ev.time_varying.w,
+                            ev.time_varying.phi)
             actions += [ParamAction(f"SIM_MOT{n}_EFF", a), ParamAction(f"SIM_MOT{n}_TVB", b),
                         ParamAction(f"SIM_MOT{n}_TVW", w), ParamAction(f"SIM_MOT{n}_TVP", phi)]
             text.append(f"motor {n} effectiveness {a:g} - {b:g} sin({w:g} t + {phi:g})")
-        if sec.has("stopped"):    # (not "off": YAML 1.1 reads a bare off as false)
-            off = sec.bool("stopped")
-            actions.append(InjectAction(MOTOR, TYPE_OFF if off else TYPE_OK, n))
-            text.append(f"motor {n} {'off' if off else 'restored'}")
-        if not actions:
-            raise sec.fail("motor", n, "with effectiveness, time_varying or stopped")
-    elif sec.has("servo"):
-        n = sec.int("servo", 1, 4)
-        value = sec.raw("stuck_deg")
+        if ev.stopped is not None:
+            actions.append(InjectAction(MOTOR, TYPE_OFF if ev.stopped else TYPE_OK, n))
+            text.append(f"motor {n} {'off' if ev.stopped else 'restored'}")
+    elif isinstance(ev, ServoEvent):
+        n, value = ev.servo, ev.stuck_deg
         if value is None:
             actions.append(InjectAction(SERVO, TYPE_OK, n))
             text.append(f"servo {n} freed")
         else:
-            lo, hi = tilt_range_deg
-            if isinstance(value, bool) or not isinstance(value, (int, float)) \
-                    or not lo <= value <= hi:
-                raise sec.fail("stuck_deg", value, f"null or an angle in [{lo:g}, {hi:g}] deg")
             actions.append(InjectAction(SERVO, TYPE_STUCK, n, float(value)))
             text.append(f"servo {n} stuck at {value:g} deg")
-    elif sec.has("wind"):
-        w = sec.section("wind")
-        if w.has("speed_m_s"):
-            v = w.float("speed_m_s", 0.0, 40.0)
-            actions.append(ParamAction("SIM_WIND_SPD", v))
-            text.append(f"wind {v:g} m/s")
-        if w.has("direction_deg"):
-            d = w.float("direction_deg", -360.0, 360.0)
-            actions.append(ParamAction("SIM_WIND_DIR", d))
-            text.append(f"from {d:g} deg")
-        if w.has("gusts"):
-            g = w.bool("gusts")
-            actions.append(ParamAction("SIM_GUST_EN", 1.0 if g else 0.0))
-            text.append(f"gusts {'on' if g else 'off'}")
-        if w.has("gust_sigma_m_s"):
-            actions.append(ParamAction("SIM_GUST_SIG", w.float("gust_sigma_m_s", 0.0, 20.0)))
-        w.done()
-        if not actions:
-            raise sec.fail("wind", {}, "speed_m_s, direction_deg, gusts or gust_sigma_m_s")
-    elif sec.has("clear"):
-        if not sec.bool("clear"):
-            raise sec.fail("clear", False, "true")
+    elif isinstance(ev, WindEvent):
+        w = ev.wind
+        if w.speed_m_s is not None:
+            actions.append(ParamAction("SIM_WIND_SPD", w.speed_m_s))
+            text.append(f"wind {w.speed_m_s:g} m/s")
+        if w.direction_deg is not None:
+            actions.append(ParamAction("SIM_WIND_DIR", w.direction_deg))
+            text.append(f"from {w.direction_deg:g} deg")
+        if w.gusts is not None:
+            actions.append(ParamAction("SIM_GUST_EN", 1.0 if w.gusts else 0.0))
+            text.append(f"gusts {'on' if w.gusts else 'off'}")
+        if w.gust_sigma_m_s is not None:
+            actions.append(ParamAction("SIM_GUST_SIG", w.gust_sigma_m_s))
+    else:
         for n in range(1, 5):
             actions += [ParamAction(f"SIM_MOT{n}_EFF", 1.0), ParamAction(f"SIM_MOT{n}_TVB", 0.0),
                         InjectAction(MOTOR, TYPE_OK, n), InjectAction(SERVO, TYPE_OK, n)]
         text.append("all faults cleared")
-    else:
-        raise ConfigError(f"{sec.file}: key '{sec.prefix.rstrip('.')}': an event needs one of "
-                          "motor, servo, wind, clear")
-    sec.done()
-    return Event(int(round(at_s * 1e6)), tuple(actions), ", ".join(text))
+    return Event(int(round(ev.at_s * 1e6)), tuple(actions), ", ".join(text))
 
 
-def load_script(path: Path | str, tilt_range_deg: tuple[float, float] = (-90.0, 90.0)) -> tuple[Event, ...]:
+def load_script(path: Path | str,
+                tilt_range_deg: tuple[float, float] = (-90.0, 90.0)) -> tuple[Event, ...]:
     """Events sorted by time (stable: events at the same time keep their order)."""
     path = Path(path)
-    top = Section(load_yaml(path), path)
-    raw = top.raw("events")
+    top = read_yaml(path)
+    if "events" not in top:
+        raise ConfigError(f"{path}: key 'events' is missing")
+    raw = top["events"]
     if not isinstance(raw, list) or not raw:
-        raise top.fail("events", raw, "a non-empty list of events")
-    events = [parse_event(Section(item, path, f"events[{i}]."), tilt_range_deg)
+        raise ConfigError(f"{path}: key 'events': got {raw!r}, expected a non-empty list of "
+                          "events")
+    extra = sorted((k for k in top if k != "events"), key=str)
+    if extra:
+        raise ConfigError(f"{path}: unknown key '{extra[0]}' (value {top[extra[0]]!r}): "
+                          "expected events")
+    events = [parse_event(item, tilt_range_deg, file=str(path), key=f"events[{i}]")
               for i, item in enumerate(raw)]
-    top.done()
     return tuple(sorted(events, key=lambda e: e.at_us))

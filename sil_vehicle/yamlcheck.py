@@ -1,89 +1,22 @@
-"""Strict reading of YAML mappings: every key is consumed once, checked and typed.
+"""Deprecated: what tools/ still imports until it moves to `trq_params.loader`.
 
-A `Section` wraps one mapping of a file. Reading a key removes it from the set of keys still to
-read; `done()` then fails on whatever is left (an unknown key). Every error is a `ConfigError`
-naming the file, the dotted key, the value and what was expected.
+Nothing in sil_vehicle or trq_offboard imports this module (tests/meta checks it). `ConfigError`
+and `load_yaml` are the loader's own (one error class, one YAML dialect); `Section` is the old
+key-by-key reader that tools/campaign.py and tools/run_scenario.py still use for their own
+files. Delete this module once tools/ calls `trq_params.loader.load(path, Model)` or
+`validate(Model, data, file)` instead.
 """
 
 from __future__ import annotations
 
 import math
-import re
 from pathlib import Path
 from typing import Any
 
-import yaml
+from trq_params.loader import ConfigError, merge
+from trq_params.loader import read_yaml as load_yaml
 
-
-class ConfigError(ValueError):
-    """A parameter file is wrong. The message names the file, the key, the value, the expectation."""
-
-
-class _Yaml12Loader(yaml.SafeLoader):
-    """SafeLoader with YAML 1.2 booleans: only true/false (any case) are booleans, so that
-    `off`, `on`, `yes`, `no` stay strings and a key or value like `off: true` fails the normal
-    checks instead of silently turning into False."""
-
-
-_Yaml12Loader.yaml_implicit_resolvers = {
-    first: [(tag, regexp) for tag, regexp in resolvers if tag != "tag:yaml.org,2002:bool"]
-    for first, resolvers in yaml.SafeLoader.yaml_implicit_resolvers.items()}
-_Yaml12Loader.add_implicit_resolver(
-    "tag:yaml.org,2002:bool", re.compile(r"^(?:true|True|TRUE|false|False|FALSE)$"),
-    list("tTfF"))
-
-
-def load_yaml(path: Path) -> dict[str, Any]:
-    """Read one YAML file that must hold a mapping at the top level."""
-    try:
-        text = Path(path).read_text(encoding="utf-8")
-    except OSError as exc:
-        raise ConfigError(f"{path}: cannot read: {exc.strerror}") from exc
-    try:
-        data = yaml.load(text, Loader=_Yaml12Loader)
-    except yaml.YAMLError as exc:
-        raise ConfigError(f"{path}: not valid YAML: {exc}") from exc
-    if not isinstance(data, dict):
-        raise ConfigError(f"{path}: expected a mapping at the top level, got {type(data).__name__}")
-    return data
-
-
-def merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
-    """Deep merge: mappings merge key by key, anything else in `over` replaces `base`."""
-    out = dict(base)
-    for key, value in over.items():
-        if isinstance(value, dict) and isinstance(out.get(key), dict):
-            out[key] = merge(out[key], value)
-        else:
-            out[key] = value
-    return out
-
-
-def load_with_extends(path: Path, path_keys: tuple[str, ...] = ()) -> dict[str, Any]:
-    """Load a file; an `extends: OTHER.yaml` key (relative to the file) supplies the defaults.
-    Top-level `path_keys` holding a relative path are made absolute against the folder of the
-    file that names them, so an inherited path still points where its author meant."""
-    path = Path(path)
-    data = _absolute(load_yaml(path), path, path_keys)
-    seen = [path.resolve()]
-    while "extends" in data:
-        ref = data.pop("extends")
-        if not isinstance(ref, str):
-            raise ConfigError(f"{path}: key 'extends': expected a file name, got {ref!r}")
-        base_path = (seen[-1].parent / ref).resolve()
-        if base_path in seen:
-            raise ConfigError(f"{path}: key 'extends': cycle through {base_path}")
-        seen.append(base_path)
-        data = merge(_absolute(load_yaml(base_path), base_path, path_keys), data)
-    return data
-
-
-def _absolute(data: dict[str, Any], file: Path, keys: tuple[str, ...]) -> dict[str, Any]:
-    for key in keys:
-        value = data.get(key)
-        if isinstance(value, str) and not Path(value).is_absolute():
-            data[key] = str((Path(file).resolve().parent / value).resolve())
-    return data
+__all__ = ["ConfigError", "Section", "load_yaml", "merge"]
 
 
 class Section:

@@ -9,6 +9,7 @@ import pytest
 import yaml
 
 from trq_offboard.config import ConfigError, load_controller, load_eso, load_vehicle_model
+from trq_params.loader import read_yaml     # the loader's YAML 1.2 dialect: `off` stays a string
 
 PARAMS = Path(__file__).resolve().parents[2] / "params"
 
@@ -80,7 +81,7 @@ def test_extends_merges_and_detects_cycles(tmp_path):
 
 
 def test_controller_file_errors(tmp_path):
-    src = yaml.safe_load((PARAMS / "controller/nmpc.yaml").read_text())
+    src = read_yaml(PARAMS / "controller/nmpc.yaml")
     src["vehicle"] = str(PARAMS / "vehicle/trq.yaml")
     src["observer"]["file"] = str(PARAMS / "controller/eso.yaml")
     ok = _write(tmp_path, "c.yaml", src)
@@ -97,7 +98,7 @@ def test_controller_file_errors(tmp_path):
 
 
 def test_solver_qp_keys(tmp_path):
-    src = yaml.safe_load((PARAMS / "controller/nmpc.yaml").read_text())
+    src = read_yaml(PARAMS / "controller/nmpc.yaml")
     src["vehicle"] = str(PARAMS / "vehicle/trq.yaml")
     src["observer"]["file"] = str(PARAMS / "controller/eso.yaml")
     cfg = load_controller(_write(tmp_path, "c.yaml", src))

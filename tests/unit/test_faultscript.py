@@ -13,7 +13,7 @@ from conftest import PARAMS
 
 from sil_vehicle.faultscript import (MOTOR, SERVO, TYPE_OFF, TYPE_OK, TYPE_STUCK, InjectAction,
                                      ParamAction, load_script)
-from sil_vehicle.yamlcheck import ConfigError
+from sil_vehicle.config import ConfigError     # the loader's, re-exported
 
 FAULT_FILES = sorted((PARAMS / "faults").glob("*.yaml"))
 

@@ -16,6 +16,7 @@ import yaml
 
 from trq_offboard.allocation import Allocator
 from trq_offboard.config import ConfigError, load_controller
+from trq_params.loader import read_yaml     # the loader's YAML 1.2 dialect: `off` stays a string
 from trq_offboard.model import PredictionModel
 from trq_offboard.nmpc.ocp import Ocp, Stage
 
@@ -60,7 +61,7 @@ def test_auto_follows_the_delay_predictor():
 
 
 def test_config_key_is_validated(tmp_path):
-    src = yaml.safe_load((CTRL / "nmpc.yaml").read_text())
+    src = read_yaml(CTRL / "nmpc.yaml")
     src["vehicle"] = str(PARAMS / "vehicle/trq.yaml")
     src["observer"]["file"] = str(CTRL / "eso.yaml")
     src["actuator_states"] = "sometimes"
@@ -284,7 +285,7 @@ def test_lag_states_bring_the_lagged_observer_along():
 
 def test_bare_yaml_on_off_read_as_words(tmp_path):
     """YAML 1.1 reads a bare `off` as false: an on|off|auto key takes it as the word."""
-    src = yaml.safe_load((CTRL / "nmpc.yaml").read_text())
+    src = read_yaml(CTRL / "nmpc.yaml")
     src["vehicle"] = str(PARAMS / "vehicle/trq.yaml")
     src["observer"]["file"] = str(CTRL / "eso.yaml")
     del src["actuator_states"], src["lagged_actuators"]

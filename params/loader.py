@@ -1,0 +1,353 @@
+"""The one YAML loader of the toolkit: one dialect, one `extends:` rule, one error type.
+
+What goes in: a file path and a pydantic model (a schema of `trq_params.schema`, or a caller's
+own). What comes out: the validated, frozen model; the daemons' config modules build their
+records from it. It never builds records or computes derived quantities.
+
+    load(path, Model)             read, resolve `extends:`, validate -> Model instance
+    validate(Model, data, file)   validate a mapping already in hand (file names the source)
+    read(path, path_keys=())      the merged mapping of a file and its `extends:` chain
+    read_yaml(path)               one file, no `extends:` (a mapping at the top level)
+
+Dialect: YAML 1.2 booleans, so only true/false (any case) are booleans; `no`, `off`, `yes`, `on`
+stay strings and fail a boolean key instead of silently turning into one.
+
+`extends: OTHER` names a file that supplies defaults: a path relative to the file that writes
+it (or absolute), or `builtin:KIND/NAME` for a shipped file (`trq_params.builtin`). Mappings merge
+key by key, anything else in the child replaces the parent's value. Cycles and missing files are
+errors.
+
+Path-valued keys: a schema marks a field as a path with the `PathStr` type. `load` asks the model
+for the dotted keys of its path fields (`path_keys(Model)`) and `read` makes every relative value
+of those keys absolute against the folder of the file that wrote the value, before merging, so
+an inherited path points where its author meant whoever extends the file.
+
+Errors: `ConfigError`, a ValueError whose message names the file, the dotted key (`rotors[2].spin`),
+the value and what was expected.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import types
+import typing
+from pathlib import Path
+from typing import Any, Annotated, Callable, Mapping, TypeVar
+
+import yaml
+from pydantic import BaseModel, BeforeValidator, ValidationError
+from pydantic_core import PydanticCustomError
+
+import trq_params
+
+__all__ = ["ConfigError", "Invalid", "load", "validate", "read", "read_yaml", "path_keys",
+           "PathStr", "Num", "Int", "Flag", "Text", "Choice", "Vec", "Items", "expect", "merge",
+           "BUILTIN"]
+
+BUILTIN = "builtin:"
+
+
+class ConfigError(ValueError):
+    """A parameter file is wrong; the message names the file, key, value and expectation."""
+
+
+class Invalid(Exception):
+    """Raised by a schema's cross-key check: `key` is the full dotted key from the top level.
+    Not a ValueError on purpose, so that pydantic lets it through to `validate`, which names the
+    file."""
+
+    def __init__(self, key: str, value: Any, expected: str) -> None:
+        super().__init__(key, value, expected)
+        self.key, self.value, self.expected = key, value, expected
+
+
+# --------------------------------------------------------------------------------------------
+# the dialect and `extends:`
+# --------------------------------------------------------------------------------------------
+
+class _Yaml12Loader(yaml.SafeLoader):
+    """SafeLoader with YAML 1.2 booleans (only true/false)."""
+
+
+_Yaml12Loader.yaml_implicit_resolvers = {
+    first: [(tag, regexp) for tag, regexp in resolvers if tag != "tag:yaml.org,2002:bool"]
+    for first, resolvers in yaml.SafeLoader.yaml_implicit_resolvers.items()}
+_Yaml12Loader.add_implicit_resolver(
+    "tag:yaml.org,2002:bool", re.compile(r"^(?:true|True|TRUE|false|False|FALSE)$"),
+    list("tTfF"))
+
+
+def read_yaml(path: Path | str) -> dict[str, Any]:
+    """Read one YAML file that must hold a mapping at the top level."""
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot read: {exc.strerror}") from exc
+    try:
+        data = yaml.load(text, Loader=_Yaml12Loader)
+    except yaml.YAMLError as exc:
+        raise ConfigError(f"{path}: not valid YAML: {exc}") from exc
+    if not isinstance(data, dict):
+        raise ConfigError(f"{path}: expected a mapping at the top level, got {type(data).__name__}")
+    return data
+
+
+def merge(base: Mapping[str, Any], over: Mapping[str, Any]) -> dict[str, Any]:
+    """Deep merge: mappings merge key by key, anything else in `over` replaces `base`."""
+    out = dict(base)
+    for key, value in over.items():
+        if isinstance(value, dict) and isinstance(out.get(key), dict):
+            out[key] = merge(out[key], value)
+        else:
+            out[key] = value
+    return out
+
+
+def _parent(ref: Any, file: Path) -> Path:
+    if not isinstance(ref, str) or not ref:
+        raise ConfigError(f"{file}: key 'extends': got {ref!r}, expected a file name or "
+                          f"{BUILTIN}KIND/NAME")
+    if ref.startswith(BUILTIN):
+        kind, sep, name = ref[len(BUILTIN):].partition("/")
+        try:
+            return trq_params.builtin(kind, name).resolve()
+        except ValueError as exc:     # UnknownName, or an unknown kind
+            raise ConfigError(f"{file}: key 'extends': got {ref!r}: {exc}") from exc
+    return (file.parent / ref).resolve()
+
+
+def _absolute(data: dict[str, Any], file: Path, keys: tuple[str, ...]) -> dict[str, Any]:
+    """Relative values of the dotted `keys` made absolute against `file`'s folder."""
+    for dotted in keys:
+        *outer, last = dotted.split(".")
+        node: Any = data
+        for part in outer:
+            node = node.get(part) if isinstance(node, dict) else None
+        if isinstance(node, dict):
+            value = node.get(last)
+            if isinstance(value, str) and not Path(value).is_absolute():
+                node[last] = str((file.parent / value).resolve())
+    return data
+
+
+def read(path: Path | str, path_keys: tuple[str, ...] = ()) -> dict[str, Any]:
+    """The mapping of `path` with its `extends:` chain merged (children override parents), each
+    layer's relative values of `path_keys` resolved against its own folder."""
+    file = Path(path).resolve()
+    chain = [file]
+    layers = [_absolute(read_yaml(path), file, path_keys)]
+    while "extends" in layers[-1]:
+        parent = _parent(layers[-1].pop("extends"), chain[-1])
+        if parent in chain:
+            raise ConfigError(f"{chain[-1]}: key 'extends': cycle through {parent}")
+        if not parent.is_file():
+            raise ConfigError(f"{chain[-1]}: key 'extends': no such file {parent}")
+        chain.append(parent)
+        layers.append(_absolute(read_yaml(parent), parent, path_keys))
+    merged: dict[str, Any] = {}
+    for layer in reversed(layers):
+        merged = merge(merged, layer)
+    return merged
+
+
+# --------------------------------------------------------------------------------------------
+# validation
+# --------------------------------------------------------------------------------------------
+
+M = TypeVar("M", bound=BaseModel)
+
+
+def load(path: Path | str, model: type[M], *, context: Any = None) -> M:
+    """Read `path` (with `extends:`) and validate it as `model`."""
+    return validate(model, read(path, path_keys(model)), path, context=context)
+
+
+def validate(model: type[M], data: Any, file: Path | str, *, prefix: str = "",
+             context: Any = None) -> M:
+    """Validate a mapping as `model`; errors are ConfigErrors naming `file` and the dotted key,
+    which starts with `prefix` when the mapping is a part of a file (`events[2]`)."""
+    try:
+        return model.model_validate(data, context=context)
+    except ValidationError as exc:
+        raise _translate(exc, model, file, prefix) from None
+    except Invalid as exc:
+        raise ConfigError(f"{file}: key '{_join(prefix, exc.key)}': got {exc.value!r}, "
+                          f"expected {exc.expected}") from None
+
+
+def _join(prefix: str, key: str) -> str:
+    if not prefix or not key:
+        return prefix or key
+    return prefix + key if key.startswith("[") else f"{prefix}.{key}"
+
+
+def dotted(loc: tuple[Any, ...]) -> str:
+    """('rotors', 2, 'spin') -> 'rotors[2].spin'"""
+    out = ""
+    for part in loc:
+        out += f"[{part}]" if isinstance(part, int) else (f".{part}" if out else str(part))
+    return out
+
+
+def _translate(exc: ValidationError, model: type[BaseModel], file: Path | str,
+               prefix: str = "") -> ConfigError:
+    """pydantic's first error (its loc, input and msg) as a ConfigError."""
+    err = exc.errors(include_url=False)[0]
+    loc = tuple(p for p in err["loc"] if not (isinstance(p, str) and p.startswith("function-")))
+    key, kind, value = _join(prefix, dotted(loc)) or "top level", err["type"], err.get("input")
+    if kind == "missing":
+        return ConfigError(f"{file}: key '{key}' is missing")
+    if kind == "extra_forbidden":
+        owner = _model_at(model, loc[:-1])
+        known = f": expected one of {', '.join(owner.model_fields)}" if owner else ""
+        return ConfigError(f"{file}: unknown key '{key}' (value {value!r}){known}")
+    if kind == "expected":
+        expected = err["ctx"]["expected"]
+    elif kind in ("model_type", "model_attributes_type", "dict_type"):
+        expected = "a mapping"
+    else:
+        expected = err["msg"][0].lower() + err["msg"][1:]
+    return ConfigError(f"{file}: key '{key}': got {value!r}, expected {expected}")
+
+
+def _unwrap(tp: Any) -> Any:
+    """The model class inside an annotation (Annotated, Optional, tuple[X, ...]), or None."""
+    while True:
+        origin = typing.get_origin(tp)
+        if origin is Annotated:
+            tp = typing.get_args(tp)[0]
+        elif origin in (typing.Union, types.UnionType, tuple, list):
+            inner = [_unwrap(a) for a in typing.get_args(tp) if a is not type(None)]
+            inner = [a for a in inner if a is not None]
+            return inner[0] if inner else None
+        else:
+            return tp if isinstance(tp, type) and issubclass(tp, BaseModel) else None
+
+
+def _model_at(model: type[BaseModel], loc: tuple[Any, ...]) -> type[BaseModel] | None:
+    current: Any = model
+    for part in loc:
+        if isinstance(part, int):
+            continue
+        field = current.model_fields.get(part) if current else None
+        current = _unwrap(field.annotation) if field else None
+        if current is None:
+            return None
+    return current
+
+
+class _PathMark:
+    """Metadata of a path-valued field (see `PathStr`)."""
+
+
+_PATH = _PathMark()
+
+
+def path_keys(model: type[BaseModel], prefix: str = "") -> tuple[str, ...]:
+    """The dotted keys of the fields typed `PathStr` in `model` and its nested models (not
+    inside lists)."""
+    out: list[str] = []
+    for name, field in model.model_fields.items():
+        key = f"{prefix}{field.alias or name}"
+        if any(m is _PATH for m in field.metadata):
+            out.append(key)
+            continue
+        tp = field.annotation
+        while typing.get_origin(tp) is Annotated:
+            tp = typing.get_args(tp)[0]
+        if typing.get_origin(tp) in (typing.Union, types.UnionType):
+            args = [a for a in typing.get_args(tp) if a is not type(None)]
+            tp = args[0] if len(args) == 1 else None
+        if isinstance(tp, type) and issubclass(tp, BaseModel):
+            out.extend(path_keys(tp, key + "."))
+    return tuple(out)
+
+
+# --------------------------------------------------------------------------------------------
+# field types: each checks its value and says what it expected in the same words everywhere
+# --------------------------------------------------------------------------------------------
+
+def expect(expected: str) -> PydanticCustomError:
+    """The error a field check raises (the translator puts `expected` into the message)."""
+    return PydanticCustomError("expected", "{expected}", {"expected": expected})
+
+
+def _checked(check: Callable[[Any], Any]) -> BeforeValidator:
+    return BeforeValidator(check)
+
+
+def _is_number(value: Any) -> bool:
+    return not isinstance(value, bool) and isinstance(value, (int, float)) \
+        and math.isfinite(value)
+
+
+def Num(lo: float = -math.inf, hi: float = math.inf, *, open_lo: bool = False) -> Any:
+    """A finite number in [lo, hi] (or (lo, hi]); an integer in the file becomes a float."""
+    want = f"a number in {'(' if open_lo else '['}{lo:g}, {hi:g}]"
+
+    def check(value: Any) -> float:
+        if not _is_number(value) or not lo <= value <= hi or (open_lo and value == lo):
+            raise expect(want)
+        return float(value)
+    return Annotated[float, _checked(check)]
+
+
+def Int(lo: int, hi: int) -> Any:
+    """An integer in [lo, hi] (not a bool, not a float)."""
+    def check(value: Any) -> int:
+        if isinstance(value, bool) or not isinstance(value, int) or not lo <= value <= hi:
+            raise expect(f"an integer in [{lo}, {hi}]")
+        return value
+    return Annotated[int, _checked(check)]
+
+
+def _flag(value: Any) -> bool:
+    if not isinstance(value, bool):
+        raise expect("true or false")
+    return value
+
+
+Flag = Annotated[bool, _checked(_flag)]
+"""true or false (YAML 1.2: `no`, `off` are strings, so they are rejected)."""
+
+
+def _text(value: Any) -> str:
+    if not isinstance(value, str):
+        raise expect("a string")
+    return value
+
+
+Text = Annotated[str, _checked(_text)]
+PathStr = Annotated[str, _checked(_text), _PATH]
+"""A file path; relative values are resolved against the folder of the file that wrote them."""
+
+
+def Choice(*choices: str) -> Any:
+    """One of the given strings."""
+    def check(value: Any) -> str:
+        if not isinstance(value, str) or value not in choices:
+            raise expect("one of " + "|".join(choices))
+        return value
+    return Annotated[str, _checked(check)]
+
+
+def Vec(n: int, lo: float = -math.inf, hi: float = math.inf) -> Any:
+    """A list of n finite numbers in [lo, hi], as a tuple of floats."""
+    want = f"a list of {n} numbers in [{lo:g}, {hi:g}]"
+
+    def check(value: Any) -> tuple[float, ...]:
+        if not isinstance(value, (list, tuple)) or len(value) != n or not all(
+                _is_number(v) and lo <= v <= hi for v in value):
+            raise expect(want)
+        return tuple(float(v) for v in value)
+    return Annotated[tuple[float, ...], _checked(check)]
+
+
+def Items(n: int) -> BeforeValidator:
+    """A list of exactly n mappings (put on a `tuple[Model, ...]` field), as a tuple."""
+    def check(value: Any) -> tuple[Any, ...]:
+        if not isinstance(value, (list, tuple)) or len(value) != n:
+            raise expect(f"a list of {n} mappings")
+        return tuple(value)
+    return _checked(check)

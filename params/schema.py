@@ -1,0 +1,443 @@
+"""Typed schemas of the parameter files: what each file may hold, its types and ranges.
+
+One model per kind of file, read by `trq_params.loader.load(path, Model)`:
+
+    VehicleFile      params/vehicle/*.yaml   (both daemons: the one vehicle-file parser)
+    SimFile          params/sim/*.yaml       (sil_vehicle)
+    ControllerFile   params/controller/*.yaml, the controllers (trq_offboard)
+    EsoFile          params/controller/eso*.yaml, the observer's gains (trq_offboard)
+
+The models are strict and frozen and forbid unknown keys. Values keep the units of the file
+(degrees stay degrees): the daemons' config modules convert them and compute derived quantities
+when they build their records. Checks that span several keys of one file live here too, as
+model validators raising `loader.Invalid` with the full dotted key; checks that span files (a
+controller's rate against its observer's gains) stay with the daemon that joins the files.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Any, Optional
+
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, model_validator
+
+from trq_params.loader import (Choice, Flag, Int, Invalid, Items, Num, PathStr, Text, Vec,
+                               expect)
+
+__all__ = ["Strict", "VehicleFile", "SimFile", "ControllerFile", "EsoFile", "STREAMS",
+           "HPIPM_OPTIONS", "parse_endpoint"]
+
+
+class Strict(BaseModel):
+    """Base of every schema: strict types, no unknown key, frozen."""
+    model_config = ConfigDict(strict=True, extra="forbid", frozen=True)
+
+
+# --------------------------------------------------------------------------------------------
+# vehicle
+# --------------------------------------------------------------------------------------------
+
+class Inertia(Strict):
+    xx: Num(1e-6, 100.0)
+    yy: Num(1e-6, 100.0)
+    zz: Num(1e-6, 100.0)
+
+
+class QuadraticCurve(Strict):
+    """c2 zeta^2 + c1 zeta + c0, zeta the throttle in percent."""
+    c2: Num(0.0, 1.0, open_lo=True)
+    c1: Num(-10.0, 10.0)
+    c0: Num(-10.0, 10.0)
+
+    def value(self, zeta_pct: float) -> float:
+        return (self.c2 * zeta_pct + self.c1) * zeta_pct + self.c0
+
+
+class RotorCurves(Strict):
+    thrust_N: QuadraticCurve
+    torque_Nm: QuadraticCurve
+
+
+class Rotor(Strict):
+    name: Text
+    azimuth_deg: Num(-180.0, 180.0)
+    spin: Choice("ccw", "cw")
+
+
+class Motor(Strict):
+    idle_pct: Num(0.0, 50.0)
+    time_constant_s: Num(0.0, 1.0)
+    rate_limit_pct_s: Num(1.0, 1e6)
+
+
+class Tilt(Strict):
+    locked: Flag
+    min_deg: Num(-90.0, 0.0)
+    max_deg: Num(0.0, 90.0)
+    servo_time_constant_s: Num(0.0, 1.0)
+    servo_rate_limit_deg_s: Num(1.0, 1e5)
+
+
+class Drag(Strict):
+    quadratic_N_s2_m2: Num(0.0, 10.0)
+
+
+class VehicleFile(Strict):
+    """An airframe. Rotor order is PX4 quad X (motor 1..4)."""
+    name: Text
+    mass_kg: Num(0.05, 100.0)
+    inertia_kg_m2: Inertia
+    gravity_m_s2: Num(9.7, 9.9)
+    arm_length_m: Num(0.01, 5.0)
+    rotor_curves: RotorCurves
+    rotors: Annotated[tuple[Rotor, ...], Items(4)]
+    motor: Motor
+    tilt: Tilt
+    drag: Drag
+
+    @model_validator(mode="after")
+    def _can_fly(self) -> "VehicleFile":
+        thrust = self.rotor_curves.thrust_N
+        if thrust.value(self.motor.idle_pct) <= 0.0:
+            raise Invalid("motor.idle_pct", self.motor.idle_pct,
+                          "a throttle where rotor_curves.thrust_N > 0")
+        weight = self.mass_kg * self.gravity_m_s2
+        if 4.0 * thrust.value(100.0) <= weight:
+            raise Invalid("rotor_curves.thrust_N", thrust.model_dump(),
+                          f"full throttle to lift the weight {weight:.2f} N (it gives "
+                          f"{4.0 * thrust.value(100.0):.2f} N: the vehicle cannot fly)")
+        return self
+
+
+# --------------------------------------------------------------------------------------------
+# simulation
+# --------------------------------------------------------------------------------------------
+
+# Telemetry streams the vehicle can send, by MAVLink message name.
+STREAMS = ("HEARTBEAT", "SYS_STATUS", "ODOMETRY", "ATTITUDE", "LOCAL_POSITION_NED",
+           "SERVO_OUTPUT_RAW", "ACTUATOR_OUTPUT_STATUS", "GLOBAL_POSITION_INT", "GPS_RAW_INT",
+           "HOME_POSITION")
+
+_RATE = Int(0, 10_000)      # then checked against physics_rate_hz by SimFile
+
+
+class StreamRates(Strict):
+    HEARTBEAT: _RATE
+    SYS_STATUS: _RATE
+    ODOMETRY: _RATE
+    ATTITUDE: _RATE
+    LOCAL_POSITION_NED: _RATE
+    SERVO_OUTPUT_RAW: _RATE
+    ACTUATOR_OUTPUT_STATUS: _RATE
+    GLOBAL_POSITION_INT: _RATE
+    GPS_RAW_INT: _RATE
+    HOME_POSITION: _RATE
+
+
+class Telemetry(Strict):
+    gcs: StreamRates
+    offboard: StreamRates
+
+
+def parse_endpoint(text: Any) -> tuple[str, int]:
+    """`HOST:PORT` -> (host, port); raises the field error of an endpoint otherwise."""
+    host, sep, port = str(text).rpartition(":")
+    if not isinstance(text, str) or not sep or not host or not port.isdigit() \
+            or not 0 <= int(port) <= 65535:
+        raise expect("HOST:PORT with a port in [0, 65535]")
+    return host, int(port)
+
+
+def _endpoint(value: Any) -> str:
+    parse_endpoint(value)
+    return value
+
+
+Endpoint = Annotated[str, BeforeValidator(_endpoint)]
+
+
+class Impair(Strict):
+    loss: Num(0.0, 1.0) = 0.0
+    delay_ms: Num(0.0, 10_000.0) = 0.0
+    jitter_ms: Num(0.0, 10_000.0) = 0.0
+    duplicate: Num(0.0, 1.0) = 0.0
+    reorder: Num(0.0, 1.0) = 0.0
+
+
+class Link(Strict):
+    bind: Endpoint
+    target: Endpoint
+    impair: Optional[Impair] = None
+
+
+class Links(Strict):
+    gcs: Link
+    offboard: Link
+
+
+class Clock(Strict):
+    mode: Choice("lockstep", "realtime")
+    speed_up: Num(0.01, 1000.0)
+    resend_s: Num(0.01, 60.0)
+    free_run_after_s: Num(0.05, 3600.0)
+
+
+class Gusts(Strict):
+    enabled: Flag
+    sigma_m_s: Num(0.0, 20.0)
+    length_m: Num(1.0, 2000.0)
+
+
+class Wind(Strict):
+    speed_m_s: Num(0.0, 40.0)
+    direction_deg: Num(-360.0, 360.0)
+    gusts: Gusts
+
+
+class Noise(Strict):
+    position_m: Num(0.0, 10.0)
+    velocity_m_s: Num(0.0, 10.0)
+    attitude_rad: Num(0.0, 1.0)
+    rates_rad_s: Num(0.0, 10.0)
+
+
+class Faults(Strict):
+    motor_effectiveness: Vec(4, 0.0, 1.0)
+    motor_tv_amplitude: Vec(4, 0.0, 1.0)
+    motor_tv_omega_rad_s: Vec(4, 0.0, 1000.0)
+    motor_tv_phase_rad: Vec(4, -10.0, 10.0)
+
+
+class Ground(Strict):
+    crash_speed_m_s: Num(0.1, 100.0)
+    crash_tilt_deg: Num(10.0, 180.0)
+
+
+class Home(Strict):
+    lat_deg: Num(-90.0, 90.0)
+    lon_deg: Num(-180.0, 180.0)
+    alt_m: Num(-500.0, 9000.0)
+
+
+class Log(Strict):
+    dir: Text
+    rate_hz: _RATE
+
+
+class SimFile(Strict):
+    """Simulation settings; `vehicle` names the airframe file."""
+    vehicle: PathStr
+    physics_rate_hz: Int(500, 10_000)
+    control_rate_hz: _RATE
+    seed: Int(0, 2**63 - 1)
+    physics_core: Choice("auto", "compiled", "python") = "auto"
+    clock: Clock
+    telemetry: Telemetry
+    links: Links
+    wind: Wind
+    noise: Noise
+    faults: Faults
+    ground: Ground
+    home: Home
+    log: Log
+
+    @model_validator(mode="after")
+    def _rates(self) -> "SimFile":
+        physics = self.physics_rate_hz
+        if 1_000_000 % physics:
+            raise Invalid("physics_rate_hz", physics, "a rate whose period is a whole microsecond")
+
+        def check(key: str, hz: int) -> None:
+            if hz > physics or (hz and physics % hz):
+                raise Invalid(key, hz, f"0 or a rate in Hz that divides physics_rate_hz "
+                                       f"({physics})")
+        check("control_rate_hz", self.control_rate_hz)
+        if self.control_rate_hz == 0:
+            raise Invalid("control_rate_hz", 0, "a rate > 0")
+        for name in ("gcs", "offboard"):
+            rates = getattr(self.telemetry, name)
+            for stream in STREAMS:
+                check(f"telemetry.{name}.{stream}", getattr(rates, stream))
+        if self.telemetry.offboard.ODOMETRY != self.control_rate_hz:
+            raise Invalid("telemetry.offboard.ODOMETRY", self.telemetry.offboard.ODOMETRY,
+                          f"control_rate_hz ({self.control_rate_hz}): the offboard state stream "
+                          "paces the control loop and the lockstep")
+        check("log.rate_hz", self.log.rate_hz)
+        return self
+
+
+# --------------------------------------------------------------------------------------------
+# observer
+# --------------------------------------------------------------------------------------------
+
+class EsoGroup(Strict):
+    omega_o_rad_s: Num(0.1, 500.0)
+    delta: Num(1e-6, 10.0)
+
+
+class EsoTranslational(EsoGroup):
+    output: Choice("position", "velocity") = "position"
+
+
+class EsoRotational(EsoGroup):
+    output: Choice("angles", "rates") = "angles"
+
+
+class MaxDisturbance(Strict):
+    translational_m_s2: Num(0.0, 100.0)
+    rotational_rad_s2: Num(0.0, 1000.0)
+
+
+class EsoFile(Strict):
+    kind: Choice("nonlinear", "linear")
+    alpha: Vec(3, 0.05, 1.0)
+    translational: EsoTranslational
+    rotational: EsoRotational
+    substeps: Int(1, 1000)
+    max_disturbance: MaxDisturbance
+
+
+# --------------------------------------------------------------------------------------------
+# controller
+# --------------------------------------------------------------------------------------------
+
+class Observer(Strict):
+    kind: Choice("none", "nonlinear", "linear")
+    file: PathStr
+
+
+class Effectiveness(Strict):
+    """The motor effectiveness observer; it reads the observer's disturbance."""
+    estimate: Choice("on", "off")
+    bandwidth_rad_s: Num(1.0, 2000.0) = 250.0
+    min: Num(0.01, 1.0) = 0.1
+    substeps: Int(1, 1000) = 10
+
+
+class Horizon(Strict):
+    steps: Int(2, 200)
+    step_s: Num(1e-3, 1.0)
+
+
+class WeightsFile(Strict):
+    position: Vec(3, 0.0, 1e6)
+    velocity: Vec(3, 0.0, 1e6)
+    euler: Vec(3, 0.0, 1e6)
+    rates: Vec(3, 0.0, 1e6)
+    terminal_factor: Num(0.0, 1e4)
+    tilt: Num(0.0, 1e6)
+    throttle: Num(0.0, 1e6)
+    tilt_rate: Num(0.0, 1e6)
+    output_error: Num(0.0, 1e6)
+
+
+class Constraints(Strict):
+    max_roll_pitch_deg: Num(1.0, 89.0)
+    max_body_rate_rad_s: Num(0.1, 50.0)
+
+
+# HPIPM's further IPM arguments (d_ocp_qp_ipm_arg_set_<name>) a solver file may set
+HPIPM_OPTIONS = ("mu0", "tol_stat", "tol_eq", "tol_ineq", "tol_comp", "reg_prim", "ric_alg",
+                 "pred_corr", "split_step")
+
+
+class HpipmOptions(Strict):
+    mu0: Optional[Num(1e-8, 1e8)] = None
+    tol_stat: Optional[Num(1e-14, 1.0)] = None
+    tol_eq: Optional[Num(1e-14, 1.0)] = None
+    tol_ineq: Optional[Num(1e-14, 1.0)] = None
+    tol_comp: Optional[Num(1e-14, 1.0)] = None
+    reg_prim: Optional[Num(0.0, 1.0)] = None
+    ric_alg: Optional[Int(0, 1)] = None
+    pred_corr: Optional[Int(0, 1)] = None
+    split_step: Optional[Int(0, 1)] = None
+
+    def pairs(self) -> tuple[tuple[str, float], ...]:
+        """The options the file set, as (name, value), in the order of HPIPM_OPTIONS."""
+        return tuple((n, getattr(self, n)) for n in HPIPM_OPTIONS if getattr(self, n) is not None)
+
+
+class SolverFile(Strict):
+    kind: Choice("rti", "sqp", "ipopt")
+    hessian: Choice("gauss_newton", "exact")
+    max_iterations: Int(1, 100)
+    tolerance: Num(0.0, 1.0)
+    qp_solver: Choice("qrqp", "osqp", "qpoases", "hpipm", "daqp", "proxqp")
+    regularization: Num(0.0, 1e3)
+    ipopt_max_iterations: Int(1, 10_000)
+    codegen: Choice("auto", "off") = "auto"
+    hpipm_interface: Choice("direct", "conic") = "direct"
+    hpipm_mode: Choice("auto", "speed_abs", "speed", "balance", "robust") = "auto"
+    qp_max_iterations: Int(1, 1000) = 50
+    hpipm_options: HpipmOptions = Field(default_factory=HpipmOptions)
+
+
+class ReferenceFile(Strict):
+    kind: Choice("hover", "step", "circle", "helix", "figure8")
+    altitude_m: Num(0.2, 100.0)
+    climb_speed_m_s: Num(0.05, 5.0)
+    hold_s: Num(0.0, 600.0)
+    duration_s: Num(0.0, 3600.0)
+    ramp_s: Num(0.0, 60.0)
+    radius_m: Num(0.0, 50.0)
+    period_s: Num(1.0, 600.0)
+    helix_climb_m: Num(-20.0, 20.0)
+    step_ned_m: Vec(3, -20.0, 20.0)
+    land: Flag
+
+
+_ON_OFF_AUTO = Choice("on", "off", "auto")
+
+
+class ControllerFile(Strict):
+    """A controller; `vehicle` and `observer.file` name the other files it reads."""
+    name: Text
+    vehicle: PathStr
+    observer: Observer
+    applied_input: Choice("commanded", "outputs")
+    applied_delay_s: Num(0.0, 1.0)
+    delay_compensation: Choice("predict", "none", "auto") = "auto"
+    lagged_actuators: _ON_OFF_AUTO = "auto"
+    actuator_states: _ON_OFF_AUTO = "auto"
+    tilt_rate_limit: Choice("horizon", "first_step") = "horizon"
+    motor_effectiveness: Optional[Effectiveness] = None
+    control_rate_hz: Int(1, 1000)
+    horizon: Horizon
+    weights: WeightsFile
+    constraints: Constraints
+    solver: SolverFile
+    reference: ReferenceFile
+
+    @model_validator(mode="after")
+    def _consistent(self) -> "ControllerFile":
+        eff = self.motor_effectiveness
+        if eff is not None and eff.estimate == "on":
+            if self.observer.kind == "none":
+                raise Invalid("motor_effectiveness.estimate", "on",
+                              "off with observer.kind none (the motor effectiveness observer "
+                              "reads the extended state observer's disturbance)")
+            if self.applied_input == "outputs":
+                raise Invalid("applied_input", "outputs",
+                              "commanded with motor_effectiveness on (the outputs the vehicle "
+                              "reports already carry the motors' loss: the observer would see "
+                              "no fault to estimate)")
+        s = self.solver
+        if s.hessian == "exact" and s.hpipm_mode == "speed_abs":
+            raise Invalid("solver.hpipm_mode", "speed_abs",
+                          "speed, balance, robust or auto with hessian exact (the exact Hessian "
+                          "needs the QP's multipliers, which speed_abs does not compute to "
+                          "tolerance)")
+        r = self.reference
+        if 2.0 * r.ramp_s > r.duration_s:
+            raise Invalid("reference.ramp_s", r.ramp_s,
+                          f"at most half of duration_s ({r.duration_s:g})")
+        period = 1.0 / self.control_rate_hz
+        if self.horizon.step_s < period - 1e-12:
+            raise Invalid("horizon.step_s", self.horizon.step_s,
+                          f"at least one control period ({period:g} s)")
+        if eff is not None and eff.estimate == "on" \
+                and eff.bandwidth_rad_s > eff.substeps * self.control_rate_hz:
+            raise Invalid("motor_effectiveness.bandwidth_rad_s", eff.bandwidth_rad_s,
+                          f"at most substeps x control_rate_hz = {eff.substeps} x "
+                          f"{self.control_rate_hz} = {eff.substeps * self.control_rate_hz:g} "
+                          "rad/s (explicit Euler substeps; raise substeps for a faster observer)")
+        return self
