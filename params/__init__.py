@@ -18,7 +18,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-__all__ = ["DIR", "KINDS", "builtin", "resolve", "exists", "names", "is_name", "UnknownName"]
+__all__ = ["DIR", "KINDS", "builtin", "resolve", "exists", "names", "is_name", "ConfigError",
+           "UnknownName"]
 
 DIR = Path(__file__).resolve().parent
 """The folder of the shipped files (wheels install unzipped, so this is a real folder)."""
@@ -26,7 +27,13 @@ DIR = Path(__file__).resolve().parent
 KINDS = ("vehicle", "sim", "controller", "scenarios", "faults", "campaigns")
 
 
-class UnknownName(ValueError):
+class ConfigError(ValueError):
+    """A parameter file is wrong; the message names the file, key, value and expectation.
+    (Defined here, beside the files, so that a wrong name and a wrong file are one error type;
+    `trq_params.loader` raises it.)"""
+
+
+class UnknownName(ConfigError):
     """A built-in file was asked for by a name that is not shipped."""
 
 

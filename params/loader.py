@@ -8,6 +8,8 @@ records from it. It never builds records or computes derived quantities.
     validate(Model, data, file)   validate a mapping already in hand (file names the source)
     read(path, path_keys=())      the merged mapping of a file and its `extends:` chain
     read_yaml(path)               one file, no `extends:` (a mapping at the top level)
+    chain(path)                   the files a file is made of (itself and its `extends:` chain)
+    dump(mapping)                 YAML text of a mapping (for overlays a tool writes)
 
 Dialect: YAML 1.2 booleans, so only true/false (any case) are booleans; `no`, `off`, `yes`, `on`
 stay strings and fail a boolean key instead of silently turning into one.
@@ -33,23 +35,20 @@ import re
 import types
 import typing
 from pathlib import Path
-from typing import Any, Annotated, Callable, Mapping, TypeVar
+from typing import Annotated, Any, Callable, Mapping, TypeVar
 
+import trq_params
 import yaml
 from pydantic import BaseModel, BeforeValidator, ValidationError
 from pydantic_core import PydanticCustomError
+from trq_params import ConfigError
 
-import trq_params
-
-__all__ = ["ConfigError", "Invalid", "load", "validate", "read", "read_yaml", "path_keys",
-           "PathStr", "Num", "Int", "Flag", "Text", "Choice", "Vec", "Items", "expect", "merge",
-           "BUILTIN"]
+__all__ = ["ConfigError", "Invalid", "load", "validate", "read", "read_yaml", "chain",
+           "path_keys", "PathStr", "Num", "Int", "Flag", "Text", "Choice", "Vec", "Items", "expect",
+           "merge", "dump", "BUILTIN"]
 
 BUILTIN = "builtin:"
 
-
-class ConfigError(ValueError):
-    """A parameter file is wrong; the message names the file, key, value and expectation."""
 
 
 class Invalid(Exception):
@@ -93,6 +92,11 @@ def read_yaml(path: Path | str) -> dict[str, Any]:
     return data
 
 
+def dump(data: Mapping[str, Any]) -> str:
+    """YAML text of a mapping, keys in their order (the overlays the tools write and fly)."""
+    return yaml.safe_dump(dict(data), sort_keys=False)
+
+
 def merge(base: Mapping[str, Any], over: Mapping[str, Any]) -> dict[str, Any]:
     """Deep merge: mappings merge key by key, anything else in `over` replaces `base`."""
     out = dict(base)
@@ -129,6 +133,19 @@ def _absolute(data: dict[str, Any], file: Path, keys: tuple[str, ...]) -> dict[s
             if isinstance(value, str) and not Path(value).is_absolute():
                 node[last] = str((file.parent / value).resolve())
     return data
+
+
+def chain(path: Path | str) -> list[Path]:
+    """The files `path` is made of: itself, then each file its `extends:` names, in order."""
+    files = [Path(path).resolve()]
+    data = read_yaml(files[0])
+    while "extends" in data:
+        parent = _parent(data["extends"], files[-1])
+        if parent in files:
+            raise ConfigError(f"{files[-1]}: key 'extends': cycle through {parent}")
+        files.append(parent)
+        data = read_yaml(parent)
+    return files
 
 
 def read(path: Path | str, path_keys: tuple[str, ...] = ()) -> dict[str, Any]:

@@ -19,9 +19,7 @@ from __future__ import annotations
 from typing import Annotated, Any, Optional
 
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, model_validator
-
-from trq_params.loader import (Choice, Flag, Int, Invalid, Items, Num, PathStr, Text, Vec,
-                               expect)
+from trq_params.loader import Choice, Flag, Int, Invalid, Items, Num, PathStr, Text, Vec, expect
 
 __all__ = ["Strict", "VehicleFile", "SimFile", "ControllerFile", "EsoFile", "STREAMS",
            "HPIPM_OPTIONS", "parse_endpoint"]

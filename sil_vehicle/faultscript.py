@@ -23,9 +23,7 @@ from pathlib import Path
 from typing import Any, Optional
 
 from pydantic import ValidationInfo, field_validator, model_validator
-
-from trq_params.loader import (ConfigError, Flag, Int, Invalid, Num, expect, read_yaml,
-                               validate)
+from trq_params.loader import ConfigError, Flag, Int, Invalid, Num, expect, read_yaml, validate
 from trq_params.schema import Strict
 
 MOTOR = 101          # FAILURE_UNIT_SYSTEM_MOTOR
@@ -130,9 +128,6 @@ _KINDS = (("motor", MotorEvent), ("servo", ServoEvent), ("wind", WindEvent),
 def parse_event(event: Any, tilt_range_deg: tuple[float, float] = (-90.0, 90.0), *,
                 file: str = "command line", key: str = "") -> Event:
     """One event mapping (`key`: where it sits in `file`, e.g. `events[2]`) -> Event."""
-    if hasattr(event, "_data") and hasattr(event, "prefix"):
-        # a tools/ caller still hands a yamlcheck.Section (until tools/ use the loader)
-        event, file, key = event._data, event.file, event.prefix.rstrip(".")
     if not isinstance(event, dict):
         raise ConfigError(f"{file}: key '{key}': got {event!r}, expected a mapping")
     model = next((m for k, m in _KINDS if k in event), None)

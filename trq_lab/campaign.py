@@ -78,8 +78,10 @@ from pathlib import Path
 from typing import Any
 
 import trq_params
-
-from sil_vehicle.yamlcheck import ConfigError, Section, load_yaml
+from pydantic import create_model, model_validator
+from trq_params import ConfigError
+from trq_params.loader import Choice, Flag, Int, Invalid, Num, Text, Vec, chain, read_yaml, validate
+from trq_params.schema import Strict
 
 PARAMS = trq_params.DIR
 AXES = ("fault", "wind", "trajectory", "link")
@@ -124,77 +126,100 @@ class Campaign:
     flights: tuple[dict, ...]          # flight specs (JSON-able), controllers included
 
 
-def _check_value(sec: Section, key: str, kind: str, lo, hi) -> Any:
-    """Read one scalar of an axis with the Section's typed readers (errors name file and key)."""
+def _field(kind: str, lo, hi):
+    """The loader's field type of one axis key (its checks and its wording)."""
     if kind == "int":
-        return sec.int(key, lo, hi)
+        return Int(lo, hi)
     if kind == "float":
-        return sec.float(key, -math.inf if lo is None else lo, math.inf if hi is None else hi)
+        return Num(-math.inf if lo is None else lo, math.inf if hi is None else hi)
     if kind == "bool":
-        return sec.bool(key)
+        return Flag
     if kind == "vec3":
-        return list(sec.floats(key, 3))
-    return sec.str(key, REFERENCE_KINDS)
+        return Vec(3)
+    return Choice(*REFERENCE_KINDS)
 
 
-def _axis_values(raw_axis: Any, file, prefix: str, axis: str,
+def _axis_models(axis: str):
+    """(one value per key, a list of values per key, a uniform draw) models of an axis."""
+    keys = AXIS_KEYS[axis]
+    point = create_model(f"{axis}_point", __base__=Strict,
+                         **{k: (_field(*spec) | None, None) for k, spec in keys.items()})
+    lists = create_model(f"{axis}_lists", __base__=Strict,
+                         **{k: (list[_field(*spec)] | None, None) for k, spec in keys.items()})
+    return point, lists
+
+
+AXIS_MODELS = {axis: _axis_models(axis) for axis in AXES}
+
+
+def _uniform_model(kind: str, lo, hi):
+    return create_model("uniform", __base__=Strict,
+                        uniform=(Vec(2, -math.inf if lo is None else lo,
+                                     math.inf if hi is None else hi), ...))
+
+
+def _axis_values(raw_axis: Any, file, where: str, axis: str,
                  sampling: bool) -> dict[str, list | dict]:
     """Each key of one axis mapping -> its list of values (grid) or its distribution (sample):
-    a list (choice) or {"uniform": [lo, hi]}. Scalars become one-element lists."""
-    sec = Section(raw_axis, file, prefix)          # fails unless it is a mapping
+    a list (choice) or {"uniform": [lo, hi]}. Scalars become one-element lists. Checked with
+    the loader's field types: errors name the file and the dotted key (`grid.fault.motor[1]`)."""
     keys = AXIS_KEYS[axis]
+    point, lists = AXIS_MODELS[axis]
+    if not isinstance(raw_axis, dict):
+        raise ConfigError(f"{file}: key '{where}': got {raw_axis!r}, expected a mapping")
+    unknown = sorted((k for k in raw_axis if k not in keys), key=str)
+    if unknown:
+        raise ConfigError(f"{file}: unknown key '{where}.{unknown[0]}' (value "
+                          f"{raw_axis[unknown[0]]!r}): expected one of {', '.join(keys)}")
     out: dict[str, list | dict] = {}
     for key in sorted(raw_axis, key=str):
-        if key not in keys:
-            continue                               # done() reports it with its value
         kind, lo, hi = keys[key]
-        raw = sec.raw(key)
+        raw = raw_axis[key]
         if sampling and isinstance(raw, dict):
-            dist = Section(raw, sec.file, f"{sec.prefix}{key}.")
             if kind not in ("float", "int"):
-                raise sec.fail(key, raw, "a value or a list of values to choose from")
-            bounds = dist.floats("uniform", 2, -math.inf if lo is None else lo,
-                                 math.inf if hi is None else hi)
-            dist.done()
+                raise ConfigError(f"{file}: key '{where}.{key}': got {raw!r}, expected a value "
+                                  "or a list of values to choose from")
+            bounds = validate(_uniform_model(kind, lo, hi), raw, file,
+                              prefix=f"{where}.{key}").uniform
             if bounds[0] > bounds[1]:
-                raise dist.fail("uniform", list(bounds), "[lo, hi] with lo <= hi")
+                raise ConfigError(f"{file}: key '{where}.{key}.uniform': got {list(bounds)}, "
+                                  "expected [lo, hi] with lo <= hi")
             out[key] = {"uniform": list(bounds)}
             continue
         is_list = isinstance(raw, list) and not (kind == "vec3" and raw and
                                                  not isinstance(raw[0], list))
-        values = raw if is_list else [raw]
-        if not values:
-            raise sec.fail(key, raw, "a value or a non-empty list of values")
-        checked = []
-        for i, v in enumerate(values):
-            name = f"{key}[{i}]" if is_list else key
-            checked.append(_check_value(Section({name: v}, sec.file, sec.prefix), name, kind,
-                                        lo, hi))
-        out[key] = checked
-    sec.done()
+        if is_list and not raw:
+            raise ConfigError(f"{file}: key '{where}.{key}': got [], expected a value or a "
+                              "non-empty list of values")
+        if is_list:
+            values = list(getattr(validate(lists, {key: raw}, file, prefix=where), key))
+        else:
+            values = [getattr(validate(point, {key: raw}, file, prefix=where), key)]
+        out[key] = [list(v) if isinstance(v, tuple) else v for v in values]
     return out
 
 
-def _grid_axis(top: Section, axis: str) -> list[dict | None]:
+def _grid_axis(grid: dict, file, axis: str) -> list[dict | None]:
     """All points of one grid axis (None: no fault)."""
-    if not top.has(axis):
+    if axis not in grid:
         return [None] if axis == "fault" else [{}]
-    raw = top.raw(axis)
+    raw = grid[axis]
     items = raw if isinstance(raw, list) else [raw]
     if not items:
-        raise top.fail(axis, raw, "a mapping or a non-empty list of mappings")
+        raise ConfigError(f"{file}: key 'grid.{axis}': got {raw!r}, expected a mapping or a "
+                          "non-empty list of mappings")
     points: list[dict | None] = []
     for i, item in enumerate(items):
-        where = f"{top.prefix}{axis}" + (f"[{i}]" if isinstance(raw, list) else "")
+        where = f"grid.{axis}" + (f"[{i}]" if isinstance(raw, list) else "")
         if axis == "fault" and item == "none":
             points.append(None)
             continue
-        values = _axis_values(item, top.file, where + ".", axis, sampling=False)
+        values = _axis_values(item, file, where, axis, sampling=False)
         names = list(values)
         for combo in itertools.product(*(values[k] for k in names)):
             point = dict(zip(names, combo))
             if axis == "fault":
-                _fault_event(point, top.file, where)
+                _fault_event(point, file, where)
             points.append(point)
     return points
 
@@ -244,7 +269,7 @@ def _fault_event(fault: dict | None, file, where: str, tilt_range_deg=(-90.0, 90
         if "stuck_deg" not in f:
             raise ConfigError(f"{file}: missing key '{prefix}stuck_deg'")
         event["stuck_deg"] = f["stuck_deg"]
-    return parse_event(Section(event, file, prefix), tilt_range_deg)
+    return parse_event(event, tilt_range_deg, file=str(file), key=where)
 
 
 def _sample_axis(values: dict | None, axis: str, rng) -> dict | None:
@@ -280,14 +305,7 @@ def controller_inputs(name: str) -> tuple[Path, str]:
     from trq_offboard.config import load_controller
 
     path = controller_file(name)
-    files = []
-    p = path
-    while True:
-        files.append(p)
-        data = load_yaml(p)
-        if "extends" not in data:
-            break
-        p = (p.parent / data["extends"]).resolve()
+    files = chain(path)
     cfg = load_controller(path)
     files += [Path(cfg.vehicle.file), Path(cfg.eso.file) if cfg.eso else PARAMS / "controller" /
               "eso.yaml", SIM_DEFAULT]
@@ -299,53 +317,73 @@ def flight_id(spec: dict) -> str:
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
+class _Grid(Strict):
+    """Every combination of the axes' values (each axis checked by `_axis_values`)."""
+    fault: Any = None
+    wind: Any = None
+    trajectory: Any = None
+    link: Any = None
+
+
+class _Sample(_Grid):
+    """n seeded random draws of the axes' distributions."""
+    n: Int(1, 10_000_000)
+    seed: Int(0, 2**31 - 1)
+
+
+class CampaignFile(Strict):
+    """A campaign file (params/campaigns/*.yaml); the axes are checked key by key afterwards."""
+    name: Text
+    description: Text
+    seed: Int(0, 2**31 - 1)
+    controllers: list[Text]
+    success_rmse_m: Num(0.001, 100.0)
+    recovery_threshold_m: Num(0.001, 100.0)
+    timeout_s: Num(1.0, 36000.0)
+    repeats: Int(1, 1000) = 1
+    grid: _Grid | None = None
+    sample: _Sample | None = None
+
+    @model_validator(mode="after")
+    def _flights(self) -> "CampaignFile":
+        if not self.controllers or len(set(self.controllers)) != len(self.controllers):
+            raise Invalid("controllers", self.controllers,
+                          "a non-empty list of distinct controller names")
+        for i, c in enumerate(self.controllers):
+            if not trq_params.exists("controller", c):
+                raise Invalid(f"controllers[{i}]", c, "a built-in controller name or a "
+                              "controller YAML path")
+        if self.grid is None and self.sample is None:
+            raise Invalid("grid", None, "a grid (or a sample): a campaign needs flights")
+        return self
+
+
+def _axes(section: _Grid) -> dict[str, Any]:
+    """The axes a grid or sample names (an axis written as null is named, and then fails)."""
+    return {axis: getattr(section, axis) for axis in AXES if axis in section.model_fields_set}
+
+
 def load_campaign(path: Path) -> Campaign:
     import numpy as np
 
     path = Path(path)
-    top = Section(load_yaml(path), path)
-    name = top.str("name")
-    description = top.str("description")
-    seed = top.int("seed", 0, 2**31 - 1)
-    controllers = top.raw("controllers")
-    if not isinstance(controllers, list) or not controllers or \
-            not all(isinstance(c, str) for c in controllers) or \
-            len(set(controllers)) != len(controllers):
-        raise top.fail("controllers", controllers, "a non-empty list of distinct controller names")
+    top = validate(CampaignFile, read_yaml(path), path)
     digests = {}
-    for i, c in enumerate(controllers):
-        if not trq_params.exists("controller", c):
-            raise ConfigError(f"{path}: key 'controllers[{i}]': got {c!r}, expected a file name in "
-                              "params/controller/ without .yaml, or a controller YAML path")
+    for i, c in enumerate(top.controllers):
         try:
             digests[c] = controller_inputs(c)[1]
         except ConfigError as exc:
             raise ConfigError(f"{path}: key 'controllers[{i}]': {c!r} does not load: "
                               f"{exc}") from exc
-    success = top.float("success_rmse_m", 0.001, 100.0)
-    threshold = top.float("recovery_threshold_m", 0.001, 100.0)
-    timeout = top.float("timeout_s", 1.0, 36000.0)
-    repeats = top.int("repeats", 1, 1000, default=1)
-    if not top.has("grid") and not top.has("sample"):
-        raise ConfigError(f"{path}: missing key 'grid' (or 'sample'): a campaign needs flights")
     cells: list[tuple] = []
-    if top.has("grid"):
-        grid = top.section("grid")
-        axes = [_grid_axis(grid, axis) for axis in AXES]
-        grid.done()
-        cells += list(itertools.product(*axes))
-    if top.has("sample"):
-        sample = top.section("sample")
-        n = sample.int("n", 1, 10_000_000)
-        sseed = sample.int("seed", 0, 2**31 - 1)
-        dists = {}
-        for axis in AXES:
-            if sample.has(axis):
-                dists[axis] = _axis_values(sample.raw(axis), path, f"sample.{axis}.", axis,
-                                           sampling=True)
-        sample.done()
-        rng = np.random.default_rng(sseed)
-        for k in range(n):
+    if top.grid is not None:
+        grid = _axes(top.grid)
+        cells += list(itertools.product(*(_grid_axis(grid, path, axis) for axis in AXES)))
+    if top.sample is not None:
+        dists = {axis: _axis_values(raw, path, f"sample.{axis}", axis, sampling=True)
+                 for axis, raw in _axes(top.sample).items()}
+        rng = np.random.default_rng(top.sample.seed)
+        for k in range(top.sample.n):
             point = tuple(_sample_axis(dists.get(axis), axis, rng) for axis in AXES)
             try:
                 _fault_event(point[0], path, f"sample.fault (draw {k})")
@@ -353,7 +391,9 @@ def load_campaign(path: Path) -> Campaign:
                 raise ConfigError(f"{exc} (a sampled fault must be valid whatever is "
                                   "drawn)") from exc
             cells.append(point)
-    top.done()
+    name, description, seed, controllers = top.name, top.description, top.seed, top.controllers
+    success, threshold, timeout, repeats = (top.success_rmse_m, top.recovery_threshold_m,
+                                            top.timeout_s, top.repeats)
     flights = []
     seen = set()
     for fault, wind, traj, link in cells:

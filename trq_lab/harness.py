@@ -293,10 +293,6 @@ class InMemoryLink:
 
 # --- configuration, as trq-scenario prepares it ------------------------------------------
 
-def _yaml_dump(data: dict) -> str:
-    import yaml
-    return yaml.safe_dump(data, sort_keys=False)
-
 
 def prepare_controller(controller: str | Path, reference: dict | None, out_dir: Path) -> Path:
     """Write the flight's controller overlay (the base file with `reference` over it) exactly as
@@ -329,9 +325,8 @@ def sim_params(vehicle_file: Path | str, control_rate_hz: int, *, seed: int,
                 link = dataclasses.replace(link, impair=ImpairParams(**offboard_impair))
         links.append(link)
     if sim.physics_rate_hz % control_rate_hz:
-        from sil_vehicle.yamlcheck import ConfigError
-        raise ConfigError(f"control_rate_hz {control_rate_hz} does not divide the physics rate "
-                          f"{sim.physics_rate_hz}")
+        raise trq_params.ConfigError(f"control_rate_hz {control_rate_hz} does not divide the "
+                                     f"physics rate {sim.physics_rate_hz}")
     changes = dict(control_rate_hz=control_rate_hz, links=tuple(links), seed=int(seed),
                    wind_speed_m_s=float(wind_speed_m_s), wind_from_deg=float(wind_from_deg))
     if gusts:
@@ -375,9 +370,8 @@ def script(*events: dict, tilt_range_deg: tuple[float, float] = (-90.0, 90.0)) -
            {"at_s": 6.0, "motor": 1, "effectiveness": 0.5});
     sorted by time as load_script does. Raises ConfigError naming the event and the key."""
     from sil_vehicle.faultscript import parse_event
-    from sil_vehicle.yamlcheck import Section
 
-    parsed = [parse_event(Section(e, "trq_lab.harness.script", f"events[{i}]."), tilt_range_deg)
+    parsed = [parse_event(e, tilt_range_deg, file="trq_lab.harness.script", key=f"events[{i}]")
               for i, e in enumerate(events)]
     return tuple(sorted(parsed, key=lambda e: e.at_us))
 
@@ -615,7 +609,6 @@ def main(argv: list[str] | None = None) -> int:
     import argparse
 
     from sil_vehicle.faultscript import load_script
-    from sil_vehicle.yamlcheck import ConfigError
     from trq_lab import scenario as run_scenario
     from trq_offboard.config import load_controller
 
@@ -630,7 +623,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         sc = run_scenario.load_scenario(trq_params.resolve("scenarios", args.scenario))
         events = load_script(sc.faults) if sc.faults else ()
-    except (ConfigError, trq_params.UnknownName) as exc:
+    except trq_params.ConfigError as exc:
         print(f"inprocess: {exc}", file=sys.stderr)
         return 2
     onset = events[0].at_us if events else None

@@ -7,7 +7,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import trq_params
-import yaml
+from trq_params.loader import dump as dump_yaml
 
 
 def controller_file(controller: str | Path) -> Path:
@@ -34,6 +34,6 @@ def write_controller_overlay(controller: str | Path, reference: dict | None, out
     out_dir.mkdir(parents=True, exist_ok=True)
     path = out_dir / "controller.yaml"
     path.write_text((f"# {comment}\n" if comment else "")
-                    + yaml.safe_dump(overlay, sort_keys=False))
+                    + dump_yaml(overlay))
     load_controller(path)
     return path

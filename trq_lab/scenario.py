@@ -28,12 +28,17 @@ import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any, Optional
 
 import trq_params
+from pydantic import model_validator
+from trq_params import ConfigError
+from trq_params.loader import Choice, Flag, Int, Invalid, Num, Text, read_yaml, validate
+from trq_params.loader import dump as dump_yaml
+from trq_params.schema import Strict
 
 from sil_vehicle.config import load_vehicle
 from sil_vehicle.faultscript import load_script
-from sil_vehicle.yamlcheck import ConfigError, Section, load_yaml
 from trq_lab import metrics as metrics_mod
 from trq_lab import procs
 from trq_lab.overlays import write_controller_overlay
@@ -74,68 +79,90 @@ def command_delay_s(impair: dict[str, float], realtime: bool) -> float:
     return 2.0 * one_way_s + (REALTIME_LATENCY_S if realtime else 0.0)
 
 
+class _Wind(Strict):
+    speed_m_s: Num(0.0, 40.0)
+    direction_deg: Num(-360.0, 360.0)
+    gusts: Flag
+
+
+class _OffboardLink(Strict):
+    """The offboard link's seeded impairment (sil_vehicle's links.offboard.impair)."""
+    loss: Optional[Num(0.0, 1.0)] = None
+    delay_ms: Optional[Num(0.0, 10_000.0)] = None
+    jitter_ms: Optional[Num(0.0, 10_000.0)] = None
+    duplicate: Optional[Num(0.0, 1.0)] = None
+    reorder: Optional[Num(0.0, 1.0)] = None
+
+
+class _Targets(Strict):
+    """What one controller must achieve: each metric at most its bound, crashed as given."""
+    crashed: Optional[Flag] = None
+    rmse_pos_m: Optional[Num(0.0, 1e6)] = None
+    rmse_pos_after_fault_m: Optional[Num(0.0, 1e6)] = None
+    max_pos_err_m: Optional[Num(0.0, 1e6)] = None
+    max_yaw_err_deg: Optional[Num(0.0, 1e6)] = None
+    rmse_yaw_deg: Optional[Num(0.0, 1e6)] = None
+    recovery_s: Optional[Num(0.0, 1e6)] = None
+
+
+class _Better(Strict):
+    better: Text
+    worse: Text
+    metric: Choice(*(k for k, v in TARGET_KEYS.items() if v is float))
+
+
+class ScenarioFile(Strict):
+    """A scenario file (params/scenarios/*.yaml): wind, faults, reference, controllers, targets."""
+    name: Text
+    description: Text
+    seed: Int(0, 2**31)
+    wind: _Wind
+    faults: Optional[Text]                  # a built-in fault script name, a path, or null
+    reference: dict[str, Any]               # checked by the controller's loader when flown
+    controllers: list[Text]
+    offboard_link: Optional[_OffboardLink] = None
+    recovery_threshold_m: Num(0.001, 100.0)
+    timeout_s: Num(1.0, 36000.0)
+    targets: dict[str, _Targets] = {}
+    better: list[_Better] = []
+
+    @model_validator(mode="after")
+    def _names(self) -> "ScenarioFile":
+        if not self.controllers:
+            raise Invalid("controllers", [], "a non-empty list of controller names")
+        for i, c in enumerate(self.controllers):
+            if not trq_params.exists("controller", c):
+                raise Invalid(f"controllers[{i}]", c, "a built-in controller name or a "
+                              "controller YAML path")
+        for c in self.targets:
+            if c not in self.controllers:
+                raise Invalid(f"targets.{c}", self.targets[c].model_dump(exclude_none=True),
+                              "targets of one of the controllers " + ", ".join(self.controllers))
+        for i, b in enumerate(self.better):
+            for key in ("better", "worse"):
+                if getattr(b, key) not in self.controllers:
+                    raise Invalid(f"better[{i}].{key}", getattr(b, key),
+                                  "one of " + "|".join(self.controllers))
+        return self
+
+
 def load_scenario(path: Path) -> Scenario:
+    """A scenario file, validated (ConfigError naming the file and the key), its fault script
+    loaded once to fail early with the script's own message."""
     path = Path(path)
-    top = Section(load_yaml(path), path)
-    name = top.str("name")
-    description = top.str("description")
-    seed = top.int("seed", 0, 2**31)
-    wind = top.section("wind")
-    speed = wind.float("speed_m_s", 0.0, 40.0)
-    direction = wind.float("direction_deg", -360.0, 360.0)
-    gusts = wind.bool("gusts")
-    wind.done()
-    faults_ref = top.raw("faults")
+    sc = validate(ScenarioFile, read_yaml(path), path)
     faults = None
-    if faults_ref is not None:
-        if not isinstance(faults_ref, str):
-            raise top.fail("faults", faults_ref, "a fault script (a built-in name or a path "
-                                                 "relative to this file) or null")
-        faults = (trq_params.builtin("faults", faults_ref) if trq_params.is_name(faults_ref)
-                  else (path.parent / faults_ref).resolve())
+    if sc.faults is not None:
+        faults = (trq_params.builtin("faults", sc.faults) if trq_params.is_name(sc.faults)
+                  else (path.parent / sc.faults).resolve())
         load_script(faults)     # fail now, with the script's own message, if it is bad
-    reference = top.raw("reference")
-    if not isinstance(reference, dict):
-        raise top.fail("reference", reference, "a mapping of reference settings")
-    controllers = top.raw("controllers")
-    if not isinstance(controllers, list) or not controllers or \
-            not all(isinstance(c, str) for c in controllers):
-        raise top.fail("controllers", controllers, "a non-empty list of controller names")
-    for c in controllers:
-        if not trq_params.exists("controller", c):
-            raise top.fail("controllers", c, "a file name in params/controller/ without .yaml")
-    impair: dict[str, float] = {}
-    if top.has("offboard_link"):
-        isec = top.section("offboard_link")
-        for key, hi in (("loss", 1.0), ("delay_ms", 10_000.0), ("jitter_ms", 10_000.0),
-                        ("duplicate", 1.0), ("reorder", 1.0)):
-            if isec.has(key):
-                impair[key] = isec.float(key, 0.0, hi)
-        isec.done()
-    threshold = top.float("recovery_threshold_m", 0.001, 100.0)
-    timeout = top.float("timeout_s", 1.0, 36000.0)
-    targets: dict[str, dict[str, object]] = {}
-    tsec = top.section("targets", default={})
-    for c in controllers:
-        if not tsec.has(c):
-            continue
-        csec = tsec.section(c)
-        t = {}
-        for key, kind in TARGET_KEYS.items():
-            if csec.has(key):
-                t[key] = csec.bool(key) if kind is bool else csec.float(key, 0.0, 1e6)
-        csec.done()
-        targets[c] = t
-    tsec.done()
-    better = []
-    for i, item in enumerate(top.raw("better", default=[])):
-        b = Section(item, path, f"better[{i}].")
-        better.append((b.str("better", tuple(controllers)), b.str("worse", tuple(controllers)),
-                       b.str("metric", tuple(k for k, v in TARGET_KEYS.items() if v is float))))
-        b.done()
-    top.done()
-    return Scenario(name, path, description, seed, speed, direction, gusts, faults, reference,
-                    tuple(controllers), threshold, timeout, targets, tuple(better), impair)
+    impair = sc.offboard_link.model_dump(exclude_none=True) if sc.offboard_link else {}
+    targets = {c: t.model_dump(exclude_none=True) for c, t in sc.targets.items()}
+    better = tuple((b.better, b.worse, b.metric) for b in sc.better)
+    return Scenario(sc.name, path, sc.description, sc.seed, sc.wind.speed_m_s,
+                    sc.wind.direction_deg, sc.wind.gusts, faults, dict(sc.reference),
+                    tuple(sc.controllers), sc.recovery_threshold_m, sc.timeout_s, targets,
+                    better, impair)
 
 
 def free_ports(n: int) -> list[int]:
@@ -149,10 +176,6 @@ def free_ports(n: int) -> list[int]:
         s.close()
     return ports
 
-
-def _yaml_dump(data: dict) -> str:
-    import yaml
-    return yaml.safe_dump(data, sort_keys=False)
 
 
 @dataclass
@@ -183,7 +206,7 @@ def prepare(scenario: Scenario, controller: str, out: Path) -> tuple[Path, Path,
                    "control_rate_hz": rate, "telemetry": {"offboard": {"ODOMETRY": rate}}}
     if scenario.offboard_impair:
         sim_overlay["links"] = {"offboard": {"impair": dict(scenario.offboard_impair)}}
-    sim_yaml.write_text(_yaml_dump(sim_overlay))
+    sim_yaml.write_text(dump_yaml(sim_overlay))
     return ctrl_yaml, sim_yaml, Path(cfg.vehicle.file).resolve(), rate
 
 
@@ -387,7 +410,7 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     try:
         scenario = load_scenario(trq_params.resolve("scenarios", args.scenario))
-    except (ConfigError, trq_params.UnknownName) as exc:
+    except ConfigError as exc:
         print(f"trq-scenario: {exc}", file=sys.stderr)
         return 2
     sources = args.controller or list(scenario.controllers)
@@ -398,7 +421,6 @@ def main(argv: list[str] | None = None) -> int:
               file=sys.stderr)
         return 2
     try:    # every run's settings must be valid before anything starts
-        from trq_offboard.config import ConfigError as ControllerConfigError
         from trq_offboard.config import load_controller
         for c in sources:
             vp = load_vehicle(load_controller(trq_params.resolve("controller", c))
@@ -406,7 +428,7 @@ def main(argv: list[str] | None = None) -> int:
             if scenario.faults:
                 load_script(scenario.faults, (math.degrees(vp.tilt_min_rad),
                                               math.degrees(vp.tilt_max_rad)))
-    except (ConfigError, ControllerConfigError, trq_params.UnknownName) as exc:
+    except ConfigError as exc:
         print(f"trq-scenario: {exc}", file=sys.stderr)
         return 2
     if not names:

@@ -80,14 +80,14 @@ def test_what_trq_wire_defines_is_not_defined_again_in_a_daemon():
     assert not offenders, offenders
 
 
-@pytest.mark.parametrize("package", ["sil_vehicle", "trq_offboard"])
+@pytest.mark.parametrize("package", ["sil_vehicle", "trq_offboard", "trq_lab", "params"])
 def test_one_yaml_loader(package):
-    """Every parameter file goes through trq_params.loader: no package reads YAML itself, and
-    the deprecated sil_vehicle.yamlcheck (kept for tools/ only) is imported by none of them."""
+    """Every YAML file is read (and every overlay written) through trq_params.loader: no other
+    module imports yaml."""
     offenders = [f"{path.relative_to(ROOT)}: import {name}"
-                 for path in sources(package) if path.name not in ("loader.py", "yamlcheck.py")
-                 for name in imported_modules(parse(path))
-                 if name == "sil_vehicle.yamlcheck" or name.split(".")[0] == "yaml"]
+                 for path in sorted((ROOT / package).rglob("*.py"))
+                 if path != ROOT / "params" / "loader.py"
+                 for name in imported_modules(parse(path)) if name.split(".")[0] == "yaml"]
     assert not offenders, offenders
 
 

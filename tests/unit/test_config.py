@@ -1,4 +1,4 @@
-"""Parameter loading (sil_vehicle.config, sil_vehicle.yamlcheck): the real files load into the
+"""Parameter loading (sil_vehicle.config on trq_params.loader): the real files load into the
 expected records, and every kind of mistake is a ConfigError naming the file and the dotted key.
 
 Bad files are written into tmp_path; they reuse the real ones with `extends:` (an absolute path

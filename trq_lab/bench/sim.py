@@ -34,8 +34,8 @@ import time
 from pathlib import Path
 
 import numpy as np
-import yaml
 from pymavlink.dialects.v20 import common as mavlink
+from trq_params.loader import dump as dump_yaml
 
 from sil_vehicle import compiled
 from sil_vehicle.config import PARAMS_DIR, load_sim
@@ -206,7 +206,7 @@ def bench_lockstep(sim_seconds: float, core: str, runs: int = 3) -> tuple[float,
         sim_yaml = Path(tmp) / "bench_100hz.yaml"
         # `vehicle:` absolute: a relative one inherited through `extends:` would be resolved
         # against this temporary file's folder
-        sim_yaml.write_text(yaml.safe_dump({
+        sim_yaml.write_text(dump_yaml({
             "extends": str(SIM_DEFAULT), "vehicle": str(VEHICLE), "control_rate_hz": 100,
             "physics_core": core, "telemetry": {"offboard": {"ODOMETRY": 100}}}),
             encoding="utf-8")

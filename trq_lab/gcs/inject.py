@@ -26,6 +26,7 @@ from pathlib import Path
 
 import trq_params
 from pymavlink.dialects.v20 import common as mavlink
+from trq_params import ConfigError
 
 from sil_vehicle.faultscript import (
     MOTOR,
@@ -38,7 +39,6 @@ from sil_vehicle.faultscript import (
     ParamAction,
     load_script,
 )
-from sil_vehicle.yamlcheck import ConfigError
 from trq_lab.gcs.client import MavClient, NoAnswer, gcs_parser
 from trq_wire.signing import SigningKeyError, load_key
 
@@ -200,8 +200,7 @@ def main(argv: list[str] | None = None) -> int:
 
 def load_script_from_text(kind: str) -> tuple[Event, ...]:
     from sil_vehicle.faultscript import parse_event
-    from sil_vehicle.yamlcheck import Section
-    return (parse_event(Section({"at_s": 0.0, kind: True}, "command line", "")),)
+    return (parse_event({"at_s": 0.0, kind: True}, file="command line"),)
 
 
 if __name__ == "__main__":

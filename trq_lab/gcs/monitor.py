@@ -29,9 +29,9 @@ from collections import deque
 
 import trq_params
 from pymavlink.dialects.v20 import common as mavlink
+from trq_params import ConfigError
 
 from sil_vehicle.config import load_vehicle
-from sil_vehicle.yamlcheck import ConfigError
 from trq_lab.gcs.client import MavClient, NoAnswer, gcs_parser
 
 CLEAR_HOME = "\x1b[2J\x1b[H"
