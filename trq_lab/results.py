@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import re
 import sys
 from pathlib import Path
@@ -126,7 +127,12 @@ def _short_failure(text: str) -> str:
     return re.sub(r"(?<![\w.])\d+\.\d{5,}", rounded, text)
 
 
-def scenario_table(metrics_path: Path) -> str:
+def _shown(path: Path, base: Path | None) -> str:
+    """``path`` as the README names it: relative to ``base`` (the README's folder) if given."""
+    return Path(os.path.relpath(path, base)).as_posix() if base is not None else path.as_posix()
+
+
+def scenario_table(metrics_path: Path, base: Path | None = None) -> str:
     """The full table of one scenario, with its source and whether its targets were met."""
     doc = load_metrics(metrics_path)
     lines = ["| " + " | ".join(h for h, _, _ in COLUMNS) + " |",
@@ -138,11 +144,11 @@ def scenario_table(metrics_path: Path) -> str:
         lines.append("| " + " | ".join(_cell(run.get(k), f) for _, k, f in COLUMNS) + " |")
     lines.append("")
     lines.append(f"Targets of `{doc.get('scenario', metrics_path.parent.name)}`: "
-                 f"{targets_met(metrics_path, doc)}. Source: `{metrics_path.as_posix()}`.")
+                 f"{targets_met(metrics_path, doc)}. Source: `{_shown(metrics_path, base)}`.")
     return "\n".join(lines)
 
 
-def scenarios_table(paths: list[Path]) -> str:
+def scenarios_table(paths: list[Path], base: Path | None = None) -> str:
     """One row per scenario: its fault, per controller pos RMSE after fault / max yaw error."""
     docs = [(p, load_metrics(p)) for p in paths]
     controllers: list[str] = []
@@ -172,7 +178,7 @@ def scenarios_table(paths: list[Path]) -> str:
         cells.append(targets_met(path, doc))
         lines.append("| " + " | ".join(cells) + " |")
     lines.append("")
-    lines.append("Sources: " + ", ".join(f"`{p.as_posix()}`" for p, _ in docs) + ".")
+    lines.append("Sources: " + ", ".join(f"`{_shown(p, base)}`" for p, _ in docs) + ".")
     return "\n".join(lines)
 
 
@@ -197,7 +203,8 @@ def blocks_in(text: str, source: str) -> list[str]:
     return names
 
 
-def render_block(name: str, results_dir: Path, own_blocks: list[str]) -> str:
+def render_block(name: str, results_dir: Path, own_blocks: list[str],
+                 base: Path | None = None) -> str:
     """The generated text of block ``name`` (without its markers)."""
     if name == SCENARIOS_BLOCK:
         paths = sorted(p for p in results_dir.glob("*/metrics.json")
@@ -205,12 +212,12 @@ def render_block(name: str, results_dir: Path, own_blocks: list[str]) -> str:
         if not paths:
             raise ResultsError(f"{results_dir}: no */metrics.json for the block "
                                f"'results:{SCENARIOS_BLOCK}'")
-        return scenarios_table(paths)
-    return scenario_table(results_dir / name / "metrics.json")
+        return scenarios_table(paths, base)
+    return scenario_table(results_dir / name / "metrics.json", base)
 
 
 def update_text(text: str, results_dir: Path, source: str = "README",
-                required: tuple[str, ...] = ()) -> str:
+                required: tuple[str, ...] = (), base: Path | None = None) -> str:
     """``text`` with every marked block regenerated from ``results_dir``."""
     names = blocks_in(text, source)
     for name in required:
@@ -218,7 +225,7 @@ def update_text(text: str, results_dir: Path, source: str = "README",
             raise ResultsError(f"{source}: marker '<!-- results:{name} begin -->' missing")
     own = [n for n in names if n != SCENARIOS_BLOCK]
     for name in names:
-        body = render_block(name, results_dir, own)
+        body = render_block(name, results_dir, own, base)
         pattern = re.compile(r"(<!-- results:" + re.escape(name) + r" begin -->\n)"
                              r".*?(<!-- results:" + re.escape(name) + r" end -->)", re.S)
         text = pattern.sub(lambda m: m.group(1) + body + "\n" + m.group(2), text, count=1)
@@ -236,7 +243,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--readme", type=Path, default=Path("README.md"),
                         help="the Markdown file to update in place (default: README.md)")
     parser.add_argument("--results", type=Path, default=Path("docs/results"),
-                        help="the directory of result directories (default: docs/results)")
+                        help="the directory of result directories (default: docs/results); "
+                             "the tables name their sources relative to the README's folder")
     parser.add_argument("--require", action="append", default=[], metavar="NAME",
                         help="a block that must be present (repeatable); a missing marker "
                              "is an error")
@@ -250,7 +258,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         if not blocks_in(old, str(args.readme)) and not args.require:
             raise ResultsError(f"{args.readme}: no '<!-- results:NAME begin -->' marker")
-        new = update_text(old, args.results, str(args.readme), tuple(args.require))
+        new = update_text(old, args.results, str(args.readme), tuple(args.require),
+                          base=args.readme.resolve().parent)
     except ResultsError as exc:
         print(f"trq-results: {exc}", file=sys.stderr)
         return 2
