@@ -122,5 +122,5 @@ def test_imports_only_the_standard_library():
              for a in n.names}
     names |= {n.module.split(".")[0] for n in ast.walk(tree)
               if isinstance(n, ast.ImportFrom) and n.module}
-    assert names <= {"__future__", "argparse", "json", "re", "sys", "pathlib"}
+    assert names <= {"__future__", "argparse", "json", "os", "re", "sys", "pathlib"}
     assert "sys.path" not in _PATH.read_text()
