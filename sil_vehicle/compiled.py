@@ -9,8 +9,8 @@
 functions of this package) operation for operation, built without fused multiply-add and without
 fast-math, so that both give bit-identical flights; tests/consistency/test_compiled_core.py holds
 them to equality. The Python code stays the reference and the readable statement of the model;
-the compiled tick is a faster way of running the same arithmetic (about five times faster per
-tick, `tools/bench_sim.py` prints both).
+the compiled tick is a faster way of running the same arithmetic (`trq-bench-sim` measures both
+side by side; a record of its figures: docs/simulator.md).
 
 Cache: trq_wire.cache (the folder the controller's compiled functions use too), one library per
 hash of the source, compiler and flags, written to a temporary name and renamed into place

@@ -7,7 +7,7 @@ random generator for gusts is injected, time is an integer count of microseconds
 
 The tick runs either in Python (`_tick_python`, the reference, built from the pure functions of
 `sil_vehicle.dynamics`) or compiled (`dynamics/tick.c` through `sil_vehicle.compiled`, the same
-arithmetic in the same order: bit-identical, about five times faster), chosen by the simulation's
+arithmetic in the same order: bit-identical, faster: docs/simulator.md), chosen by the simulation's
 `physics_core` (auto: compiled when a C compiler is found). Gusts are drawn in Python in both, from
 the same generator, so the random stream is the same too.
 """

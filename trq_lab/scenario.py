@@ -44,7 +44,7 @@ from trq_lab import procs
 from trq_lab.overlays import write_controller_overlay
 
 # what a command waits in real time, about one NMPC step (docs/decisions/
-# 2026-12-02-realtime-command-latency.md: how it was chosen)
+# 2026-12-02-shorter-applied-delay.md: what else was tried)
 REALTIME_LATENCY_S = 0.005
 
 TARGET_KEYS = {"crashed": bool, "rmse_pos_m": float, "rmse_pos_after_fault_m": float,

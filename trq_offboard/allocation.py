@@ -15,10 +15,9 @@ throttle from the inverted thrust curve; finally saturation to the tilt limits a
 Drag torque. kappa_i = tau(zeta_i) / F(zeta_i) is not constant. The first pass uses kappa at the
 hover throttle for all rotors; `refine_iterations` fixed-point passes then recompute kappa_i from
 the throttle just found and re-solve. The map stays linear at every pass, so when the fixed point
-is reached the exact curves reproduce the wrench exactly. Measured on 50 random feasible wrenches
-(60-90 % throttle): without refinement the worst error is 1.3e-3 (TRQ) and 1.0e-2 (quad, whose
-yaw torque comes from the drag torque alone) N or N m; the TRQ contracts fast (2e-8 after 2
-passes, 1e-13 after 4), the quad by about 15x per pass (1e-9 after 12). Default: 12 passes.
+is reached the exact curves reproduce the wrench exactly; the TRQ contracts faster than the quad
+(whose yaw torque comes from the drag torque alone). Default: 12 passes (the measured errors per
+pass: docs/decisions/2026-12-02-figures-from-comments.md).
 """
 
 from __future__ import annotations

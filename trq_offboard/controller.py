@@ -96,8 +96,8 @@ class Controller:
                              "Ocp (its throttle bounds follow the estimate)")
         self._scale = np.ones(self.model.nu)              # plan (effective) = scale x command
         # auto: also whenever the NMPC carries the lag states, which must not meet an observer
-        # whose b0 ignores the lags (paper_fault50 with actuator_states on: 0.206 m with the
-        # observer's b0 unlagged, 0.022 m lagged); always with the effectiveness observer
+        # whose b0 ignores the lags (measured: docs/decisions/2026-12-02-figures-from-comments.md);
+        # always with the effectiveness observer
         self._lagged = self.effectiveness is not None or cfg.lagged_actuators == "on" or (
             cfg.lagged_actuators == "auto"
             and ((predict and self.delay_s > 0.0) or cfg.nmpc_actuator_states))

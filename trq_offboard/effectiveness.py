@@ -20,8 +20,8 @@ Per control step (controller.py):
      y_meas = y_nom + that deficit. Yaw is left out (the rotors' drag torque moves it little: a
      small yaw disturbance would read as a large deficit) and so is the horizontal force (wind).
      One fault at a time: a second motor's loss stays in the additive d; and a torque from
-     elsewhere (a gust's moment) reads as a small deficit of the motor that would cause it (in
-     the paper's 8 m/s wind, on a clean link, the healthy estimates stay above 0.97);
+     elsewhere (a gust's moment) reads as a small deficit of the motor that would cause it (how
+     small, measured in the paper's wind: docs/observer.md);
   3. per motor, a second-order observer of the first-order motor model with e as an unknown
      constant gain, both poles at -p (p: bandwidth_rad_s):
          yh' = (eh c - yh) / T + l1 (y_meas - yh)          l1 = 2 p - 1 / T

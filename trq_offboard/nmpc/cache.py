@@ -31,7 +31,8 @@ from trq_wire.cache import build_library, cache_dir, find_compiler
 __all__ = ["cache_dir", "find_compiler", "compiled", "compiled_many", "compiled_c", "COUNTS",
            "CFLAGS"]
 
-CFLAGS = ("-O1", "-fPIC", "-shared")   # -O1: 2-3x faster to build than -O2, same speed here
+# -O1 builds faster than -O2 at the same speed (docs/decisions/2026-12-02-figures-from-comments.md)
+CFLAGS = ("-O1", "-fPIC", "-shared")
 COUNTS = {"compiled": 0, "cached": 0, "interpreted": 0}   # per process, for tests and benches
 
 

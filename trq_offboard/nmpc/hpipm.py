@@ -11,10 +11,10 @@ variable: its dynamics carry A_0 ds0 in their constant):
     min  sum_k 1/2 [u_k; x_k]' [R S; S' Q] [u_k; x_k] + r_k' u_k + q_k' x_k  (+ terminal in x_N)
     s.t. x_{k+1} = A_k x_k + B_k u_k + b_k,    lbx_k <= x_k[idxbx] <= ubx_k,  lbu_k <= u_k <= ubu_k
 
-Why not casadi.conic("hpipm"): measured on 160 QPs of the paper's fault flight (N = 20, stage
-16 + 8), CasADi's interface spends 0.37 to 0.39 ms per call before the first iteration (it
-allocates and builds HPIPM's workspace on every call and converts the sparse matrices), a quarter
-of the solve, and it boxes every state of every stage (unbounded ones with a large number), which
+Why not casadi.conic("hpipm"): CasADi's interface spends a large share of the solve before the
+first iteration (it allocates and builds HPIPM's workspace on every call and converts the sparse
+matrices; measured: docs/solver.md, docs/decisions/2026-12-02-figures-from-comments.md),
+and it boxes every state of every stage (unbounded ones with a large number), which
 the interior point then carries. Here the workspace is built once, only the finite bounds are
 constraints, and the initial state is not a variable.
 

@@ -152,7 +152,8 @@ class RtiSolver:
             HL = ca.densify(hess(S, V, D, ca.reshape(LAM, ns, N)))   # (nz, nz N)
         if direct:
             # the stage Jacobians [A_k B_k] dense (column-major: one block per stage), all
-            # outputs dense and evaluated into NumPy buffers (no DM conversion: 0.4 ms a step)
+            # outputs dense and evaluated into NumPy buffers (no DM conversion, which cost
+            # time a step: docs/decisions/2026-12-02-figures-from-comments.md)
             outs = [ca.densify(JZ), ca.densify(gaps), ca.densify(grad), ca.densify(ca.vec(JD))]
             if HL is not None:
                 outs.append(HL)
