@@ -320,28 +320,26 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+# option -> (SimParams field, lowest, highest, what the range means)
+_NUMERIC_OVERRIDES = {"speed_up": ("speed_up", 0.01, 1000.0, "a number in [0.01, 1000]"),
+                      "seed": ("seed", 0, math.inf, "an integer >= 0"),
+                      "wind_speed": ("wind_speed_m_s", 0.0, 40.0, "[0, 40] m/s"),
+                      "wind_dir": ("wind_from_deg", -360.0, 360.0, "[-360, 360] deg")}
+
+
 def apply_overrides(sim: SimParams, args: argparse.Namespace) -> SimParams:
     changes: dict[str, object] = {}
     if args.mode:
         changes["clock_mode"] = args.mode
-    if args.speed_up is not None:
-        if not 0.01 <= args.speed_up <= 1000:
-            raise ConfigError(f"--speed-up: got {args.speed_up}, expected a number in [0.01, 1000]")
-        changes["speed_up"] = args.speed_up
-    if args.seed is not None:
-        if args.seed < 0:
-            raise ConfigError(f"--seed: got {args.seed}, expected an integer >= 0")
-        changes["seed"] = args.seed
     if args.physics_core is not None:
         changes["physics_core"] = args.physics_core
-    if args.wind_speed is not None:
-        if not 0.0 <= args.wind_speed <= 40.0:
-            raise ConfigError(f"--wind-speed: got {args.wind_speed}, expected [0, 40] m/s")
-        changes["wind_speed_m_s"] = args.wind_speed
-    if args.wind_dir is not None:
-        if not -360.0 <= args.wind_dir <= 360.0:
-            raise ConfigError(f"--wind-dir: got {args.wind_dir}, expected [-360, 360] deg")
-        changes["wind_from_deg"] = args.wind_dir
+    for option, (field, lo, hi, expected) in _NUMERIC_OVERRIDES.items():
+        value = getattr(args, option)
+        if value is None:
+            continue
+        if not lo <= value <= hi:
+            raise ConfigError(f"--{option.replace('_', '-')}: got {value}, expected {expected}")
+        changes[field] = value
     if args.gusts:
         changes["gusts_enabled"] = True
     links = []
