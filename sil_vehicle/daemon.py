@@ -90,8 +90,17 @@ class VehicleDaemon:
         self._stop = asyncio.Event()
         self._monotonic = monotonic
         self._wall_us = wall_us
+        self._start_wall_us = wall_us()
         self.exit_reason = ""
         self.free_runs = 0
+
+    def _log_us(self) -> int:
+        """The .tlog's stamp: in lockstep the start's wall time plus the simulated time (so a
+        log viewer shows the flight on its own timeline, as PX4's lockstep logs do, however
+        long the run took); in real time the wall clock."""
+        if self.sim.clock_mode == "lockstep":
+            return self._start_wall_us + self.sitl.t_us
+        return self._wall_us()
 
     # --- transport -------------------------------------------------------------------------
     async def open(self) -> None:
@@ -120,7 +129,7 @@ class VehicleDaemon:
                 continue
             data = self.codecs[item.link].encode(item.msg)
             if self.tlog:
-                self.tlog.write(self._wall_us(), data)
+                self.tlog.write(self._log_us(), data)
             if item.to is not None:
                 dests = [item.to]
             else:
@@ -169,7 +178,7 @@ class VehicleDaemon:
             self._heard(link, addr)
         for msg in msgs:
             if self.tlog:
-                self.tlog.write(self._wall_us(), bytes(msg.get_msgbuf()))
+                self.tlog.write(self._log_us(), bytes(msg.get_msgbuf()))
             self.send(self.sitl.handle(link, msg, addr))
         if self.sitl.answered and self._answer is not None and not self._answer.done():
             self._answer.set_result(True)
