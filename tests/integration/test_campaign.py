@@ -30,6 +30,8 @@ import pytest
 
 from conftest import PARAMS, ROOT, cli
 
+pytestmark = pytest.mark.slow      # starts daemons or flies: the full run only
+
 pytest.importorskip("distributed")
 
 ENV = dict(os.environ)

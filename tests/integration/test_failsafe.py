@@ -16,6 +16,8 @@ import sys
 import time
 from pathlib import Path
 
+import pytest
+
 import numpy as np
 import yaml
 from pymavlink import mavutil
@@ -25,6 +27,8 @@ from conftest import free_udp_port
 ROOT = Path(__file__).resolve().parents[2]
 from trq_lab import metrics
 from trq_lab.gcs.client import MavClient
+
+pytestmark = pytest.mark.slow      # starts daemons or flies: the full run only
 
 ENV = dict(os.environ)
 AUTO_LAND = (4 << 16) | (6 << 24)

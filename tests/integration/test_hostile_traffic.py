@@ -22,9 +22,13 @@ import subprocess
 import sys
 import time
 
+import pytest
+
 from conftest import ROOT, free_udp_port
 
 from trq_lab import stress
+
+pytestmark = pytest.mark.slow      # starts daemons or flies: the full run only
 
 QUIET_S = 2.0
 ATTACK_S = 3.0

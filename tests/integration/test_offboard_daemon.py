@@ -31,6 +31,8 @@ from conftest import ROOT, free_udp_port
 from trq_lab import metrics
 from trq_lab.overlays import write_controller_overlay
 
+pytestmark = pytest.mark.slow      # starts daemons or flies: the full run only
+
 ENV = dict(os.environ)
 STARTUP_S = 60.0               # the controller builds its NMPC before it listens
 FLIGHT_TIMEOUT_S = 120.0        # a ~32 s simulated flight takes ~25 s of wall time here

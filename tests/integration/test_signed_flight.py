@@ -13,10 +13,14 @@ import threading
 import time
 from pathlib import Path
 
+import pytest
+
 import yaml
 from pymavlink.dialects.v20 import common as mavlink
 
 from conftest import free_udp_port
+
+pytestmark = pytest.mark.slow      # starts daemons or flies: the full run only
 
 ROOT = Path(__file__).resolve().parents[2]
 ENV = dict(os.environ)

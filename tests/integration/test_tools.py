@@ -22,6 +22,8 @@ from conftest import PARAMS, ROOT, cli, free_udp_port
 
 from trq_lab.gcs.client import MavClient, NoAnswer
 
+pytestmark = pytest.mark.slow      # starts daemons or flies: the full run only
+
 STARTUP_S = 15.0            # a cold interpreter imports numpy and pymavlink
 TOOL_TIMEOUT_S = 30.0
 ENV = dict(os.environ)

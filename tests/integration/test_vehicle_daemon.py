@@ -25,6 +25,8 @@ from conftest import ROOT, free_udp_port
 
 from sil_vehicle.config import load_vehicle
 
+pytestmark = pytest.mark.slow      # starts daemons or flies: the full run only
+
 STARTUP_S = 15.0            # first datagram (a cold interpreter imports numpy and pymavlink)
 
 
