@@ -42,6 +42,7 @@ def run(onset, latency_s, horizon_s=0.6):
     return lb.bound(onset, TRQ, latency_s, horizon_s, math.radians(5.0))
 
 
+@pytest.mark.slow
 def test_no_fault_the_hover_trim_holds():
     r = run(hover_onset([1.0, 1.0, 1.0, 1.0]), 0.0)
     assert r["status"] == "optimal"
