@@ -19,11 +19,8 @@ import json
 import math
 import os
 import signal
-import socket
 import subprocess
-import sys
 import threading
-import time
 from pathlib import Path
 
 import pytest
@@ -261,7 +258,7 @@ def test_link_axis_impairs_the_offboard_link(tmp_path):
 
 # --- the in-process flight against the daemons over UDP ---------------------------------------
 
-def _udp_lockstep_flight(out: Path, scenario) -> None:
+def _udp_lockstep_flight(daemons, out: Path, scenario) -> None:
     """The two daemons over UDP, set up as trq-scenario does, with the controller listening
     before the vehicle starts (and the vehicle never free-running on wall time): the ideal
     lockstep flight, with which the in-process flight must agree."""
@@ -271,43 +268,21 @@ def _udp_lockstep_flight(out: Path, scenario) -> None:
     ctrl_yaml, sim_yaml, vehicle_file, _ = run_scenario.prepare(scenario, c, out)
     sim_yaml.write_text(sim_yaml.read_text() + "clock: {mode: lockstep, speed_up: 1.0, "
                         "resend_s: 0.5, free_run_after_s: 3600.0}\n")
-    p_vehicle, p_ctrl, p_gcs, p_gcs_target = run_scenario.free_ports(4)
-    ctrl = subprocess.Popen(
-        [sys.executable, "-m", "trq_offboard", "--controller", str(ctrl_yaml), "--connect",
-         f"udpin:127.0.0.1:{p_ctrl}", "--log-dir", str(out)],
-        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=ENV, cwd=ROOT)
-    vehicle = None
+    ctrl = daemons.controller("--controller", str(ctrl_yaml), log_dir=out, cwd=ROOT)
     try:
-        deadline = time.monotonic() + 60
-        while time.monotonic() < deadline:           # the controller's socket is bound
-            with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-                try:
-                    s.bind(("127.0.0.1", p_ctrl))
-                except OSError:
-                    break
-            time.sleep(0.1)
-        vehicle = subprocess.Popen(
-            [sys.executable, "-m", "sil_vehicle", "--sim", str(sim_yaml), "--vehicle",
-             str(vehicle_file), "--seed", str(scenario.seed), "--wind-speed",
-             str(scenario.wind_speed_m_s), "--wind-dir", str(scenario.wind_from_deg),
-             "--offboard-bind", f"127.0.0.1:{p_vehicle}", "--offboard-target",
-             f"127.0.0.1:{p_ctrl}", "--gcs-bind", f"127.0.0.1:{p_gcs}", "--gcs-target",
-             f"127.0.0.1:{p_gcs_target}", "--log-dir", str(out), "--mode", "lockstep",
-             "--faults", str(scenario.faults)],
-            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=ENV, cwd=ROOT)
-        assert ctrl.wait(120) == 0
+        ctrl.wait_bound(timeout_s=60)                # the controller's socket is bound
+        daemons.vehicle(
+            "--sim", str(sim_yaml), "--vehicle", str(vehicle_file), "--seed", str(scenario.seed),
+            "--wind-speed", str(scenario.wind_speed_m_s), "--wind-dir",
+            str(scenario.wind_from_deg), "--mode", "lockstep", "--faults", str(scenario.faults),
+            log_dir=out, offboard_target=ctrl.port, cwd=ROOT)
+        assert ctrl.wait(120) == 0, ctrl.why()
     finally:
-        for proc in (ctrl, vehicle):
-            if proc is not None and proc.poll() is None:
-                proc.send_signal(signal.SIGINT)
-                try:
-                    proc.wait(10)
-                except subprocess.TimeoutExpired:
-                    proc.kill()
-                    proc.wait()
+        for proc in daemons.procs:
+            proc.stop(signal.SIGINT)
 
 
-def test_inprocess_flight_reproduces_the_udp_flight(tmp_path):
+def test_inprocess_flight_reproduces_the_udp_flight(tmp_path, daemons):
     from trq_lab import harness as inprocess
     from trq_lab import metrics, overlays
     from trq_lab import scenario as run_scenario
@@ -321,7 +296,7 @@ def test_inprocess_flight_reproduces_the_udp_flight(tmp_path):
 
     def udp_flight():
         try:
-            _udp_lockstep_flight(tmp_path / "udp", sc)
+            _udp_lockstep_flight(daemons, tmp_path / "udp", sc)
         except BaseException as exc:  # re-raised in the test's thread
             errors.append(exc)
 
