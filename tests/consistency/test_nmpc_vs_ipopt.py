@@ -21,7 +21,8 @@ def _problem(name):
 
 
 @pytest.mark.parametrize("name,hessian", [("trq_nmpc_eso", "gauss_newton"),
-                                          ("trq_nmpc_eso", "exact"),
+                                          pytest.param("trq_nmpc_eso", "exact",
+                                                       marks=pytest.mark.slow),
                                           ("quad_nmpc", "gauss_newton")])
 def test_sqp_converges_to_ipopt(name, hessian):
     cfg, model, u_trim, x0, x_ref, d, guess = _problem(name)
@@ -45,6 +46,7 @@ def test_sqp_converges_to_ipopt(name, hessian):
     assert np.all(thr >= cfg.vehicle.idle_pct - 1e-6) and np.all(thr <= 100 + 1e-6)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("iterations,settle", [(3, 5), (1, 35)])
 def test_realtime_budget_tracks_reference_solution(iterations, settle):
     """Along a 1 s closed loop on the model, the warm-started SQP's first input is within

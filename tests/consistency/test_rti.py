@@ -197,6 +197,7 @@ def test_pure_python_fallback_without_compiler(cache_env, monkeypatch):
     assert np.all(np.isfinite(u)) and np.all(np.isfinite(x))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["trq_nmpc_eso", "quad_nmpc"])
 def test_rti_and_sqp_with_actuator_lag_states_converge_to_ipopt(cache_env, name):
     """actuator_states on (the actuators start behind the applied command): repeated real-time

@@ -18,13 +18,15 @@ from __future__ import annotations
 import json
 import math
 import os
+import signal
 import subprocess
-import sys
 import threading
 from pathlib import Path
 
 import pytest
 from conftest import PARAMS, ROOT, cli
+
+pytestmark = pytest.mark.slow      # starts daemons or flies: the full run only
 
 pytest.importorskip("distributed")
 
@@ -257,41 +259,31 @@ def test_link_axis_impairs_the_offboard_link(tmp_path):
 
 # --- the in-process flight against the daemons over UDP ---------------------------------------
 
-def _udp_lockstep_flight(out: Path, scenario) -> None:
+def _udp_lockstep_flight(daemons, out: Path, scenario) -> None:
     """The two daemons over UDP, set up as trq-scenario does, with the controller listening
     before the vehicle starts (and the vehicle never free-running on wall time): the ideal
     lockstep flight, with which the in-process flight must agree."""
-    from trq_lab import procs
     from trq_lab import scenario as run_scenario
 
     c = scenario.controllers[0]
     ctrl_yaml, sim_yaml, vehicle_file, _ = run_scenario.prepare(scenario, c, out)
     sim_yaml.write_text(sim_yaml.read_text() + "clock: {mode: lockstep, speed_up: 1.0, "
                         "resend_s: 0.5, free_run_after_s: 3600.0}\n")
-    p_vehicle, p_ctrl, p_gcs, p_gcs_target = run_scenario.free_ports(4)
-    ctrl = subprocess.Popen(
-        [sys.executable, "-m", "trq_offboard", "--controller", str(ctrl_yaml), "--connect",
-         f"udpin:127.0.0.1:{p_ctrl}", "--log-dir", str(out)],
-        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=ENV, cwd=ROOT)
-    vehicle = None
+    ctrl = daemons.controller("--controller", str(ctrl_yaml), log_dir=out, cwd=ROOT)
     try:
-        procs.wait_bound(p_ctrl, ctrl, 60.0)         # the controller's socket is bound
-        vehicle = subprocess.Popen(
-            [sys.executable, "-m", "sil_vehicle", "--sim", str(sim_yaml), "--vehicle",
-             str(vehicle_file), "--seed", str(scenario.seed), "--wind-speed",
-             str(scenario.wind_speed_m_s), "--wind-dir", str(scenario.wind_from_deg),
-             "--offboard-bind", f"127.0.0.1:{p_vehicle}", "--offboard-target",
-             f"127.0.0.1:{p_ctrl}", "--gcs-bind", f"127.0.0.1:{p_gcs}", "--gcs-target",
-             f"127.0.0.1:{p_gcs_target}", "--log-dir", str(out), "--mode", "lockstep",
-             "--faults", str(scenario.faults)],
-            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=ENV, cwd=ROOT)
-        assert ctrl.wait(120) == 0
+        ctrl.wait_bound(timeout_s=60)                # the controller's socket is bound
+        daemons.vehicle(
+            "--sim", str(sim_yaml), "--vehicle", str(vehicle_file), "--seed", str(scenario.seed),
+            "--wind-speed", str(scenario.wind_speed_m_s), "--wind-dir",
+            str(scenario.wind_from_deg), "--mode", "lockstep", "--faults", str(scenario.faults),
+            log_dir=out, offboard_target=ctrl.port, cwd=ROOT)
+        assert ctrl.wait(120) == 0, ctrl.why()
     finally:
-        for proc in (ctrl, vehicle):
-            procs.stop(proc)
+        for proc in daemons.procs:
+            proc.stop(signal.SIGINT)
 
 
-def test_inprocess_flight_reproduces_the_udp_flight(tmp_path):
+def test_inprocess_flight_reproduces_the_udp_flight(tmp_path, daemons):
     from sil_vehicle.faultscript import load_script
     from trq_lab import harness as inprocess
     from trq_lab import metrics, overlays
@@ -305,7 +297,7 @@ def test_inprocess_flight_reproduces_the_udp_flight(tmp_path):
 
     def udp_flight():
         try:
-            _udp_lockstep_flight(tmp_path / "udp", sc)
+            _udp_lockstep_flight(daemons, tmp_path / "udp", sc)
         except BaseException as exc:  # re-raised in the test's thread
             errors.append(exc)
 

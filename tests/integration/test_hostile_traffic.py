@@ -18,13 +18,14 @@ exits 1 with "no vehicle heartbeat", not a traceback.
 
 from __future__ import annotations
 
-import subprocess
-import sys
 import time
 
-from conftest import ROOT, free_udp_port
+import pytest
+from conftest import ROOT, Process
 
-from trq_lab import procs, stress
+from trq_lab import stress
+
+pytestmark = pytest.mark.slow      # starts daemons or flies: the full run only
 
 QUIET_S = 2.0
 ATTACK_S = 3.0
@@ -33,12 +34,19 @@ MIN_FLOOD_RATE = 10_000
 BAD_RATE = 700                # malformed / hostile datagrams per second, all kinds together
 
 
-def test_hostile_traffic(tmp_path):
+def exit_line(vehicle: Process) -> str:
+    """SIGTERM; the vehicle's exit line (its own totals of what it dropped)."""
+    vehicle.stop()
+    lines = [ln for ln in vehicle.text().splitlines() if ln.startswith("trq-sil-vehicle:")]
+    return lines[-1] if lines else ""
+
+
+def test_hostile_traffic(tmp_path, daemons):
     arsenal = stress.Arsenal(seed=6, batch=50)
     watcher = stress.Watcher()
-    ctrl_port = free_udp_port()
-    vehicle = stress.start_vehicle(tmp_path, watcher.port, free_udp_port())
-    controller = None
+    ctrl_port = daemons.port()
+    vehicle = daemons.vehicle("--mode", "realtime", log_dir=tmp_path / "vehicle",
+                              gcs_target=watcher.port)
     watcher.start()
     try:
         assert watcher.first.wait(15.0), "no telemetry from the vehicle"
@@ -52,12 +60,9 @@ def test_hostile_traffic(tmp_path):
 
         # the controller daemon, waiting for a vehicle heartbeat that never comes: it gets
         # only garbage, from the moment it listens (its 3 s wait lies within the attack)
-        controller = subprocess.Popen(
-            [sys.executable, "-m", "trq_offboard", "--connect", f"udpin:127.0.0.1:{ctrl_port}",
-             "--connect-timeout", "3", "--no-log"],
-            cwd=tmp_path, env=stress.ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-            text=True)
-        assert procs.wait_bound(ctrl_port, controller, 30.0), controller.communicate()
+        controller = daemons.controller("--connect-timeout", "3", "--no-log", port=ctrl_port,
+                                        split_stderr=True)
+        controller.wait_bound(timeout_s=30.0)
         vports = [vehicle.gcs_port, vehicle.offboard_port]
         drops0 = stress.kernel_drops(vports)
         sent = stress.attack(vports, ATTACK_S, list(stress.KINDS), FLOOD_RATE, BAD_RATE, arsenal,
@@ -101,22 +106,18 @@ def test_hostile_traffic(tmp_path):
         assert vehicle.alive()
 
         # the controller's link survived its garbage: the usual no-vehicle exit, no traceback
-        out, err = controller.communicate(timeout=30.0)
-        assert controller.returncode == 1, err
+        assert controller.wait(30.0) == 1, controller.why()
+        out, err = controller.text(), controller.err()
         assert "no vehicle heartbeat" in err and "Traceback" not in err + out, err
     finally:
         watcher.close()
-        if controller is not None and controller.poll() is None:
-            controller.kill()
-            controller.communicate(timeout=5)
-        exit_line = vehicle.stop()
+        line = exit_line(vehicle)
 
     # the log: the exit line counts what was dropped; the flight log holds no bad command
-    assert "dropped" in exit_line and "no crash" in exit_line and "0 targets applied" in exit_line, \
-        exit_line
-    dropped = int(exit_line.split("dropped ")[1].split()[0])
-    assert dropped >= want["errors_comm"] - unread, (exit_line, want)
-    text = vehicle.out_path.read_text(errors="replace")
+    assert "dropped" in line and "no crash" in line and "0 targets applied" in line, line
+    dropped = int(line.split("dropped ")[1].split()[0])
+    assert dropped >= want["errors_comm"] - unread, (line, want)
+    text = vehicle.text()
     assert "Traceback" not in text, text[-3000:]
     from sil_vehicle.config import load_sim
     vp = load_sim(ROOT / "params" / "sim" / "default.yaml").vehicle

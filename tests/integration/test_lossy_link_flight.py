@@ -18,7 +18,11 @@ import os
 import subprocess
 import sys
 
+import pytest
+
 from conftest import PARAMS, ROOT, cli
+
+pytestmark = pytest.mark.slow      # starts daemons or flies: the full run only
 
 ENV = dict(os.environ)
 

@@ -8,7 +8,8 @@ processes on free ports, exactly as trq-scenario starts them.
     vehicle applying exactly the command of each stamp);
 (2) the command line: no vehicle, a bad controller file, --help;
 (3) real time: the same controller flies a short hover against the wall-clock vehicle.
-Every subprocess is killed in a finally; every wait has a wall-clock deadline. Nothing depends on
+The daemons come from the `daemons` fixtures (stopped at teardown); every wait has a wall-clock
+deadline. Nothing depends on
 the working directory: paths come from this file and the processes run in tmp directories.
 """
 
@@ -16,7 +17,6 @@ from __future__ import annotations
 
 import math
 import os
-import socket
 import subprocess
 import sys
 import time
@@ -26,10 +26,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from conftest import ROOT, free_udp_port
+from conftest import Daemons, Process
 
 from trq_lab import metrics
 from trq_lab.overlays import write_controller_overlay
+
+pytestmark = pytest.mark.slow      # starts daemons or flies: the full run only
 
 ENV = dict(os.environ)
 STARTUP_S = 60.0               # the controller builds its NMPC before it listens
@@ -55,76 +57,42 @@ def write_overlay(out: Path, controller: str, reference: dict) -> Path:
 class Flight:
     name: str
     out: Path
-    vehicle: subprocess.Popen
-    controller: subprocess.Popen
+    vehicle: Process
+    controller: Process
     returncode: int | None = None
     stdout: str = ""
 
     def wait(self, deadline: float) -> None:
         try:
-            self.returncode = self.controller.wait(timeout=max(deadline - time.monotonic(), 0.1))
+            self.returncode = self.controller.popen.wait(
+                timeout=max(deadline - time.monotonic(), 0.1))
         except subprocess.TimeoutExpired:
             self.returncode = None
         finally:
             self.stop()
-        self.stdout = (self.out / "controller.out").read_text(errors="replace")
+        self.stdout = self.controller.text()
 
     def stop(self) -> None:
-        for proc in (self.controller, self.vehicle):
-            if proc.poll() is None:
-                proc.terminate()
-                try:
-                    proc.wait(timeout=5)
-                except subprocess.TimeoutExpired:
-                    proc.kill()
-                    proc.wait(timeout=5)
+        self.controller.stop()
+        self.vehicle.stop()
 
     def why(self) -> str:
-        tail = lambda p: p.read_text(errors="replace")[-2000:] if p.exists() else ""  # noqa
-        return (f"{self.name}: controller rc {self.returncode}\n--- controller\n"
-                f"{tail(self.out / 'controller.out')}\n--- vehicle\n"
-                f"{tail(self.out / 'vehicle.out')}")
+        return (f"{self.name}: controller rc {self.returncode}\n"
+                f"{self.controller.why()}\n{self.vehicle.why()}")
 
 
-def start_flight(out: Path, controller: str, reference: dict, *vehicle_args: str,
-                 controller_args: tuple[str, ...] = ()) -> Flight:
+def start_flight(daemons: Daemons, out: Path, controller: str, reference: dict,
+                 *vehicle_args: str, controller_args: tuple[str, ...] = ()) -> Flight:
     overlay = write_overlay(out, controller, reference)
-    p_vehicle, p_ctrl, p_gcs, p_gcs_target = (free_udp_port() for _ in range(4))
-    vcmd = [sys.executable, "-m", "sil_vehicle",
-            "--offboard-bind", f"127.0.0.1:{p_vehicle}",
-            "--offboard-target", f"127.0.0.1:{p_ctrl}",
-            "--gcs-bind", f"127.0.0.1:{p_gcs}", "--gcs-target", f"127.0.0.1:{p_gcs_target}",
-            "--log-dir", str(out / "vehicle"), *vehicle_args]
-    ccmd = [sys.executable, "-m", "trq_offboard", "--controller", str(overlay),
-            "--connect", f"udpin:127.0.0.1:{p_ctrl}", "--log-dir", str(out / "controller"),
-            *controller_args]
     # The controller first, the vehicle once the controller listens: a lockstep vehicle left
     # unanswered for clock.free_run_after_s (2 s) runs on in real time, and the controller's
     # NMPC build (2-3 s, more on a loaded machine) would then race its first answers.
-    with open(out / "vehicle.out", "wb") as vout, open(out / "controller.out", "wb") as cout:
-        ctl = subprocess.Popen(ccmd, cwd=out, env=ENV, stdout=cout, stderr=subprocess.STDOUT)
-        try:
-            wait_bound(p_ctrl, ctl, STARTUP_S)
-            vehicle = subprocess.Popen(vcmd, cwd=out, env=ENV, stdout=vout,
-                                       stderr=subprocess.STDOUT)
-        except BaseException:
-            ctl.kill()
-            ctl.wait(timeout=5)
-            raise
+    ctl = daemons.controller("--controller", str(overlay), *controller_args,
+                             log_dir=out / "controller", out_dir=out)
+    ctl.wait_bound(timeout_s=STARTUP_S)
+    vehicle = daemons.vehicle(*vehicle_args, log_dir=out / "vehicle", offboard_target=ctl.port,
+                              out_dir=out)
     return Flight(controller, out, vehicle, ctl)
-
-
-def wait_bound(port: int, proc: subprocess.Popen, timeout_s: float) -> None:
-    """Until someone (proc) is bound to UDP 127.0.0.1:port."""
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline and proc.poll() is None:
-        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-            try:
-                s.bind(("127.0.0.1", port))
-            except OSError:
-                return
-        time.sleep(0.05)
-    raise AssertionError(f"the controller did not listen on {port} (rc {proc.poll()})")
 
 
 def fly_all(flights: list[Flight], timeout_s: float) -> None:
@@ -154,12 +122,13 @@ def assert_landed_summary(flight: Flight) -> None:
 # --- (1) lockstep flights ----------------------------------------------------------------------
 
 @pytest.fixture(scope="module")
-def lockstep_flights(tmp_path_factory) -> dict[str, Flight]:
-    base = tmp_path_factory.mktemp("offboard_lockstep")
+def lockstep_flights(module_daemons) -> dict[str, Flight]:
+    base = module_daemons.tmp / "offboard_lockstep"
     flights = []
     try:
         for name in LOCKSTEP_CONTROLLERS:
-            flights.append(start_flight(base / name, name, HELIX, "--mode", "lockstep"))
+            flights.append(start_flight(module_daemons, base / name, name, HELIX,
+                                        "--mode", "lockstep"))
     finally:
         fly_all(flights, FLIGHT_TIMEOUT_S)
     return {f.name: f for f in flights}
@@ -214,14 +183,14 @@ def run_cli(tmp_path: Path, *args: str, timeout_s: float = 60.0) -> subprocess.C
                           capture_output=True, text=True, timeout=timeout_s)
 
 
-def test_no_vehicle_exits_1_naming_the_connection(tmp_path):
-    port = free_udp_port()
+def test_no_vehicle_exits_1_naming_the_connection(tmp_path, daemons):
     t0 = time.monotonic()
-    r = run_cli(tmp_path, "--connect-timeout", "1", "--connect", f"udpin:127.0.0.1:{port}",
-                "--log-dir", str(tmp_path / "logs"))
-    assert r.returncode == 1, r.stderr
-    assert f"udpin:127.0.0.1:{port}" in r.stderr and "heartbeat" in r.stderr, r.stderr
-    assert "Traceback" not in r.stderr
+    ctl = daemons.controller("--connect-timeout", "1", log_dir=tmp_path / "logs",
+                             split_stderr=True)
+    assert ctl.wait(60.0) == 1, ctl.why()
+    stderr = ctl.err()
+    assert f"udpin:127.0.0.1:{ctl.port}" in stderr and "heartbeat" in stderr, stderr
+    assert "Traceback" not in stderr
     assert time.monotonic() - t0 < 30.0
 
 
@@ -255,12 +224,12 @@ def test_help_lists_every_option(tmp_path):
 # --- (3) real time -----------------------------------------------------------------------------
 
 @pytest.mark.parametrize("controller", ["trq_nmpc", "trq_nmpc_eso"])
-def test_realtime_hover_flight(tmp_path, controller):
+def test_realtime_hover_flight(tmp_path, daemons, controller):
     """The same controller program against the wall-clock vehicle (no lockstep): it connects,
     arms, hovers, lands and disarms without crashing. This takes the flight's wall time (~12 s)."""
     # in real time a command acts about one solve after its state was measured: the observer
     # is told so (in lockstep the vehicle waits and the delay is zero)
-    flight = start_flight(tmp_path / "realtime", controller, HOVER, "--mode", "realtime",
+    flight = start_flight(daemons, tmp_path / "realtime", controller, HOVER, "--mode", "realtime",
                           controller_args=("--applied-delay-s", "0.005"))
     fly_all([flight], 60.0)
     assert_landed_summary(flight)

@@ -14,6 +14,8 @@ import pytest
 
 from conftest import PARAMS, ROOT, cli
 
+pytestmark = pytest.mark.slow      # starts daemons or flies: the full run only
+
 ENV = dict(os.environ)
 FIGURES = ("trajectories.png", "errors.png", "observer.png", "effectiveness.png")
 

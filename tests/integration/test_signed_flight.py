@@ -5,21 +5,21 @@ counts what it refused."""
 
 from __future__ import annotations
 
-import os
+import signal
 import socket
-import subprocess
-import sys
 import threading
 import time
 from pathlib import Path
 
+import pytest
+
 import yaml
 from pymavlink.dialects.v20 import common as mavlink
 
-from conftest import free_udp_port
+from conftest import ROOT
 
-ROOT = Path(__file__).resolve().parents[2]
-ENV = dict(os.environ)
+pytestmark = pytest.mark.slow      # starts daemons or flies: the full run only
+
 KEY_HEX = "5a" * 32
 WRONG = bytes.fromhex("a5" * 32)
 
@@ -69,34 +69,26 @@ def _attack(ports: list[int], tlog: Path, stop: threading.Event, sent: list[int]
     sock.close()
 
 
-def test_signed_flight_survives_forged_and_replayed_traffic(tmp_path):
+def test_signed_flight_survives_forged_and_replayed_traffic(tmp_path, daemons):
     key_file = tmp_path / "key.hex"
     key_file.write_text(KEY_HEX + "\n")
-    p_vehicle, p_ctrl, p_gcs = free_udp_port(), free_udp_port(), free_udp_port()
-    ccmd = [sys.executable, "-m", "trq_offboard", "--controller", str(_overlay(tmp_path)),
-            "--connect", f"udpin:127.0.0.1:{p_ctrl}", "--log-dir", str(tmp_path / "ctl"),
-            "--signing-key-file", str(key_file)]
-    vcmd = [sys.executable, "-m", "sil_vehicle", "--offboard-bind", f"127.0.0.1:{p_vehicle}",
-            "--offboard-target", f"127.0.0.1:{p_ctrl}", "--gcs-bind", f"127.0.0.1:{p_gcs}",
-            "--gcs-target", f"127.0.0.1:{free_udp_port()}", "--log-dir", str(tmp_path / "veh"),
-            "--signing-key-file", str(key_file)]
-    ctl = subprocess.Popen(ccmd, env=ENV, stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+    ctl = daemons.controller("--controller", str(_overlay(tmp_path)),
+                             "--signing-key-file", str(key_file), log_dir=tmp_path / "ctl")
     time.sleep(1.0)
-    veh = subprocess.Popen(vcmd, env=ENV, stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+    veh = daemons.vehicle("--signing-key-file", str(key_file), log_dir=tmp_path / "veh",
+                          offboard_target=ctl.port)
     stop, sent = threading.Event(), [0]
     attacker = threading.Thread(target=_attack, args=(
-        [p_vehicle, p_gcs], tmp_path / "ctl" / "offboard.tlog", stop, sent))
+        [veh.offboard_port, veh.gcs_port], tmp_path / "ctl" / "offboard.tlog", stop, sent))
     attacker.start()
     try:
-        out, _ = ctl.communicate(timeout=180)
+        ctl.wait(180)
     finally:
         stop.set()
         attacker.join()
-        veh.send_signal(2)
-        vout, _ = veh.communicate(timeout=30)
-        if ctl.poll() is None:
-            ctl.kill()
-    text, vtext = out.decode(errors="replace"), vout.decode(errors="replace")
+        veh.send_signal(signal.SIGINT)
+        veh.wait(30)
+    text, vtext = ctl.text(), veh.text()
     assert ctl.returncode == 0, text[-2000:]
     assert "landed" in text and "disarmed" in text
     assert "no crash" in vtext, vtext[-2000:]

@@ -3,7 +3,7 @@ subprocess on free ports (one for the module), driven by trq-inject-fault and wa
 trq-monitor, both run as subprocesses the way a user runs them, and checked with
 trq_lab.gcs.client.MavClient. Plus trq-envelope's analysis, called directly.
 
-Every subprocess has a wall-clock timeout and the vehicle is stopped in a finally.
+Every subprocess has a wall-clock timeout; the vehicle is module_daemons', stopped at teardown.
 """
 
 from __future__ import annotations
@@ -11,16 +11,17 @@ from __future__ import annotations
 import os
 import re
 import subprocess
-import sys
 import time
 from pathlib import Path
 
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
-from conftest import PARAMS, ROOT, cli, free_udp_port
+from conftest import PARAMS, cli, free_udp_port
 
 from trq_lab.gcs.client import MavClient, NoAnswer
+
+pytestmark = pytest.mark.slow      # starts daemons or flies: the full run only
 
 STARTUP_S = 15.0            # a cold interpreter imports numpy and pymavlink
 TOOL_TIMEOUT_S = 30.0
@@ -37,34 +38,20 @@ class Vehicle:
 
 
 @pytest.fixture(scope="module")
-def vehicle(tmp_path_factory):
-    tmp = tmp_path_factory.mktemp("tools_vehicle")
-    gcs_bind, off_bind, gcs_target, off_target = (free_udp_port() for _ in range(4))
-    cmd = [sys.executable, "-m", "sil_vehicle", "--mode", "realtime",
-           "--gcs-bind", f"127.0.0.1:{gcs_bind}", "--gcs-target", f"127.0.0.1:{gcs_target}",
-           "--offboard-bind", f"127.0.0.1:{off_bind}",
-           "--offboard-target", f"127.0.0.1:{off_target}", "--log-dir", str(tmp / "log")]
-    with open(tmp / "vehicle.out", "wb") as out:
-        proc = subprocess.Popen(cmd, cwd=tmp, env=ENV, stdout=out, stderr=subprocess.STDOUT)
-    try:
-        deadline = time.monotonic() + STARTUP_S
-        with MavClient(f"udpout:127.0.0.1:{gcs_bind}") as client:
-            while True:          # the first hello may go out before the vehicle listens
-                assert proc.poll() is None, (tmp / "vehicle.out").read_text()
-                try:
-                    client.hello(1.0)
-                    break
-                except NoAnswer:
-                    assert time.monotonic() < deadline, "the vehicle did not start in time"
-        yield Vehicle(proc, gcs_bind, tmp / "log")
-    finally:
-        if proc.poll() is None:
-            proc.terminate()
+def vehicle(module_daemons):
+    log_dir = module_daemons.tmp / "log"
+    proc = module_daemons.vehicle("--mode", "realtime", log_dir=log_dir)
+    deadline = time.monotonic() + STARTUP_S
+    with MavClient(f"udpout:127.0.0.1:{proc.gcs_port}") as client:
+        while True:          # the first hello may go out before the vehicle listens
+            assert proc.alive(), proc.why()
             try:
-                proc.wait(timeout=5)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait(timeout=5)
+                client.hello(1.0)
+                break
+            except NoAnswer:
+                assert time.monotonic() < deadline, "the vehicle did not start in time\n" \
+                    + proc.why()
+    return Vehicle(proc.popen, proc.gcs_port, log_dir)
 
 
 def run_tool(tool: str, *args: str, cwd: Path, timeout: float = TOOL_TIMEOUT_S):

@@ -5,7 +5,8 @@ pymavlink clients playing the ground station and the offboard controller.
     unsupported commands, garbage that does not kill it;
 (2) lockstep: a scripted flight flown twice gives byte-identical flight logs; another seed with
     gusts on gives another flight.
-Every subprocess is killed in a finally; every wait has a wall-clock deadline.
+The vehicle is started by the `daemons` fixture (stopped at teardown); every wait has a
+wall-clock deadline.
 """
 
 from __future__ import annotations
@@ -13,17 +14,17 @@ from __future__ import annotations
 import math
 import os
 import socket
-import subprocess
-import sys
 import time
 from pathlib import Path
 
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
-from conftest import ROOT, free_udp_port
+from conftest import ROOT
 
 from sil_vehicle.config import load_vehicle
+
+pytestmark = pytest.mark.slow      # starts daemons or flies: the full run only
 
 STARTUP_S = 15.0            # first datagram (a cold interpreter imports numpy and pymavlink)
 
@@ -91,39 +92,14 @@ def is_ack(cmd):
     return lambda m: m.get_type() == "COMMAND_ACK" and m.command == cmd
 
 
-def start_vehicle(tmp_path: Path, name: str, gcs_target: int, offboard_target: int,
-                  *extra: str) -> tuple[subprocess.Popen, int, int, Path]:
-    gcs_bind, off_bind = free_udp_port(), free_udp_port()
-    log_dir = tmp_path / name
-    log_dir.mkdir(parents=True, exist_ok=True)
-    cmd = [sys.executable, "-m", "sil_vehicle",
-           "--gcs-bind", f"127.0.0.1:{gcs_bind}", "--gcs-target", f"127.0.0.1:{gcs_target}",
-           "--offboard-bind", f"127.0.0.1:{off_bind}",
-           "--offboard-target", f"127.0.0.1:{offboard_target}",
-           "--log-dir", str(log_dir), *extra]
-    env = dict(os.environ)
-    out = open(log_dir / "stdout.txt", "wb")
-    proc = subprocess.Popen(cmd, cwd=tmp_path, env=env, stdout=out, stderr=subprocess.STDOUT)
-    out.close()
-    return proc, gcs_bind, off_bind, log_dir
-
-
-def stop(proc: subprocess.Popen) -> None:
-    if proc.poll() is None:
-        proc.terminate()
-        try:
-            proc.wait(timeout=5)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait(timeout=5)
-
-
 # --- (1) real time ------------------------------------------------------------------------------
 
-def test_realtime_daemon(tmp_path):
+def test_realtime_daemon(tmp_path, daemons):
     gcs, off = Client(), Client()
-    proc, gcs_port, off_port, log_dir = start_vehicle(tmp_path, "rt", gcs.port, off.port,
-                                                      "--mode", "realtime")
+    log_dir = tmp_path / "rt"
+    proc = daemons.vehicle("--mode", "realtime", log_dir=log_dir, gcs_target=gcs.port,
+                           offboard_target=off.port)
+    gcs_port, off_port = proc.gcs_port, proc.offboard_port
     try:
         # telemetry: the first datagram once the process is up, then every gcs stream in 3 s
         gcs.wait_for(lambda m: True, STARTUP_S, "any telemetry")
@@ -189,9 +165,9 @@ def test_realtime_daemon(tmp_path):
         assert status.errors_comm > 0
         gcs.wait_for(lambda m: m.get_type() == "ATTITUDE" and m.time_boot_ms > t_before + 500,
                      3.0, "telemetry after the garbage")
-        assert proc.poll() is None
+        assert proc.alive(), proc.why()
     finally:
-        stop(proc)
+        proc.stop()
         gcs.close()
         off.close()
     assert (log_dir / "flight.csv").stat().st_size > 0
@@ -216,17 +192,20 @@ def profile(t_us: int, trim_pct: float) -> tuple[list[float], list[float]]:
     return [zeta / 100.0] * 4, [tilt] * 4
 
 
-def fly_lockstep(tmp_path: Path, name: str, seed: int) -> Path:
+def fly_lockstep(daemons, tmp_path: Path, name: str, seed: int) -> Path:
     trim = load_vehicle(ROOT / "params" / "vehicle" / "trq.yaml").hover_throttle_pct
     off, gcs = Client(), Client()
-    proc, _, off_port, log_dir = start_vehicle(
-        tmp_path, name, gcs.port, off.port, "--mode", "lockstep", "--seed", str(seed),
-        "--duration", str(DURATION_S))
+    log_dir = tmp_path / name
+    proc = daemons.vehicle("--mode", "lockstep", "--seed", str(seed),
+                           "--duration", str(DURATION_S), log_dir=log_dir, name=name,
+                           gcs_target=gcs.port, offboard_target=off.port)
+    off_port = proc.offboard_port
     answered: set[int] = set()
     try:
         deadline = time.monotonic() + STARTUP_S + 15.0
-        while proc.poll() is None:
-            assert time.monotonic() < deadline, "lockstep flight did not finish in time"
+        while proc.alive():
+            assert time.monotonic() < deadline, "lockstep flight did not finish in time\n" \
+                + proc.why()
             for m in off.poll(0.1):
                 if m.get_type() != "ODOMETRY" or m.time_usec in answered:
                     continue        # a resend of a stamp already answered: answer it once only
@@ -242,9 +221,9 @@ def fly_lockstep(tmp_path: Path, name: str, seed: int) -> Path:
                 throttle, tilt = profile(t, trim)
                 msgs.append(target(t, throttle, tilt))
                 off.send(off_port, *msgs)            # one datagram: applied in this order
-        assert proc.wait(timeout=5) == 0
+        assert proc.wait(5) == 0, proc.why()
     finally:
-        stop(proc)
+        proc.stop()
         off.close()
         gcs.close()
     assert len(answered) >= DURATION_S * 50
@@ -255,10 +234,10 @@ def rows(path: Path) -> list[str]:
     return [line for line in path.read_text().splitlines() if not line.startswith("#")]
 
 
-def test_lockstep_replay_is_bit_identical(tmp_path):
-    a = fly_lockstep(tmp_path, "a", seed=11)
-    b = fly_lockstep(tmp_path, "b", seed=11)
-    c = fly_lockstep(tmp_path, "c", seed=12)
+def test_lockstep_replay_is_bit_identical(tmp_path, daemons):
+    a = fly_lockstep(daemons, tmp_path, "a", seed=11)
+    b = fly_lockstep(daemons, tmp_path, "b", seed=11)
+    c = fly_lockstep(daemons, tmp_path, "c", seed=12)
     assert a.read_bytes() == b.read_bytes()
 
     ra = rows(a)

@@ -42,6 +42,7 @@ def run(onset, latency_s, horizon_s=0.6):
     return lb.bound(onset, TRQ, latency_s, horizon_s, math.radians(5.0))
 
 
+@pytest.mark.slow
 def test_no_fault_the_hover_trim_holds():
     r = run(hover_onset([1.0, 1.0, 1.0, 1.0]), 0.0)
     assert r["status"] == "optimal"
@@ -54,6 +55,7 @@ def half_motor():
     return {L: run(onset, L) for L in (0.0, 0.06)}
 
 
+@pytest.mark.slow
 def test_a_fault_seen_at_once_costs_little(half_motor):
     r = half_motor[0.0]
     assert r["status"] == "optimal"
@@ -63,6 +65,7 @@ def test_a_fault_seen_at_once_costs_little(half_motor):
     assert np.all(np.abs(X[8]) <= math.radians(5.0) + 1e-6)
 
 
+@pytest.mark.slow
 def test_latency_costs_position(half_motor):
     now, late = half_motor[0.0], half_motor[0.06]
     assert late["status"] == "optimal"
@@ -72,6 +75,7 @@ def test_latency_costs_position(half_motor):
     assert late["max_err_m"] > now["max_err_m"]
 
 
+@pytest.mark.slow
 def test_the_fixed_rotor_quad_cannot_hold_yaw_on_half_a_motor(half_motor):
     """As trq-envelope finds (no trim): with yaw held, the quad's best answer tips over."""
     onset = hover_onset([0.5, 1.0, 1.0, 1.0], QUAD)
@@ -82,6 +86,7 @@ def test_the_fixed_rotor_quad_cannot_hold_yaw_on_half_a_motor(half_motor):
     assert r["rmse_lower_bound_m"] > 0.01
 
 
+@pytest.mark.slow
 def test_frozen_outputs_follow_the_plants_lag(half_motor):
     """During the latency the faulted motor's output decays towards factor x command with the
     motor's time constant (rate limited), as the plant's does."""
