@@ -16,7 +16,6 @@ import csv
 import json
 import os
 import subprocess
-import sys
 
 import pytest
 

@@ -8,11 +8,10 @@ import json
 import math
 import os
 import subprocess
-import sys
 
 import pytest
 
-from conftest import PARAMS, ROOT, cli
+from conftest import PARAMS, cli
 
 pytestmark = pytest.mark.slow      # starts daemons or flies: the full run only
 

@@ -5,12 +5,11 @@ from __future__ import annotations
 
 import math
 import subprocess
-import sys
 
 import numpy as np
 import pytest
 
-from conftest import PARAMS, ROOT, cli
+from conftest import PARAMS, cli
 
 from trq_lab.analysis import latency_bound as lb
 from trq_offboard.allocation import Allocator

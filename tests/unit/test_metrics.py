@@ -7,12 +7,10 @@ figure against hand arithmetic."""
 from __future__ import annotations
 
 import math
-import sys
 
 import numpy as np
 import pytest
 
-from conftest import ROOT
 
 from trq_lab import metrics
 

@@ -6,7 +6,6 @@ import importlib.util
 import json
 from pathlib import Path
 
-import pytest
 
 _PATH = Path(__file__).resolve().parents[2] / "trq_lab" / "results.py"
 
