@@ -20,11 +20,12 @@ import sys
 import time
 from pathlib import Path
 
-from sil_vehicle.clock import RealTimePacer
 import trq_params
+
+from sil_vehicle.clock import RealTimePacer
 from sil_vehicle.config import ConfigError, SimParams, load_sim, parse_endpoint
 from sil_vehicle.faultscript import load_script
-from sil_vehicle.mavlink.codec import Codec
+from sil_vehicle.mavlink.codec import COMPONENT_ID, SYSTEM_ID, Codec
 from sil_vehicle.sitl import LINKS, LOG_COLUMNS, Outgoing, Sitl
 from trq_wire.logfile import CsvLog, Tlog
 from trq_wire.signing import SignatureCheck, SigningKeyError, load_key, sign_outgoing
@@ -33,6 +34,7 @@ log = logging.getLogger("sil_vehicle")
 
 MAX_PEERS = 16
 PEER_TIMEOUT_S = 10.0      # a peer silent this long (wall clock) gets no more telemetry
+MAVLINK2_MAGIC, IFLAG_SIGNED = 0xFD, 0x01     # a MAVLink 2 frame, and its "signed" flag
 MAX_DATAGRAM = 1400          # bytes: frames to one address are packed up to this (below the MTU)
 
 
@@ -93,6 +95,7 @@ class VehicleDaemon:
         self._start_wall_us = wall_us()
         self.exit_reason = ""
         self.free_runs = 0
+        self.routed = {name: 0 for name in LINKS}     # frames forwarded onto each link
 
     def _log_us(self) -> int:
         """The .tlog's stamp: in lockstep the start's wall time plus the simulated time (so a
@@ -177,11 +180,42 @@ class VehicleDaemon:
         if msgs:
             self._heard(link, addr)
         for msg in msgs:
+            frame = bytes(msg.get_msgbuf())
             if self.tlog:
-                self.tlog.write(self._log_us(), bytes(msg.get_msgbuf()))
+                self.tlog.write(self._log_us(), frame)
             self.send(self.sitl.handle(link, msg, addr))
+            self.route(link, msg, frame)
         if self.sitl.answered and self._answer is not None and not self._answer.done():
             self._answer.set_result(True)
+
+    def route(self, link: str, msg, frame: bytes) -> None:
+        """Forward between the links what is not the vehicle's alone, as an autopilot routes
+        for its companion computer: from the offboard link to the ground station every
+        message not addressed to the vehicle (the controller's HEARTBEAT, NAMED_VALUE_FLOAT,
+        STATUSTEXT: broadcasts, or addressed to another component or system); from the ground
+        station to the offboard link only what is addressed to another component of this
+        system (a ground station's own broadcasts, its HEARTBEAT above all, would read to a
+        controller as the vehicle's). Never back onto the link it came from; the frame as it
+        came (its sender and signature); with a signing key, only signed frames (the codec has
+        already refused the others on the offboard link; the ground station's unsigned
+        read-only requests stay here)."""
+        system, component = getattr(msg, "target_system", 0), getattr(msg, "target_component", 0)
+        if link == "offboard":
+            to = "gcs"
+            if (system, component) == (SYSTEM_ID, COMPONENT_ID):
+                return                                  # the vehicle's alone
+        else:
+            to = "offboard"
+            if system != SYSTEM_ID or component in (0, COMPONENT_ID):
+                return
+        if self.signed and not (frame[0] == MAVLINK2_MAGIC and frame[2] & IFLAG_SIGNED):
+            return
+        if to not in self.transports:
+            return
+        peer = self.sim.link(to).target
+        for dest in dict.fromkeys([(peer.host, peer.port), *self._live_peers(to)]):
+            self.transports[to].sendto(frame, dest)
+        self.routed[to] += 1
 
     # --- loops -----------------------------------------------------------------------------
     def stop(self, reason: str = "stopped") -> None:

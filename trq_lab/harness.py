@@ -11,7 +11,7 @@ vehicle daemon drives), the controller is `Controller` + `Reference` driven by `
 (the code the controller daemon drives). What replaces the sockets:
 
 - controller -> vehicle: `OffboardFlight` calls `link.send(msg)`; the message is packed to bytes
-  with pymavlink (system 255, component 191, as `MavlinkUdp`), decoded by the vehicle's own
+  with pymavlink (system 1, component 191, as `MavlinkUdp`), decoded by the vehicle's own
   `Codec` for the offboard link and handed to `sitl.handle('offboard', msg, sender)`;
 - vehicle -> controller: every `Outgoing` of the offboard link is encoded by that `Codec` and
   parsed back by a fresh pymavlink parser (as `MavlinkUdp` parses a datagram), then delivered to
@@ -245,7 +245,7 @@ class InMemoryLink:
         self._codec = codec                     # the vehicle's codec of the offboard link
         self._on_answer = on_answer
         # the controller's packer: the system and component MavlinkUdp uses
-        self._tx = mavlink.MAVLink(None, srcSystem=255, srcComponent=191)
+        self._tx = mavlink.MAVLink(None, srcSystem=1, srcComponent=191)
         self.sent = 0
         self.received = 0
         self.bytes = 0

@@ -19,6 +19,7 @@ from typing import Callable
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
+from trq_offboard.diagnosis import Diagnosis
 from trq_offboard.link import wire
 from trq_offboard.link.udp import MavlinkUdp
 from trq_offboard.records import ActuatorCommand, ReferenceSample, StateEstimate, StepInfo
@@ -109,6 +110,7 @@ class OffboardFlight:
         self._have_output_status = False    # prefer ACTUATOR_OUTPUT_STATUS (full resolution)
         self._mode_task: asyncio.Future | None = None
         self.summary = FlightSummary(name)
+        self.diagnosis = Diagnosis()        # the motors' estimates, for the ground station
         self._errors: list[np.ndarray] = []
         self._yaw_errors: list[float] = []
         self._solve_ms: list[float] = []
@@ -314,6 +316,8 @@ class OffboardFlight:
         yaw_err = (odo.state.euler_rad[2] - ref.yaw_rad + math.pi) % (2 * math.pi) - math.pi
         self._yaw_errors.append(math.degrees(yaw_err))
         if info is not None:
+            for msg in self.diagnosis.messages(odo.stamp_us, info.effectiveness):
+                self.link.send(msg)
             self._solve_ms.append(info.solve.solve_time_s * 1e3)
             if info.source.value != "nmpc":
                 self.summary.fallbacks += 1

@@ -54,7 +54,7 @@ class LinkStats:
 
 class MavlinkUdp(asyncio.DatagramProtocol):
     def __init__(self, connection: Connection, on_message: Callable[[object], None],
-                 system_id: int = 255, component_id: int = 191,
+                 system_id: int = 1, component_id: int = 191,
                  signing_key: bytes | None = None, monotonic=time.monotonic) -> None:
         self.connection = connection
         self._monotonic = monotonic
