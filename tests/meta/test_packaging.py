@@ -61,3 +61,11 @@ def test_no_sys_path_manipulation():
                 if isinstance(node, ast.Constant) and node.value == "PYTHON" "PATH":
                     offenders.append(f"{path.relative_to(ROOT)}:{node.lineno}: PYTHONPATH")
     assert not offenders, offenders
+
+
+def test_the_readme_tables_are_the_result_files():
+    """The README's generated blocks match docs/results/ (`trq-results --check`)."""
+    from trq_lab import results
+
+    assert results.main(["--check", "--readme", str(ROOT / "README.md"),
+                         "--results", str(ROOT / "docs" / "results")]) == 0
