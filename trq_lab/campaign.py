@@ -63,6 +63,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import functools
 import hashlib
 import itertools
 import json
@@ -140,7 +141,7 @@ def _field(kind: str, lo, hi):
 
 
 def _axis_models(axis: str):
-    """(one value per key, a list of values per key, a uniform draw) models of an axis."""
+    """The models of one axis: one value per key, and a list of values per key."""
     keys = AXIS_KEYS[axis]
     point = create_model(f"{axis}_point", __base__=Strict,
                          **{k: (_field(*spec) | None, None) for k, spec in keys.items()})
@@ -152,7 +153,9 @@ def _axis_models(axis: str):
 AXIS_MODELS = {axis: _axis_models(axis) for axis in AXES}
 
 
-def _uniform_model(kind: str, lo, hi):
+@functools.cache
+def _uniform_model(lo, hi):
+    """{uniform: [lo, hi]}: a continuous draw within the key's range."""
     return create_model("uniform", __base__=Strict,
                         uniform=(Vec(2, -math.inf if lo is None else lo,
                                      math.inf if hi is None else hi), ...))
@@ -179,7 +182,7 @@ def _axis_values(raw_axis: Any, file, where: str, axis: str,
             if kind not in ("float", "int"):
                 raise ConfigError(f"{file}: key '{where}.{key}': got {raw!r}, expected a value "
                                   "or a list of values to choose from")
-            bounds = validate(_uniform_model(kind, lo, hi), raw, file,
+            bounds = validate(_uniform_model(lo, hi), raw, file,
                               prefix=f"{where}.{key}").uniform
             if bounds[0] > bounds[1]:
                 raise ConfigError(f"{file}: key '{where}.{key}.uniform': got {list(bounds)}, "

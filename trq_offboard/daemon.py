@@ -129,7 +129,14 @@ def main(argv: list[str] | None = None) -> int:
 
         def interrupt(sig: int) -> None:
             received.append(sig)
-            flying.cancel()
+            cancel_until_done()
+
+        def cancel_until_done() -> None:
+            # asyncio.wait_for of Python 3.11 can swallow a cancellation that meets its inner
+            # future's completion (CPython gh-86296): ask again until the flight has stopped
+            if not flying.done():
+                flying.cancel()
+                loop.call_later(0.05, cancel_until_done)
 
         for sig in (signal.SIGINT, signal.SIGTERM):
             loop.add_signal_handler(sig, interrupt, sig)
