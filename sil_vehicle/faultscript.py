@@ -10,7 +10,7 @@
 
 Each event becomes MAVLink actions: parameter sets (`SIM_*`, PROTOCOL.md) or
 MAV_CMD_INJECT_FAILURE commands, so a script means the same thing whether the vehicle plays it
-itself (deterministic, `--faults FILE`) or `tools/inject_fault.py` sends it over the wire.
+itself (deterministic, `--faults FILE`) or `trq-inject-fault` sends it over the wire.
 Each event is validated by `trq_params.loader` against its kind's schema (below: the first of
 motor, servo, wind, clear it holds decides): errors name the file, the event index, the key, the
 value and what was expected.
