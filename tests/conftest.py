@@ -16,8 +16,9 @@ import time
 from pathlib import Path
 
 import pytest
-
 import trq_params
+
+from trq_lab import procs
 
 ROOT = Path(__file__).resolve().parent.parent
 PARAMS = trq_params.DIR
@@ -162,14 +163,8 @@ class Process:
     def wait_bound(self, port: int | None = None, timeout_s: float = 60.0) -> None:
         """Until this process is bound to UDP 127.0.0.1:port (its own port by default)."""
         port = self.port if port is None else port
-        deadline = time.monotonic() + timeout_s
-        while time.monotonic() < deadline and self.popen.poll() is None:
-            with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-                try:
-                    s.bind(("127.0.0.1", port))
-                except OSError:
-                    return
-            time.sleep(0.05)
+        if procs.wait_bound(port, self.popen, timeout_s):
+            return
         raise AssertionError(f"{self.name} did not listen on {port} within {timeout_s} s\n"
                              f"{self.why()}")
 
