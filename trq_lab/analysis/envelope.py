@@ -49,7 +49,9 @@ def wrench_expr(alpha, zeta, factors, vp: VehicleParams):
 
 
 def analyse(vp: VehicleParams, factors: list[float], wind_speed: float, wind_from_deg: float,
-            max_tilt_deg: float = 35.0) -> dict:
+            max_tilt_deg: float = 35.0, tilt_fixed_rad: dict[int, float] | None = None) -> dict:
+    """The trim and margins (see the module docstring). `tilt_fixed_rad`: rotor index (0..3) ->
+    a tilt the rotor cannot leave (a stuck servo)."""
     n_tilt = 0 if vp.tilt_locked else 4
     alpha = ca.MX.sym("alpha", 4) if n_tilt else ca.MX.zeros(4)
     zeta = ca.MX.sym("zeta", 4)
@@ -69,6 +71,9 @@ def analyse(vp: VehicleParams, factors: list[float], wind_speed: float, wind_fro
     lbx = [lo_tilt] * n_tilt + [vp.idle_pct] * 4 + [-mt, -mt]
     ubx = [hi_tilt] * n_tilt + [100.0] * 4 + [mt, mt]
     x0 = [0.0] * n_tilt + [vp.hover_throttle_pct] * 4 + [0.0, 0.0]
+    for i, angle in (tilt_fixed_rad or {}).items():
+        if n_tilt:
+            lbx[i] = ubx[i] = x0[i] = float(angle)
     opts = {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes"}
     # 1) the trim: the wrench as close as possible to the need, then the smallest effort
     resid = w - need
@@ -111,6 +116,18 @@ def analyse(vp: VehicleParams, factors: list[float], wind_speed: float, wind_fro
             out["margin"][f"{'+' if sign > 0 else '-'}{axis}"] = (
                 round(sign * (value - trim_w[j]), 4) if ok else None)
     return out
+
+
+def throttle_margins(out: dict, vp: VehicleParams) -> dict:
+    """The trim's throttle margins (percentage points) of an `analyse` result: per motor, how far
+    its trim throttle sits from full throttle (up) and from idle (down), and the smallest of all;
+    None where there is no trim."""
+    if not out["feasible"]:
+        return {"up_pct": None, "down_pct": None, "min_pct": None}
+    zeta = out["trim"]["throttle_pct"]
+    up = [round(100.0 - z, 2) for z in zeta]
+    down = [round(z - vp.idle_pct, 2) for z in zeta]
+    return {"up_pct": up, "down_pct": down, "min_pct": round(min(up + down), 2)}
 
 
 def main(argv: list[str] | None = None) -> int:
