@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """Fault campaigns at scale: a grid and/or a seeded random sample of flights over fault, wind,
-trajectory and controller, flown on Dask (a LocalCluster by default, or an existing cluster).
+trajectory, link, plant and controller, flown on Dask (a LocalCluster by default, or an existing cluster).
 
     trq-campaign smoke --out out/campaign_smoke --workers 2
     trq-campaign CAMPAIGN.yaml --out DIR [--workers N | --scheduler tcp://HOST:8786]
@@ -20,6 +20,11 @@ Outputs in DIR:
     report.md           success rate and position RMSE per controller against fault severity
                         and wind (tables), where each controller stops coping, and the figures
     success.png, rmse.png   the heat maps
+    metrics.json        the report's summary per controller (and the targets missed), which
+                        trq-results turns into the README's campaigns row
+With a plant axis, report.md also sets every flight against its plant's faulted trim
+(trq_lab.plants: envelope classes, rank correlations, paired comparison, targets), with
+margin.png, rmse_dist.png and params.png.
 
 Campaign file (strict: an unknown or misspelt key is an error naming the file and the key):
 
@@ -43,13 +48,23 @@ Campaign file (strict: an unknown or misspelt key is an error naming the file an
 
 An axis of `grid` may also be a list of such mappings (their union); `none` in the fault axis is
 a flight without a fault. Axes left out: no fault, no wind, the controller file's reference, a
-clean link.
+clean link, the airframe file as it is. In `sample` a number may also be {normal: [mean, sd]}
+(truncated to the key's range).
 Fault keys: at_s and either motor (1..4) with effectiveness (a), optional time-varying terms
 tv_b, tv_w_rad_s, tv_phi_rad (e = a - b sin(w t + phi)), or stopped: true; or servo (1..4) with
 stuck_deg. Wind keys: speed_m_s, direction_deg (from, clockwise from north), gusts,
 gust_sigma_m_s. Link keys (the offboard link's seeded impairment, as a scenario's
 offboard_link; the controller is told its round trip as applied_delay_s, as by the scenario
-runner): loss, delay_ms, jitter_ms, duplicate, reorder. Trajectory keys: those of the controller file's `reference` (kind, altitude_m,
+runner): loss, delay_ms, jitter_ms, duplicate, reorder. Plant keys (the SIMULATED airframe
+only, each controller's own file: trq_lab.overlays.PLANT_PARAMS): mass_scale, inertia_scale,
+arm_length_scale, thrust_scale, torque_scale (a curve's coefficients together), motor_lag_scale,
+motor_rate_scale, servo_lag_scale, servo_rate_scale, drag_scale, idle_offset_pct; every plant is
+checked against every controller's airframe when the campaign is read (a plant that cannot lift
+the weight is an error naming the draw). The plant enters the flight's spec (and so its id) but
+not its seed: the plants of a cell meet the same noise and gusts. `controller_model: plant` (or
+[nominal, plant], both) gives the controller's model the plant's airframe too; default nominal.
+`targets` (optional): {controller, min_margin_pct, rmse_after_fault_m, share, better: [{worse,
+share}]}, judged in the report (trq_lab.plants). Trajectory keys: those of the controller file's `reference` (kind, altitude_m,
 climb_speed_m_s, hold_s, duration_s, ramp_s, radius_m, period_s, helix_climb_m, step_ned_m, land);
 their types are checked when the campaign is read, their values and combinations (ramp_s at most
 half of duration_s, ...) by the controller's own loader when the flight is prepared: an invalid

@@ -1,6 +1,8 @@
 """The controller overlay every tool and test flies: a YAML file that `extends:` a controller of
 params/controller/, with absolute paths (so it can live in any output folder) and, optionally,
-another reference. One writer, used by run_scenario, inprocess, stress and the tests."""
+another reference. One writer, used by run_scenario, inprocess, stress and the tests. And the
+vehicle overlay of a campaign's plant: an airframe file with factors and offsets applied
+(`write_vehicle_overlay`), for the simulated vehicle and, when asked, the controller's model."""
 
 from __future__ import annotations
 

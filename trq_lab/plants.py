@@ -118,6 +118,14 @@ def paired(rows: list[dict], a: str, b: str) -> dict:
             "not_better": [(ra, rb) for ra, rb in pairs if not score(ra) < score(rb)]}
 
 
+def _finite(st: dict) -> dict:
+    """A controller's summary as strict JSON: an RMSE statistic reached by crashes (+inf) is
+    None, and named in `crashed_stats`."""
+    out = {k: (None if isinstance(v, float) and math.isinf(v) else v) for k, v in st.items()}
+    out["crashed_stats"] = [k for k, v in st.items() if isinstance(v, float) and math.isinf(v)]
+    return out
+
+
 def _params_text(r: dict, keys: list[str]) -> str:
     return ", ".join(f"{_label(k)} {r[k]:g}" for k in keys)
 
@@ -171,7 +179,7 @@ def report(campaign, rows: list[dict], out: Path, figures: bool = True
               "rmse_median_m": float(statistics.median(sc)) if sc else None,
               "rmse_p90_m": _pct(sc, 90) if sc else None,
               "rmse_max_finite_m": finite[-1] if finite else None}
-        summary["controllers"][c] = st
+        summary["controllers"][c] = _finite(st)
         lines.append(f"| {c} | {len(rs)} | {st['success_rate']:.0%} | {st['crashed']} | "
                      + " | ".join(str(n_cls[k]) for k in cls) + " | "
                      + ("-" if not ok else f"{st['success_with_margin']:.0%} ({len(ok)})")
@@ -243,6 +251,17 @@ def report(campaign, rows: list[dict], out: Path, figures: bool = True
             lines.append(f"| `{o}` | {p['pairs']} | {p['better']} | "
                          f"{_fmt(p['share'], '{:.0%}')} | {_fmt(p['median_ratio'], '{:.3g}')} | "
                          f"{p['a_crashed']} | {p['b_crashed']} |")
+        lines += ["", f"By the envelope class of `{head}`'s plant (its airframe's trim): better "
+                  "on (pairs)", "", "| against | " + " | ".join(cls) + " |",
+                  "|---|" + "---|" * len(cls)]
+        for o in others:
+            cells = []
+            for k in cls:
+                sub = paired([r for r in rows if r["controller"] == o or
+                              env_class(r, margin_pct) == k], head, o)
+                cells.append("-" if not sub["pairs"] else
+                             f"{_fmt(sub['share'], '{:.0%}')} ({sub['pairs']})")
+            lines.append(f"| `{o}` | " + " | ".join(cells) + " |")
         lines += ["", "The quadcopter flies its own airframe with the same draw of factors (its "
                   "servos are locked, so the servo factors change nothing there).", ""]
         summary["paired"] = {o: {k: v for k, v in p.items() if k != "not_better"}
@@ -263,10 +282,9 @@ def report(campaign, rows: list[dict], out: Path, figures: bool = True
                      f"**{_fmt(share, '{:.1%}')}** (target >= {t.share:.0%}): "
                      + ("met." if met else "missed." if pop else "not judged: no such plant."))
         if not met:
-            failures.append(f"{t.controller}: share within {t.rmse_after_fault_m:g} m among "
-                            f"plants with >= {margin_pct:g} % margin = "
-                            f"{_fmt(share, '{:.3f}')} (target >= {t.share:g}, {len(pop)} "
-                            "plants)")
+            failures.append(f"{t.controller} within {t.rmse_after_fault_m:g} m on "
+                            f"{_fmt(share, '{:.0%}')} of the {len(pop)} plants with >= "
+                            f"{margin_pct:g} % margin (target >= {t.share:.0%})")
         summary["target_rmse"] = {"plants": len(pop), "within": len(within), "share": share,
                                   "target": t.share, "met": met}
         for b in t.better:
@@ -277,8 +295,8 @@ def report(campaign, rows: list[dict], out: Path, figures: bool = True
                          f"(target >= {b.share:.0%}): {'met' if ok else 'missed'}.")
             if not ok:
                 failures.append(f"{t.controller} better than {b.worse} on "
-                                f"{_fmt(p['share'], '{:.3f}')} of paired flights (target >= "
-                                f"{b.share:g})")
+                                f"{_fmt(p['share'], '{:.0%}')} of {p['pairs']} paired flights "
+                                f"(target >= {b.share:.0%})")
             summary.setdefault("target_paired", {})[b.worse] = {
                 "pairs": p["pairs"], "better": p["better"], "share": p["share"],
                 "target": b.share, "met": ok}

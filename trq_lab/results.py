@@ -127,8 +127,9 @@ def load_campaign_metrics(path: Path) -> dict:
 
 
 def campaigns_table(paths: list[Path], base: Path | None = None) -> str:
-    """One row per campaign: flights (plants), per controller success rate / median position
-    RMSE after the fault, and its targets."""
+    """One row per campaign: its name (a link to the report.md beside its metrics.json, when
+    there is one), flights (plants), per controller success rate / median position RMSE after
+    the fault, and its targets."""
     docs = [(p, load_campaign_metrics(p)) for p in paths]
     controllers: list[str] = []
     for _, doc in docs:
@@ -143,20 +144,20 @@ def campaigns_table(paths: list[Path], base: Path | None = None) -> str:
     for path, doc in docs:
         flights = str(doc["flights"]) + (f" ({doc['plants']} plants)" if doc.get("plants")
                                          else "")
-        cells = [f"`{doc['campaign']}`", flights]
+        report = path.with_name("report.md")
+        name = f"`{doc['campaign']}`"
+        cells = [f"[{name}]({_shown(report, base)})" if report.is_file() else name, flights]
         for c in controllers:
             st = doc["controllers"].get(c)
             if st is None:
                 cells.append("not flown")
                 continue
             rate = st.get("success_rate")
-            cells.append(("-" if rate is None else f"{rate:.0%}") + " / "
-                         + _cell(st.get("rmse_median_m"), "{:.4f}"))
+            median = ("crashed" if "rmse_median_m" in st.get("crashed_stats", ())
+                      else _cell(st.get("rmse_median_m"), "{:.4f}"))
+            cells.append(("-" if rate is None else f"{rate:.0%}") + " / " + median)
         cells.append(targets_met(path, doc))
         lines.append("| " + " | ".join(cells) + " |")
-    lines.append("")
-    lines.append("Sources: " + ", ".join(f"`{_shown(p, base)}`" for p, _ in docs)
-                 + " (and the `report.md` beside each).")
     return "\n".join(lines)
 
 
@@ -214,7 +215,8 @@ def scenario_table(metrics_path: Path, base: Path | None = None) -> str:
 
 
 def scenarios_table(paths: list[Path], base: Path | None = None) -> str:
-    """One row per scenario: its fault, per controller pos RMSE after fault / max yaw error."""
+    """One row per scenario: its name (a link to its report.md, else to its metrics.json), its
+    fault, per controller pos RMSE after fault / max yaw error."""
     docs = [(p, load_metrics(p)) for p in paths]
     controllers: list[str] = []
     for _, doc in docs:
@@ -229,7 +231,10 @@ def scenarios_table(paths: list[Path], base: Path | None = None) -> str:
     for path, doc in docs:
         name = doc.get("scenario", path.parent.name)
         by = {r["controller"]: r for r in doc["runs"]}
-        cells = [f"`{name}`", str(doc.get("fault", FAULTS.get(name, "-")))]
+        report = path.with_name("report.md")
+        source = report if report.is_file() else path
+        cells = [f"[`{name}`]({_shown(source, base)})",
+                 str(doc.get("fault", FAULTS.get(name, "-")))]
         for c in controllers:
             r = by.get(c)
             if r is None:
@@ -242,8 +247,6 @@ def scenarios_table(paths: list[Path], base: Path | None = None) -> str:
                 cells.append(cell + (" (crashed)" if r.get("crashed") else ""))
         cells.append(targets_met(path, doc))
         lines.append("| " + " | ".join(cells) + " |")
-    lines.append("")
-    lines.append("Sources: " + ", ".join(f"`{_shown(p, base)}`" for p, _ in docs) + ".")
     return "\n".join(lines)
 
 

@@ -317,5 +317,8 @@ def test_results_campaigns_block(tmp_path):
     scen, camp = out.split("<!-- results:campaigns begin -->")
     assert "`sc`" in scen and "camp" not in scen.replace("campaigns", "")
     assert "| `camp` | 6 (2 plants) | 50% / 0.0123 | 0% / 1.5000 |" in camp
+    (res / "camp" / "report.md").write_text("# Campaign\n")     # the name links to its report
+    out = results.update_text(text, res, base=tmp_path)
+    assert "| [`camp`](results/camp/report.md) | 6 (2 plants) |" in out
     assert "missed: trq_nmpc_eso: share within 0.02 m = 0.8765 (target >= 0.95)" in camp
     assert camp.index("trq_nmpc_eso success") < camp.index("trq_nmpc success")
