@@ -1198,8 +1198,11 @@ def main(argv: list[str] | None = None) -> int:
     if args.dry_run:
         for s in campaign.flights:
             r = flight_inputs(s)
+            plant = "" if "plant" not in s else " plant " + ",".join(
+                f"{k}={v:g}" for k, v in sorted(s["plant"].items())) + (
+                " (model: the plant)" if s.get("controller_model") == "plant" else "")
             print(f"{s['id']} {s['controller']:14s} fault {r['fault_kind']} {r['severity']:g} "
-                  f"wind {_wind_label(r)} traj {r['traj_kind']} seed {s['seed']}")
+                  f"wind {_wind_label(r)} traj {r['traj_kind']} seed {s['seed']}{plant}")
         print(f"campaign: {campaign.name}: {len(campaign.flights)} flights")
         return 0
     args.out.mkdir(parents=True, exist_ok=True)

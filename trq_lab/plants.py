@@ -425,7 +425,8 @@ def plant_figures(campaign, rows, ctrls, keys, top, margin_pct, out: Path) -> li
         nb = 5
         ex = np.linspace(min(r[kx] for r in rows), max(r[kx] for r in rows), nb + 1)
         ey = np.linspace(min(r[ky] for r in rows), max(r[ky] for r in rows), nb + 1)
-        fig, axes = plt.subplots(1, len(ctrls), figsize=(3.4 * len(ctrls), 3.2), squeeze=False)
+        fig, axes = plt.subplots(1, len(ctrls), figsize=(3.6 * len(ctrls), 3.2), squeeze=False,
+                                 sharey=True)
         im = None
         for ax, c in zip(axes[0], ctrls):
             g = np.full((nb, nb), np.nan)
@@ -444,13 +445,15 @@ def plant_figures(campaign, rows, ctrls, keys, top, margin_pct, out: Path) -> li
                            extent=(ex[0], ex[-1], ey[0], ey[-1]))
             for i in range(nb):
                 for j in range(nb):
-                    if not np.isnan(g[i, j]):
+                    if not np.isnan(g[i, j]):     # dark text on the light (small) end
+                        light = math.log(shown[i, j] / lo) < 0.5 * math.log(crash_y / lo)
                         ax.text((ex[j] + ex[j + 1]) / 2, (ey[i] + ey[i + 1]) / 2,
                                 "crash" if np.isinf(g[i, j]) else f"{g[i, j]:.3f}",
-                                ha="center", va="center", fontsize=6, color="w")
+                                ha="center", va="center", fontsize=6,
+                                color="k" if light else "w")
             ax.set_title(c, fontsize=9)
             ax.set_xlabel(_label(kx), fontsize=8)
-            ax.set_ylabel(_label(ky), fontsize=8)
+        axes[0][0].set_ylabel(_label(ky), fontsize=8)
         fig.colorbar(im, ax=axes[0].tolist(), shrink=0.85)
         fig.suptitle(f"{campaign.name}: median RMSE after the fault (m) over the two most "
                      "telling parameters", fontsize=9, y=1.03)
