@@ -1219,10 +1219,15 @@ def main(argv: list[str] | None = None) -> int:
                   f"simulated s ({info['cpu_s'] / max(info['flown'], 1):.1f} CPU s a flight); the "
                   f"workers got {info['cpu_share']:.0%} of their cores")
         _write_json(args.out / "last_run.json", info)
+    elif (args.out / "last_run.json").is_file():      # --report-only: the last run's figures
+        try:
+            info = json.loads((args.out / "last_run.json").read_text())
+        except ValueError:
+            info = None
     results = load_results(args.out)
     rows = rows_of(campaign, results)
     write_csv(rows, args.out / "flights.csv")
-    report = write_report(campaign, rows, args.out, info if info and info["flown"] else None,
+    report = write_report(campaign, rows, args.out, info if info and info.get("flown") else None,
                           figures=not args.no_figures)
     print(f"campaign: {len(rows)} of {len(campaign.flights)} flights in "
           f"{args.out / 'flights.csv'}, "

@@ -129,7 +129,7 @@ def load_campaign_metrics(path: Path) -> dict:
 def campaigns_table(paths: list[Path], base: Path | None = None) -> str:
     """One row per campaign: its name (a link to the report.md beside its metrics.json, when
     there is one), flights (plants), per controller success rate / median position RMSE after
-    the fault, and its targets."""
+    the fault, and its targets (the campaign's own "headline" of them when it writes one)."""
     docs = [(p, load_campaign_metrics(p)) for p in paths]
     controllers: list[str] = []
     for _, doc in docs:
@@ -156,7 +156,7 @@ def campaigns_table(paths: list[Path], base: Path | None = None) -> str:
             median = ("crashed" if "rmse_median_m" in st.get("crashed_stats", ())
                       else _cell(st.get("rmse_median_m"), "{:.4f}"))
             cells.append(("-" if rate is None else f"{rate:.0%}") + " / " + median)
-        cells.append(targets_met(path, doc))
+        cells.append(doc.get("headline") or targets_met(path, doc))
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
 

@@ -287,6 +287,9 @@ def test_plant_report_separates_the_envelope_from_the_controller(tmp_path):
     assert (paired["pairs"], paired["better"]) == (11, 9) and not paired["met"]   # p6, p9 not
     assert summary["misses"] == {"no trim": 2, "margin < 5 %": 0, "margin >= 5 %": 1}
     assert len(summary["failures"]) == 2
+    assert summary["headline"] == ("a within 0.02 m on 88% of 8 plants with >= 5 % margin: "
+                                   "missed; better than b on 82% of 11 plants (89% of the 9 "
+                                   "with a trim): missed")
     assert "**Missed:**" in text and "`p7`" in text          # the controller's miss is listed
     assert summary["controllers"]["a"]["envelope"] == {"no trim": 2, "margin < 5 %": 1,
                                                        "margin >= 5 %": 8}
@@ -322,3 +325,6 @@ def test_results_campaigns_block(tmp_path):
     assert "| [`camp`](results/camp/report.md) | 6 (2 plants) |" in out
     assert "missed: trq_nmpc_eso: share within 0.02 m = 0.8765 (target >= 0.95)" in camp
     assert camp.index("trq_nmpc_eso success") < camp.index("trq_nmpc success")
+    doc = json.loads((res / "camp" / "metrics.json").read_text())
+    (res / "camp" / "metrics.json").write_text(json.dumps({**doc, "headline": "all met"}))
+    assert "| all met |" in results.update_text(text, res)    # the campaign's own words win
