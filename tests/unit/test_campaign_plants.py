@@ -328,3 +328,20 @@ def test_results_campaigns_block(tmp_path):
     doc = json.loads((res / "camp" / "metrics.json").read_text())
     (res / "camp" / "metrics.json").write_text(json.dumps({**doc, "headline": "all met"}))
     assert "| all met |" in results.update_text(text, res)    # the campaign's own words win
+
+
+def test_trq_envelope_takes_a_plant(tmp_path, capsys):
+    from trq_lab.analysis import envelope
+
+    out = {}
+    for name, plant in (("nominal", []), ("heavier", ["--plant", "mass_scale=1.03"])):
+        path = tmp_path / f"{name}.json"
+        assert envelope.main(["--motor", "1", "--eff", "0.5", "--wind", "8", *plant,
+                              "--json", str(path)]) == 0
+        out[name] = json.loads(path.read_text())["trim"]["throttle_pct"]
+    assert max(out["heavier"]) > max(out["nominal"])          # 3 % more weight: less margin
+    assert "throttle margin: up" in capsys.readouterr().out
+    assert envelope.main(["--plant", "mass=1.1"]) == 2
+    assert "KEY one of mass_scale" in capsys.readouterr().err
+    assert envelope.main(["--plant", "thrust_scale=0.5"]) == 2
+    assert "cannot fly" in capsys.readouterr().err
