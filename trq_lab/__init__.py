@@ -11,11 +11,13 @@ flight here is one that the daemons fly the same way on their own.
     harness         the one closed loop in one process: the vehicle's `Sitl` and the controller's
                     `OffboardFlight` joined by an in-memory link of the same MAVLink bytes
                     (trq-inprocess; the campaigns, the benchmark and the tests fly it)
-    overlays        the controller overlay every flight flies (a reference over a controller file)
+    overlays        the controller overlay every flight flies (a reference over a controller file),
+                    and a perturbed airframe (a campaign's plant)
     metrics         a flight's metrics from its two logs (pure functions of arrays)
     report          a scenario's report.md and figures
     results         the README's results tables, generated from result files (trq-results)
     campaign        grids and seeded samples of flights on Dask, resumable (trq-campaign)
+    plants          a campaign's report over its plants: the faulted trim against the flights
     stress          hostile and malformed traffic against both daemons (trq-stress)
     analysis/       envelope (trim and margins, trq-envelope), latency_bound (the best any
                     controller could fly after a fault, given its reaction time, trq-latency-bound)

@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """Fault campaigns at scale: a grid and/or a seeded random sample of flights over fault, wind,
-trajectory and controller, flown on Dask (a LocalCluster by default, or an existing cluster).
+trajectory, link, plant and controller, flown on Dask (a LocalCluster by default, or an existing cluster).
 
     trq-campaign smoke --out out/campaign_smoke --workers 2
     trq-campaign CAMPAIGN.yaml --out DIR [--workers N | --scheduler tcp://HOST:8786]
@@ -20,6 +20,11 @@ Outputs in DIR:
     report.md           success rate and position RMSE per controller against fault severity
                         and wind (tables), where each controller stops coping, and the figures
     success.png, rmse.png   the heat maps
+    metrics.json        the report's summary per controller (and the targets missed), which
+                        trq-results turns into the README's campaigns row
+With a plant axis, report.md also sets every flight against its plant's faulted trim
+(trq_lab.plants: envelope classes, rank correlations, paired comparison, targets), with
+margin.png, rmse_dist.png and params.png.
 
 Campaign file (strict: an unknown or misspelt key is an error naming the file and the key):
 
@@ -43,13 +48,23 @@ Campaign file (strict: an unknown or misspelt key is an error naming the file an
 
 An axis of `grid` may also be a list of such mappings (their union); `none` in the fault axis is
 a flight without a fault. Axes left out: no fault, no wind, the controller file's reference, a
-clean link.
+clean link, the airframe file as it is. In `sample` a number may also be {normal: [mean, sd]}
+(truncated to the key's range).
 Fault keys: at_s and either motor (1..4) with effectiveness (a), optional time-varying terms
 tv_b, tv_w_rad_s, tv_phi_rad (e = a - b sin(w t + phi)), or stopped: true; or servo (1..4) with
 stuck_deg. Wind keys: speed_m_s, direction_deg (from, clockwise from north), gusts,
 gust_sigma_m_s. Link keys (the offboard link's seeded impairment, as a scenario's
 offboard_link; the controller is told its round trip as applied_delay_s, as by the scenario
-runner): loss, delay_ms, jitter_ms, duplicate, reorder. Trajectory keys: those of the controller file's `reference` (kind, altitude_m,
+runner): loss, delay_ms, jitter_ms, duplicate, reorder. Plant keys (the SIMULATED airframe
+only, each controller's own file: trq_lab.overlays.PLANT_PARAMS): mass_scale, inertia_scale,
+arm_length_scale, thrust_scale, torque_scale (a curve's coefficients together), motor_lag_scale,
+motor_rate_scale, servo_lag_scale, servo_rate_scale, drag_scale, idle_offset_pct; every plant is
+checked against every controller's airframe when the campaign is read (a plant that cannot lift
+the weight is an error naming the draw). The plant enters the flight's spec (and so its id) but
+not its seed: the plants of a cell meet the same noise and gusts. `controller_model: plant` (or
+[nominal, plant], both) gives the controller's model the plant's airframe too; default nominal.
+`targets` (optional): {controller, min_margin_pct, rmse_after_fault_m, share, better: [{worse,
+share}]}, judged in the report (trq_lab.plants). Trajectory keys: those of the controller file's `reference` (kind, altitude_m,
 climb_speed_m_s, hold_s, duration_s, ramp_s, radius_m, period_s, helix_climb_m, step_ned_m, land);
 their types are checked when the campaign is read, their values and combinations (ramp_s at most
 half of duration_s, ...) by the controller's own loader when the flight is prepared: an invalid
@@ -85,7 +100,7 @@ from trq_params.loader import Choice, Flag, Int, Invalid, Num, Text, Vec, chain,
 from trq_params.schema import Strict
 
 PARAMS = trq_params.DIR
-AXES = ("fault", "wind", "trajectory", "link")
+AXES = ("fault", "wind", "trajectory", "link", "plant")
 REFERENCE_KINDS = ("hover", "step", "circle", "helix", "figure8")
 
 # key: (kind, lo, hi); kind: int | float | bool | vec3 | kind
@@ -105,8 +120,19 @@ TRAJECTORY_KEYS = {"kind": ("kind", None, None), "altitude_m": ("float", None, N
 LINK_KEYS = {"loss": ("float", 0.0, 1.0), "delay_ms": ("float", 0.0, 10_000.0),
              "jitter_ms": ("float", 0.0, 10_000.0), "duplicate": ("float", 0.0, 1.0),
              "reorder": ("float", 0.0, 1.0)}
+# the simulated airframe's parameters (trq_lab.overlays.PLANT_PARAMS says what each changes):
+# factors, and an offset for idle; the ranges keep a plant physical, the vehicle schema then
+# checks the airframe that results (a thrust curve that still lifts the weight, ...)
+PLANT_KEYS = {"mass_scale": ("float", 0.5, 2.0), "inertia_scale": ("float", 0.2, 5.0),
+              "arm_length_scale": ("float", 0.5, 2.0), "thrust_scale": ("float", 0.5, 2.0),
+              "torque_scale": ("float", 0.2, 5.0), "motor_lag_scale": ("float", 0.0, 10.0),
+              "motor_rate_scale": ("float", 0.1, 10.0), "servo_lag_scale": ("float", 0.0, 10.0),
+              "servo_rate_scale": ("float", 0.1, 10.0), "drag_scale": ("float", 0.0, 10.0),
+              "idle_offset_pct": ("float", -20.0, 20.0)}
+PLANT_NEUTRAL = {k: (0.0 if k.endswith("_offset_pct") else 1.0) for k in PLANT_KEYS}
+CONTROLLER_MODELS = ("nominal", "plant")
 AXIS_KEYS = {"fault": FAULT_KEYS, "wind": WIND_KEYS, "trajectory": TRAJECTORY_KEYS,
-             "link": LINK_KEYS}
+             "link": LINK_KEYS, "plant": PLANT_KEYS}
 WIND_DEFAULT = {"speed_m_s": 0.0, "direction_deg": 0.0, "gusts": False}
 SAMPLE_DIGITS = 4            # sampled numbers are rounded: readable tables, stable ids
 
@@ -125,6 +151,8 @@ class Campaign:
     timeout_s: float
     repeats: int
     flights: tuple[dict, ...]          # flight specs (JSON-able), controllers included
+    targets: Any = None                # _PlantTargets or None
+    has_plant: bool = False            # a plant axis: every spec has "plant"
 
 
 def _field(kind: str, lo, hi):
@@ -154,6 +182,13 @@ AXIS_MODELS = {axis: _axis_models(axis) for axis in AXES}
 
 
 @functools.cache
+def _normal_model():
+    """{normal: [mean, sd]}: a normal draw, truncated to the key's range (drawn again until it
+    falls inside); the mean within the range and sd > 0 are checked by `_axis_values`."""
+    return create_model("normal", __base__=Strict, normal=(Vec(2), ...))
+
+
+@functools.cache
 def _uniform_model(lo, hi):
     """{uniform: [lo, hi]}: a continuous draw within the key's range."""
     return create_model("uniform", __base__=Strict,
@@ -164,7 +199,8 @@ def _uniform_model(lo, hi):
 def _axis_values(raw_axis: Any, file, where: str, axis: str,
                  sampling: bool) -> dict[str, list | dict]:
     """Each key of one axis mapping -> its list of values (grid) or its distribution (sample):
-    a list (choice) or {"uniform": [lo, hi]}. Scalars become one-element lists. Checked with
+    a list (choice), {"uniform": [lo, hi]} or {"normal": [mean, sd]}. Scalars become one-element
+    lists. Checked with
     the loader's field types: errors name the file and the dotted key (`grid.fault.motor[1]`)."""
     keys = AXIS_KEYS[axis]
     point, lists = AXIS_MODELS[axis]
@@ -182,6 +218,15 @@ def _axis_values(raw_axis: Any, file, where: str, axis: str,
             if kind not in ("float", "int"):
                 raise ConfigError(f"{file}: key '{where}.{key}': got {raw!r}, expected a value "
                                   "or a list of values to choose from")
+            if "normal" in raw:
+                mean, sd = validate(_normal_model(), raw, file, prefix=f"{where}.{key}").normal
+                lo_, hi_ = (-math.inf if lo is None else lo), (math.inf if hi is None else hi)
+                if not (sd > 0.0 and lo_ <= mean <= hi_):
+                    raise ConfigError(f"{file}: key '{where}.{key}.normal': got "
+                                      f"{[mean, sd]}, expected [mean, sd] with sd > 0 and the "
+                                      f"mean in [{lo_:g}, {hi_:g}]")
+                out[key] = {"normal": [mean, sd]}
+                continue
             bounds = validate(_uniform_model(lo, hi), raw, file,
                               prefix=f"{where}.{key}").uniform
             if bounds[0] > bounds[1]:
@@ -282,7 +327,19 @@ def _sample_axis(values: dict | None, axis: str, rng) -> dict | None:
     point = {}
     for key in sorted(values):
         v = values[key]
-        if isinstance(v, dict):
+        if isinstance(v, dict) and "normal" in v:
+            kind, lo, hi = AXIS_KEYS[axis][key]
+            mean, sd = v["normal"]
+            lo = -math.inf if lo is None else lo
+            hi = math.inf if hi is None else hi
+            for _ in range(10_000):
+                x = float(rng.normal(mean, sd))
+                if lo <= x <= hi:
+                    break
+            else:
+                x = min(max(mean, lo), hi)   # unreachable for a mean in range and sd > 0
+            point[key] = int(round(x)) if kind == "int" else round(x, SAMPLE_DIGITS)
+        elif isinstance(v, dict):
             lo, hi = v["uniform"]
             x = float(rng.uniform(lo, hi))
             kind = AXIS_KEYS[axis][key][0]
@@ -315,6 +372,30 @@ def controller_inputs(name: str) -> tuple[Path, str]:
     return path, _file_digest(files)
 
 
+def controller_vehicle(name: str) -> str:
+    """The airframe file of a controller (its model's, and the simulated vehicle's)."""
+    from trq_lab.overlays import controller_file
+    from trq_offboard.config import load_controller
+
+    return load_controller(controller_file(name)).vehicle.file
+
+
+def _check_plant(plant: dict, vehicles: dict[str, str], file, where: str) -> None:
+    """Every controller's airframe with `plant` applied must be a valid vehicle file."""
+    from trq_params import schema
+
+    from trq_lab.overlays import perturbed_vehicle, vehicle_data
+
+    if not plant:
+        return
+    for vfile in sorted(set(vehicles.values())):
+        try:
+            validate(schema.VehicleFile, perturbed_vehicle(vehicle_data(vfile), plant), vfile)
+        except ConfigError as exc:
+            raise ConfigError(f"{file}: key '{where}': got {plant}, expected a plant with "
+                              f"which the airframe stays valid: {exc}") from None
+
+
 def flight_id(spec: dict) -> str:
     text = json.dumps({k: v for k, v in spec.items() if k != "id"}, sort_keys=True)
     return hashlib.sha256(text.encode()).hexdigest()[:16]
@@ -326,12 +407,31 @@ class _Grid(Strict):
     wind: Any = None
     trajectory: Any = None
     link: Any = None
+    plant: Any = None
 
 
 class _Sample(_Grid):
     """n seeded random draws of the axes' distributions."""
     n: Int(1, 10_000_000)
     seed: Int(0, 2**31 - 1)
+
+
+class _Paired(Strict):
+    """`controller` does better than `worse` (a lower RMSE after the fault, or it flies where
+    the other crashes) on at least `share` of the flights both flew on the same plant."""
+    worse: Text
+    share: Num(0.0, 1.0)
+
+
+class _PlantTargets(Strict):
+    """A campaign's targets: among the flights of `controller` whose faulted trim keeps at least
+    `min_margin_pct` of throttle margin on every motor, at least `share` stay within
+    `rmse_after_fault_m`; and the paired comparisons."""
+    controller: Text
+    min_margin_pct: Num(0.0, 100.0)
+    rmse_after_fault_m: Num(1e-5, 100.0)
+    share: Num(0.0, 1.0)
+    better: list[_Paired] = []
 
 
 class CampaignFile(Strict):
@@ -344,6 +444,8 @@ class CampaignFile(Strict):
     recovery_threshold_m: Num(0.001, 100.0)
     timeout_s: Num(1.0, 36000.0)
     repeats: Int(1, 1000) = 1
+    controller_model: Any = "nominal"
+    targets: _PlantTargets | None = None
     grid: _Grid | None = None
     sample: _Sample | None = None
 
@@ -358,6 +460,19 @@ class CampaignFile(Strict):
                               "controller YAML path")
         if self.grid is None and self.sample is None:
             raise Invalid("grid", None, "a grid (or a sample): a campaign needs flights")
+        models = self.controller_model
+        if not (models in CONTROLLER_MODELS or (
+                isinstance(models, list) and models and len(set(models)) == len(models)
+                and all(m in CONTROLLER_MODELS for m in models))):
+            raise Invalid("controller_model", models, "one of " + "|".join(CONTROLLER_MODELS)
+                          + " or a list of distinct ones")
+        t = self.targets
+        if t is not None:
+            for key, name in [("targets.controller", t.controller)] + [
+                    (f"targets.better[{i}].worse", b.worse) for i, b in enumerate(t.better)]:
+                if name not in self.controllers:
+                    raise Invalid(key, name, "one of the campaign's controllers ("
+                                  + ", ".join(self.controllers) + ")")
         return self
 
 
@@ -378,10 +493,15 @@ def load_campaign(path: Path) -> Campaign:
         except ConfigError as exc:
             raise ConfigError(f"{path}: key 'controllers[{i}]': {c!r} does not load: "
                               f"{exc}") from exc
+    vehicles = {c: controller_vehicle(c) for c in top.controllers}
     cells: list[tuple] = []
     if top.grid is not None:
         grid = _axes(top.grid)
         cells += list(itertools.product(*(_grid_axis(grid, path, axis) for axis in AXES)))
+    has_plant = any(s is not None and "plant" in _axes(s) for s in (top.grid, top.sample))
+    if top.grid is not None:
+        for plant in {json.dumps(c[4], sort_keys=True): c[4] for c in cells}.values():
+            _check_plant(plant, vehicles, path, "grid.plant")
     if top.sample is not None:
         dists = {axis: _axis_values(raw, path, f"sample.{axis}", axis, sampling=True)
                  for axis, raw in _axes(top.sample).items()}
@@ -393,13 +513,16 @@ def load_campaign(path: Path) -> Campaign:
             except ConfigError as exc:
                 raise ConfigError(f"{exc} (a sampled fault must be valid whatever is "
                                   "drawn)") from exc
+            _check_plant(point[4], vehicles, path, f"sample.plant (draw {k})")
             cells.append(point)
     name, description, seed, controllers = top.name, top.description, top.seed, top.controllers
     success, threshold, timeout, repeats = (top.success_rmse_m, top.recovery_threshold_m,
                                             top.timeout_s, top.repeats)
+    models = top.controller_model if isinstance(top.controller_model, list) else \
+        [top.controller_model]
     flights = []
     seen = set()
-    for fault, wind, traj, link in cells:
+    for fault, wind, traj, link, plant in cells:
         wind = {**WIND_DEFAULT, **(wind or {})}
         for r in range(repeats):
             cell = {"fault": fault, "wind": wind, "trajectory": traj or {}, "repeat": r}
@@ -407,16 +530,23 @@ def load_campaign(path: Path) -> Campaign:
                 cell["link"] = link
             text = json.dumps({"campaign_seed": seed, **cell}, sort_keys=True)
             fseed = int(hashlib.sha256(text.encode()).hexdigest()[:8], 16) % 2**31
-            for c in controllers:
-                spec = {"controller": c, **cell, "seed": fseed, "timeout_s": timeout,
-                        "recovery_threshold_m": threshold, "params_digest": digests[c]}
-                spec["id"] = flight_id(spec)
-                if spec["id"] in seen:
-                    continue                      # the same flight listed twice: fly it once
-                seen.add(spec["id"])
-                flights.append(spec)
+            # the plant is not in the seed: every plant of a cell meets the same noise and
+            # gusts (common random numbers), so what differs between plants is the plant's
+            for model in models:
+                extra: dict[str, Any] = {"plant": plant} if has_plant else {}
+                if model != "nominal":
+                    extra["controller_model"] = model
+                for c in controllers:
+                    spec = {"controller": c, **cell, **extra, "seed": fseed,
+                            "timeout_s": timeout, "recovery_threshold_m": threshold,
+                            "params_digest": digests[c]}
+                    spec["id"] = flight_id(spec)
+                    if spec["id"] in seen:
+                        continue                  # the same flight listed twice: fly it once
+                    seen.add(spec["id"])
+                    flights.append(spec)
     return Campaign(name, path, description, seed, tuple(controllers), success, threshold,
-                    timeout, repeats, tuple(flights))
+                    timeout, repeats, tuple(flights), top.targets, has_plant)
 
 
 # --- one flight, on a worker -------------------------------------------------------------------
@@ -454,7 +584,60 @@ def flight_inputs(spec: dict) -> dict:
             v = traj.get(key)
             row[f"traj_{key}"] = json.dumps(v) if isinstance(v, list) else v
     row.update(seed=spec["seed"], repeat=spec["repeat"])
+    if "plant" in spec:
+        for key in PLANT_KEYS:
+            row[f"plant_{key}"] = spec["plant"].get(key, PLANT_NEUTRAL[key])
+        row["controller_model"] = spec.get("controller_model", "nominal")
+        row["plant_id"] = plant_id(spec)
     return row
+
+
+def plant_id(spec: dict) -> str:
+    """What the flights of one plant share (all but the controller): a short hash, so that a
+    table or a figure can pair the controllers' flights on the same plant."""
+    keep = {k: v for k, v in spec.items() if k not in ("id", "controller", "params_digest")}
+    return hashlib.sha256(json.dumps(keep, sort_keys=True).encode()).hexdigest()[:8]
+
+
+def _fault_factors(fault: dict | None) -> tuple[tuple[float, ...], tuple[tuple[int, float], ...]]:
+    """(motor factors, stuck tilts) of a campaign fault for trq_lab.analysis.envelope: a motor's
+    worst effectiveness (a - b of a time-varying one, 0 stopped), a stuck servo's angle."""
+    factors = [1.0] * 4
+    stuck: list[tuple[int, float]] = []
+    if fault is not None and "motor" in fault:
+        worst = 0.0 if fault.get("stopped") else fault["effectiveness"] - fault.get("tv_b", 0.0)
+        factors[fault["motor"] - 1] = min(1.0, max(0.0, worst))
+    elif fault is not None:
+        stuck.append((fault["servo"] - 1, math.radians(fault["stuck_deg"])))
+    return tuple(factors), tuple(stuck)
+
+
+@functools.lru_cache(maxsize=64)
+def _envelope_cached(vp, factors: tuple, wind_m_s: float, wind_from_deg: float,
+                     stuck: tuple) -> dict:
+    from trq_lab.analysis import envelope
+
+    out = envelope.analyse(vp, list(factors), wind_m_s, wind_from_deg,
+                           tilt_fixed_rad=dict(stuck) or None)
+    m = envelope.throttle_margins(out, vp)
+    return {"feasible": out["feasible"], "motor_factors": list(factors),
+            "stuck_tilt": [[i + 1, round(math.degrees(a), 3)] for i, a in stuck],
+            "throttle_pct": out["trim"]["throttle_pct"], "tilt_deg": out["trim"]["tilt_deg"],
+            "roll_deg": out["trim"]["roll_deg"], "pitch_deg": out["trim"]["pitch_deg"],
+            "throttle_margin_up_pct": m["up_pct"], "throttle_margin_down_pct": m["down_pct"],
+            "min_throttle_margin_pct": m["min_pct"],
+            "wrench_margin": {k: (None if v is None else float(v))
+                              for k, v in out["margin"].items()}}
+
+
+def flight_envelope(vp, fault: dict | None, wind: dict) -> dict:
+    """The faulted hover trim of the simulated airframe `vp` (a plant's, perturbed) in the
+    flight's mean wind, and its margins (trq_lab.analysis.envelope); computed once per process
+    for a plant, a fault and a wind (the controllers of a plant share it)."""
+    factors, stuck = _fault_factors(fault)
+    key = dataclasses.replace(vp, file="")          # the same airframe wherever its file lives
+    return dict(_envelope_cached(key, factors, float(wind["speed_m_s"]),
+                                 float(wind["direction_deg"]), stuck))
 
 
 def run_flight(spec: dict, log_dir: str | None = None) -> dict:
@@ -473,6 +656,19 @@ def run_flight(spec: dict, log_dir: str | None = None) -> dict:
             out = Path(log_dir) / spec["id"] if log_dir else Path(tmp)
             ctl_yaml = inprocess.prepare_controller(spec["controller"], spec["trajectory"], out)
             cfg = load_controller(ctl_yaml)
+            vehicle_file = cfg.vehicle.file
+            controller = None                    # the harness's cached Controller of cfg
+            if "plant" in spec:                  # the simulated airframe, perturbed
+                from trq_lab.overlays import write_controller_overlay, write_vehicle_overlay
+                vehicle_file = write_vehicle_overlay(cfg.vehicle.file, spec["plant"],
+                                                     out / "plant")
+                if spec.get("controller_model") == "plant":     # and the model with it
+                    from trq_offboard.controller import Controller
+                    ctl_yaml = write_controller_overlay(
+                        ctl_yaml, None, out / "model", "the controller's model: the plant",
+                        vehicle=vehicle_file)
+                    cfg = load_controller(ctl_yaml)
+                    controller = "build"         # its own, not cached: one model per plant
             link = spec.get("link")
             if link:            # the controller is told the link's round trip, as by the runner
                 from trq_lab import scenario as run_scenario
@@ -480,7 +676,9 @@ def run_flight(spec: dict, log_dir: str | None = None) -> dict:
                     cfg, applied_delay_s=run_scenario.command_delay_s(link, False))
             record["applied_delay_s"] = cfg.applied_delay_s
             w = spec["wind"]
-            sim = inprocess.sim_params(cfg.vehicle.file, cfg.control_rate_hz, seed=spec["seed"],
+            if controller == "build":
+                controller = Controller(cfg)
+            sim = inprocess.sim_params(vehicle_file, cfg.control_rate_hz, seed=spec["seed"],
                                        wind_speed_m_s=w["speed_m_s"],
                                        wind_from_deg=w["direction_deg"], gusts=w["gusts"],
                                        gust_sigma_m_s=w.get("gust_sigma_m_s"),
@@ -489,7 +687,12 @@ def run_flight(spec: dict, log_dir: str | None = None) -> dict:
             event = _fault_event(spec["fault"], f"flight {spec['id']}", "fault",
                                  (math.degrees(vp.tilt_min_rad), math.degrees(vp.tilt_max_rad)))
             events = (event,) if event is not None else ()
-            res = inprocess.fly_inprocess(cfg, sim, events, out_dir=out,
+            try:                # the envelope never fails the flight: its error is recorded
+                record["envelope"] = flight_envelope(vp, spec["fault"], w)
+            except Exception:
+                record["envelope"] = {"error": traceback.format_exc().strip().splitlines()[-1]}
+            res = inprocess.fly_inprocess(cfg if controller is None else controller, sim,
+                                          events, out_dir=out,
                                           timeout_s=spec["timeout_s"], name=spec["controller"])
             onset = event.at_us if event is not None else None
             record["metrics"] = inprocess.flight_metrics(res.out_dir, spec["controller"], onset,
@@ -547,6 +750,10 @@ def rows_of(campaign: Campaign, results: dict[str, dict]) -> list[dict]:
         m = rec.get("metrics") or {}
         for key in METRIC_KEYS:
             row[key] = m.get(key)
+        env = rec.get("envelope") or {}
+        row.update(env_feasible=env.get("feasible"),
+                   env_min_margin_pct=env.get("min_throttle_margin_pct"),
+                   env_max_throttle_pct=max(env["throttle_pct"]) if env.get("feasible") else None)
         err = rec.get("error")
         row.update(status=rec.get("status"), success=is_success(rec, campaign.success_rmse_m),
                    wall_s=rec.get("wall_s"), sim_s=rec.get("sim_s"),
@@ -745,8 +952,12 @@ def write_report(campaign: Campaign, rows: list[dict], out: Path, run_info: dict
         lines += [f"Last run: {run_info['flown']} flights in {run_info['wall_s']:.0f} s on "
                   f"{run_info['workers']} worker(s): **{run_info['flights_per_hour']:.0f} "
                   f"flights/hour**.", ""]
+    summary: dict = {"campaign": campaign.name, "description": campaign.description.strip(),
+                     "planned": n_plan, "flights": len(rows),
+                     "failed": len(failed), "success_rmse_m": campaign.success_rmse_m}
     if not rows:
         (out / "report.md").write_text("\n".join(lines) + "\n")
+        _write_json(out / "metrics.json", summary)
         return out / "report.md"
     winds, sevs, stats = summarise(campaign, rows)
     lines += ["## Success rate per controller", "",
@@ -762,6 +973,26 @@ def write_report(campaign: Campaign, rows: list[dict], out: Path, run_info: dict
                      f"{sum(r['status'] == 'failed' for r in rs)} | "
                      f"{_fmt(statistics.median(rm) if rm else None)} |")
     lines.append("")
+    if campaign.has_plant:
+        from trq_lab import plants
+
+        plant_lines, plant_summary = plants.report(campaign, rows, out, figures)
+        lines += plant_lines
+        summary.update(plant_summary)
+    else:
+        summary["controllers"] = {}
+        for c in campaign.controllers:
+            rs = [r for r in rows if r["controller"] == c]
+            rm = [v for r in rs if not r["crashed"] and (v := _rmse_of(r)) is not None]
+            if rs:
+                summary["controllers"][c] = {
+                    "flights": len(rs), "success_rate": sum(r["success"] for r in rs) / len(rs),
+                    "crashed": sum(bool(r["crashed"]) for r in rs),
+                    "rmse_median_m": float(statistics.median(rm)) if rm else None}
+    _write_json(out / "metrics.json", summary)
+    if campaign.has_plant and len(winds) * len(sevs) == 1:
+        figures = False                  # one cell: the cell tables and heat maps say nothing
+        stats = {}
     head = "| wind | " + " | ".join(s[1] for s in sevs) + " |"
     rule = "|---|" + "---|" * len(sevs)
     for c in campaign.controllers:
@@ -784,7 +1015,7 @@ def write_report(campaign: Campaign, rows: list[dict], out: Path, run_info: dict
                 cellv.append("" if st is None else _fmt(st["rmse_median"]))
             lines.append(f"| {w[1]} | " + " | ".join(cellv) + " |")
         lines.append("")
-    if any(s[0][0] == "motor" for s in sevs):
+    if stats and any(s[0][0] == "motor" for s in sevs):
         lines += ["## Where each controller stops coping", "",
                   "The largest loss of motor effectiveness up to which every flight (every motor, "
                   "every smaller loss) succeeded.", "",
@@ -967,8 +1198,11 @@ def main(argv: list[str] | None = None) -> int:
     if args.dry_run:
         for s in campaign.flights:
             r = flight_inputs(s)
+            plant = "" if "plant" not in s else " plant " + ",".join(
+                f"{k}={v:g}" for k, v in sorted(s["plant"].items())) + (
+                " (model: the plant)" if s.get("controller_model") == "plant" else "")
             print(f"{s['id']} {s['controller']:14s} fault {r['fault_kind']} {r['severity']:g} "
-                  f"wind {_wind_label(r)} traj {r['traj_kind']} seed {s['seed']}")
+                  f"wind {_wind_label(r)} traj {r['traj_kind']} seed {s['seed']}{plant}")
         print(f"campaign: {campaign.name}: {len(campaign.flights)} flights")
         return 0
     args.out.mkdir(parents=True, exist_ok=True)
@@ -985,10 +1219,15 @@ def main(argv: list[str] | None = None) -> int:
                   f"simulated s ({info['cpu_s'] / max(info['flown'], 1):.1f} CPU s a flight); the "
                   f"workers got {info['cpu_share']:.0%} of their cores")
         _write_json(args.out / "last_run.json", info)
+    elif (args.out / "last_run.json").is_file():      # --report-only: the last run's figures
+        try:
+            info = json.loads((args.out / "last_run.json").read_text())
+        except ValueError:
+            info = None
     results = load_results(args.out)
     rows = rows_of(campaign, results)
     write_csv(rows, args.out / "flights.csv")
-    report = write_report(campaign, rows, args.out, info if info and info["flown"] else None,
+    report = write_report(campaign, rows, args.out, info if info and info.get("flown") else None,
                           figures=not args.no_figures)
     print(f"campaign: {len(rows)} of {len(campaign.flights)} flights in "
           f"{args.out / 'flights.csv'}, "

@@ -7,10 +7,14 @@ Contract. In: result directories, one per scenario, each holding the ``metrics.j
 
     <!-- results:paper_fault50 begin -->  ...  <!-- results:paper_fault50 end -->
     <!-- results:scenarios begin -->      ...  <!-- results:scenarios end -->
+    <!-- results:campaigns begin -->      ...  <!-- results:campaigns end -->
 
 rewritten in place: the first is the full table of one scenario (any scenario name works), the
 second one row per scenario found under the results directory (other than those with a block of
-their own). Whether a scenario's targets were met is taken from ``metrics.json``'s
+their own), the third one row per campaign found there: the ``metrics.json`` that ``trq-campaign``
+writes (``{"campaign": ..., "flights": ..., "controllers": {NAME: {"success_rate": ...,
+"rmse_median_m": ...}}, "plants": ..., "failures": [...]}``; a campaign's is told from a
+scenario's by its "campaign" key). Whether a scenario's targets were met is taken from ``metrics.json``'s
 ``"failures"`` list when it has one, else from the "Missed" section of the ``report.md`` beside
 it ("none set" when that report has no Targets section); without either, "not recorded". Text
 outside the markers is never touched.
@@ -30,8 +34,8 @@ import re
 import sys
 from pathlib import Path
 
-__all__ = ["ResultsError", "main", "render_block", "scenario_table", "scenarios_table",
-           "update_text"]
+__all__ = ["ResultsError", "campaigns_table", "main", "render_block", "scenario_table",
+           "scenarios_table", "update_text"]
 
 # The faults of the shipped scenarios, as the scenarios table names them (metrics.json does not
 # name its fault; a "fault" key in it, when present, wins).
@@ -62,6 +66,7 @@ COLUMNS = (
 )
 
 SCENARIOS_BLOCK = "scenarios"
+CAMPAIGNS_BLOCK = "campaigns"
 _MARK = re.compile(r"<!-- results:([A-Za-z0-9_.-]+) (begin|end) -->")
 
 
@@ -93,6 +98,67 @@ def load_metrics(path: Path) -> dict:
         if not isinstance(run, dict) or "controller" not in run:
             raise ResultsError(f"{path}: runs[{i}] has no 'controller'")
     return doc
+
+
+def _read_json(path: Path) -> dict:
+    if not path.is_file():
+        raise ResultsError(f"{path}: no such result file")
+    try:
+        doc = json.loads(path.read_text())
+    except (OSError, ValueError) as exc:
+        raise ResultsError(f"{path}: not a readable metrics.json ({exc})") from exc
+    if not isinstance(doc, dict):
+        raise ResultsError(f"{path}: not a mapping")
+    return doc
+
+
+def is_campaign(path: Path) -> bool:
+    """Whether a metrics.json is a campaign's (trq-campaign) rather than a scenario's."""
+    return "campaign" in _read_json(path)
+
+
+def load_campaign_metrics(path: Path) -> dict:
+    """One campaign's metrics.json, checked for the keys the campaigns table reads."""
+    doc = _read_json(path)
+    if not isinstance(doc.get("controllers"), dict) or "flights" not in doc:
+        raise ResultsError(f"{path}: no 'controllers' mapping or no 'flights' (not a "
+                           "metrics.json of trq-campaign)")
+    return doc
+
+
+def campaigns_table(paths: list[Path], base: Path | None = None) -> str:
+    """One row per campaign: its name (a link to the report.md beside its metrics.json, when
+    there is one), flights (plants), per controller success rate / median position RMSE after
+    the fault, and its targets (the campaign's own "headline" of them when it writes one)."""
+    docs = [(p, load_campaign_metrics(p)) for p in paths]
+    controllers: list[str] = []
+    for _, doc in docs:
+        for c in doc["controllers"]:
+            if c not in controllers:
+                controllers.append(c)
+    controllers = [c for c in CONTROLLERS if c in controllers] + \
+        [c for c in controllers if c not in CONTROLLERS]
+    head = ["campaign", "flights"] + [f"{c} success / median RMSE after fault m"
+                                      for c in controllers] + ["targets"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for path, doc in docs:
+        flights = str(doc["flights"]) + (f" ({doc['plants']} plants)" if doc.get("plants")
+                                         else "")
+        report = path.with_name("report.md")
+        name = f"`{doc['campaign']}`"
+        cells = [f"[{name}]({_shown(report, base)})" if report.is_file() else name, flights]
+        for c in controllers:
+            st = doc["controllers"].get(c)
+            if st is None:
+                cells.append("not flown")
+                continue
+            rate = st.get("success_rate")
+            median = ("crashed" if "rmse_median_m" in st.get("crashed_stats", ())
+                      else _cell(st.get("rmse_median_m"), "{:.4f}"))
+            cells.append(("-" if rate is None else f"{rate:.0%}") + " / " + median)
+        cells.append(doc.get("headline") or targets_met(path, doc))
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
 
 
 def _ordered(runs: list[dict]) -> list[dict]:
@@ -149,7 +215,8 @@ def scenario_table(metrics_path: Path, base: Path | None = None) -> str:
 
 
 def scenarios_table(paths: list[Path], base: Path | None = None) -> str:
-    """One row per scenario: its fault, per controller pos RMSE after fault / max yaw error."""
+    """One row per scenario: its name (a link to its report.md, else to its metrics.json), its
+    fault, per controller pos RMSE after fault / max yaw error."""
     docs = [(p, load_metrics(p)) for p in paths]
     controllers: list[str] = []
     for _, doc in docs:
@@ -164,7 +231,10 @@ def scenarios_table(paths: list[Path], base: Path | None = None) -> str:
     for path, doc in docs:
         name = doc.get("scenario", path.parent.name)
         by = {r["controller"]: r for r in doc["runs"]}
-        cells = [f"`{name}`", str(doc.get("fault", FAULTS.get(name, "-")))]
+        report = path.with_name("report.md")
+        source = report if report.is_file() else path
+        cells = [f"[`{name}`]({_shown(source, base)})",
+                 str(doc.get("fault", FAULTS.get(name, "-")))]
         for c in controllers:
             r = by.get(c)
             if r is None:
@@ -177,8 +247,6 @@ def scenarios_table(paths: list[Path], base: Path | None = None) -> str:
                 cells.append(cell + (" (crashed)" if r.get("crashed") else ""))
         cells.append(targets_met(path, doc))
         lines.append("| " + " | ".join(cells) + " |")
-    lines.append("")
-    lines.append("Sources: " + ", ".join(f"`{_shown(p, base)}`" for p, _ in docs) + ".")
     return "\n".join(lines)
 
 
@@ -206,9 +274,15 @@ def blocks_in(text: str, source: str) -> list[str]:
 def render_block(name: str, results_dir: Path, own_blocks: list[str],
                  base: Path | None = None) -> str:
     """The generated text of block ``name`` (without its markers)."""
+    if name == CAMPAIGNS_BLOCK:
+        paths = sorted(p for p in results_dir.glob("*/metrics.json") if is_campaign(p))
+        if not paths:
+            raise ResultsError(f"{results_dir}: no campaign's */metrics.json for the block "
+                               f"'results:{CAMPAIGNS_BLOCK}'")
+        return campaigns_table(paths, base)
     if name == SCENARIOS_BLOCK:
         paths = sorted(p for p in results_dir.glob("*/metrics.json")
-                       if p.parent.name not in own_blocks)
+                       if p.parent.name not in own_blocks and not is_campaign(p))
         if not paths:
             raise ResultsError(f"{results_dir}: no */metrics.json for the block "
                                f"'results:{SCENARIOS_BLOCK}'")
@@ -223,7 +297,7 @@ def update_text(text: str, results_dir: Path, source: str = "README",
     for name in required:
         if name not in names:
             raise ResultsError(f"{source}: marker '<!-- results:{name} begin -->' missing")
-    own = [n for n in names if n != SCENARIOS_BLOCK]
+    own = [n for n in names if n not in (SCENARIOS_BLOCK, CAMPAIGNS_BLOCK)]
     for name in names:
         body = render_block(name, results_dir, own, base)
         pattern = re.compile(r"(<!-- results:" + re.escape(name) + r" begin -->\n)"
@@ -239,7 +313,8 @@ def main(argv: list[str] | None = None) -> int:
                     "'<!-- results:NAME begin -->' and '<!-- results:NAME end -->') from "
                     "result files: RESULTS/<scenario>/metrics.json as trq-scenario writes it. "
                     "Block NAME is that scenario's full table; block 'scenarios' has one row "
-                    "per other scenario found.")
+                    "per other scenario found; block 'campaigns' one row per campaign "
+                    "(RESULTS/<campaign>/metrics.json as trq-campaign writes it).")
     parser.add_argument("--readme", type=Path, default=Path("README.md"),
                         help="the Markdown file to update in place (default: README.md)")
     parser.add_argument("--results", type=Path, default=Path("docs/results"),

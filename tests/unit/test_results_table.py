@@ -6,7 +6,6 @@ import importlib.util
 import json
 from pathlib import Path
 
-
 _PATH = Path(__file__).resolve().parents[2] / "trq_lab" / "results.py"
 
 
@@ -58,7 +57,7 @@ def test_blocks_written(tmp_path):
     assert "stale" not in text
     row = "| trq_nmpc_eso | trq | False | 40.7 | 0.002 | 0.019 | 0.0023 | 0.28 | 0.00 | 1.1 | 3.8 |"
     assert row in text
-    assert "| `other` | - | 0.0128 / 0.28 | not recorded |" in text
+    assert "| [`other`](results/other/metrics.json) | - | 0.0128 / 0.28 | not recorded |" in text
     assert "`demo`" not in text.split("results:scenarios begin")[1]   # it has its own block
     assert text.startswith("# title\nintro\n<!-- results:demo begin -->\n")
     assert "<!-- results:demo end -->\nbetween\n" in text

@@ -4,7 +4,8 @@ and torque margin the actuators have left (an allocation problem under the actua
 solved with CasADi + IPOPT on the simulator's own rotor model).
 
     trq-envelope [--vehicle params/vehicle/trq.yaml] [--motor 1 --eff 0.5]
-                             [--wind 8 --wind-dir 0] [--json PATH]
+                             [--wind 8 --wind-dir 0] [--plant mass_scale=1.03,thrust_scale=0.95]
+                             [--json PATH]
 
 The trim holds position at constant yaw: roll and pitch are free (a fixed-rotor quadcopter must
 lean into the wind), throttles within idle..100 %, tilts within the servo range. The margins are,
@@ -49,7 +50,9 @@ def wrench_expr(alpha, zeta, factors, vp: VehicleParams):
 
 
 def analyse(vp: VehicleParams, factors: list[float], wind_speed: float, wind_from_deg: float,
-            max_tilt_deg: float = 35.0) -> dict:
+            max_tilt_deg: float = 35.0, tilt_fixed_rad: dict[int, float] | None = None) -> dict:
+    """The trim and margins (see the module docstring). `tilt_fixed_rad`: rotor index (0..3) ->
+    a tilt the rotor cannot leave (a stuck servo)."""
     n_tilt = 0 if vp.tilt_locked else 4
     alpha = ca.MX.sym("alpha", 4) if n_tilt else ca.MX.zeros(4)
     zeta = ca.MX.sym("zeta", 4)
@@ -69,6 +72,9 @@ def analyse(vp: VehicleParams, factors: list[float], wind_speed: float, wind_fro
     lbx = [lo_tilt] * n_tilt + [vp.idle_pct] * 4 + [-mt, -mt]
     ubx = [hi_tilt] * n_tilt + [100.0] * 4 + [mt, mt]
     x0 = [0.0] * n_tilt + [vp.hover_throttle_pct] * 4 + [0.0, 0.0]
+    for i, angle in (tilt_fixed_rad or {}).items():
+        if n_tilt:
+            lbx[i] = ubx[i] = x0[i] = float(angle)
     opts = {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes"}
     # 1) the trim: the wrench as close as possible to the need, then the smallest effort
     resid = w - need
@@ -113,6 +119,18 @@ def analyse(vp: VehicleParams, factors: list[float], wind_speed: float, wind_fro
     return out
 
 
+def throttle_margins(out: dict, vp: VehicleParams) -> dict:
+    """The trim's throttle margins (percentage points) of an `analyse` result: per motor, how far
+    its trim throttle sits from full throttle (up) and from idle (down), and the smallest of all;
+    None where there is no trim."""
+    if not out["feasible"]:
+        return {"up_pct": None, "down_pct": None, "min_pct": None}
+    zeta = out["trim"]["throttle_pct"]
+    up = [round(100.0 - z, 2) for z in zeta]
+    down = [round(z - vp.idle_pct, 2) for z in zeta]
+    return {"up_pct": up, "down_pct": down, "min_pct": round(min(up + down), 2)}
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="trq-envelope", description=__doc__.splitlines()[0])
     ap.add_argument("--vehicle", default="trq",
@@ -121,9 +139,35 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--eff", type=float, default=1.0, help="its effectiveness 0..1")
     ap.add_argument("--wind", type=float, default=0.0, help="wind speed m/s")
     ap.add_argument("--wind-dir", type=float, default=0.0, help="wind from, deg")
+    ap.add_argument("--plant", default=None,
+                    help="the airframe perturbed as a campaign's plant: KEY=VALUE,... "
+                         "(mass_scale, thrust_scale, idle_offset_pct, ...)")
     ap.add_argument("--json", type=Path, default=None)
     args = ap.parse_args(argv)
-    vp = load_vehicle(trq_params.resolve("vehicle", args.vehicle))
+    vehicle_file = trq_params.resolve("vehicle", args.vehicle)
+    if args.plant:
+        import tempfile
+
+        from trq_lab.overlays import PLANT_PARAMS, write_vehicle_overlay
+        plant = {}
+        for item in args.plant.split(","):
+            key, _, value = item.partition("=")
+            try:
+                if key not in PLANT_PARAMS:
+                    raise ValueError
+                plant[key] = float(value)
+            except ValueError:
+                print(f"envelope: --plant: got {item!r}, expected KEY=NUMBER with KEY one of "
+                      + ", ".join(PLANT_PARAMS), file=sys.stderr)
+                return 2
+        with tempfile.TemporaryDirectory() as tmp:
+            try:
+                vp = load_vehicle(write_vehicle_overlay(vehicle_file, plant, Path(tmp)))
+            except trq_params.ConfigError as exc:
+                print(f"envelope: --plant {args.plant}: {exc}", file=sys.stderr)
+                return 2
+    else:
+        vp = load_vehicle(vehicle_file)
     factors = [1.0] * 4
     if args.motor is not None:
         if not 1 <= args.motor <= 4 or not 0.0 <= args.eff <= 1.0:
@@ -137,6 +181,10 @@ def main(argv: list[str] | None = None) -> int:
     print(f"  trim {'feasible' if out['feasible'] else 'INFEASIBLE'}: throttle "
           f"{t['throttle_pct']} %, tilt {t['tilt_deg']} deg, roll {t['roll_deg']} deg, "
           f"pitch {t['pitch_deg']} deg; wrench residual {out['residual']}")
+    m = throttle_margins(out, vp)
+    if m["min_pct"] is not None:
+        print(f"  throttle margin: up {m['up_pct']} %, down {m['down_pct']} % (smallest "
+              f"{m['min_pct']:g} %)")
     for key, value in out["margin"].items():
         unit = "N" if key[1] == "F" else "N m"
         print(f"  margin {key}: {'none (not actuated or not reachable)' if value is None else f'{value:.3f} {unit}'}")
