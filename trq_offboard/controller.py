@@ -20,7 +20,10 @@ over the horizon, warm-started from the previous plan shifted by the elapsed tim
 the allocation's hover trim, rolled out through the model); (3) on a solver failure the previous
 plan shifted in time is flown while it lasts, then the allocation's hover command; (4) the
 command is clipped to the actuator limits as a last line of defence (counted) and is always
-finite. `step` never prints, sleeps or reads a clock (the solver measures its own wall time).
+finite. `step` never prints or sleeps, and reads no clock but the injected CPU clock `cpu_ns`
+(default time.thread_time_ns) that times its parts for StepInfo.cpu (observer, effectiveness,
+predictor, feedback) and `prepare` for `last_prepare_cpu_ns`: measurements only, never an input
+of what is computed (the solver measures its own wall time).
 
 `prepare` (optional, for solvers with a preparation phase such as the real-time iteration): called
 after the command of `step` has been sent, it linearises the NMPC at the plan expected one control
@@ -32,7 +35,9 @@ from __future__ import annotations
 
 import collections
 import math
+import time
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
@@ -42,8 +47,16 @@ from trq_offboard.effectiveness import MotorEffectivenessObserver
 from trq_offboard.eso import ExtendedStateObserver
 from trq_offboard.model import PredictionModel
 from trq_offboard.nmpc.solver import Solver, make_solver
-from trq_offboard.records import (ActuatorCommand, CommandSource, ReferenceSample, SolveInfo,
-                                  SolveStatus, StateEstimate, StepInfo)
+from trq_offboard.records import (
+    ActuatorCommand,
+    CommandSource,
+    ReferenceSample,
+    SolveInfo,
+    SolveStatus,
+    StateEstimate,
+    StepInfo,
+    StepTimes,
+)
 
 __all__ = ["Controller"]
 
@@ -66,8 +79,11 @@ def _interp_rows(x: np.ndarray, h: float, times: np.ndarray) -> np.ndarray:
 
 
 class Controller:
-    def __init__(self, cfg: ControllerConfig, solver: Solver | None = None) -> None:
+    def __init__(self, cfg: ControllerConfig, solver: Solver | None = None,
+                 cpu_ns: Callable[[], int] = time.thread_time_ns) -> None:
         self.cfg = cfg
+        self.cpu_ns = cpu_ns                 # the parts' CPU clock (a measurement only)
+        self.last_prepare_cpu_ns = 0
         vm = cfg.vehicle
         self.model = PredictionModel(vm)
         self.allocator = Allocator(vm)
@@ -283,11 +299,13 @@ class Controller:
     # --- one control step -----------------------------------------------------------------------
     def step(self, t_s: float, state: StateEstimate, applied: ActuatorCommand | None,
              reference) -> tuple[ActuatorCommand, StepInfo]:
+        clock = self.cpu_ns
+        c0 = clock()
         if self._last_t is None:
             self.reset(t_s, state, applied)
         x = state.as_vector()
         if not np.all(np.isfinite(x)):
-            return self._emergency(t_s, "non-finite state")
+            return self._emergency(t_s, "non-finite state", c0)
         # the input that acted since the last step: the previous command, or what the vehicle
         # reports it produced (applied_input in the controller file)
         u_applied = (np.clip(self.allocator.command_vector(applied), self._u_lo, self._u_hi)
@@ -319,13 +337,16 @@ class Controller:
                 self.eso.update(y, self.eso.b0_of(b0), dt)
             d = d_obs = self.eso.disturbance(x[6:9])
             out_err = self.eso.output_error(y)
-            if self.effectiveness is not None:
-                d, path, y_act = self._effective(x, d, y_now, t_prev, t_s, t_act)
+        c1 = clock()
+        if self.eso is not None and self.effectiveness is not None:
+            d, path, y_act = self._effective(x, d, y_now, t_prev, t_s, t_act)
+        c2 = clock()
         self._last_t = float(t_s)
         self._last_d = d
 
         # the command computed now acts from t_act: plan from the state predicted for then
         x0 = self._predict(x, t_s, t_act, d, path) if self.delay_s > 0.0 else x
+        c3 = clock()
         x_ref = self._reference_states(t_act, x0, reference)
         guess = self._guess(t_act, x0, d)
         if self._act_states:
@@ -343,7 +364,7 @@ class Controller:
                 info = SolveInfo(SolveStatus.FAILED, info.iterations, info.solve_time_s,
                                  float("nan"), "non-finite plan")
             u, source = self._fallback(t_act)
-        return self._finish(u, source, info, d_obs, out_err)
+        return self._finish(u, source, info, d_obs, out_err, (c0, c1, c2, c3))
 
     def _motor_deficit(self, x: np.ndarray, d: np.ndarray, y_nom: np.ndarray) -> np.ndarray:
         """The motors' outputs less their healthy ones y_nom (4, throttle %) that explain the
@@ -399,6 +420,13 @@ class Controller:
         """Preparation phase for the next step (t + one control period): the solver linearises
         at the current plan shifted by one period, with the current disturbance estimate. A
         no-op for solvers without one and before the first plan."""
+        c0 = self.cpu_ns()
+        try:
+            self._prepare(reference)
+        finally:
+            self.last_prepare_cpu_ns = self.cpu_ns() - c0
+
+    def _prepare(self, reference) -> None:
         prep = getattr(self.solver, "prepare", None)
         if prep is None or self._plan is None or self._last_t is None:
             return
@@ -461,7 +489,10 @@ class Controller:
                 return self._plan[0][k] / self._scale, CommandSource.SHIFTED_PLAN
         return self.u_trim.copy(), CommandSource.HOVER
 
-    def _finish(self, u, source, info, d, out_err) -> tuple[ActuatorCommand, StepInfo]:
+    def _finish(self, u, source, info, d, out_err, marks) -> tuple[ActuatorCommand, StepInfo]:
+        """The command of the step (clipped, finite) and its StepInfo; `marks`: the CPU clock
+        at the step's start and after its observer, effectiveness and predictor parts (any of
+        them the same when a part did not run)."""
         u = np.asarray(u, float).copy()
         bad = ~np.isfinite(u)
         u[bad] = self.u_trim[bad]
@@ -472,13 +503,15 @@ class Controller:
         self._last_u = clipped_u
         self._sent.append((self._last_t, clipped_u.copy()))   # sent for the state at _last_t
         cmd = self.allocator.command_of(clipped_u)
+        c0, c1, c2, c3 = marks
+        cpu = StepTimes(c1 - c0, c2 - c1, c3 - c2, self.cpu_ns() - c3)
         info = StepInfo(source, info, tuple(float(v) for v in d), out_err, n_clip,
                         self.clip_count, self.failures,
-                        tuple(float(v) for v in self._scale[self._nt:]))
+                        tuple(float(v) for v in self._scale[self._nt:]), cpu)
         return cmd, info
 
-    def _emergency(self, t_s, why) -> tuple[ActuatorCommand, StepInfo]:
+    def _emergency(self, t_s, why, c0) -> tuple[ActuatorCommand, StepInfo]:
         self.failures += 1
         u, source = self._fallback(t_s + self.delay_s)
         info = SolveInfo(SolveStatus.FAILED, 0, 0.0, float("nan"), why)
-        return self._finish(u, source, info, np.zeros(6), 0.0)
+        return self._finish(u, source, info, np.zeros(6), 0.0, (c0, c0, c0, c0))
