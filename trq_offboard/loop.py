@@ -188,9 +188,10 @@ class OffboardFlight:
                 raise FlightError(f"no new ODOMETRY for {silent_s:g} s: telemetry lost")
             self._new_odometry.clear()
             wait_s = min(self.telemetry_timeout_s, self.telemetry_lost_s - silent_s)
-            try:
-                await asyncio.wait_for(self._new_odometry.wait(), wait_s)
-            except asyncio.TimeoutError:
+            try:       # asyncio.timeout: wait_for can swallow a cancellation (CPython gh-86296)
+                async with asyncio.timeout(wait_s):
+                    await self._new_odometry.wait()
+            except TimeoutError:
                 silent_s += wait_s
                 log.warning("no telemetry for %.1f s: not commanding", silent_s)
 

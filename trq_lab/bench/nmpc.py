@@ -4,6 +4,7 @@
     trq-bench-nmpc --quick         # 16 s (4 s after the fault)
     trq-bench-nmpc --modes rti-gn,ipopt --json out/bench_nmpc.json
     trq-bench-nmpc --quick --repeat 3   # median of 3 interleaved runs
+    trq-bench-nmpc --modes rti-gn --daemons    # and the whole period over both daemons
 
 The flight is trq_lab.harness's (`fly_inprocess`, the loop the campaigns and tests fly): the
 vehicle's `Sitl` and the controller's `OffboardFlight` in one process, joined by an in-memory link
@@ -211,6 +212,18 @@ def table(results: list[dict]) -> str:
     return "\n".join(lines)
 
 
+def _daemons_summary(runs: list[dict]) -> dict:
+    """The median over the daemon runs of each figure and part."""
+    med = lambda vals: float(np.median(vals))           # noqa: E731
+    parts = {name: {k: med([r["parts"][name][k] for r in runs]) for k in runs[0]["parts"][name]}
+             for name in runs[0]["parts"]}
+    ratio = [r["controller_cpu_ms"] / (r["parts"]["solve (wall)"]["mean_ms"]
+                                        + r["parts"]["prepare"]["mean_ms"]) for r in runs]
+    return {"runs": len(runs), "parts": parts, "ratio_to_solver": med(ratio),
+            **{k: med([r[k] for r in runs])
+               for k in ("controller_cpu_ms", "vehicle_cpu_ms", "realtime_factor")}}
+
+
 def calibration_ms(repeats: int = 5) -> float:
     """Median time of a fixed piece of dense linear algebra (100 products of two 64 x 64 matrices
     and a Cholesky factorisation of the result): how fast this shared machine is right now, to
@@ -262,6 +275,12 @@ def main(argv=None) -> int:
                     help="a controller file of params/controller/ without .yaml (default: "
                          "trq_nmpc_eso; the README's tables before the observer measured rates: "
                          "trq_nmpc_eso_paper)")
+    ap.add_argument("--daemons", action="store_true",
+                    help="also fly both daemons in lockstep over UDP (5 s and 35 s of vehicle "
+                         "time, once per --repeat) and report the controller process's CPU per "
+                         "control period measured from outside, its parts from its log, the "
+                         "vehicle's CPU per period and the closed loop's real-time factor "
+                         "(trq_lab/bench/period.py)")
     ap.add_argument("--child", default=None, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if not (trq_params.resolve("controller", args.controller)).is_file():
@@ -279,7 +298,16 @@ def main(argv=None) -> int:
     if args.repeat < 1:
         ap.error(f"--repeat {args.repeat}: expected at least 1")
     runs: dict[str, list[dict]] = {m: [] for m in modes}
+    daemon_runs: list[dict] = []
     for k in range(args.repeat):
+        if args.daemons:      # interleaved with the modes, as they are with each other
+            from trq_lab.bench.period import daemons_period
+            d = daemons_period(controller=args.controller)
+            daemon_runs.append(d)
+            print(f"  daemons{f' (run {k + 1})' if args.repeat > 1 else ''}: controller "
+                  f"{d['controller_cpu_ms']:.2f} ms CPU a period from outside, vehicle "
+                  f"{d['vehicle_cpu_ms']:.2f} ms, lockstep {d['realtime_factor']:.2f}x real "
+                  "time", flush=True)
         for m in modes:       # one after the other: the modes do not share the cores
             r = run_mode(m, seconds, args.controller)
             runs[m].append(r)
@@ -297,10 +325,21 @@ def main(argv=None) -> int:
             print(f"  {m}: p50 {min(p50):.2f}-{max(p50):.2f} ms, p99 {min(p99):.2f}-"
                   f"{max(p99):.2f} ms")
     print(table(results))
+    daemons = _daemons_summary(daemon_runs) if daemon_runs else None
+    if daemons is not None:
+        from trq_lab.bench.period import parts_table
+        print(f"\nthe whole period over both daemons in lockstep (median of {len(daemon_runs)} "
+              "run(s)):")
+        print(parts_table(daemons))
+        print(f"controller CPU per period / the solver's own step (feedback wall + preparation "
+              f"CPU, same flights): {daemons['ratio_to_solver']:.2f}; closed loop "
+              f"{daemons['realtime_factor']:.2f}x real time")
     print(f"calibration at the end {calibration_ms():.2f} ms")
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps({"machine": machine_line(), "modes": results}, indent=1))
+        args.json.write_text(json.dumps({"machine": machine_line(), "modes": results,
+                                         "daemons": daemons, "daemon_runs": daemon_runs},
+                                        indent=1))
     return 0
 
 
