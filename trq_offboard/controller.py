@@ -39,6 +39,7 @@ import time
 from pathlib import Path
 from typing import Callable
 
+import casadi as ca
 import numpy as np
 
 from trq_offboard.allocation import Allocator
@@ -61,6 +62,7 @@ from trq_offboard.records import (
 __all__ = ["Controller"]
 
 PREDICT_STEP_S = 0.005        # RK4 step of the delay predictor
+CHAIN_STEPS = 48              # steps of the compiled actuator lag chain per call
 
 
 def _wrap(a):
@@ -90,7 +92,8 @@ class Controller:
         self.hover_command = self.allocator.hover()
         self.u_trim = self.allocator.command_vector(self.hover_command)
         self.solver = solver if solver is not None else make_solver(cfg, self.model, self.u_trim)
-        self.eso = (ExtendedStateObserver(cfg.eso, cfg.control_dt_s)
+        self.eso = (ExtendedStateObserver(cfg.eso, cfg.control_dt_s,
+                                          codegen=cfg.solver.codegen == "auto")
                     if cfg.eso is not None else None)
         self.N, self.h = cfg.horizon_steps, cfg.step_s
         self._rollout = self.model.discrete(self.h, 1)
@@ -103,7 +106,8 @@ class Controller:
         # outputs; it needs the actuators' lags (its motor model is the lag)
         self.effectiveness = (MotorEffectivenessObserver(cfg.effectiveness,
                                                          vm.motor_time_constant_s,
-                                                         cfg.control_dt_s)
+                                                         cfg.control_dt_s,
+                                                         codegen=cfg.solver.codegen == "auto")
                               if cfg.effectiveness is not None and self.eso is not None else None)
         self._nt = 4 if self.model.tilting else 0         # where the throttles start in u
         if self.effectiveness is not None and not hasattr(getattr(self.solver, "ocp", None),
@@ -122,6 +126,8 @@ class Controller:
         self._rate_limit = np.array([vm.servo_rate_limit_rad_s] * tilts
                                     + [vm.motor_rate_limit_pct_s] * 4)
         self._gains: dict[float, np.ndarray] = {}
+        codegen = cfg.solver.codegen == "auto"
+        self._chain_fn = self._build_chain(codegen)
         # the NMPC's stage carries the actuators' lag states (actuator_states): its plan starts
         # from the actuators' outputs predicted for t + delay (self._y_act)
         self._act_states = bool(getattr(getattr(self.solver, "ocp", None), "n_lag", 0))
@@ -219,22 +225,90 @@ class Controller:
 
     def _actuator_walk(self, t0: float, t1: float, cut: float | None = None):
         """(_actuator_path(t0, t1, cut), the actuators' outputs at t1, at `cut` (None without
-        one))."""
+        one)). The steps are laid out here and the lag chain through them is one call of a
+        compiled function (`_chain`)."""
         segs = self._in_effect(-math.inf, t1)
-        y = segs[0][2].copy()
-        y_cut = y.copy() if cut is not None and cut <= segs[0][0] else None
-        path = []
+        y0 = segs[0][2]
+        ops = []                  # (u, h, start, end: None before t0, where nothing is recorded)
+        cut_at = -1 if cut is not None and cut <= segs[0][0] else None   # -1: y0
         for lo, hi, u in segs:
             cuts = [lo] + [c for c in (t0, cut) if c is not None and lo < c < hi] + [hi]
             for a, b in zip(cuts[:-1], cuts[1:]):
                 if b <= a or not math.isfinite(a):
                     continue
-                y = self._walk_segment(y, u, a, b, path if a >= t0 else None)
+                if a >= t0:       # recorded: steps of at most PREDICT_STEP_S
+                    n = max(1, math.ceil((b - a) / PREDICT_STEP_S - 1e-9))
+                    h = (b - a) / n
+                    for i in range(n):
+                        ops.append((u, h, a + i * h, b if i == n - 1 else a + (i + 1) * h))
+                else:             # the history before the path: one step, nothing recorded
+                    ops.append((u, b - a, a, None))
                 if cut is not None and b == cut:
-                    y_cut = y.copy()
-        if cut is not None and y_cut is None:
+                    cut_at = len(ops) - 1
+        ys, mids = self._chain(y0, ops)
+        path = [(op[2], op[3], mids[k]) for k, op in enumerate(ops) if op[3] is not None]
+        y = ys[-1].copy() if ops else y0.copy()
+        if cut is None:
+            y_cut = None
+        elif cut_at is None:
             y_cut = y.copy()
+        else:
+            y_cut = y0.copy() if cut_at < 0 else ys[cut_at].copy()
         return path, y, y_cut
+
+    def _chain(self, y0: np.ndarray, ops) -> tuple[np.ndarray, np.ndarray]:
+        """The actuators through `ops` ((u, h, ...) steps) from y0: (outputs after each step,
+        the lag's midpoint of each, `_lag(y, u, h / 2)`), as `_lag` step by step would give
+        them, in chunks of CHAIN_STEPS steps through the compiled chain."""
+        m, K = self.model.nu, CHAIN_STEPS
+        ys, mids = np.empty((len(ops), m)), np.empty((len(ops), m))
+        y = np.asarray(y0, float)
+        for s0 in range(0, len(ops), K):
+            chunk = ops[s0:s0 + K]
+            k = len(chunk)
+            self._ch_u[:k] = [op[0] for op in chunk]
+            for j, op in enumerate(chunk):
+                h = op[1]
+                self._ch_g[j] = self._lag_gain(h)
+                self._ch_gm[j] = self._lag_gain(0.5 * h)
+                self._ch_h[j, 0] = h
+                self._ch_h[j, 1] = 0.5 * h
+            self._ch_h[k:, 0] = -1.0      # inactive steps
+            # (K, m) row-major is the chain's (m, K) column-major
+            out = self._chain_fn.outputs(y, self._ch_u, self._ch_g, self._ch_gm, self._ch_h)
+            ys[s0:s0 + k] = out[0].reshape(K, m)[:k]
+            mids[s0:s0 + k] = out[1].reshape(K, m)[:k]
+            y = ys[s0 + k - 1]
+        return ys, mids
+
+    def _build_chain(self, codegen: bool):
+        """The lag chain of `_chain` as one CasADi function, generated as C and compiled once
+        (nmpc/cache.py): (y0 (m), u, gain(h), gain(h/2) (m x K), [h; h/2] (2 x K)) -> (outputs
+        after each step, midpoints) (m x K each); a step with h < 0 leaves y as it is. The
+        gains come in from `_lag_gain` (NumPy's expm1), so that the chain's arithmetic is
+        `_lag`'s, in the same order."""
+        from trq_offboard.model.dynamics import NumpyFunction
+        from trq_offboard.nmpc.cache import compiled
+
+        m, K = self.model.nu, CHAIN_STEPS
+        y0 = ca.SX.sym("y0", m)
+        U, G, GM = (ca.SX.sym(name, m, K) for name in ("u", "gain", "gain_mid"))
+        H = ca.SX.sym("h", 2, K)
+        rate = ca.DM(self._rate_limit)
+        y, outs, mids = y0, [], []
+        for k in range(K):
+            u = U[:, k]
+            lim_m = rate * H[1, k]
+            mids.append(y + ca.fmin(ca.fmax(GM[:, k] * (u - y), -lim_m), lim_m))
+            lim = rate * H[0, k]
+            y1 = y + ca.fmin(ca.fmax(G[:, k] * (u - y), -lim), lim)
+            y = ca.if_else(H[0, k] >= 0, y1, y)
+            outs.append(y)
+        fn = ca.Function(f"actuator_chain_{m}_{K}", [y0, U, G, GM, H],
+                         [ca.horzcat(*outs), ca.horzcat(*mids)])
+        self._ch_u, self._ch_g, self._ch_gm = (np.zeros((K, m)) for _ in range(3))
+        self._ch_h = np.zeros((K, 2))
+        return NumpyFunction(compiled(fn, codegen)[0])
 
     def _walk_from(self, y0: np.ndarray, t0: float, t1: float, scale: np.ndarray):
         """(path, outputs at t1) of the actuators from y0 at t0 under the commands in effect
