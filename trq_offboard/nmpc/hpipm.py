@@ -47,6 +47,7 @@ ARG_OPTIONS = {"ric_alg": ctypes.c_int, "pred_corr": ctypes.c_int, "split_step":
 _LIB: ctypes.CDLL | None = None
 _LIB_ERROR: str | None = None
 _SHIM: ctypes.CDLL | None | bool = None         # False: tried, not available
+_LIB_PATH: Path | None = None                   # the library loaded
 
 _SHIM_SOURCE = r"""
 /* trq_hpipm_shim: set one OCP QP's per-solve data, solve it, read the solution (HPIPM). */
@@ -101,7 +102,20 @@ int trq_hpipm_solve(int N, int ns, int nv, int nb, void *qp, void *sol, void *ar
 """
 
 
+LIBRARY_ENV = "TRQ_HPIPM_LIBRARY"
+
+
 def library_path() -> Path | None:
+    """The libhpipm to load: $TRQ_HPIPM_LIBRARY if set (another build, e.g. one with BLASFEO's
+    AVX2 kernels; it must carry BLASFEO inside or beside it), else the one of the installed
+    CasADi (next to its own libraries), or None."""
+    other = os.environ.get(LIBRARY_ENV)
+    if other:
+        return Path(other)
+    return bundled_path()
+
+
+def bundled_path() -> Path | None:
     """libhpipm of the installed CasADi (next to its own libraries), or None."""
     try:
         import casadi
@@ -125,7 +139,20 @@ def _load() -> ctypes.CDLL | None:
         _LIB_ERROR = "libhpipm not found next to casadi"
         return None
     try:
-        lib = ctypes.CDLL(str(path), mode=os.RTLD_LOCAL if hasattr(os, "RTLD_LOCAL") else 0)
+        try:
+            lib = ctypes.CDLL(str(path), mode=os.RTLD_LOCAL if hasattr(os, "RTLD_LOCAL") else 0)
+        except OSError as exc:
+            if path == bundled_path():
+                raise
+            import warnings
+            warnings.warn(f"${LIBRARY_ENV}={path} could not be loaded ({exc}): the HPIPM "
+                          "bundled with CasADi is used", RuntimeWarning, stacklevel=2)
+            path = bundled_path()
+            if path is None:
+                raise
+            lib = ctypes.CDLL(str(path), mode=os.RTLD_LOCAL if hasattr(os, "RTLD_LOCAL") else 0)
+        global _LIB_PATH
+        _LIB_PATH = path
         P, I, S = ctypes.c_void_p, ctypes.c_int, ctypes.c_size_t
         sig = {
             "d_ocp_qp_dim_strsize": (S,), "d_ocp_qp_dim_memsize": (S, I),
@@ -169,9 +196,11 @@ def _load_shim() -> ctypes.CDLL | None:
     if _SHIM is None:
         _SHIM = False
         from trq_offboard.nmpc.cache import compiled_c
-        lib_dir = str(library_path().parent)
+        loaded = _LIB_PATH or library_path()
+        lib_dir = str(loaded.parent)
+        # linked by the loaded library's file name: the shim calls into that one
         path = compiled_c("trq_hpipm_shim", _SHIM_SOURCE,
-                          (f"-L{lib_dir}", f"-Wl,-rpath,{lib_dir}", "-lhpipm"))
+                          (f"-L{lib_dir}", f"-Wl,-rpath,{lib_dir}", f"-l:{loaded.name}"))
         if path is not None:
             try:
                 shim = ctypes.CDLL(str(path))
