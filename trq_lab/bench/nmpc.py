@@ -60,6 +60,9 @@ MODES = {     # name: solver overrides of params/controller/trq_nmpc_eso.yaml (a
     "rti-gn-cap8": dict(kind="rti", hessian="gauss_newton", max_iterations=1,
                         qp_max_iterations=8),          # the QP stopped after 8 iterations
     "rti-exact": dict(kind="rti", hessian="exact", max_iterations=1),
+    # HPIPM's partial condensing: the horizon's N stages condensed into this many blocks
+    **{f"rti-gn-pc{n2}": dict(kind="rti", hessian="gauss_newton", max_iterations=1,
+                              hpipm=dict(condensed_stages=n2)) for n2 in (10, 5, 4, 2)},
     "rti-gn-py": dict(kind="rti", hessian="gauss_newton", max_iterations=1, codegen="off"),
     "sqp-gn": dict(kind="sqp", hessian="gauss_newton", max_iterations=1),
     "ipopt": dict(kind="ipopt"),
@@ -81,6 +84,7 @@ def fly(mode: str, seconds: float | None, controller: str = "trq_nmpc_eso") -> d
     cfg = load_controller(trq_params.resolve("controller", controller))
     overrides = dict(MODES[mode])
     cfg = dataclasses.replace(cfg, **overrides.pop("controller", {}))
+    qp_args = overrides.pop("hpipm", None)
     cfg = dataclasses.replace(cfg, solver=dataclasses.replace(cfg.solver, **overrides))
     t0 = timer.wall_s()
     Controller(cfg)
@@ -88,6 +92,8 @@ def fly(mode: str, seconds: float | None, controller: str = "trq_nmpc_eso") -> d
     compiled_cold = cache.COUNTS["compiled"]
     t0 = timer.wall_s()
     ctl = Controller(cfg)
+    if qp_args:               # the direct HPIPM QP rebuilt with these arguments
+        _rebuild_qp(ctl.solver, qp_args)
     build_cached = timer.wall_s() - t0
     compiled_cached = cache.COUNTS["compiled"] - compiled_cold
 
@@ -150,6 +156,20 @@ def fly(mode: str, seconds: float | None, controller: str = "trq_nmpc_eso") -> d
         peak_rss_mb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0)
 
 
+def _rebuild_qp(solver, qp_args: dict) -> None:
+    """The RTI's direct HPIPM QP built again with further OcpQp arguments (partial condensing:
+    condensed_stages), the same mode, options and Hessian."""
+    from trq_offboard.nmpc import hpipm
+
+    old = solver._hqp
+    qp = hpipm.OcpQp(old.ns, old.nv, old.N, old.idxbx, mode=solver.hpipm_mode,
+                     iter_max=solver.cfg.solver.qp_max_iterations,
+                     options=solver.hpipm_options, shim=old.uses_shim, **qp_args)
+    if solver.hessian != "exact":
+        qp.set_hessian(solver._hc, solver._hcN)
+    solver._hqp = qp
+
+
 def _qp_line(solver) -> str:
     """Which QP path the mode's solver took (e.g. "hpipm direct speed_abs, shim")."""
     iface = getattr(solver, "qp_interface", None)
@@ -159,7 +179,9 @@ def _qp_line(solver) -> str:
         return f"{solver.cfg.solver.qp_solver} {iface}"
     shim = "shim" if solver._hqp.uses_shim else "ctypes loop"
     opts = "".join(f" {k} {v:g}" for k, v in solver.hpipm_options.items())
-    return f"hpipm direct {solver.hpipm_mode}{opts}, {shim}"
+    pc = (f", condensed to {solver._hqp.condensed_stages} blocks"
+          if solver._hqp.condensed_stages else "")
+    return f"hpipm direct {solver.hpipm_mode}{opts}, {shim}{pc}"
 
 
 def run_mode(mode: str, seconds: float | None, controller: str = "trq_nmpc_eso") -> dict:
