@@ -266,13 +266,14 @@ class Controller:
         for s0 in range(0, len(ops), K):
             chunk = ops[s0:s0 + K]
             k = len(chunk)
+            hs = [op[1] for op in chunk]
+            half = [0.5 * h for h in hs]
+            gain = self._lag_gain
             self._ch_u[:k] = [op[0] for op in chunk]
-            for j, op in enumerate(chunk):
-                h = op[1]
-                self._ch_g[j] = self._lag_gain(h)
-                self._ch_gm[j] = self._lag_gain(0.5 * h)
-                self._ch_h[j, 0] = h
-                self._ch_h[j, 1] = 0.5 * h
+            self._ch_g[:k] = [gain(h) for h in hs]
+            self._ch_gm[:k] = [gain(h) for h in half]
+            self._ch_h[:k, 0] = hs
+            self._ch_h[:k, 1] = half
             self._ch_h[k:, 0] = -1.0      # inactive steps
             # (K, m) row-major is the chain's (m, K) column-major
             out = self._chain_fn.outputs(y, self._ch_u, self._ch_g, self._ch_gm, self._ch_h)
