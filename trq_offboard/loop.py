@@ -11,7 +11,10 @@ step takes a few milliseconds and the loop has nothing else to do meanwhile (in 
 vehicle waits for the answer; in real time the next state comes one control period later, and
 datagrams arriving meanwhile wait in the socket's buffer), while a hop to a worker thread and
 back costs a share of the period in thread hand-offs and event-loop turns. `executor` (a
-concurrent.futures.Executor) runs them there instead, off the event loop.
+concurrent.futures.Executor) runs them there instead, off the event loop. Once the answer is
+sent the loop yields its core (os.sched_yield) to whoever the answer woke, the vehicle in
+lockstep, before it logs and prepares: off the latency path, and on a busy machine the vehicle
+would otherwise wait for them.
 
 Every period is timed by part with the injected CPU clock `cpu_ns` (default
 time.thread_time_ns; the controller times its own step's parts): StepRecord.cpu holds the
@@ -24,6 +27,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import math
+import os
 import time
 from dataclasses import dataclass, field
 from typing import Callable
@@ -43,6 +47,7 @@ from trq_offboard.records import (
 )
 
 log = logging.getLogger("trq_offboard")
+_sched_yield = getattr(os, "sched_yield", None)      # POSIX; None elsewhere
 
 TOUCHDOWN_ALT_M = 0.05
 TAKEOVER_ALTITUDE_M = 0.3         # higher than this, armed: the vehicle is flying
@@ -312,6 +317,13 @@ class OffboardFlight:
             wire_rx, self._wire_ns = self._wire_ns, 0     # this state's decode
             cmd, info = await self._call(self.controller.step, t, odo.state, applied, reference)
             self._answer(odo.stamp_us, cmd)
+            # the answer is out: hand the core to whoever it woke (in lockstep the vehicle, on
+            # this core if the scheduler put it here) before the log and the preparation, which
+            # are off the latency path. Without it, on a busy machine (two lockstep flights on
+            # two cores) the step's slice, spent, had the scheduler preempt this thread or hold
+            # the vehicle back: docs/solver.md
+            if _sched_yield is not None:
+                _sched_yield()
             rec = self._account(t, odo, ref, cmd, applied, info)
             rec.cpu.wire_ns = wire_rx + self._wire_ns
             self._wire_ns = 0
