@@ -14,8 +14,14 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from trq_offboard.link.udp import Connection
 from trq_offboard.loop import COMMAND_TRIES, IDLE_STEPS_BEFORE_DISARM, FlightError, OffboardFlight
-from trq_offboard.records import (ActuatorCommand, CommandSource, ReferenceSample, SolveInfo,
-                                  SolveStatus, StepInfo)
+from trq_offboard.records import (
+    ActuatorCommand,
+    CommandSource,
+    ReferenceSample,
+    SolveInfo,
+    SolveStatus,
+    StepInfo,
+)
 
 LIMIT = math.radians(30.0)
 CMD = ActuatorCommand((60.0, 61.0, 62.0, 63.0), (0.1, -0.1, 0.05, 0.0))
