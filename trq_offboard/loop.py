@@ -6,15 +6,14 @@ time it is simply an event-driven controller. A repeated stamp (the vehicle rese
 gets the same target again; an older stamp is stale and ignored: no command is ever computed from
 an old state.
 
-The controller's step and preparation are called directly from the flight loop by default: a
-step takes a few milliseconds and the loop has nothing else to do meanwhile (in lockstep the
-vehicle waits for the answer; in real time the next state comes one control period later, and
-datagrams arriving meanwhile wait in the socket's buffer), while a hop to a worker thread and
-back costs a share of the period in thread hand-offs and event-loop turns. `executor` (a
-concurrent.futures.Executor) runs them there instead, off the event loop. Once the answer is
-sent the loop yields its core (os.sched_yield) to whoever the answer woke, the vehicle in
-lockstep, before it logs and prepares: off the latency path, and on a busy machine the vehicle
-would otherwise wait for them.
+The controller's step and preparation run on a worker thread by default (`executor`: a
+concurrent.futures.Executor, None for the event loop's default one), off the event loop.
+`direct=True` calls them from the flight loop instead, which saves the hop's thread hand-offs
+and event-loop turns when the machine has a core to spare for the controller, and yields the
+core (os.sched_yield) once the answer is sent, to whoever it woke, before the log and the
+preparation. Measured (docs/decisions/2026-12-02-flight-loop-direct-calls.md): one lockstep
+flight alone is faster direct, two flights in parallel on two busy cores (the scenario runner's
+default) are slower, so the thread stays the default.
 
 Every period is timed by part with the injected CPU clock `cpu_ns` (default
 time.thread_time_ns; the controller times its own step's parts): StepRecord.cpu holds the
@@ -116,9 +115,11 @@ class OffboardFlight:
                  name: str, tilt_limit_rad: float, record: Callable[[StepRecord], None] | None = None,
                  connect_timeout_s: float = 30.0, telemetry_timeout_s: float = 2.0,
                  telemetry_lost_s: float = 10.0, ack_timeout_s: float = 1.0,
-                 executor=None, cpu_ns: Callable[[], int] = time.thread_time_ns) -> None:
+                 executor=None, direct: bool = False,
+                 cpu_ns: Callable[[], int] = time.thread_time_ns) -> None:
         self.link = link
-        self.executor = executor        # None: step and prepare called directly
+        self.executor = executor        # where step and prepare run (None: the loop's default)
+        self.direct = direct            # or called directly from the flight loop
         self.cpu_ns = cpu_ns
         self._wire_ns = 0               # the wire's CPU since the last step's start
         self.controller = controller
@@ -241,8 +242,8 @@ class OffboardFlight:
         self._wire_ns += self.cpu_ns() - c0
 
     async def _call(self, fn, *args):
-        """fn(*args): directly, or on the executor (off the event loop) if there is one."""
-        if self.executor is None:
+        """fn(*args): on the executor (off the event loop), or directly with `direct`."""
+        if self.direct:
             return fn(*args)
         return await asyncio.get_running_loop().run_in_executor(self.executor, fn, *args)
 
@@ -317,12 +318,10 @@ class OffboardFlight:
             wire_rx, self._wire_ns = self._wire_ns, 0     # this state's decode
             cmd, info = await self._call(self.controller.step, t, odo.state, applied, reference)
             self._answer(odo.stamp_us, cmd)
-            # the answer is out: hand the core to whoever it woke (in lockstep the vehicle, on
-            # this core if the scheduler put it here) before the log and the preparation, which
-            # are off the latency path. Without it, on a busy machine (two lockstep flights on
-            # two cores) the step's slice, spent, had the scheduler preempt this thread or hold
-            # the vehicle back: docs/solver.md
-            if _sched_yield is not None:
+            # direct: the answer is out, hand the core to whoever it woke (in lockstep the
+            # vehicle) before the log and the preparation, which are off the latency path
+            # (docs/decisions/2026-12-02-flight-loop-direct-calls.md)
+            if self.direct and _sched_yield is not None:
                 _sched_yield()
             rec = self._account(t, odo, ref, cmd, applied, info)
             rec.cpu.wire_ns = wire_rx + self._wire_ns
