@@ -70,10 +70,11 @@ def period_text(rows: list[tuple[str, dict[str, float]]]) -> list[str]:
         return []
     head = "| controller | " + " | ".join(h for _, h in PERIOD_PARTS) + " |"
     lines = ["## The controller's period", "",
-             "CPU time per control period, mean over the flight (ms, the controller's loop "
-             "thread, measured by the controller itself: `cpu_*_ms` in controller.csv). The "
-             "whole period is everything the thread did from one step's start to the next: "
-             "the parts, the event loop and the transport's frame parse.", "",
+             "CPU time per control period, mean over the flight (ms, measured by the "
+             "controller itself: `cpu_*_ms` in controller.csv). The whole period is the CPU "
+             "of every thread of the controller process from one step's start to the next: "
+             "the parts, the event loop, the transport's frame parse, the hand-offs to the "
+             "worker thread.", "",
              head, "|" + "---|" * (len(PERIOD_PARTS) + 1)]
     for name, parts in rows:
         lines.append(f"| {name} | " + " | ".join(_fmt(parts[k], "{:.3f}") for k, _ in

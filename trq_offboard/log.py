@@ -8,11 +8,12 @@ Rows are kept as the loop's records and formatted in batches of `batch` (off the
 a call only appends, one call in `batch` writes the batch), every record but the newest, whose
 period (StepRecord.cpu) is complete only at the next step's start; `close()` writes the rest.
 
-CPU columns (ms of the loop thread's CPU, records.StepTimes and records.PeriodTimes; nan when
-not measured): cpu_observer_ms, cpu_effectiveness_ms, cpu_predictor_ms, cpu_feedback_ms (the
-step's parts), cpu_prepare_ms (the preparation after the command), cpu_wire_ms (the state's
-decode, the target's encode and send), cpu_log_ms (this log's share), cpu_period_ms (the loop
-thread's whole period: the parts, the event loop, the transport's frame parse)."""
+CPU columns (ms, records.StepTimes and records.PeriodTimes; nan when not measured), each part in
+the thread that ran it: cpu_observer_ms, cpu_effectiveness_ms, cpu_predictor_ms,
+cpu_feedback_ms (the step's parts), cpu_prepare_ms (the preparation after the command),
+cpu_wire_ms (the state's decode, the target's encode and send), cpu_log_ms (this log's share),
+cpu_period_ms (the whole period, every thread of the process: the parts, the event loop, the
+transport's frame parse, the hand-offs to a worker thread)."""
 
 from __future__ import annotations
 

@@ -15,10 +15,11 @@ preparation. Measured (docs/decisions/2026-12-02-flight-loop-direct-calls.md): o
 flight alone is faster direct, two flights in parallel on two busy cores (the scenario runner's
 default) are slower, so the thread stays the default.
 
-Every period is timed by part with the injected CPU clock `cpu_ns` (default
-time.thread_time_ns; the controller times its own step's parts): StepRecord.cpu holds the
-preparation, the wire (the telemetry's decode into a state, the target's encode and send), the
-log and the loop thread's whole period, completed as the period runs (records.PeriodTimes).
+Every period is timed by part with injected CPU clocks: `cpu_ns` (default time.thread_time_ns:
+the calling thread's) for the wire (the telemetry's decode into a state, the target's encode and
+send) and the log, `process_cpu_ns` (default time.process_time_ns: every thread's) for the whole
+period; the controller times its own step's parts and its preparation in the thread that runs
+them. StepRecord.cpu holds them, completed as the period runs (records.PeriodTimes).
 """
 
 from __future__ import annotations
@@ -116,11 +117,13 @@ class OffboardFlight:
                  connect_timeout_s: float = 30.0, telemetry_timeout_s: float = 2.0,
                  telemetry_lost_s: float = 10.0, ack_timeout_s: float = 1.0,
                  executor=None, direct: bool = False,
-                 cpu_ns: Callable[[], int] = time.thread_time_ns) -> None:
+                 cpu_ns: Callable[[], int] = time.thread_time_ns,
+                 process_cpu_ns: Callable[[], int] = time.process_time_ns) -> None:
         self.link = link
         self.executor = executor        # where step and prepare run (None: the loop's default)
         self.direct = direct            # or called directly from the flight loop
-        self.cpu_ns = cpu_ns
+        self.cpu_ns = cpu_ns                    # the loop thread's parts (wire, log)
+        self.process_cpu_ns = process_cpu_ns    # the whole period: every thread of the process
         self._wire_ns = 0               # the wire's CPU since the last step's start
         self.controller = controller
         self.make_reference = make_reference
@@ -298,7 +301,7 @@ class OffboardFlight:
         while True:
             odo = pending if pending is not None else await self._next_odometry()
             pending = None
-            start = self.cpu_ns()
+            start = self.process_cpu_ns()
             if prev is not None:
                 prev.cpu.period_ns = start - prev_start
             prev_start = start

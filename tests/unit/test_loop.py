@@ -376,7 +376,8 @@ def test_each_period_is_timed_by_part_directly_or_on_an_executor(threaded):
 
     async def scenario():
         flight, link, ctl = make_flight(record=records.append, executor=executor,
-                                        direct=not threaded, cpu_ns=_Ticks())
+                                        direct=not threaded, cpu_ns=_Ticks(),
+                                        process_cpu_ns=_Ticks())
         task = asyncio.create_task(flight.run())
         await take_off(flight, link)
         for k in (1, 2, 3):

@@ -15,8 +15,8 @@ and the same for the vehicle; the real-time factor of the closed loop is
 (long_s - short_s) / (wall_long - wall_short) (simulated seconds per wall second, both daemons
 in lockstep, the vehicle's whole run). The long flight's controller.csv gives the parts of the
 same periods (the controller's own measurement, records.StepTimes and PeriodTimes), their mean
-over the rows stamped in (short_s, long_s]: the outside figure less the loop thread's period is
-what other threads and the interpreter's own work cost. Both flights write their logs, as a
+over the rows stamped in (short_s, long_s]; their whole period (every thread, from one step's
+start to the next) is the inside view of the outside figure. Both flights write their logs, as a
 scenario's do (the log's cost is one of the parts).
 """
 
@@ -146,7 +146,7 @@ def parts_table(fig: dict) -> str:
     """The controller's period by part beside the outside figures (markdown)."""
     lines = ["| part | mean ms | p50 ms | p99 ms |", "|---|---|---|---|"]
     for name, v in fig["parts"].items():
-        label = "loop thread's whole period" if name == "period" else name
+        label = "whole period (every thread, from inside)" if name == "period" else name
         lines.append(f"| {label} | {v['mean_ms']:.3f} | {v['p50_ms']:.3f} | {v['p99_ms']:.3f} |")
     lines.append(f"| the controller process, from outside (CPU per period) "
                  f"| {fig['controller_cpu_ms']:.3f} | - | - |")
