@@ -41,6 +41,47 @@ def table(results: list[dict]) -> str:
     return "\n".join([head, rule] + rows)
 
 
+PERIOD_PARTS = (("observer", "observer"), ("effectiveness", "effectiveness"),
+                ("predictor", "predictor"), ("feedback", "NMPC feedback"),
+                ("prepare", "NMPC preparation"), ("wire", "wire"), ("log", "log"),
+                ("period", "whole period"))
+
+
+def period_rows(runs) -> list[tuple[str, dict[str, float]]]:
+    """(controller, {part: mean CPU ms per control period}) of each run whose controller.csv has
+    the controller's CPU columns (trq_offboard/log.py)."""
+    rows = []
+    for r in runs:
+        try:
+            _, steps = metrics_mod.read_csv(Path(r.out) / "controller.csv")
+        except (OSError, ValueError):
+            continue
+        if "cpu_period_ms" not in steps or len(steps["cpu_period_ms"]) == 0:
+            continue
+        rows.append((r.controller, {k: float(np.nanmean(steps[f"cpu_{k}_ms"]))
+                                    if np.isfinite(steps[f"cpu_{k}_ms"]).any() else math.nan
+                                    for k, _ in PERIOD_PARTS}))
+    return rows
+
+
+def period_text(rows: list[tuple[str, dict[str, float]]]) -> list[str]:
+    """The controller's CPU per control period by part (mean ms): a table of the report."""
+    if not rows:
+        return []
+    head = "| controller | " + " | ".join(h for _, h in PERIOD_PARTS) + " |"
+    lines = ["## The controller's period", "",
+             "CPU time per control period, mean over the flight (ms, measured by the "
+             "controller itself: `cpu_*_ms` in controller.csv). The whole period is the CPU "
+             "of every thread of the controller process from one step's start to the next: "
+             "the parts, the event loop, the transport's frame parse, the hand-offs to the "
+             "worker thread.", "",
+             head, "|" + "---|" * (len(PERIOD_PARTS) + 1)]
+    for name, parts in rows:
+        lines.append(f"| {name} | " + " | ".join(_fmt(parts[k], "{:.3f}") for k, _ in
+                                                   PERIOD_PARTS) + " |")
+    return lines + [""]
+
+
 def envelope_text(envelopes: list[dict]) -> list[str]:
     lines = ["## The physical envelope", "",
              "Hover trim and the wrench margin left at it, under this wind and the worst motor "
@@ -63,7 +104,8 @@ def envelope_text(envelopes: list[dict]) -> list[str]:
 
 
 def markdown(scenario, results: list[dict], failures: list[str], figures: list[Path],
-             envelopes: list[dict] | None = None) -> str:
+             envelopes: list[dict] | None = None,
+             periods: list[tuple[str, dict[str, float]]] | None = None) -> str:
     lines = [f"# Scenario `{scenario.name}`", "", scenario.description, "",
              f"Seed {scenario.seed}; wind {scenario.wind_speed_m_s:g} m/s from "
              f"{scenario.wind_from_deg:g} deg{' with gusts' if scenario.gusts else ''}; faults: "
@@ -85,6 +127,8 @@ def markdown(scenario, results: list[dict], failures: list[str], figures: list[P
         lines.append("")
     if envelopes:
         lines += envelope_text(envelopes)
+    if periods:
+        lines += period_text(periods)
     for fig in figures:
         lines += [f"![{fig.stem}]({fig.name})", ""]
     return "\n".join(lines)

@@ -477,7 +477,8 @@ def main(argv: list[str] | None = None) -> int:
     envelopes = envelope_of(scenario, runs)
     doc["envelope"] = envelopes
     (args.out / "metrics.json").write_text(json.dumps(doc, indent=2) + "\n")
-    text = report.markdown(scenario, results, failures, figures, envelopes)
+    text = report.markdown(scenario, results, failures, figures, envelopes,
+                           report.period_rows(runs))
     (args.out / "report.md").write_text(text)
     print()
     print(report.table(results))

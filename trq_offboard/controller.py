@@ -20,7 +20,10 @@ over the horizon, warm-started from the previous plan shifted by the elapsed tim
 the allocation's hover trim, rolled out through the model); (3) on a solver failure the previous
 plan shifted in time is flown while it lasts, then the allocation's hover command; (4) the
 command is clipped to the actuator limits as a last line of defence (counted) and is always
-finite. `step` never prints, sleeps or reads a clock (the solver measures its own wall time).
+finite. `step` never prints or sleeps, and reads no clock but the injected CPU clock `cpu_ns`
+(default time.thread_time_ns) that times its parts for StepInfo.cpu (observer, effectiveness,
+predictor, feedback) and `prepare` for `last_prepare_cpu_ns`: measurements only, never an input
+of what is computed (the solver measures its own wall time).
 
 `prepare` (optional, for solvers with a preparation phase such as the real-time iteration): called
 after the command of `step` has been sent, it linearises the NMPC at the plan expected one control
@@ -32,8 +35,11 @@ from __future__ import annotations
 
 import collections
 import math
+import time
 from pathlib import Path
+from typing import Callable
 
+import casadi as ca
 import numpy as np
 
 from trq_offboard.allocation import Allocator
@@ -42,12 +48,21 @@ from trq_offboard.effectiveness import MotorEffectivenessObserver
 from trq_offboard.eso import ExtendedStateObserver
 from trq_offboard.model import PredictionModel
 from trq_offboard.nmpc.solver import Solver, make_solver
-from trq_offboard.records import (ActuatorCommand, CommandSource, ReferenceSample, SolveInfo,
-                                  SolveStatus, StateEstimate, StepInfo)
+from trq_offboard.records import (
+    ActuatorCommand,
+    CommandSource,
+    ReferenceSample,
+    SolveInfo,
+    SolveStatus,
+    StateEstimate,
+    StepInfo,
+    StepTimes,
+)
 
 __all__ = ["Controller"]
 
 PREDICT_STEP_S = 0.005        # RK4 step of the delay predictor
+CHAIN_STEPS = 48              # steps of the compiled actuator lag chain per call
 
 
 def _wrap(a):
@@ -66,15 +81,19 @@ def _interp_rows(x: np.ndarray, h: float, times: np.ndarray) -> np.ndarray:
 
 
 class Controller:
-    def __init__(self, cfg: ControllerConfig, solver: Solver | None = None) -> None:
+    def __init__(self, cfg: ControllerConfig, solver: Solver | None = None,
+                 cpu_ns: Callable[[], int] = time.thread_time_ns) -> None:
         self.cfg = cfg
+        self.cpu_ns = cpu_ns                 # the parts' CPU clock (a measurement only)
+        self.last_prepare_cpu_ns = 0
         vm = cfg.vehicle
         self.model = PredictionModel(vm)
         self.allocator = Allocator(vm)
         self.hover_command = self.allocator.hover()
         self.u_trim = self.allocator.command_vector(self.hover_command)
         self.solver = solver if solver is not None else make_solver(cfg, self.model, self.u_trim)
-        self.eso = (ExtendedStateObserver(cfg.eso, cfg.control_dt_s)
+        self.eso = (ExtendedStateObserver(cfg.eso, cfg.control_dt_s,
+                                          codegen=cfg.solver.codegen == "auto")
                     if cfg.eso is not None else None)
         self.N, self.h = cfg.horizon_steps, cfg.step_s
         self._rollout = self.model.discrete(self.h, 1)
@@ -87,7 +106,8 @@ class Controller:
         # outputs; it needs the actuators' lags (its motor model is the lag)
         self.effectiveness = (MotorEffectivenessObserver(cfg.effectiveness,
                                                          vm.motor_time_constant_s,
-                                                         cfg.control_dt_s)
+                                                         cfg.control_dt_s,
+                                                         codegen=cfg.solver.codegen == "auto")
                               if cfg.effectiveness is not None and self.eso is not None else None)
         self._nt = 4 if self.model.tilting else 0         # where the throttles start in u
         if self.effectiveness is not None and not hasattr(getattr(self.solver, "ocp", None),
@@ -106,6 +126,8 @@ class Controller:
         self._rate_limit = np.array([vm.servo_rate_limit_rad_s] * tilts
                                     + [vm.motor_rate_limit_pct_s] * 4)
         self._gains: dict[float, np.ndarray] = {}
+        codegen = cfg.solver.codegen == "auto"
+        self._chain_fn = self._build_chain(codegen)
         # the NMPC's stage carries the actuators' lag states (actuator_states): its plan starts
         # from the actuators' outputs predicted for t + delay (self._y_act)
         self._act_states = bool(getattr(getattr(self.solver, "ocp", None), "n_lag", 0))
@@ -203,22 +225,91 @@ class Controller:
 
     def _actuator_walk(self, t0: float, t1: float, cut: float | None = None):
         """(_actuator_path(t0, t1, cut), the actuators' outputs at t1, at `cut` (None without
-        one))."""
+        one)). The steps are laid out here and the lag chain through them is one call of a
+        compiled function (`_chain`)."""
         segs = self._in_effect(-math.inf, t1)
-        y = segs[0][2].copy()
-        y_cut = y.copy() if cut is not None and cut <= segs[0][0] else None
-        path = []
+        y0 = segs[0][2]
+        ops = []                  # (u, h, start, end: None before t0, where nothing is recorded)
+        cut_at = -1 if cut is not None and cut <= segs[0][0] else None   # -1: y0
         for lo, hi, u in segs:
             cuts = [lo] + [c for c in (t0, cut) if c is not None and lo < c < hi] + [hi]
             for a, b in zip(cuts[:-1], cuts[1:]):
                 if b <= a or not math.isfinite(a):
                     continue
-                y = self._walk_segment(y, u, a, b, path if a >= t0 else None)
+                if a >= t0:       # recorded: steps of at most PREDICT_STEP_S
+                    n = max(1, math.ceil((b - a) / PREDICT_STEP_S - 1e-9))
+                    h = (b - a) / n
+                    for i in range(n):
+                        ops.append((u, h, a + i * h, b if i == n - 1 else a + (i + 1) * h))
+                else:             # the history before the path: one step, nothing recorded
+                    ops.append((u, b - a, a, None))
                 if cut is not None and b == cut:
-                    y_cut = y.copy()
-        if cut is not None and y_cut is None:
+                    cut_at = len(ops) - 1
+        ys, mids = self._chain(y0, ops)
+        path = [(op[2], op[3], mids[k]) for k, op in enumerate(ops) if op[3] is not None]
+        y = ys[-1].copy() if ops else y0.copy()
+        if cut is None:
+            y_cut = None
+        elif cut_at is None:
             y_cut = y.copy()
+        else:
+            y_cut = y0.copy() if cut_at < 0 else ys[cut_at].copy()
         return path, y, y_cut
+
+    def _chain(self, y0: np.ndarray, ops) -> tuple[np.ndarray, np.ndarray]:
+        """The actuators through `ops` ((u, h, ...) steps) from y0: (outputs after each step,
+        the lag's midpoint of each, `_lag(y, u, h / 2)`), as `_lag` step by step would give
+        them, in chunks of CHAIN_STEPS steps through the compiled chain."""
+        m, K = self.model.nu, CHAIN_STEPS
+        ys, mids = np.empty((len(ops), m)), np.empty((len(ops), m))
+        y = np.asarray(y0, float)
+        for s0 in range(0, len(ops), K):
+            chunk = ops[s0:s0 + K]
+            k = len(chunk)
+            hs = [op[1] for op in chunk]
+            half = [0.5 * h for h in hs]
+            gain = self._lag_gain
+            self._ch_u[:k] = [op[0] for op in chunk]
+            self._ch_g[:k] = [gain(h) for h in hs]
+            self._ch_gm[:k] = [gain(h) for h in half]
+            self._ch_h[:k, 0] = hs
+            self._ch_h[:k, 1] = half
+            self._ch_h[k:, 0] = -1.0      # inactive steps
+            # (K, m) row-major is the chain's (m, K) column-major
+            out = self._chain_fn.outputs(y, self._ch_u, self._ch_g, self._ch_gm, self._ch_h)
+            ys[s0:s0 + k] = out[0].reshape(K, m)[:k]
+            mids[s0:s0 + k] = out[1].reshape(K, m)[:k]
+            y = ys[s0 + k - 1]
+        return ys, mids
+
+    def _build_chain(self, codegen: bool):
+        """The lag chain of `_chain` as one CasADi function, generated as C and compiled once
+        (nmpc/cache.py): (y0 (m), u, gain(h), gain(h/2) (m x K), [h; h/2] (2 x K)) -> (outputs
+        after each step, midpoints) (m x K each); a step with h < 0 leaves y as it is. The
+        gains come in from `_lag_gain` (NumPy's expm1), so that the chain's arithmetic is
+        `_lag`'s, in the same order."""
+        from trq_offboard.model.dynamics import NumpyFunction
+        from trq_offboard.nmpc.cache import compiled
+
+        m, K = self.model.nu, CHAIN_STEPS
+        y0 = ca.SX.sym("y0", m)
+        U, G, GM = (ca.SX.sym(name, m, K) for name in ("u", "gain", "gain_mid"))
+        H = ca.SX.sym("h", 2, K)
+        rate = ca.DM(self._rate_limit)
+        y, outs, mids = y0, [], []
+        for k in range(K):
+            u = U[:, k]
+            lim_m = rate * H[1, k]
+            mids.append(y + ca.fmin(ca.fmax(GM[:, k] * (u - y), -lim_m), lim_m))
+            lim = rate * H[0, k]
+            y1 = y + ca.fmin(ca.fmax(G[:, k] * (u - y), -lim), lim)
+            y = ca.if_else(H[0, k] >= 0, y1, y)
+            outs.append(y)
+        fn = ca.Function(f"actuator_chain_{m}_{K}", [y0, U, G, GM, H],
+                         [ca.horzcat(*outs), ca.horzcat(*mids)])
+        self._ch_u, self._ch_g, self._ch_gm = (np.zeros((K, m)) for _ in range(3))
+        self._ch_h = np.zeros((K, 2))
+        return NumpyFunction(compiled(fn, codegen)[0])
 
     def _walk_from(self, y0: np.ndarray, t0: float, t1: float, scale: np.ndarray):
         """(path, outputs at t1) of the actuators from y0 at t0 under the commands in effect
@@ -283,11 +374,13 @@ class Controller:
     # --- one control step -----------------------------------------------------------------------
     def step(self, t_s: float, state: StateEstimate, applied: ActuatorCommand | None,
              reference) -> tuple[ActuatorCommand, StepInfo]:
+        clock = self.cpu_ns
+        c0 = clock()
         if self._last_t is None:
             self.reset(t_s, state, applied)
         x = state.as_vector()
         if not np.all(np.isfinite(x)):
-            return self._emergency(t_s, "non-finite state")
+            return self._emergency(t_s, "non-finite state", c0)
         # the input that acted since the last step: the previous command, or what the vehicle
         # reports it produced (applied_input in the controller file)
         u_applied = (np.clip(self.allocator.command_vector(applied), self._u_lo, self._u_hi)
@@ -319,13 +412,16 @@ class Controller:
                 self.eso.update(y, self.eso.b0_of(b0), dt)
             d = d_obs = self.eso.disturbance(x[6:9])
             out_err = self.eso.output_error(y)
-            if self.effectiveness is not None:
-                d, path, y_act = self._effective(x, d, y_now, t_prev, t_s, t_act)
+        c1 = clock()
+        if self.eso is not None and self.effectiveness is not None:
+            d, path, y_act = self._effective(x, d, y_now, t_prev, t_s, t_act)
+        c2 = clock()
         self._last_t = float(t_s)
         self._last_d = d
 
         # the command computed now acts from t_act: plan from the state predicted for then
         x0 = self._predict(x, t_s, t_act, d, path) if self.delay_s > 0.0 else x
+        c3 = clock()
         x_ref = self._reference_states(t_act, x0, reference)
         guess = self._guess(t_act, x0, d)
         if self._act_states:
@@ -343,7 +439,7 @@ class Controller:
                 info = SolveInfo(SolveStatus.FAILED, info.iterations, info.solve_time_s,
                                  float("nan"), "non-finite plan")
             u, source = self._fallback(t_act)
-        return self._finish(u, source, info, d_obs, out_err)
+        return self._finish(u, source, info, d_obs, out_err, (c0, c1, c2, c3))
 
     def _motor_deficit(self, x: np.ndarray, d: np.ndarray, y_nom: np.ndarray) -> np.ndarray:
         """The motors' outputs less their healthy ones y_nom (4, throttle %) that explain the
@@ -399,6 +495,13 @@ class Controller:
         """Preparation phase for the next step (t + one control period): the solver linearises
         at the current plan shifted by one period, with the current disturbance estimate. A
         no-op for solvers without one and before the first plan."""
+        c0 = self.cpu_ns()
+        try:
+            self._prepare(reference)
+        finally:
+            self.last_prepare_cpu_ns = self.cpu_ns() - c0
+
+    def _prepare(self, reference) -> None:
         prep = getattr(self.solver, "prepare", None)
         if prep is None or self._plan is None or self._last_t is None:
             return
@@ -461,7 +564,10 @@ class Controller:
                 return self._plan[0][k] / self._scale, CommandSource.SHIFTED_PLAN
         return self.u_trim.copy(), CommandSource.HOVER
 
-    def _finish(self, u, source, info, d, out_err) -> tuple[ActuatorCommand, StepInfo]:
+    def _finish(self, u, source, info, d, out_err, marks) -> tuple[ActuatorCommand, StepInfo]:
+        """The command of the step (clipped, finite) and its StepInfo; `marks`: the CPU clock
+        at the step's start and after its observer, effectiveness and predictor parts (any of
+        them the same when a part did not run)."""
         u = np.asarray(u, float).copy()
         bad = ~np.isfinite(u)
         u[bad] = self.u_trim[bad]
@@ -472,13 +578,15 @@ class Controller:
         self._last_u = clipped_u
         self._sent.append((self._last_t, clipped_u.copy()))   # sent for the state at _last_t
         cmd = self.allocator.command_of(clipped_u)
+        c0, c1, c2, c3 = marks
+        cpu = StepTimes(c1 - c0, c2 - c1, c3 - c2, self.cpu_ns() - c3)
         info = StepInfo(source, info, tuple(float(v) for v in d), out_err, n_clip,
                         self.clip_count, self.failures,
-                        tuple(float(v) for v in self._scale[self._nt:]))
+                        tuple(float(v) for v in self._scale[self._nt:]), cpu)
         return cmd, info
 
-    def _emergency(self, t_s, why) -> tuple[ActuatorCommand, StepInfo]:
+    def _emergency(self, t_s, why, c0) -> tuple[ActuatorCommand, StepInfo]:
         self.failures += 1
         u, source = self._fallback(t_s + self.delay_s)
         info = SolveInfo(SolveStatus.FAILED, 0, 0.0, float("nan"), why)
-        return self._finish(u, source, info, np.zeros(6), 0.0)
+        return self._finish(u, source, info, np.zeros(6), 0.0, (c0, c0, c0, c0))

@@ -36,13 +36,18 @@ A step in e first shows as a change in the *slope* of y (the motor starts laggin
 the observer reads the fault's size from the slope before the output has fallen, so the NMPC
 plans for the whole loss about one motor time constant sooner than an additive estimate.
 
-Pure: `update` is a function of the observer's state and its arguments.
+Pure: `update` is a function of the observer's state and its arguments. A piece of the commands
+in effect that needs at most `substeps` Euler steps (the usual case) is integrated by one CasADi
+function, generated as C and compiled once through nmpc/cache.py (`codegen`; without a compiler
+CasADi's interpreter runs it), with the same arithmetic in the same order as the NumPy loop that
+serves longer pieces (lost samples).
 """
 
 from __future__ import annotations
 
 import math
 
+import casadi as ca
 import numpy as np
 
 from trq_offboard.config import EffectivenessConfig
@@ -52,7 +57,7 @@ __all__ = ["MotorEffectivenessObserver"]
 
 class MotorEffectivenessObserver:
     def __init__(self, cfg: EffectivenessConfig, motor_time_constant_s: float,
-                 control_dt_s: float, n_motors: int = 4) -> None:
+                 control_dt_s: float, n_motors: int = 4, codegen: bool = True) -> None:
         if motor_time_constant_s <= 0.0:
             raise ValueError("the motor effectiveness observer needs a motor time constant > 0 "
                              f"(got {motor_time_constant_s!r} s in the vehicle file)")
@@ -66,6 +71,35 @@ class MotorEffectivenessObserver:
         self.e = np.ones(n_motors)                # estimated effectiveness
         self.y = np.zeros(n_motors)               # estimated motor outputs (throttle %)
         self._y_meas_prev: np.ndarray | None = None
+        self._piece_fn = self._build_piece(codegen)
+
+    def _build_piece(self, codegen: bool):
+        """One piece of `update` (up to `substeps` Euler steps, n of them active) as a compiled
+        function: (y, e, y0, y_meas, c (4 each), [dur, t, dt_s, n]) -> (y, e, [t])."""
+        from trq_offboard.model.dynamics import NumpyFunction
+        from trq_offboard.nmpc.cache import compiled
+
+        m, n_max = self.n, self.cfg.substeps
+        y, e, y0, ym, c_in = (ca.SX.sym(name, m) for name in ("y", "e", "y0", "y_meas", "c"))
+        p = ca.SX.sym("p", 4)                          # dur, t, dt_s, n
+        dur, t, dt_s, n = p[0], p[1], p[2], p[3]
+        lo, T = self.cfg.min_effectiveness, self.T
+        c = ca.fmax(c_in, 1e-6)
+        h = dur / n
+        gain = self.l2T / c
+        yk, ek, tk = y, e, t
+        for i in range(n_max):
+            on = i < n
+            t1 = tk + h
+            err = y0 + (ca.fmin(t1, dt_s) / dt_s) * (ym - y0) - yk
+            dy = (ek * c - yk) / T + self.l1 * err
+            de = gain * err
+            y1 = yk + h * dy
+            e1 = ca.fmin(ca.fmax(ek + h * de, lo), 1.0)
+            yk, ek, tk = ca.if_else(on, y1, yk), ca.if_else(on, e1, ek), ca.if_else(on, t1, tk)
+        fn = ca.Function(f"effectiveness_piece_{m}_{n_max}", [y, e, y0, ym, c_in, p],
+                         [yk, ek, tk])
+        return NumpyFunction(compiled(fn, codegen)[0])
 
     def reset(self, y_outputs: np.ndarray) -> None:
         """Healthy motors producing y_outputs (throttle %)."""
@@ -87,8 +121,12 @@ class MotorEffectivenessObserver:
         for dur, c in segments:
             if dur <= 0.0:
                 continue
-            c = np.maximum(np.asarray(c, float).reshape(self.n), 1e-6)
             n = max(1, int(math.ceil(dur / self.h_max - 1e-9)))
+            if n <= self.cfg.substeps and self._piece_fn is not None:
+                y, e, tt = self._piece_fn.outputs(y, e, y0, y_meas, c, (dur, t, dt_s, n))
+                t = float(tt[0])
+                continue
+            c = np.maximum(np.asarray(c, float).reshape(self.n), 1e-6)
             h = dur / n
             for _ in range(n):
                 t += h

@@ -39,12 +39,19 @@ Integration: at each control step the observer ODE is integrated over the contro
 `substeps` explicit Euler steps; b0 is held, the measurement is interpolated linearly between the
 previous and the current sample (first-order hold: holding the newest sample instead biases x3 in
 proportion to the velocity, about 30 % after 1 s in the double-integrator test).
+
+The update over one control period (`substeps` steps, the usual case) is also built as one
+CasADi function of (z, y_prev, y, b0, dt), generated as C and compiled once through
+nmpc/cache.py (`codegen`; without a compiler CasADi's interpreter runs it): the same arithmetic
+in the same order as the NumPy loop (the wrap as NumPy's floor modulo, the clip as min and max),
+which serves any other gap (lost samples) and the pure path.
 """
 
 from __future__ import annotations
 
 import math
 
+import casadi as ca
 import numpy as np
 
 from trq_offboard.config import EsoConfig
@@ -67,7 +74,7 @@ def _wrap(a: np.ndarray) -> np.ndarray:
 class ExtendedStateObserver:
     """Six third-order observers advanced together (vectorised over channels)."""
 
-    def __init__(self, cfg: EsoConfig, control_dt_s: float) -> None:
+    def __init__(self, cfg: EsoConfig, control_dt_s: float, codegen: bool = True) -> None:
         self.cfg = cfg
         self.dt = control_dt_s
         self.h = control_dt_s / cfg.substeps
@@ -97,6 +104,60 @@ class ExtendedStateObserver:
         lim_t, lim_r = cfg.max_disturbance
         self._lim = np.array([lim_t] * 3 + [lim_r] * 3)
         self._acol = np.array(self.alpha, float).reshape(3, 1)   # fal's exponent per row
+        self._period_fn = self._build_period(codegen)
+
+    def _build_period(self, codegen: bool):
+        """update() over one control period as a compiled function (see the module docstring):
+        (z (3x6 row-major), y_prev, y, b0, dt) -> z (3x6 row-major)."""
+        from trq_offboard.model.dynamics import NumpyFunction
+        from trq_offboard.nmpc.cache import compiled
+
+        n = self.cfg.substeps
+        zs, yp, ys, bs, dts = (ca.SX.sym(name, k) for name, k in
+                               (("z", 18), ("y_prev", 6), ("y", 6), ("b0", 6), ("dt", 1)))
+        two_pi = 2.0 * math.pi
+
+        def wrap(a):                      # NumPy's (a + pi) % (2 pi) - pi: a floor modulo
+            m = ca.fmod(a + math.pi, two_pi)
+            return ca.if_else(m < 0, m + two_pi, m) - math.pi
+
+        # fal's constants as NumPy computes them (delta^(1 - alpha) per row and channel)
+        inner = np.power(self.delta, 1.0 - self._acol)          # (3, 6)
+        h = dts[0] / n
+        b2 = self.beta[1]
+        z1 = [zs[j] for j in range(6)]
+        z2 = [zs[6 + j] for j in range(6)]
+        z3 = [zs[12 + j] for j in range(6)]
+        ang = self._angles
+        step = [ys[j] - yp[j] for j in range(6)]
+        step = [wrap(step[j]) if ang[j] else step[j] for j in range(6)]
+        for i in range(n):
+            frac = (i + 1) / n
+            n1, n2, n3 = [], [], []
+            for j in range(6):
+                e = yp[j] + frac * step[j] - z1[j]
+                if ang[j]:
+                    e = wrap(e)
+                if self.linear:
+                    g = [e, e, e]
+                else:
+                    g = [ca.if_else(ca.fabs(e) <= self.delta[j], e / inner[r, j],
+                                    ca.sign(e) * ca.power(ca.fabs(e), self.alpha[r]))
+                         for r in range(3)]
+                red = bool(self.reduced[j])
+                dz1 = (z3[j] + bs[j] if red else z2[j]) + self._b1[j] * g[0]
+                dz2 = z3[j] + b2[j] * g[1] + bs[j]
+                dz3 = self._b3[j] * (g[1] if red else g[2])
+                n1.append(z1[j] + h * dz1)
+                n2.append(z2[j] + h * dz2)
+                n3.append(z3[j] + h * dz3)
+            z1, z2, z3 = n1, n2, n3
+        z1 = [wrap(z1[j]) if ang[j] else z1[j] for j in range(6)]
+        z3 = [ca.fmin(ca.fmax(z3[j], -self._lim[j]), self._lim[j]) for j in range(6)]
+        z2 = [z3[j] + bs[j] if self.reduced[j] else z2[j] for j in range(6)]
+        fn = ca.Function(f"eso_period_{n}", [zs, yp, ys, bs, dts],
+                         [ca.vertcat(*z1, *z2, *z3)])
+        return NumpyFunction(compiled(fn, codegen)[0])
 
     def measurement(self, x: np.ndarray) -> np.ndarray:
         """The channels' measured outputs (6) from a state vector (12: position, velocity NED,
@@ -135,6 +196,10 @@ class ExtendedStateObserver:
         b0 = np.asarray(b0, float)
         dt = self.dt if dt_s is None else float(dt_s)
         n = max(1, int(math.ceil(self.cfg.substeps * dt / self.dt - 1e-9)))
+        if n == self.cfg.substeps and self._period_fn is not None:   # one control period
+            self.z = self._period_fn(self.z, self._y_prev, y, b0, dt).reshape(3, 6)
+            self._y_prev = y.copy()
+            return
         h = dt / n
         b2 = self.beta[1]
         red, ang = self.reduced, self._angles

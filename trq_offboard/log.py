@@ -1,7 +1,19 @@
 """The controller's flight log: one CSV row per control step (estimated state, reference,
-observer estimate, command, applied outputs, solve time and status), flushed about once a
-second. The file format (header, row formatting, flushing) and the .tlog of the offboard link's
-MAVLink traffic are trq_wire.logfile's, shared with the vehicle's flight.csv."""
+observer estimate, command, applied outputs, solve time and status, the period's CPU time by
+part), flushed about once a second. The file format (header, row formatting, flushing) and the
+.tlog of the offboard link's MAVLink traffic are trq_wire.logfile's, shared with the vehicle's
+flight.csv.
+
+Rows are kept as the loop's records and formatted in batches of `batch` (off the control step:
+a call only appends, one call in `batch` writes the batch), every record but the newest, whose
+period (StepRecord.cpu) is complete only at the next step's start; `close()` writes the rest.
+
+CPU columns (ms, records.StepTimes and records.PeriodTimes; nan when not measured), each part in
+the thread that ran it: cpu_observer_ms, cpu_effectiveness_ms, cpu_predictor_ms,
+cpu_feedback_ms (the step's parts), cpu_prepare_ms (the preparation after the command),
+cpu_wire_ms (the state's decode, the target's encode and send), cpu_log_ms (this log's share),
+cpu_period_ms (the whole period, every thread of the process: the parts, the event loop, the
+transport's frame parse, the hand-offs to a worker thread)."""
 
 from __future__ import annotations
 
@@ -11,6 +23,8 @@ from pathlib import Path
 from trq_offboard.loop import StepRecord
 from trq_wire.logfile import CsvLog
 
+CPU_PARTS = ("observer", "effectiveness", "predictor", "feedback", "prepare", "wire", "log",
+             "period")
 COLUMNS = (
     ["t_s", "stamp_us"] + [f"pos_{a}_m" for a in "ned"] + [f"vel_{a}_m_s" for a in "ned"]
     + ["roll_rad", "pitch_rad", "yaw_rad"] + [f"rate_{a}_rad_s" for a in "pqr"]
@@ -21,16 +35,32 @@ COLUMNS = (
     + [f"applied_throttle{i}_pct" for i in range(1, 5)]
     + [f"applied_tilt{i}_rad" for i in range(1, 5)]
     + ["solve_ms", "iterations", "status", "source", "output_error", "cost"]
-    + [f"eff_motor{i}" for i in range(1, 5)])
+    + [f"eff_motor{i}" for i in range(1, 5)]
+    + [f"cpu_{part}_ms" for part in CPU_PARTS])
+
+
+def _ms(ns: int) -> float:
+    return ns * 1e-6 if ns >= 0 else math.nan
 
 
 class ControllerLog:
-    def __init__(self, path: Path, meta: dict[str, object], flush_every: int = 50) -> None:
+    def __init__(self, path: Path, meta: dict[str, object], flush_every: int = 50,
+                 batch: int = 50) -> None:
         self._log = CsvLog(path, COLUMNS, meta, flush_every=flush_every)
         self.path = self._log.path
+        self._batch = max(1, batch)
+        self._rows: list[StepRecord] = []
 
     def __call__(self, r: StepRecord) -> None:
-        s, ref, info = r.state, r.ref, r.info
+        rows = self._rows
+        rows.append(r)
+        if len(rows) > self._batch:
+            for old in rows[:-1]:
+                self._write(old)
+            del rows[:-1]
+
+    def _write(self, r: StepRecord) -> None:
+        s, ref, info, c = r.state, r.ref, r.info, r.cpu
         nan4 = (math.nan,) * 4
         applied = r.applied
         self._log([r.t_s, r.stamp_us, *s.pos_ned_m, *s.vel_ned_m_s, *s.euler_rad,
@@ -43,7 +73,14 @@ class ControllerLog:
                       info.solve.status.value, info.source.value, info.output_error,
                       info.solve.cost] if info else
                      [math.nan, 0, "none", "none", math.nan, math.nan])
-                  + list(info.effectiveness if info else nan4))
+                  + list(info.effectiveness if info else nan4)
+                  + ([info.cpu.observer_ns * 1e-6, info.cpu.effectiveness_ns * 1e-6,
+                      info.cpu.predictor_ns * 1e-6, info.cpu.feedback_ns * 1e-6] if info
+                     else list(nan4))
+                  + [_ms(c.prepare_ns), _ms(c.wire_ns), _ms(c.log_ns), _ms(c.period_ns)])
 
     def close(self) -> None:
+        for r in self._rows:
+            self._write(r)
+        self._rows.clear()
         self._log.close()

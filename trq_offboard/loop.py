@@ -4,7 +4,22 @@
 once by a SET_ACTUATOR_CONTROL_TARGET stamped t: that is the whole lockstep handshake, and in real
 time it is simply an event-driven controller. A repeated stamp (the vehicle resending in lockstep)
 gets the same target again; an older stamp is stale and ignored: no command is ever computed from
-an old state. The NMPC solve runs in a worker thread, off the event loop.
+an old state.
+
+The controller's step and preparation run on a worker thread by default (`executor`: a
+concurrent.futures.Executor, None for the event loop's default one), off the event loop.
+`direct=True` calls them from the flight loop instead, which saves the hop's thread hand-offs
+and event-loop turns when the machine has a core to spare for the controller, and yields the
+core (os.sched_yield) once the answer is sent, to whoever it woke, before the log and the
+preparation. Measured (docs/decisions/2026-12-02-flight-loop-direct-calls.md): one lockstep
+flight alone is faster direct, two flights in parallel on two busy cores (the scenario runner's
+default) are slower, so the thread stays the default.
+
+Every period is timed by part with injected CPU clocks: `cpu_ns` (default time.thread_time_ns:
+the calling thread's) for the wire (the telemetry's decode into a state, the target's encode and
+send) and the log, `process_cpu_ns` (default time.process_time_ns: every thread's) for the whole
+period; the controller times its own step's parts and its preparation in the thread that runs
+them. StepRecord.cpu holds them, completed as the period runs (records.PeriodTimes).
 """
 
 from __future__ import annotations
@@ -12,6 +27,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import math
+import os
 import time
 from dataclasses import dataclass, field
 from typing import Callable
@@ -22,9 +38,16 @@ from pymavlink.dialects.v20 import common as mavlink
 from trq_offboard.diagnosis import Diagnosis
 from trq_offboard.link import wire
 from trq_offboard.link.udp import MavlinkUdp
-from trq_offboard.records import ActuatorCommand, ReferenceSample, StateEstimate, StepInfo
+from trq_offboard.records import (
+    ActuatorCommand,
+    PeriodTimes,
+    ReferenceSample,
+    StateEstimate,
+    StepInfo,
+)
 
 log = logging.getLogger("trq_offboard")
+_sched_yield = getattr(os, "sched_yield", None)      # POSIX; None elsewhere
 
 TOUCHDOWN_ALT_M = 0.05
 TAKEOVER_ALTITUDE_M = 0.3         # higher than this, armed: the vehicle is flying
@@ -53,6 +76,10 @@ class StepRecord:
     cmd: ActuatorCommand
     applied: ActuatorCommand | None
     info: StepInfo | None
+    # the period's CPU by part: completed after the record is handed over (prepare, log: at the
+    # end of the step's period; period: at the next step's start), so read it late (ControllerLog
+    # formats its rows in batches, after their periods have ended)
+    cpu: PeriodTimes = field(default_factory=PeriodTimes)
 
 
 @dataclass
@@ -88,8 +115,16 @@ class OffboardFlight:
     def __init__(self, link: MavlinkUdp, controller, make_reference: Callable, *,
                  name: str, tilt_limit_rad: float, record: Callable[[StepRecord], None] | None = None,
                  connect_timeout_s: float = 30.0, telemetry_timeout_s: float = 2.0,
-                 telemetry_lost_s: float = 10.0, ack_timeout_s: float = 1.0) -> None:
+                 telemetry_lost_s: float = 10.0, ack_timeout_s: float = 1.0,
+                 executor=None, direct: bool = False,
+                 cpu_ns: Callable[[], int] = time.thread_time_ns,
+                 process_cpu_ns: Callable[[], int] = time.process_time_ns) -> None:
         self.link = link
+        self.executor = executor        # where step and prepare run (None: the loop's default)
+        self.direct = direct            # or called directly from the flight loop
+        self.cpu_ns = cpu_ns                    # the loop thread's parts (wire, log)
+        self.process_cpu_ns = process_cpu_ns    # the whole period: every thread of the process
+        self._wire_ns = 0               # the wire's CPU since the last step's start
         self.controller = controller
         self.make_reference = make_reference
         self.name = name
@@ -120,7 +155,9 @@ class OffboardFlight:
     def on_message(self, msg) -> None:
         kind = msg.get_type()
         if kind == "ODOMETRY":
+            c0 = self.cpu_ns()
             odo = wire.parse_odometry(msg)
+            self._wire_ns += self.cpu_ns() - c0
             if odo is None:
                 return
             if self._answered_stamp is not None and odo.stamp_us == self._answered_stamp \
@@ -160,9 +197,10 @@ class OffboardFlight:
                 raise FlightError(f"no new ODOMETRY for {silent_s:g} s: telemetry lost")
             self._new_odometry.clear()
             wait_s = min(self.telemetry_timeout_s, self.telemetry_lost_s - silent_s)
-            try:
-                await asyncio.wait_for(self._new_odometry.wait(), wait_s)
-            except asyncio.TimeoutError:
+            try:       # asyncio.timeout: wait_for can swallow a cancellation (CPython gh-86296)
+                async with asyncio.timeout(wait_s):
+                    await self._new_odometry.wait()
+            except TimeoutError:
                 silent_s += wait_s
                 log.warning("no telemetry for %.1f s: not commanding", silent_s)
 
@@ -200,9 +238,17 @@ class OffboardFlight:
         raise FlightError(f"no COMMAND_ACK for command {command_id} after {retries} tries")
 
     def _answer(self, stamp_us: int, cmd: ActuatorCommand) -> None:
+        c0 = self.cpu_ns()
         self._last_target = wire.actuator_target(stamp_us, cmd, self.tilt_limit)
         self._answered_stamp = stamp_us
         self.link.send(self._last_target)
+        self._wire_ns += self.cpu_ns() - c0
+
+    async def _call(self, fn, *args):
+        """fn(*args): on the executor (off the event loop), or directly with `direct`."""
+        if self.direct:
+            return fn(*args)
+        return await asyncio.get_running_loop().run_in_executor(self.executor, fn, *args)
 
     async def _heartbeats(self) -> None:
         while True:
@@ -220,7 +266,6 @@ class OffboardFlight:
                 self._mode_task.cancel()
 
     async def _fly(self) -> FlightSummary:
-        loop = asyncio.get_running_loop()
         try:
             await asyncio.wait_for(self._heartbeat_seen.wait(), self.connect_timeout_s)
         except asyncio.TimeoutError:
@@ -250,9 +295,16 @@ class OffboardFlight:
         answered = 0
         down_since: float | None = None
         pending: wire.Odometry | None = first
+        prev: StepRecord | None = None       # the last period's record, its period to close
+        prev_start = 0
+        prepare = getattr(self.controller, "prepare", None)
         while True:
             odo = pending if pending is not None else await self._next_odometry()
             pending = None
+            start = self.process_cpu_ns()
+            if prev is not None:
+                prev.cpu.period_ns = start - prev_start
+            prev_start = start
             t = (odo.stamp_us - t0) * 1e-6
             ref = reference.sample(t)
             # land detector: on the ground and still, in the landing phase, for LAND_DETECT_S
@@ -266,11 +318,18 @@ class OffboardFlight:
             else:
                 down_since = None
             applied = self.applied
-            wall0 = time.perf_counter()
-            cmd, info = await loop.run_in_executor(None, self.controller.step, t, odo.state,
-                                                   applied, reference)
+            wire_rx, self._wire_ns = self._wire_ns, 0     # this state's decode
+            cmd, info = await self._call(self.controller.step, t, odo.state, applied, reference)
             self._answer(odo.stamp_us, cmd)
-            self._account(t, odo, ref, cmd, applied, info, time.perf_counter() - wall0)
+            # direct: the answer is out, hand the core to whoever it woke (in lockstep the
+            # vehicle) before the log and the preparation, which are off the latency path
+            # (docs/decisions/2026-12-02-flight-loop-direct-calls.md)
+            if self.direct and _sched_yield is not None:
+                _sched_yield()
+            rec = self._account(t, odo, ref, cmd, applied, info)
+            rec.cpu.wire_ns = wire_rx + self._wire_ns
+            self._wire_ns = 0
+            prev = rec
             answered += 1
             # ask for offboard control once the stream is flowing (PX4 grants it only then;
             # after the vehicle's failsafe it is how control comes back), without ever holding
@@ -278,9 +337,11 @@ class OffboardFlight:
             if answered == 2:
                 self._mode_task = asyncio.ensure_future(self._request_offboard())
             # the preparation phase of the next step (RTI), while the vehicle flies this one
-            prepare = getattr(self.controller, "prepare", None)
             if prepare is not None:
-                await loop.run_in_executor(None, prepare, reference)
+                await self._call(prepare, reference)
+                rec.cpu.prepare_ns = getattr(self.controller, "last_prepare_cpu_ns", -1)
+            else:
+                rec.cpu.prepare_ns = 0
             if self.heartbeat is not None and wire.is_crashed(self.heartbeat):
                 self.summary.crashed = True
                 log.error("the vehicle reports a crash (EMERGENCY)")
@@ -310,7 +371,7 @@ class OffboardFlight:
         return (abs(state.pos_ned_m[2] - ground_z) < TOUCHDOWN_ALT_M
                 and abs(state.vel_ned_m_s[2]) < TOUCHDOWN_SPEED_M_S)
 
-    def _account(self, t, odo, ref, cmd, applied, info, wall_s) -> None:
+    def _account(self, t, odo, ref, cmd, applied, info) -> StepRecord:
         err = np.subtract(odo.state.pos_ned_m, ref.pos_ned_m)
         self._errors.append(err)
         yaw_err = (odo.state.euler_rad[2] - ref.yaw_rad + math.pi) % (2 * math.pi) - math.pi
@@ -322,8 +383,14 @@ class OffboardFlight:
             if info.source.value != "nmpc":
                 self.summary.fallbacks += 1
         self.summary.steps += 1
+        rec = StepRecord(t, odo.stamp_us, odo.state, ref, cmd, applied, info)
         if self.record:
-            self.record(StepRecord(t, odo.stamp_us, odo.state, ref, cmd, applied, info))
+            c0 = self.cpu_ns()
+            self.record(rec)
+            rec.cpu.log_ns = self.cpu_ns() - c0
+        else:
+            rec.cpu.log_ns = 0
+        return rec
 
     async def _request_offboard(self) -> None:
         for _ in range(MAX_MODE_REQUESTS):

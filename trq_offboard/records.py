@@ -68,6 +68,31 @@ class CommandSource(enum.Enum):
 
 
 @dataclass(frozen=True)
+class StepTimes:
+    """CPU time (ns, of the calling thread: an injected clock, Controller's cpu_ns) of the parts
+    of one Controller.step, in the order they run; their sum is the step's. A measurement: it
+    never changes what is flown."""
+    observer_ns: int = 0               # the actuators' walk, the ESO's b0 and update, its d
+    effectiveness_ns: int = 0          # the motor effectiveness observer and d less its share
+    predictor_ns: int = 0              # the delay predictor (0 when it does not run)
+    feedback_ns: int = 0               # reference, warm start, the solver's feedback, the command
+
+
+@dataclass
+class PeriodTimes:
+    """CPU time (ns) of one control period of the flight loop (trq_offboard/loop.py), by part,
+    filled in as the period runs (the step's parts in StepInfo.cpu): the preparation phase after
+    the command, the wire (the telemetry's decode into a state, the target's encode and send),
+    the log, and the whole period: the CPU of every thread of the process from this step's start
+    to the next one's (the parts, the event loop, the transport's frame parse, heartbeats, a
+    worker thread's hand-offs); -1 until known."""
+    prepare_ns: int = -1
+    wire_ns: int = -1
+    log_ns: int = -1
+    period_ns: int = -1
+
+
+@dataclass(frozen=True)
 class StepInfo:
     source: CommandSource
     solve: SolveInfo
@@ -79,3 +104,4 @@ class StepInfo:
     failures_total: int
     # the motors' estimated effectiveness (motor_effectiveness; 1 without its observer)
     effectiveness: tuple[float, float, float, float] = (1.0, 1.0, 1.0, 1.0)
+    cpu: StepTimes = StepTimes()       # the step's CPU time by part

@@ -14,8 +14,14 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from trq_offboard.link.udp import Connection
 from trq_offboard.loop import COMMAND_TRIES, IDLE_STEPS_BEFORE_DISARM, FlightError, OffboardFlight
-from trq_offboard.records import (ActuatorCommand, CommandSource, ReferenceSample, SolveInfo,
-                                  SolveStatus, StepInfo)
+from trq_offboard.records import (
+    ActuatorCommand,
+    CommandSource,
+    ReferenceSample,
+    SolveInfo,
+    SolveStatus,
+    StepInfo,
+)
 
 LIMIT = math.radians(30.0)
 CMD = ActuatorCommand((60.0, 61.0, 62.0, 63.0), (0.1, -0.1, 0.05, 0.0))
@@ -348,3 +354,47 @@ def test_a_lost_arm_is_resent_after_vehicle_time_not_wall_time():
         await asyncio.gather(task, return_exceptions=True)
 
     asyncio.run(scenario())
+
+
+class _Ticks:
+    """A fake CPU clock: each reading 1000 ns after the last."""
+
+    def __init__(self) -> None:
+        self.t = 0
+
+    def __call__(self) -> int:
+        self.t += 1000
+        return self.t
+
+
+@pytest.mark.parametrize("threaded", [False, True])
+def test_each_period_is_timed_by_part_directly_or_on_an_executor(threaded):
+    import concurrent.futures
+
+    records = []
+    executor = concurrent.futures.ThreadPoolExecutor(1) if threaded else None
+
+    async def scenario():
+        flight, link, ctl = make_flight(record=records.append, executor=executor,
+                                        direct=not threaded, cpu_ns=_Ticks(),
+                                        process_cpu_ns=_Ticks())
+        task = asyncio.create_task(flight.run())
+        await take_off(flight, link)
+        for k in (1, 2, 3):
+            flight.on_message(odometry(10_000 * k, down_m=-0.5))
+            await until(lambda: link.targets(10_000 * k), f"the target of stamp {10_000 * k}")
+            await settle()
+        task.cancel()
+        with pytest.raises(asyncio.CancelledError):
+            await task
+        return ctl
+
+    ctl = asyncio.run(scenario())
+    if executor is not None:
+        executor.shutdown()
+    assert [r.stamp_us for r in records] == [10_000, 20_000, 30_000] and len(ctl.steps) == 3
+    for r in records:
+        assert r.cpu.prepare_ns == 0                     # FakeController has no prepare
+        assert r.cpu.wire_ns >= 2000 and r.cpu.log_ns == 1000   # decode, encode; one log call
+    # a period is closed by the next step's start; the last one is still open
+    assert all(r.cpu.period_ns > 0 for r in records[:-1]) and records[-1].cpu.period_ns == -1

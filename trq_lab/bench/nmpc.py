@@ -4,6 +4,7 @@
     trq-bench-nmpc --quick         # 16 s (4 s after the fault)
     trq-bench-nmpc --modes rti-gn,ipopt --json out/bench_nmpc.json
     trq-bench-nmpc --quick --repeat 3   # median of 3 interleaved runs
+    trq-bench-nmpc --modes rti-gn --daemons    # and the whole period over both daemons
 
 The flight is trq_lab.harness's (`fly_inprocess`, the loop the campaigns and tests fly): the
 vehicle's `Sitl` and the controller's `OffboardFlight` in one process, joined by an in-memory link
@@ -59,6 +60,9 @@ MODES = {     # name: solver overrides of params/controller/trq_nmpc_eso.yaml (a
     "rti-gn-cap8": dict(kind="rti", hessian="gauss_newton", max_iterations=1,
                         qp_max_iterations=8),          # the QP stopped after 8 iterations
     "rti-exact": dict(kind="rti", hessian="exact", max_iterations=1),
+    # HPIPM's partial condensing: the horizon's N stages condensed into this many blocks
+    **{f"rti-gn-pc{n2}": dict(kind="rti", hessian="gauss_newton", max_iterations=1,
+                              hpipm=dict(condensed_stages=n2)) for n2 in (10, 5, 4, 2)},
     "rti-gn-py": dict(kind="rti", hessian="gauss_newton", max_iterations=1, codegen="off"),
     "sqp-gn": dict(kind="sqp", hessian="gauss_newton", max_iterations=1),
     "ipopt": dict(kind="ipopt"),
@@ -80,6 +84,7 @@ def fly(mode: str, seconds: float | None, controller: str = "trq_nmpc_eso") -> d
     cfg = load_controller(trq_params.resolve("controller", controller))
     overrides = dict(MODES[mode])
     cfg = dataclasses.replace(cfg, **overrides.pop("controller", {}))
+    qp_args = overrides.pop("hpipm", None)
     cfg = dataclasses.replace(cfg, solver=dataclasses.replace(cfg.solver, **overrides))
     t0 = timer.wall_s()
     Controller(cfg)
@@ -87,6 +92,8 @@ def fly(mode: str, seconds: float | None, controller: str = "trq_nmpc_eso") -> d
     compiled_cold = cache.COUNTS["compiled"]
     t0 = timer.wall_s()
     ctl = Controller(cfg)
+    if qp_args:               # the direct HPIPM QP rebuilt with these arguments
+        _rebuild_qp(ctl.solver, qp_args)
     build_cached = timer.wall_s() - t0
     compiled_cached = cache.COUNTS["compiled"] - compiled_cold
 
@@ -149,6 +156,20 @@ def fly(mode: str, seconds: float | None, controller: str = "trq_nmpc_eso") -> d
         peak_rss_mb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0)
 
 
+def _rebuild_qp(solver, qp_args: dict) -> None:
+    """The RTI's direct HPIPM QP built again with further OcpQp arguments (partial condensing:
+    condensed_stages), the same mode, options and Hessian."""
+    from trq_offboard.nmpc import hpipm
+
+    old = solver._hqp
+    qp = hpipm.OcpQp(old.ns, old.nv, old.N, old.idxbx, mode=solver.hpipm_mode,
+                     iter_max=solver.cfg.solver.qp_max_iterations,
+                     options=solver.hpipm_options, shim=old.uses_shim, **qp_args)
+    if solver.hessian != "exact":
+        qp.set_hessian(solver._hc, solver._hcN)
+    solver._hqp = qp
+
+
 def _qp_line(solver) -> str:
     """Which QP path the mode's solver took (e.g. "hpipm direct speed_abs, shim")."""
     iface = getattr(solver, "qp_interface", None)
@@ -158,7 +179,9 @@ def _qp_line(solver) -> str:
         return f"{solver.cfg.solver.qp_solver} {iface}"
     shim = "shim" if solver._hqp.uses_shim else "ctypes loop"
     opts = "".join(f" {k} {v:g}" for k, v in solver.hpipm_options.items())
-    return f"hpipm direct {solver.hpipm_mode}{opts}, {shim}"
+    pc = (f", condensed to {solver._hqp.condensed_stages} blocks"
+          if solver._hqp.condensed_stages else "")
+    return f"hpipm direct {solver.hpipm_mode}{opts}, {shim}{pc}"
 
 
 def run_mode(mode: str, seconds: float | None, controller: str = "trq_nmpc_eso") -> dict:
@@ -209,6 +232,18 @@ def table(results: list[dict]) -> str:
             f"| {r['max_yaw_err_deg']:.2f} | {r['build_cold_s']:.1f} | {r['build_cached_s']:.2f} "
             f"| {r['peak_rss_mb']:.0f} |")
     return "\n".join(lines)
+
+
+def _daemons_summary(runs: list[dict]) -> dict:
+    """The median over the daemon runs of each figure and part."""
+    med = lambda vals: float(np.median(vals))           # noqa: E731
+    parts = {name: {k: med([r["parts"][name][k] for r in runs]) for k in runs[0]["parts"][name]}
+             for name in runs[0]["parts"]}
+    ratio = [r["controller_cpu_ms"] / (r["parts"]["solve (wall)"]["mean_ms"]
+                                        + r["parts"]["prepare"]["mean_ms"]) for r in runs]
+    return {"runs": len(runs), "parts": parts, "ratio_to_solver": med(ratio),
+            **{k: med([r[k] for r in runs])
+               for k in ("controller_cpu_ms", "vehicle_cpu_ms", "realtime_factor")}}
 
 
 def calibration_ms(repeats: int = 5) -> float:
@@ -262,6 +297,12 @@ def main(argv=None) -> int:
                     help="a controller file of params/controller/ without .yaml (default: "
                          "trq_nmpc_eso; the README's tables before the observer measured rates: "
                          "trq_nmpc_eso_paper)")
+    ap.add_argument("--daemons", action="store_true",
+                    help="also fly both daemons in lockstep over UDP (5 s and 35 s of vehicle "
+                         "time, once per --repeat) and report the controller process's CPU per "
+                         "control period measured from outside, its parts from its log, the "
+                         "vehicle's CPU per period and the closed loop's real-time factor "
+                         "(trq_lab/bench/period.py)")
     ap.add_argument("--child", default=None, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if not (trq_params.resolve("controller", args.controller)).is_file():
@@ -279,7 +320,16 @@ def main(argv=None) -> int:
     if args.repeat < 1:
         ap.error(f"--repeat {args.repeat}: expected at least 1")
     runs: dict[str, list[dict]] = {m: [] for m in modes}
+    daemon_runs: list[dict] = []
     for k in range(args.repeat):
+        if args.daemons:      # interleaved with the modes, as they are with each other
+            from trq_lab.bench.period import daemons_period
+            d = daemons_period(controller=args.controller)
+            daemon_runs.append(d)
+            print(f"  daemons{f' (run {k + 1})' if args.repeat > 1 else ''}: controller "
+                  f"{d['controller_cpu_ms']:.2f} ms CPU a period from outside, vehicle "
+                  f"{d['vehicle_cpu_ms']:.2f} ms, lockstep {d['realtime_factor']:.2f}x real "
+                  "time", flush=True)
         for m in modes:       # one after the other: the modes do not share the cores
             r = run_mode(m, seconds, args.controller)
             runs[m].append(r)
@@ -297,10 +347,21 @@ def main(argv=None) -> int:
             print(f"  {m}: p50 {min(p50):.2f}-{max(p50):.2f} ms, p99 {min(p99):.2f}-"
                   f"{max(p99):.2f} ms")
     print(table(results))
+    daemons = _daemons_summary(daemon_runs) if daemon_runs else None
+    if daemons is not None:
+        from trq_lab.bench.period import parts_table
+        print(f"\nthe whole period over both daemons in lockstep (median of {len(daemon_runs)} "
+              "run(s)):")
+        print(parts_table(daemons))
+        print(f"controller CPU per period / the solver's own step (feedback wall + preparation "
+              f"CPU, same flights): {daemons['ratio_to_solver']:.2f}; closed loop "
+              f"{daemons['realtime_factor']:.2f}x real time")
     print(f"calibration at the end {calibration_ms():.2f} ms")
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps({"machine": machine_line(), "modes": results}, indent=1))
+        args.json.write_text(json.dumps({"machine": machine_line(), "modes": results,
+                                         "daemons": daemons, "daemon_runs": daemon_runs},
+                                        indent=1))
     return 0
 
 

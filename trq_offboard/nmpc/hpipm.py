@@ -47,6 +47,7 @@ ARG_OPTIONS = {"ric_alg": ctypes.c_int, "pred_corr": ctypes.c_int, "split_step":
 _LIB: ctypes.CDLL | None = None
 _LIB_ERROR: str | None = None
 _SHIM: ctypes.CDLL | None | bool = None         # False: tried, not available
+_LIB_PATH: Path | None = None                   # the library loaded
 
 _SHIM_SOURCE = r"""
 /* trq_hpipm_shim: set one OCP QP's per-solve data, solve it, read the solution (HPIPM). */
@@ -65,11 +66,14 @@ extern void d_ocp_qp_ipm_get_iter(void *, int *);
 extern void d_ocp_qp_sol_get_u(int, void *, double *);
 extern void d_ocp_qp_sol_get_x(int, void *, double *);
 extern void d_ocp_qp_sol_get_pi(int, void *, double *);
+extern void d_part_cond_qp_cond(void *, void *, void *, void *);
+extern void d_part_cond_qp_expand_sol(void *, void *, void *, void *, void *);
 
 int trq_hpipm_solve(int N, int ns, int nv, int nb, void *qp, void *sol, void *arg, void *ws,
                     double *A, double *B, double *b, double *q, double *r,
                     double *lbx, double *ubx, double *lbu, double *ubu,
-                    double *x, double *u, double *pi, int *iter)
+                    double *x, double *u, double *pi, int *iter,
+                    void *qp2, void *sol2, void *arg2, void *ws2, void *carg, void *cws)
 {
     int k, status;
     for (k = 0; k < N; ++k) {
@@ -88,9 +92,17 @@ int trq_hpipm_solve(int N, int ns, int nv, int nb, void *qp, void *sol, void *ar
     d_ocp_qp_set_q(N, q + N * ns, qp);
     d_ocp_qp_set_lbx(N, lbx + N * nb, qp);
     d_ocp_qp_set_ubx(N, ubx + N * nb, qp);
-    d_ocp_qp_ipm_solve(qp, sol, arg, ws);
-    d_ocp_qp_ipm_get_status(ws, &status);
-    d_ocp_qp_ipm_get_iter(ws, iter);
+    if (qp2) {      /* partial condensing: solve the condensed QP, expand its solution */
+        d_part_cond_qp_cond(qp, qp2, carg, cws);
+        d_ocp_qp_ipm_solve(qp2, sol2, arg2, ws2);
+        d_ocp_qp_ipm_get_status(ws2, &status);
+        d_ocp_qp_ipm_get_iter(ws2, iter);
+        d_part_cond_qp_expand_sol(qp, sol2, sol, carg, cws);
+    } else {
+        d_ocp_qp_ipm_solve(qp, sol, arg, ws);
+        d_ocp_qp_ipm_get_status(ws, &status);
+        d_ocp_qp_ipm_get_iter(ws, iter);
+    }
     for (k = 0; k < N; ++k) {
         d_ocp_qp_sol_get_u(k, sol, u + k * nv);
         d_ocp_qp_sol_get_pi(k, sol, pi + k * ns);
@@ -101,7 +113,20 @@ int trq_hpipm_solve(int N, int ns, int nv, int nb, void *qp, void *sol, void *ar
 """
 
 
+LIBRARY_ENV = "TRQ_HPIPM_LIBRARY"
+
+
 def library_path() -> Path | None:
+    """The libhpipm to load: $TRQ_HPIPM_LIBRARY if set (another build, e.g. one with BLASFEO's
+    AVX2 kernels; it must carry BLASFEO inside or beside it), else the one of the installed
+    CasADi (next to its own libraries), or None."""
+    other = os.environ.get(LIBRARY_ENV)
+    if other:
+        return Path(other)
+    return bundled_path()
+
+
+def bundled_path() -> Path | None:
     """libhpipm of the installed CasADi (next to its own libraries), or None."""
     try:
         import casadi
@@ -125,7 +150,20 @@ def _load() -> ctypes.CDLL | None:
         _LIB_ERROR = "libhpipm not found next to casadi"
         return None
     try:
-        lib = ctypes.CDLL(str(path), mode=os.RTLD_LOCAL if hasattr(os, "RTLD_LOCAL") else 0)
+        try:
+            lib = ctypes.CDLL(str(path), mode=os.RTLD_LOCAL if hasattr(os, "RTLD_LOCAL") else 0)
+        except OSError as exc:
+            if path == bundled_path():
+                raise
+            import warnings
+            warnings.warn(f"${LIBRARY_ENV}={path} could not be loaded ({exc}): the HPIPM "
+                          "bundled with CasADi is used", RuntimeWarning, stacklevel=2)
+            path = bundled_path()
+            if path is None:
+                raise
+            lib = ctypes.CDLL(str(path), mode=os.RTLD_LOCAL if hasattr(os, "RTLD_LOCAL") else 0)
+        global _LIB_PATH
+        _LIB_PATH = path
         P, I, S = ctypes.c_void_p, ctypes.c_int, ctypes.c_size_t
         sig = {
             "d_ocp_qp_dim_strsize": (S,), "d_ocp_qp_dim_memsize": (S, I),
@@ -146,6 +184,16 @@ def _load() -> ctypes.CDLL | None:
             "d_ocp_qp_ipm_get_status": (None, P, P),
             "d_ocp_qp_ipm_get_iter": (None, P, P),
         }
+        sig.update({
+            "d_part_cond_qp_compute_block_size": (None, I, I, P),
+            "d_part_cond_qp_compute_dim": (None, P, P, P),
+            "d_part_cond_qp_arg_memsize": (S, I), "d_part_cond_qp_arg_create": (None, I, P, P),
+            "d_part_cond_qp_arg_set_default": (None, P),
+            "d_part_cond_qp_ws_memsize": (S, P, P, P, P),
+            "d_part_cond_qp_ws_create": (None, P, P, P, P, P, P),
+            "d_part_cond_qp_cond": (None, P, P, P, P),
+            "d_part_cond_qp_expand_sol": (None, P, P, P, P, P),
+        })
         for name in ("nx", "nu", "nbx", "nbu", "ng", "ns"):
             sig[f"d_ocp_qp_dim_set_{name}"] = (None, I, I, P)
         for name in ("A", "B", "b", "Q", "S", "R", "q", "r", "lbx", "ubx", "lbu", "ubu",
@@ -169,15 +217,17 @@ def _load_shim() -> ctypes.CDLL | None:
     if _SHIM is None:
         _SHIM = False
         from trq_offboard.nmpc.cache import compiled_c
-        lib_dir = str(library_path().parent)
+        loaded = _LIB_PATH or library_path()
+        lib_dir = str(loaded.parent)
+        # linked by the loaded library's file name: the shim calls into that one
         path = compiled_c("trq_hpipm_shim", _SHIM_SOURCE,
-                          (f"-L{lib_dir}", f"-Wl,-rpath,{lib_dir}", "-lhpipm"))
+                          (f"-L{lib_dir}", f"-Wl,-rpath,{lib_dir}", f"-l:{loaded.name}"))
         if path is not None:
             try:
                 shim = ctypes.CDLL(str(path))
                 f = shim.trq_hpipm_solve
                 f.restype = ctypes.c_int
-                f.argtypes = [ctypes.c_int] * 4 + [ctypes.c_void_p] * 17
+                f.argtypes = [ctypes.c_int] * 4 + [ctypes.c_void_p] * 23
                 _SHIM = shim
             except OSError:
                 pass
@@ -201,7 +251,8 @@ class OcpQp:
     at stage N); state boxes on idxbx (the same at every stage 1..N), every input boxed."""
 
     def __init__(self, ns: int, nv: int, N: int, idxbx, mode: str = "speed",
-                 iter_max: int = 50, shim: bool = True, options: dict | None = None):
+                 iter_max: int = 50, shim: bool = True, options: dict | None = None,
+                 condensed_stages: int = 0):
         lib = _load()
         if lib is None:
             raise RuntimeError(f"HPIPM is not available: {_LIB_ERROR}")
@@ -233,24 +284,67 @@ class OcpQp:
         sol_s, sol_m = struct_and_mem(lib.d_ocp_qp_sol_strsize, (dim_s,),
                                       lib.d_ocp_qp_sol_memsize)
         lib.d_ocp_qp_sol_create(dim_s, sol_s, sol_m)
-        arg_s, arg_m = struct_and_mem(lib.d_ocp_qp_ipm_arg_strsize, (dim_s,),
-                                      lib.d_ocp_qp_ipm_arg_memsize)
-        lib.d_ocp_qp_ipm_arg_create(dim_s, arg_s, arg_m)
-        lib.d_ocp_qp_ipm_arg_set_default(MODES[mode], arg_s)
-        it = ctypes.c_int(int(iter_max))
-        lib.d_ocp_qp_ipm_arg_set_iter_max(ctypes.byref(it), arg_s)
-        for name, value in (options or {}).items():
-            if name not in ARG_OPTIONS:
-                raise ValueError(f"hpipm option {name!r}: expected one of "
-                                 f"{', '.join(ARG_OPTIONS)}")
-            getattr(lib, f"d_ocp_qp_ipm_arg_set_{name}")(
-                ctypes.byref(ARG_OPTIONS[name](value)), arg_s)
-        ws_s = _aligned(lib.d_ocp_qp_ipm_ws_strsize())
-        ws_m = _aligned(lib.d_ocp_qp_ipm_ws_memsize(dim_s, arg_s))
-        keep.extend([ws_s[0], ws_m[0]])
-        lib.d_ocp_qp_ipm_ws_create(dim_s, arg_s, ws_s[1], ws_m[1])
+        def struct(nbytes):
+            buf, addr = _aligned(nbytes)
+            keep.append(buf)
+            return addr
+
+        arg_s = struct(lib.d_ocp_qp_ipm_arg_strsize())
+        def ipm(dim, arg):
+            lib.d_ocp_qp_ipm_arg_create(dim, arg, struct_mem_arg(dim))
+            lib.d_ocp_qp_ipm_arg_set_default(MODES[mode], arg)
+            it = ctypes.c_int(int(iter_max))
+            lib.d_ocp_qp_ipm_arg_set_iter_max(ctypes.byref(it), arg)
+            for name, value in (options or {}).items():
+                if name not in ARG_OPTIONS:
+                    raise ValueError(f"hpipm option {name!r}: expected one of "
+                                     f"{', '.join(ARG_OPTIONS)}")
+                getattr(lib, f"d_ocp_qp_ipm_arg_set_{name}")(
+                    ctypes.byref(ARG_OPTIONS[name](value)), arg)
+            ws_s = _aligned(lib.d_ocp_qp_ipm_ws_strsize())
+            ws_m = _aligned(lib.d_ocp_qp_ipm_ws_memsize(dim, arg))
+            keep.extend([ws_s[0], ws_m[0]])
+            lib.d_ocp_qp_ipm_ws_create(dim, arg, ws_s[1], ws_m[1])
+            return ws_s[1]
+
+        def struct_mem_arg(dim):
+            return struct(lib.d_ocp_qp_ipm_arg_memsize(dim))
+
+        ws = ipm(dim_s, arg_s)
+        self._qp, self._sol, self._arg, self._ws = qp_s, sol_s, arg_s, ws
+        # partial condensing (HPIPM's part_cond): the N stages condensed into N2 blocks, the
+        # condensed QP solved by the same interior point, its solution expanded
+        self.condensed_stages = int(condensed_stages)
+        self._pc = (None,) * 6
+        if self.condensed_stages:
+            N2 = self.condensed_stages
+            if not 1 <= N2 < N:
+                raise ValueError(f"condensed_stages {N2}: expected 1 to {N - 1} (N = {N})")
+            self._block = np.zeros(N2 + 1, np.int32)
+            lib.d_part_cond_qp_compute_block_size(N, N2, self._block.ctypes.data)
+            dim2_s, dim2_m = struct_and_mem(lib.d_ocp_qp_dim_strsize, (N2,),
+                                            lib.d_ocp_qp_dim_memsize)
+            lib.d_ocp_qp_dim_create(N2, dim2_s, dim2_m)
+            lib.d_part_cond_qp_compute_dim(dim_s, self._block.ctypes.data, dim2_s)
+            # the condensing's arg and workspace structs have no strsize entry point: a
+            # generous zeroed buffer each (they hold a few pointers and sizes)
+            carg = struct(1 << 16)
+            lib.d_part_cond_qp_arg_create(N2, carg, struct(lib.d_part_cond_qp_arg_memsize(N2)))
+            lib.d_part_cond_qp_arg_set_default(carg)
+            qp2_s, qp2_m = struct_and_mem(lib.d_ocp_qp_strsize, (dim2_s,), lib.d_ocp_qp_memsize)
+            lib.d_ocp_qp_create(dim2_s, qp2_s, qp2_m)
+            sol2_s, sol2_m = struct_and_mem(lib.d_ocp_qp_sol_strsize, (dim2_s,),
+                                            lib.d_ocp_qp_sol_memsize)
+            lib.d_ocp_qp_sol_create(dim2_s, sol2_s, sol2_m)
+            arg2_s = struct(lib.d_ocp_qp_ipm_arg_strsize())
+            ws2 = ipm(dim2_s, arg2_s)
+            cws = struct(1 << 16)
+            lib.d_part_cond_qp_ws_create(
+                dim_s, self._block.ctypes.data, dim2_s, carg, cws,
+                struct(lib.d_part_cond_qp_ws_memsize(dim_s, self._block.ctypes.data, dim2_s,
+                                                      carg)))
+            self._pc = (qp2_s, sol2_s, arg2_s, ws2, carg, cws)
         self._keep = keep
-        self._qp, self._sol, self._arg, self._ws = qp_s, sol_s, arg_s, ws_s[1]
         self._idxbx_addr = self.idxbx.ctypes.data
         self._idxbu = np.arange(nv, dtype=np.int32)
         for k in range(N + 1):
@@ -304,7 +398,7 @@ class OcpQp:
                 A.ctypes.data, B.ctypes.data, b.ctypes.data, q.ctypes.data, r.ctypes.data,
                 lbx.ctypes.data, ubx.ctypes.data, lbu.ctypes.data, ubu.ctypes.data,
                 self.x.ctypes.data, self.u.ctypes.data, self.pi.ctypes.data,
-                ctypes.addressof(self._iter))
+                ctypes.addressof(self._iter), *self._pc)
             self.iterations = self._iter.value
             return self.x, self.u, self.pi
         # without the shim: the same calls from Python (field, data, stages)
@@ -316,9 +410,16 @@ class OcpQp:
             fn, ptr, stride = getattr(lib, f"d_ocp_qp_set_{name}"), arr.ctypes.data, arr.strides[0]
             for k in stages:
                 fn(k, ptr + k * stride, qp)
-        lib.d_ocp_qp_ipm_solve(qp, self._sol, self._arg, self._ws)
-        lib.d_ocp_qp_ipm_get_status(self._ws, ctypes.byref(self._status))
-        lib.d_ocp_qp_ipm_get_iter(self._ws, ctypes.byref(self._iter))
+        qp2, sol2, arg2, ws2, carg, cws = self._pc
+        if qp2 is not None:
+            lib.d_part_cond_qp_cond(qp, qp2, carg, cws)
+            lib.d_ocp_qp_ipm_solve(qp2, sol2, arg2, ws2)
+            lib.d_part_cond_qp_expand_sol(qp, sol2, self._sol, carg, cws)
+        else:
+            lib.d_ocp_qp_ipm_solve(qp, self._sol, self._arg, self._ws)
+        ws = self._ws if qp2 is None else ws2
+        lib.d_ocp_qp_ipm_get_status(ws, ctypes.byref(self._status))
+        lib.d_ocp_qp_ipm_get_iter(ws, ctypes.byref(self._iter))
         self.status, self.iterations = self._status.value, self._iter.value
         for name, arr, stages in (("u", self.u, inputs), ("pi", self.pi, inputs),
                                   ("x", self.x, states)):

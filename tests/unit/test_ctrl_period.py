@@ -1,0 +1,159 @@
+"""The controller's period, measured by part and made cheap (issue 18): the parts' CPU times come
+from an injected clock and add up; the compiled observers and the actuators' lag chain compute
+what their NumPy loops compute; the log writes every row, in order, after its period."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from trq_offboard.config import load_controller
+from trq_offboard.controller import Controller
+from trq_offboard.effectiveness import MotorEffectivenessObserver
+from trq_offboard.eso import ExtendedStateObserver
+from trq_offboard.records import (
+    CommandSource,
+    SolveInfo,
+    SolveStatus,
+    StateEstimate,
+)
+
+PARAMS = Path(__file__).resolve().parents[2] / "params" / "controller"
+CTRL = PARAMS / "trq_nmpc_eso.yaml"
+
+
+class _Ticks:
+    """A fake CPU clock: each reading is 1000 ns after the last."""
+
+    def __init__(self) -> None:
+        self.t = 0
+
+    def __call__(self) -> int:
+        self.t += 1000
+        return self.t
+
+
+class _HoverSolver:
+    """No NMPC (building one costs seconds): the plan holds the given command."""
+
+    def __init__(self, u, n, nx=12):
+        self.u, self.n, self.nx = np.asarray(u, float), n, nx
+
+    def solve(self, x0, x_ref, d, u_prev, guess, y0=None):
+        return (np.tile(self.u, (self.n, 1)), np.tile(x0, (self.n + 1, 1)),
+                SolveInfo(SolveStatus.OK, 1, 1e-4, 0.0))
+
+
+def _hover_state(z=-2.0):
+    return StateEstimate((0.0, 0.0, z), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+
+
+def test_step_parts_come_from_the_injected_clock_and_add_up():
+    cfg = dataclasses.replace(load_controller(CTRL), effectiveness=None)
+    clock = _Ticks()
+    probe = Controller(cfg, solver=_HoverSolver(np.zeros(8), cfg.horizon_steps))
+    ctl = Controller(cfg, solver=_HoverSolver(probe.u_trim, cfg.horizon_steps), cpu_ns=clock)
+    ctl.reset(0.0, _hover_state())
+    for k in range(1, 4):
+        before = clock.t
+        cmd, info = ctl.step(0.01 * k, _hover_state(), None, _Const())
+        cpu = info.cpu
+        parts = (cpu.observer_ns, cpu.effectiveness_ns, cpu.predictor_ns, cpu.feedback_ns)
+        assert info.source is CommandSource.NMPC
+        assert all(p >= 1000 for p in parts)      # each part between two readings
+        # the parts are contiguous: the step's first reading to its last
+        assert sum(parts) == clock.t - before - 1000
+        ctl.prepare(_Const())                     # no prepare on this solver: timed anyway
+        assert ctl.last_prepare_cpu_ns == 1000
+
+
+class _Const:
+    def sample(self, t_s):
+        from trq_offboard.records import ReferenceSample
+        return ReferenceSample((0.0, 0.0, -2.0), (0.0, 0.0, 0.0), 0.0)
+
+
+@pytest.mark.parametrize("name", ["trq_nmpc_eso", "trq_nmpc_eso_paper"])
+@pytest.mark.parametrize("kind", ["nonlinear", "linear"])
+def test_compiled_eso_period_is_the_numpy_loop(name, kind):
+    cfg = load_controller(PARAMS / f"{name}.yaml")
+    ec = dataclasses.replace(cfg.eso, kind=kind)
+    fast, ref = ExtendedStateObserver(ec, 0.01), ExtendedStateObserver(ec, 0.01)
+    ref._period_fn = None                          # the NumPy loop
+    rng = np.random.default_rng(3)
+    fast.reset(rng.normal(size=6), rng.normal(size=6))
+    ref.z, ref._y_prev = fast.z.copy(), fast._y_prev.copy()
+    worst = 0.0
+    for k in range(300):
+        y = fast._y_prev + rng.normal(size=6) * (0.05 if k % 7 else 3.0)   # in and out of fal's band
+        b0 = rng.normal(size=6) * 5.0
+        fast.update(y, b0)
+        ref.update(y, b0)
+        worst = max(worst, float(np.max(np.abs(fast.z - ref.z))))
+        ref.z = fast.z.copy()
+    # the same arithmetic; NumPy's SIMD pow may differ from libm's in the last bit
+    assert worst == 0.0 if kind == "linear" else worst < 1e-12
+
+
+def test_compiled_effectiveness_pieces_are_the_numpy_loop():
+    cfg = load_controller(CTRL)
+    args = (cfg.effectiveness, cfg.vehicle.motor_time_constant_s, 0.01)
+    fast, ref = MotorEffectivenessObserver(*args), MotorEffectivenessObserver(*args)
+    ref._piece_fn = None
+    fast.reset(np.full(4, 50.0))
+    ref.reset(np.full(4, 50.0))
+    rng = np.random.default_rng(4)
+    for k in range(300):
+        segs = ([(0.004, rng.uniform(10, 100, 4)), (0.006, rng.uniform(10, 100, 4))]
+                if k % 5 == 0 else [(0.01, rng.uniform(10, 100, 4))])
+        y_meas = fast._y_meas_prev - np.abs(rng.normal(size=4))
+        e_fast = fast.update(y_meas, segs, 0.01)
+        e_ref = ref.update(y_meas, segs, 0.01)
+        assert np.array_equal(e_fast, e_ref) and np.array_equal(fast.y, ref.y)
+
+
+def test_lag_chain_is_the_step_by_step_lag():
+    cfg = dataclasses.replace(load_controller(CTRL), effectiveness=None)
+    ctl = Controller(cfg, solver=_HoverSolver(np.zeros(8), cfg.horizon_steps))
+    rng = np.random.default_rng(5)
+    lo, hi = ctl._u_lo, ctl._u_hi
+    for n in (1, 5, 48, 49, 100):                  # within one chunk, at and past its end
+        y0 = rng.uniform(lo, hi)
+        ops = [(rng.uniform(lo, hi), float(rng.choice([0.0025, 0.005, 0.01, 0.03])), 0.0, None)
+               for _ in range(n)]
+        ys, mids = ctl._chain(y0, ops)
+        y = y0
+        for k, (u, h, _, _) in enumerate(ops):
+            assert np.array_equal(mids[k], ctl._lag(y, u, 0.5 * h))
+            y = ctl._lag(y, u, h)
+            assert np.array_equal(ys[k], y)
+
+
+def test_controller_log_writes_every_row_in_order_after_its_period(tmp_path):
+    from trq_lab import metrics
+    from trq_offboard.log import ControllerLog
+    from trq_offboard.loop import StepRecord
+    from trq_offboard.records import ActuatorCommand, ReferenceSample
+
+    log = ControllerLog(tmp_path / "controller.csv", {"controller": "x"}, batch=3)
+    cmd = ActuatorCommand((50.0,) * 4, (0.0,) * 4)
+    ref = ReferenceSample((0.0, 0.0, -1.0), (0.0, 0.0, 0.0), 0.0)
+    records = []
+    for k in range(8):
+        if records:        # as the loop does: the last period closes at the next step's start
+            records[-1].cpu.period_ns = 2_000_000 + k
+        r = StepRecord(0.01 * k, 10_000 * k, _hover_state(), ref, cmd, None, None)
+        log(r)
+        r.cpu.prepare_ns, r.cpu.wire_ns, r.cpu.log_ns = 300_000, 100_000, 1_000
+        records.append(r)
+    log.close()
+    _, cols = metrics.read_csv(tmp_path / "controller.csv")
+    assert cols["stamp_us"].tolist() == [10_000 * k for k in range(8)]
+    assert cols["cpu_period_ms"][:7].tolist() == [(2_000_000 + k) * 1e-6 for k in range(1, 8)]
+    assert math.isnan(cols["cpu_period_ms"][7])        # the last period never closed
+    assert cols["cpu_prepare_ms"].tolist() == [0.3] * 8
+    assert np.isnan(cols["cpu_observer_ms"]).all()      # no StepInfo: not measured

@@ -1,0 +1,155 @@
+"""The controller's whole control period measured from outside its process, over both daemons.
+
+    figures = daemons_period(short_s=5, long_s=35)     # trq-bench-nmpc --daemons
+
+Flies the vehicle daemon and the controller daemon (trq_nmpc_eso, or another controller file) in
+lockstep over UDP on free ports, twice: for `short_s` and for `long_s` seconds of vehicle time
+(the vehicle's --duration; the default sim, the controller's helix). Each process's CPU time
+(user + system, all its threads, from the kernel's rusage of the exited child, os.wait4) is read
+when it has exited. The difference of the two flights over the control periods between them
+cancels start-up, build and shut-down:
+
+    controller CPU per period = (cpu_long - cpu_short) / periods,   periods = (long - short) rate
+
+and the same for the vehicle; the real-time factor of the closed loop is
+(long_s - short_s) / (wall_long - wall_short) (simulated seconds per wall second, both daemons
+in lockstep, the vehicle's whole run). The long flight's controller.csv gives the parts of the
+same periods (the controller's own measurement, records.StepTimes and PeriodTimes), their mean
+over the rows stamped in (short_s, long_s]; their whole period (every thread, from one step's
+start to the next) is the inside view of the outside figure. Both flights write their logs, as a
+scenario's do (the log's cost is one of the parts).
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["daemons_period", "PARTS", "parts_table"]
+
+PARTS = ("observer", "effectiveness", "predictor", "feedback", "prepare", "wire", "log",
+         "period")
+
+
+def _free_ports(n: int) -> list[int]:
+    socks = [socket.socket(socket.AF_INET, socket.SOCK_DGRAM) for _ in range(n)]
+    for s in socks:
+        s.bind(("127.0.0.1", 0))
+    ports = [s.getsockname()[1] for s in socks]
+    for s in socks:
+        s.close()
+    return ports
+
+
+def _reap(proc: subprocess.Popen, block: bool = True) -> float | None:
+    """`proc`'s CPU seconds (user + system, all threads) once it has exited (waiting for it
+    with `block`, else None while it runs). Popen.poll or wait must not be called on it: they
+    would reap it without its rusage."""
+    pid, status, ru = os.wait4(proc.pid, 0 if block else os.WNOHANG)
+    if pid == 0:
+        return None
+    proc.returncode = os.waitstatus_to_exitcode(status)
+    return ru.ru_utime + ru.ru_stime
+
+
+def _listening(port: int, proc: subprocess.Popen, timeout_s: float) -> None:
+    """Until UDP 127.0.0.1:`port` is taken (trq_lab.procs.wait_bound without Popen.poll)."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+            try:
+                s.bind(("127.0.0.1", port))
+            except OSError:
+                return
+        time.sleep(0.05)
+    raise RuntimeError(f"the controller did not listen on {port} within {timeout_s:g} s")
+
+
+def fly_daemons(seconds: float, controller: str, log_dir: Path,
+                python: str = sys.executable) -> dict:
+    """One lockstep flight of both daemons for `seconds` of vehicle time: CPU s of each
+    process, the vehicle's wall time (start to exit) and its exit code."""
+    pv, pc, pg, pt = _free_ports(4)
+    vcmd = [python, "-m", "sil_vehicle", "--duration", f"{seconds:g}", "--mode", "lockstep",
+            "--offboard-bind", f"127.0.0.1:{pv}", "--offboard-target", f"127.0.0.1:{pc}",
+            "--gcs-bind", f"127.0.0.1:{pg}", "--gcs-target", f"127.0.0.1:{pt}",
+            "--log-dir", str(log_dir)]
+    ccmd = [python, "-m", "trq_offboard", "--controller", controller, "--connect",
+            f"udpin:127.0.0.1:{pc}", "--log-dir", str(log_dir)]
+    out = dict(stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    ctl = subprocess.Popen(ccmd, **out)
+    _listening(pc, ctl, 60.0)              # built and listening: the vehicle's clock starts now
+    t0 = time.monotonic()
+    veh = subprocess.Popen(vcmd, **out)
+    veh_cpu = _reap(veh)
+    wall = time.monotonic() - t0
+    ctl_cpu = _reap(ctl, block=False)
+    if ctl_cpu is None:
+        ctl.send_signal(signal.SIGINT)     # the daemon hands over and closes its logs
+        deadline = time.monotonic() + 15.0
+        while ctl_cpu is None and time.monotonic() < deadline:
+            time.sleep(0.05)
+            ctl_cpu = _reap(ctl, block=False)
+        if ctl_cpu is None:
+            ctl.kill()
+            ctl_cpu = _reap(ctl)
+    return {"seconds": seconds, "controller_cpu_s": ctl_cpu, "vehicle_cpu_s": veh_cpu,
+            "wall_s": wall, "vehicle_rc": veh.returncode}
+
+
+def _parts(csv_path: Path, lo_s: float, hi_s: float) -> dict:
+    from trq_lab import metrics
+    _, cols = metrics.read_csv(csv_path)
+    t = np.asarray(cols["stamp_us"], float) * 1e-6
+    keep = (t > lo_s) & (t <= hi_s)
+    out = {}
+    for part in PARTS:
+        name = f"cpu_{part}_ms"        # a controller older than these columns: nan
+        v = np.asarray(cols[name], float)[keep] if name in cols else np.array([np.nan])
+        out[part] = {"mean_ms": float(np.nanmean(v)) if v.size else float("nan"),
+                     "p50_ms": float(np.nanmedian(v)) if v.size else float("nan"),
+                     "p99_ms": float(np.nanpercentile(v, 99)) if v.size else float("nan")}
+    s = np.asarray(cols["solve_ms"], float)[keep]
+    out["solve (wall)"] = {"mean_ms": float(np.nanmean(s)), "p50_ms": float(np.nanmedian(s)),
+                           "p99_ms": float(np.nanpercentile(s, 99))}
+    return out
+
+
+def daemons_period(short_s: float = 5.0, long_s: float = 35.0,
+                   controller: str = "trq_nmpc_eso", control_rate_hz: int = 100) -> dict:
+    """The two flights and what follows from them (see the module docstring)."""
+    with tempfile.TemporaryDirectory(prefix="trq-bench-period-") as tmp:
+        short = fly_daemons(short_s, controller, Path(tmp) / "short")
+        long_ = fly_daemons(long_s, controller, Path(tmp) / "long")
+        parts = _parts(Path(tmp) / "long" / "controller.csv", short_s, long_s)
+    periods = (long_s - short_s) * control_rate_hz
+    dwall = long_["wall_s"] - short["wall_s"]
+    return {
+        "short": short, "long": long_, "periods": periods,
+        "controller_cpu_ms": (long_["controller_cpu_s"] - short["controller_cpu_s"])
+        / periods * 1e3,
+        "vehicle_cpu_ms": (long_["vehicle_cpu_s"] - short["vehicle_cpu_s"]) / periods * 1e3,
+        "realtime_factor": (long_s - short_s) / dwall if dwall > 0 else float("nan"),
+        "parts": parts,
+    }
+
+
+def parts_table(fig: dict) -> str:
+    """The controller's period by part beside the outside figures (markdown)."""
+    lines = ["| part | mean ms | p50 ms | p99 ms |", "|---|---|---|---|"]
+    for name, v in fig["parts"].items():
+        label = "whole period (every thread, from inside)" if name == "period" else name
+        lines.append(f"| {label} | {v['mean_ms']:.3f} | {v['p50_ms']:.3f} | {v['p99_ms']:.3f} |")
+    lines.append(f"| the controller process, from outside (CPU per period) "
+                 f"| {fig['controller_cpu_ms']:.3f} | - | - |")
+    lines.append(f"| the vehicle process, from outside (CPU per period) "
+                 f"| {fig['vehicle_cpu_ms']:.3f} | - | - |")
+    return "\n".join(lines)
