@@ -1,0 +1,98 @@
+"""A pair of pseudo-terminals joined back to back: a serial cable on one machine.
+
+    with PtyPair() as pair:        # as `socat -d -d pty,raw,echo=0 pty,raw,echo=0`
+        vehicle:    trq-sil-vehicle --offboard-serial {pair.a}
+        controller: trq-offboard --connect serial://{pair.b}:921600
+
+Two `os.openpty()`; each slave end (the device a program opens, `pair.a` and `pair.b`) is set
+raw with echo off, and a copier thread moves the bytes between the master ends, both ways, as
+they come. The slave ends stay open here too, so a program may close and reopen its device
+(a daemon restarting) without the pair going away. A pty has no baud rate: the line's pace, if
+any, is the writer's (the vehicle paces its writes in real time).
+"""
+
+from __future__ import annotations
+
+import os
+import selectors
+import threading
+import tty
+
+MAX_PENDING = 1 << 20      # bytes held for an end nobody reads before new bytes are dropped
+
+
+class PtyPair:
+    def __init__(self) -> None:
+        self._fds: list[int] = []
+        m_a, s_a = os.openpty()
+        m_b, s_b = os.openpty()
+        self._fds = [m_a, s_a, m_b, s_b]
+        for fd in (s_a, s_b):
+            tty.setraw(fd)                     # raw, and echo off (setraw clears ECHO)
+        self.a, self.b = os.ttyname(s_a), os.ttyname(s_b)
+        self._peer = {m_a: m_b, m_b: m_a}
+        self.copied = {self.a: 0, self.b: 0}   # bytes written by the program on each end
+        self._names = {m_a: self.a, m_b: self.b}
+        self._stop_r, self._stop_w = os.pipe()
+        self._thread = threading.Thread(target=self._copy, name="ptypair", daemon=True)
+        self._thread.start()
+
+    def _copy(self) -> None:
+        sel = selectors.DefaultSelector()
+        for fd in self._peer:
+            os.set_blocking(fd, False)
+            sel.register(fd, selectors.EVENT_READ)
+        sel.register(self._stop_r, selectors.EVENT_READ)
+        pending = {fd: bytearray() for fd in self._peer}      # bytes waiting to go to fd
+        try:
+            while True:
+                for fd, want in pending.items():
+                    sel.modify(fd, selectors.EVENT_READ | (selectors.EVENT_WRITE if want else 0))
+                for key, events in sel.select():
+                    fd = key.fd
+                    if fd == self._stop_r:
+                        return
+                    if events & selectors.EVENT_READ:
+                        try:
+                            data = os.read(fd, 65536)
+                        except (BlockingIOError, InterruptedError):
+                            data = b""
+                        except OSError:       # EIO: no program has this end open right now
+                            data = b""
+                        if data:
+                            self.copied[self._names[fd]] += len(data)
+                            if len(pending[self._peer[fd]]) < MAX_PENDING:   # else: dropped,
+                                pending[self._peer[fd]] += data              # as by a UART
+                    if events & selectors.EVENT_WRITE and pending[fd]:
+                        try:
+                            n = os.write(fd, pending[fd])
+                        except (BlockingIOError, InterruptedError):
+                            n = 0
+                        del pending[fd][:n]
+                # write at once what has just been read (the common case: no EAGAIN)
+                for fd, want in pending.items():
+                    if want:
+                        try:
+                            n = os.write(fd, want)
+                        except (BlockingIOError, InterruptedError):
+                            n = 0
+                        del want[:n]
+        finally:
+            sel.close()
+
+    def close(self) -> None:
+        if self._thread.is_alive():
+            os.write(self._stop_w, b"x")
+            self._thread.join(5)
+        for fd in (*self._fds, self._stop_r, self._stop_w):
+            try:
+                os.close(fd)
+            except OSError:
+                pass
+        self._fds = []
+
+    def __enter__(self) -> "PtyPair":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
