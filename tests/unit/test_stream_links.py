@@ -11,6 +11,7 @@ import os
 import socket
 import time
 
+import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
 from sil_vehicle.daemon import VehicleDaemon, _StreamLink
@@ -253,3 +254,48 @@ def test_vehicle_routes_a_ground_station_request_onto_the_stream(sim):
     d._on_stream_bytes("offboard", nvf)
     assert nvf in d.transports["gcs"].sent
 
+
+
+# --- the ground-station tools' client ----------------------------------------------------------
+
+def test_gcs_client_over_a_serial_line():
+    from trq_lab.gcs.client import MavClient
+
+    with PtyPair() as pair:
+        far = os.open(pair.a, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
+        try:
+            with MavClient(f"serial://{pair.b}:57600") as client:
+                data = b"\x00noise" + pack(packer(), heartbeat())
+                os.write(far, data[:9])
+                assert client.poll(0.05) == []
+                os.write(far, data[9:])
+                msg = client.wait(lambda m: m.get_type() == "HEARTBEAT", 2.0, "heartbeat")
+                assert msg.get_srcSystem() == 1
+                client.send(heartbeat())
+                sent = read_all(far, 21)
+                assert mavlink.MAVLink(None).decode(bytearray(sent)).get_srcComponent() == 190
+        finally:
+            os.close(far)
+
+
+def test_gcs_client_over_tcp():
+    from trq_lab.gcs.client import MavClient
+
+    with socket.create_server(("127.0.0.1", 0)) as server:
+        port = server.getsockname()[1]
+        with MavClient(f"tcpout://127.0.0.1:{port}") as client:
+            conn, _ = server.accept()
+            with conn:
+                frame = pack(packer(), heartbeat())
+                conn.sendall(frame[:5])
+                conn.sendall(frame[5:] + frame)
+                got = client.poll(1.0) + client.poll(0.2)
+                assert [m.get_type() for m in got] == ["HEARTBEAT", "HEARTBEAT"]
+
+
+def test_gcs_tools_refuse_a_bad_connection_string(capsys):
+    from trq_lab.gcs.monitor import main
+
+    with pytest.raises(SystemExit) as exc:
+        main(["--connect", "udpin:nowhere"])
+    assert exc.value.code == 2 and "udpin:nowhere" in capsys.readouterr().err
