@@ -80,6 +80,12 @@ class PtyPair:
         finally:
             sel.close()
 
+    def inject(self, end: str, data: bytes) -> None:
+        """Bytes for the program on `end` (pair.a or pair.b) as if from the line: noise, a
+        burst of garbage (tests). They may land between, or inside, the copier's frames."""
+        master = next(m for m, name in self._names.items() if name == end)
+        os.write(master, data)
+
     def close(self) -> None:
         if self._thread.is_alive():
             os.write(self._stop_w, b"x")
