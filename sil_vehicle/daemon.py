@@ -79,6 +79,15 @@ class _StreamLink:
         if self.stream is not None and self.stream.connected:
             self.stream.write(data)
 
+    def write_frames(self, frames: list[bytes]) -> None:
+        """Frames of one instant: on a paced line one by one (each arrives when its own last
+        byte is through, as on a UART), else in one write."""
+        if getattr(self.stream, "pacer", None) is None:
+            self.write(b"".join(frames))
+            return
+        for frame in frames:
+            self.write(frame)
+
 
 def _expire(answer: asyncio.Future) -> None:
     """The lockstep wait's timer: no answer in time (result None)."""
@@ -253,7 +262,7 @@ class VehicleDaemon:
             if chunk:
                 transport.sendto(chunk, dest)
         for link, frames in streamed.items():
-            self.streams[link].write(b"".join(frames))
+            self.streams[link].write_frames(frames)
 
     def _live_peers(self, link: str) -> list[tuple[str, int]]:
         peers = self.peers[link]
