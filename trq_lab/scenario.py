@@ -214,6 +214,15 @@ def prepare(scenario: Scenario, controller: str, out: Path) -> tuple[Path, Path,
     return ctrl_yaml, sim_yaml, Path(cfg.vehicle.file).resolve(), rate
 
 
+def serial_delay_s(signed: bool) -> float:
+    """How long the vehicle's paced serial line takes to carry one ODOMETRY (its full frame at
+    SERIAL_BAUD, 8N1): the state's extra age on that link in real time."""
+    from pymavlink.dialects.v20 import common as mavlink
+
+    from trq_wire.framing import frame_size, line_bytes_per_s
+    return frame_size(mavlink.MAVLink_odometry_message, signed) / line_bytes_per_s(SERIAL_BAUD)
+
+
 def offboard_link(link: str, p_vehicle: int, p_ctrl: int, pair=None
                   ) -> tuple[list[str], str]:
     """(the vehicle's offboard-link options, the controller's --connect) for `link`: UDP on
@@ -260,7 +269,10 @@ def _fly(scenario: Scenario, run: Run, realtime: bool, ctrl_yaml: Path, sim_yaml
     if scenario.faults:
         vcmd += ["--faults", str(scenario.faults)]
     # how long a command takes to act: the link's round trip, plus in real time about a solve
-    delay_s = command_delay_s(scenario.offboard_impair, realtime)
+    # (and on a paced serial line, the time the line takes to carry an ODOMETRY)
+    delay_s = command_delay_s(scenario.offboard_impair, realtime) + (
+        serial_delay_s(signing_key_file is not None) if realtime and "--offboard-serial" in vlink
+        else 0.0)
     ccmd = [sys.executable, "-m", "trq_offboard", "--controller", str(ctrl_yaml), "--connect",
             connect, "--log-dir", str(run.out),
             "--applied-delay-s", f"{delay_s:g}"]
