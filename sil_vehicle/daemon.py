@@ -219,9 +219,11 @@ class VehicleDaemon:
                         "network can command the vehicle (use --signing-key-file)", link.name,
                         link.tcp)
 
-    def bound(self, link: str) -> tuple[str, int]:
+    def bound(self, link: str) -> tuple[str, int] | None:
+        """The address a UDP link or a TCP server listens on (None for a serial line)."""
         if link in self.streams:
-            return self.streams[link].server.sockets[0].getsockname()[:2]
+            server = self.streams[link].server
+            return None if server is None else server.sockets[0].getsockname()[:2]
         return self.transports[link].get_extra_info("sockname")[:2]
 
     def send(self, outgoing: list[Outgoing]) -> None:
@@ -232,16 +234,15 @@ class VehicleDaemon:
         live: dict[str, list[tuple[str, int]]] = {}
         streamed: dict[str, list[bytes]] = {}
         for item in outgoing:
-            if item.link not in self.transports:
-                if item.link in self.streams:     # one peer, the stream: in order, one write
-                    data = self.codecs[item.link].encode(item.msg)
-                    if self.tlog:
-                        self.tlog.write(self._log_us(), data)
-                    streamed.setdefault(item.link, []).append(data)
+            on_stream = item.link in self.streams
+            if not on_stream and item.link not in self.transports:
                 continue
             data = self.codecs[item.link].encode(item.msg)
             if self.tlog:
                 self.tlog.write(self._log_us(), data)
+            if on_stream:                 # one peer, the stream: in order
+                streamed.setdefault(item.link, []).append(data)
+                continue
             if item.to is not None:
                 dests = [item.to]
             else:

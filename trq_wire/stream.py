@@ -98,6 +98,9 @@ class SerialStream:
         if self.pacer is None:
             self._write_now(data)
             return
+        if self.pacer.queued_bytes + len(data) > self.pacer.bytes_per_s:
+            self.dropped_bytes += len(data)    # a second of the line is queued: the buffer
+            return                             # is full, as a UART driver's overflows
         self.pacer.push(data)
         if self._flush_timer is None:
             self._flush()

@@ -299,3 +299,39 @@ def test_gcs_tools_refuse_a_bad_connection_string(capsys):
     with pytest.raises(SystemExit) as exc:
         main(["--connect", "udpin:nowhere"])
     assert exc.value.code == 2 and "udpin:nowhere" in capsys.readouterr().err
+
+
+def test_a_paced_serial_stream_writes_what_the_line_has_carried_and_drops_past_a_second():
+    from trq_wire.framing import LinePacer
+
+    class Clock:
+        ns = 0
+
+        def __call__(self):
+            return self.ns
+
+    async def main():
+        clock = Clock()
+        with PtyPair() as pair:
+            got = []
+            far = SerialStream(pair.b, 921600, got.append)
+            far.open()
+            paced = SerialStream(pair.a, 921600, lambda d: None,
+                                 pacer=LinePacer(1000, clock))   # 1000 bytes a second
+            paced.open()
+            paced.write(b"a" * 100)            # carried at 100 ms
+            paced.write(b"b" * 100)            # at 200 ms
+            await asyncio.sleep(0.05)
+            assert got == []                   # the clock has not moved: nothing left
+            clock.ns = 100_000_000
+            paced._flush()
+            await until(lambda: b"".join(got) == b"a" * 100)
+            paced.write(b"c" * 950)            # 100 + 950 queued: past a second of line
+            assert paced.dropped_bytes == 950
+            clock.ns = 200_000_000
+            paced._flush()
+            await until(lambda: b"".join(got) == b"a" * 100 + b"b" * 100)
+            paced.close()
+            far.close()
+
+    asyncio.run(main())
