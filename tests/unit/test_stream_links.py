@@ -335,3 +335,39 @@ def test_a_paced_serial_stream_writes_what_the_line_has_carried_and_drops_past_a
             far.close()
 
     asyncio.run(main())
+
+
+def _serial_sim(sim, device, baud, mode):
+    import dataclasses
+
+    from sil_vehicle.config import Endpoint, SerialPort
+    links = tuple(dataclasses.replace(link, bind=Endpoint("127.0.0.1", 0))
+                  if link.name == "gcs" else
+                  dataclasses.replace(link, serial=SerialPort(device, baud))
+                  for link in sim.links)
+    return sim.with_changes(links=links, clock_mode=mode)
+
+
+@pytest.mark.parametrize("baud, mode, warned, paced", [
+    (921600, "lockstep", False, False), (921600, "realtime", False, True),
+    (57600, "realtime", True, True)])
+def test_the_vehicle_prints_its_serial_budget_and_paces_only_in_real_time(
+        sim, capsys, caplog, baud, mode, warned, paced):
+    from sil_vehicle.daemon import serial_budget
+
+    with PtyPair() as pair:
+        d = VehicleDaemon(_serial_sim(sim, pair.a, baud, mode), None)
+
+        async def main():
+            await d.open()
+            stream = d.streams["offboard"].stream
+            d.close()
+            return stream
+
+        stream = asyncio.run(main())
+    needed, available = serial_budget(d.sim.link("offboard"), False)
+    line = capsys.readouterr().out
+    assert (f"offboard link serial {pair.a} at {baud} baud: {needed} B/s needed of "
+            f"{available} ({100 * needed / available:.0f} %)") in line
+    assert ("more than 80 %" in caplog.text) is warned
+    assert (stream.pacer is not None) is paced
