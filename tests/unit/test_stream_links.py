@@ -371,3 +371,38 @@ def test_the_vehicle_prints_its_serial_budget_and_paces_only_in_real_time(
             f"{available} ({100 * needed / available:.0f} %)") in line
     assert ("more than 80 %" in caplog.text) is warned
     assert (stream.pacer is not None) is paced
+
+
+def test_the_vehicles_tcp_server_serves_one_client_and_turns_a_second_away(sim):
+    import dataclasses
+
+    from sil_vehicle.config import Endpoint
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    links = tuple(dataclasses.replace(link, bind=Endpoint("127.0.0.1", 0)) if link.name == "gcs"
+                  else dataclasses.replace(link, tcp=Endpoint("127.0.0.1", port))
+                  for link in sim.links)
+    d = VehicleDaemon(sim.with_changes(links=links), None)
+
+    async def main():
+        await d.open()
+        assert d.bound("offboard") == ("127.0.0.1", port)
+        r1, w1 = await asyncio.open_connection("127.0.0.1", port)
+        await until(lambda: d.streams["offboard"].stream is not None)
+        r2, w2 = await asyncio.open_connection("127.0.0.1", port)
+        assert await asyncio.wait_for(r2.read(100), 5) == b""      # closed at once
+        assert d.streams["offboard"].refused == 1
+        d.send(d.sitl.telemetry_due(everything=True))
+        data = await asyncio.wait_for(r1.read(4096), 5)
+        assert any(m.get_type() == "HEARTBEAT" for m in decode_all([data]))
+        # the first client goes: the next one is served
+        w1.close()
+        await until(lambda: d.streams["offboard"].stream is None)
+        r3, w3 = await asyncio.open_connection("127.0.0.1", port)
+        await until(lambda: d.streams["offboard"].stream is not None)
+        for w in (w2, w3):
+            w.close()
+        d.close()
+
+    asyncio.run(main())
