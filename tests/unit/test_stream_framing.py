@@ -7,6 +7,8 @@ from __future__ import annotations
 import random
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from pymavlink.dialects.v20 import common as mavlink
 from trq_params import builtin
 
@@ -244,3 +246,23 @@ def test_no_rounding_accumulates():
 def test_pacer_refuses_a_zero_rate():
     with pytest.raises(ValueError, match="positive"):
         LinePacer(0, Clock())
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.lists(st.one_of(st.binary(max_size=300), st.sampled_from(frames(4) + frames(4, True))),
+                max_size=30), st.lists(st.integers(1, 400), min_size=1, max_size=20))
+def test_any_bytes_in_any_chunks_never_raise_and_give_only_checksummed_frames(parts, sizes):
+    stream = b"".join(parts)
+    f, got, i, k = StreamFramer(), [], 0, 0
+    while i < len(stream):
+        n = sizes[k % len(sizes)]
+        got += f.feed(stream[i:i + n])
+        i, k = i + n, k + 1
+    rx = mavlink.MAVLink(None)
+    for fr in got:
+        rx.decode(bytearray(fr))                 # a real frame: decodes, checksum right
+    # every whole frame is found, in order (garbage may at worst add a frame of its own, if
+    # its bytes happen to form a header and a right checksum)
+    real = set(frames(4) + frames(4, True))
+    found = iter(got)
+    assert all(any(fr == g for g in found) for fr in parts if fr in real)
