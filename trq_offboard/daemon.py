@@ -51,10 +51,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="controller YAML or its name in params/controller/ "
                         "(trq_nmpc_eso, trq_nmpc, quad_nmpc); default trq_nmpc_eso")
     p.add_argument("--connect", default="udpin:127.0.0.1:14540",
-                   help="the vehicle's link: udpin:HOST:PORT (listen, PX4's offboard port, "
-                        "the default), udpout:HOST:PORT, tcp:HOST:PORT (connect), "
-                        "tcpin:HOST:PORT, serial://DEVICE:BAUD (921600 if left out); also "
-                        "written " + ", ".join(f for f in FORMS if "://" in f))
+                   help="the vehicle's link, one of " + ", ".join(FORMS) + " (udp: listens "
+                        "as udpin:, tcp: connects as tcpout:, BAUD 921600 if left out); default "
+                        "udpin:127.0.0.1:14540, PX4's offboard port")
     p.add_argument("--reference", default=None,
                    choices=("hover", "step", "circle", "helix", "figure8"),
                    help="override the reference kind of the controller file")
