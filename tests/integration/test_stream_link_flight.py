@@ -1,11 +1,14 @@
 """The offboard link on a byte stream, end to end: the same lockstep flight (a hover with a
 motor fault) between `trq-sil-vehicle` and `trq-offboard` over UDP, over a pty pair at 921600
 baud (`--offboard-serial A`, `--connect serial://B:921600`) and over the vehicle's TCP server
-gives the vehicle the same flight log, bit for bit, over every controller step; garbage
-sprayed onto the serial line all flight long costs time (resends), not the flight."""
+gives the vehicle the same flight log, bit for bit, over every controller step, signed or not;
+garbage sprayed onto the serial line all flight long costs time (resends), not the flight; over
+TCP a controller killed mid-flight leaves the vehicle to its failsafe, and a restarted one
+connects again and takes over."""
 
 from __future__ import annotations
 
+import dataclasses
 import signal
 import socket
 import threading
@@ -14,7 +17,10 @@ from pathlib import Path
 import pytest
 import yaml
 from conftest import ROOT
+from trq_params import builtin
 
+from sil_vehicle.config import SerialPort, load_sim
+from sil_vehicle.daemon import serial_budget
 from trq_lab import metrics
 from trq_lab.ptypair import PtyPair
 
@@ -40,12 +46,16 @@ def _free_tcp_port() -> int:
         return s.getsockname()[1]
 
 
-def fly(daemons, out: Path, link: str, pair: PtyPair | None = None) -> tuple[list[str], str]:
+def fly(daemons, out: Path, link: str, pair: PtyPair | None = None,
+        key_file: Path | None = None) -> tuple[list[str], str]:
     """One flight; (the vehicle's flight.csv data rows up to the controller's last step, the
     vehicle's output)."""
     out.mkdir(parents=True)
     vehicle_args = ["--seed", "3", "--faults", "motor1_smoke", "--wind-speed", "4"]
     controller_args = ["--controller", str(_overlay(out))]
+    if key_file is not None:
+        vehicle_args += ["--signing-key-file", str(key_file)]
+        controller_args += ["--signing-key-file", str(key_file)]
     if link == "udp":
         ctl = daemons.controller(*controller_args, log_dir=out / "ctl", name=f"ctl-{link}")
         veh = daemons.vehicle(*vehicle_args, log_dir=out / "veh", offboard_target=ctl.port,
@@ -85,6 +95,22 @@ def test_a_flight_over_a_pty_pair_is_the_udp_flight_bit_for_bit(udp_flight, daem
     assert "0 malformed" in vtext, vtext
 
 
+def test_a_signed_flight_over_a_pty_pair_is_the_udp_flight_bit_for_bit(udp_flight, daemons,
+                                                                       tmp_path):
+    key_file = tmp_path / "key.hex"
+    key_file.write_text("3c" * 32 + "\n")
+    with PtyPair() as pair:
+        rows, vtext = fly(daemons, tmp_path / "signed", "serial", pair, key_file)
+    assert rows == udp_flight[0]
+    assert "0 unauthenticated" in vtext, vtext
+    # the budget printed counts the signature of every frame
+    link = load_sim(builtin("sim", "default")).link("offboard")
+    signed, _ = serial_budget(dataclasses.replace(link, serial=SerialPort(pair.a, 921600)), True)
+    unsigned, _ = serial_budget(dataclasses.replace(link, serial=SerialPort(pair.a, 921600)),
+                                False)
+    assert f"baud: {signed} B/s needed of 92160" in vtext and signed > unsigned, vtext
+
+
 def test_a_flight_over_tcp_is_the_udp_flight_bit_for_bit(udp_flight, daemons, tmp_path):
     rows, vtext = fly(daemons, tmp_path / "tcp", "tcp")
     assert len(rows) > 300 and rows == udp_flight[0]
@@ -115,3 +141,39 @@ def test_garbage_on_the_serial_line_costs_time_not_the_flight(udp_flight, daemon
     summary = vtext.strip().splitlines()[-1]
     malformed = int(summary.split("unauthenticated, ")[1].split(" malformed")[0])
     assert malformed > 10, summary
+
+
+def test_over_tcp_a_killed_controller_leaves_the_failsafe_and_a_new_one_takes_over(daemons,
+                                                                                   tmp_path):
+    from conftest import wait_until
+    from test_failsafe import AUTO_LAND, controller_time
+
+    from trq_lab.gcs.client import MavClient
+
+    port = _free_tcp_port()
+    overlay = tmp_path / "controller.yaml"
+    overlay.write_text(yaml.safe_dump({
+        "extends": str(ROOT / "params/controller/trq_nmpc_eso.yaml"),
+        "vehicle": str(ROOT / "params/vehicle/trq.yaml"),
+        "observer": {"file": str(ROOT / "params/controller/eso.yaml")},
+        "reference": {"kind": "hover", "altitude_m": 1.5, "climb_speed_m_s": 0.8,
+                      "hold_s": 1.0, "duration_s": 3.0, "ramp_s": 0.5}}))
+    veh = daemons.vehicle("--wind-speed", "4", "--offboard-tcp", f"127.0.0.1:{port}",
+                          log_dir=tmp_path / "veh")
+    controller = ("--controller", str(overlay), "--connect", f"tcpout://127.0.0.1:{port}")
+    ctl_a = daemons.controller(*controller, log_dir=tmp_path / "a", name="ctl_a")
+    wait_until(lambda: controller_time(tmp_path / "a" / "controller.csv") >= 3.0, 90,
+               "the first controller to fly", lambda: ctl_a.why() + veh.why())
+    ctl_a.kill()                                        # SIGKILL: its connection just ends
+    with MavClient(f"udpout:127.0.0.1:{veh.gcs_port}") as gcs:
+        gcs.hello(10.0)
+        gcs.wait(lambda m: m.get_type() == "HEARTBEAT" and m.get_srcSystem() == 1
+                 and m.custom_mode == AUTO_LAND, 15.0, "the vehicle's failsafe (AUTO.LAND)")
+    ctl_b = daemons.controller(*controller, log_dir=tmp_path / "b", name="ctl_b")
+    assert ctl_b.wait(150) == 0, ctl_b.why()
+    assert "took over in flight" in ctl_b.text() and "disarmed" in ctl_b.text(), ctl_b.why()
+    veh.send_signal(signal.SIGINT)
+    veh.wait(30)
+    assert "no crash" in veh.text(), veh.why()
+    _, truth = metrics.read_csv(tmp_path / "veh" / "flight.csv")
+    assert not truth["crashed"].any() and truth["armed"][-1] == 0
