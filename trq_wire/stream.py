@@ -67,7 +67,9 @@ class SerialStream:
                 self._loop.remove_writer(self._fd)
         if self._flush_timer is not None:
             self._flush_timer.cancel()
-        self._fd = None
+            self._flush_timer = None
+        self._fd, self._writing = None, False
+        self._out.clear()
         if self._port is not None:
             self._port.close()
             self._port = None
