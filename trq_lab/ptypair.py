@@ -6,9 +6,10 @@
 
 Two `os.openpty()`; each slave end (the device a program opens, `pair.a` and `pair.b`) is set
 raw with echo off, and a copier thread moves the bytes between the master ends, both ways, as
-they come. The slave ends stay open here too, so a program may close and reopen its device
-(a daemon restarting) without the pair going away. A pty has no baud rate: the line's pace, if
-any, is the writer's (the vehicle paces its writes in real time).
+they come; what an end cannot take is dropped (nothing is held back). The slave ends stay open
+here too, so a program may close and reopen its device (a daemon restarting) without the pair
+going away; pyserial empties an end's input queue when it opens it. A pty has no baud rate: the
+line's pace, if any, is the writer's (the vehicle paces its writes in real time).
 """
 
 from __future__ import annotations
@@ -17,8 +18,6 @@ import os
 import selectors
 import threading
 import tty
-
-MAX_PENDING = 1 << 20      # bytes held for an end nobody reads before new bytes are dropped
 
 
 class PtyPair:
@@ -32,51 +31,38 @@ class PtyPair:
         self.a, self.b = os.ttyname(s_a), os.ttyname(s_b)
         self._peer = {m_a: m_b, m_b: m_a}
         self.copied = {self.a: 0, self.b: 0}   # bytes written by the program on each end
+        self.dropped = {self.a: 0, self.b: 0}  # bytes for an end that could not take them
         self._names = {m_a: self.a, m_b: self.b}
         self._stop_r, self._stop_w = os.pipe()
         self._thread = threading.Thread(target=self._copy, name="ptypair", daemon=True)
         self._thread.start()
 
     def _copy(self) -> None:
+        """Each read from one master is written to the other at once; what the other end's
+        input queue cannot take (nobody has that end open, or its program has stalled) is
+        dropped and counted, as a UART without flow control drops on overrun. No bytes are held
+        here: a program that opens its end late reads the line from then on, not a backlog."""
         sel = selectors.DefaultSelector()
         for fd in self._peer:
             os.set_blocking(fd, False)
             sel.register(fd, selectors.EVENT_READ)
         sel.register(self._stop_r, selectors.EVENT_READ)
-        pending = {fd: bytearray() for fd in self._peer}      # bytes waiting to go to fd
         try:
             while True:
-                for fd, want in pending.items():
-                    sel.modify(fd, selectors.EVENT_READ | (selectors.EVENT_WRITE if want else 0))
-                for key, events in sel.select():
+                for key, _ in sel.select():
                     fd = key.fd
                     if fd == self._stop_r:
                         return
-                    if events & selectors.EVENT_READ:
-                        try:
-                            data = os.read(fd, 65536)
-                        except (BlockingIOError, InterruptedError):
-                            data = b""
-                        except OSError:       # EIO: no program has this end open right now
-                            data = b""
-                        if data:
-                            self.copied[self._names[fd]] += len(data)
-                            if len(pending[self._peer[fd]]) < MAX_PENDING:   # else: dropped,
-                                pending[self._peer[fd]] += data              # as by a UART
-                    if events & selectors.EVENT_WRITE and pending[fd]:
-                        try:
-                            n = os.write(fd, pending[fd])
-                        except (BlockingIOError, InterruptedError):
-                            n = 0
-                        del pending[fd][:n]
-                # write at once what has just been read (the common case: no EAGAIN)
-                for fd, want in pending.items():
-                    if want:
-                        try:
-                            n = os.write(fd, want)
-                        except (BlockingIOError, InterruptedError):
-                            n = 0
-                        del want[:n]
+                    try:
+                        data = os.read(fd, 65536)
+                    except OSError:       # EAGAIN, or EIO: no program has this end open
+                        continue
+                    self.copied[self._names[fd]] += len(data)
+                    try:
+                        n = os.write(self._peer[fd], data)
+                    except OSError:
+                        n = 0
+                    self.dropped[self._names[self._peer[fd]]] += len(data) - n
         finally:
             sel.close()
 

@@ -88,6 +88,36 @@ def test_ptypair_survives_an_end_closed_and_reopened():
             os.close(b)
 
 
+def test_ptypair_holds_no_backlog_for_an_end_opened_late():
+    """Bytes for an end nobody reads are dropped once its queue is full; a program opening
+    that end late (pyserial empties the queue) reads the line from then on."""
+    import serial
+
+    with PtyPair() as pair:
+        a = os.open(pair.a, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
+        try:
+            sent = 0
+            for _ in range(100):
+                try:
+                    sent += os.write(a, b"x" * 8192)
+                except BlockingIOError:
+                    time.sleep(0.001)
+            end = time.monotonic() + 5
+            while pair.copied[pair.a] < sent and time.monotonic() < end:
+                time.sleep(0.01)
+            assert pair.copied[pair.a] == sent and pair.dropped[pair.b] > 0
+            with serial.Serial(pair.b, 921600, timeout=0) as b:
+                os.write(a, b"fresh")
+                got, end = b"", time.monotonic() + 5
+                while len(got) < 5 and time.monotonic() < end:
+                    got += b.read(100)
+                    time.sleep(0.001)
+                time.sleep(0.05)
+                assert got + b.read(100) == b"fresh"
+        finally:
+            os.close(a)
+
+
 # --- the controller's stream link --------------------------------------------------------------
 
 async def until(predicate, timeout_s=5.0):
