@@ -103,6 +103,11 @@ class SerialStream:
         if self.pacer.queued_bytes + len(data) > self.pacer.bytes_per_s:
             self.dropped_bytes += len(data)    # a second of the line is queued: the buffer
             return                             # is full, as a UART driver's overflows
+        # what is due by now leaves now, even while the caller keeps the loop busy (a vehicle
+        # catching up several ticks); the timer covers the rest
+        due = self.pacer.due()
+        if due:
+            self._write_now(due)
         self.pacer.push(data)
         if self._flush_timer is None:
             self._flush()
