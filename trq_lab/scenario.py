@@ -1,6 +1,7 @@
 #!/usr/bin/env python3
 """Run a scenario: the SIL vehicle and the offboard controller as separate processes over UDP,
-once per controller under the same wind, faults and seed; then metrics, report and figures.
+a serial pair or TCP, once per controller under the same wind, faults and seed; then metrics,
+report and figures.
 
     trq-scenario paper_fault50 --out out/paper_fault50
     trq-scenario SCENARIO.yaml --out DIR [--realtime] [--jobs N] [--only NAME]
@@ -12,8 +13,8 @@ the processes' output. Lockstep by default (deterministic, faster than real time
 against the wall clock. Run i's vehicle sends its ground-station telemetry to UDP 14550 + i, so
 QGroundControl on 14550 shows the first flight. --link serial flies the offboard link over a
 pair of pseudo-terminals at 921600 baud (trq_lab.ptypair, as a companion computer's UART; paced
-at the line's rate in real time), --link tcp over the vehicle's TCP server. Exit status: 0 when every run finished and every
-target of the scenario is met, 1 otherwise, 2 on a bad scenario file.
+at the line's rate in real time), --link tcp over the vehicle's TCP server. Exit status: 0 when
+every run finished and every target of the scenario is met, 1 otherwise, 2 on a bad scenario file.
 """
 
 from __future__ import annotations
