@@ -3,9 +3,8 @@ motor fault) between `trq-sil-vehicle` and `trq-offboard` over UDP, over a pty p
 baud (`--offboard-serial A`, `--connect serial://B:921600`) and over the vehicle's TCP server
 gives the vehicle the same flight log, bit for bit, over every controller step, signed or not;
 garbage sprayed onto the serial line while the controller flies costs time (resends), not the
-flight; over
-TCP a controller killed mid-flight leaves the vehicle to its failsafe, and a restarted one
-connects again and takes over."""
+flight; over TCP a controller killed mid-flight leaves the vehicle to its failsafe, and a
+restarted one connects again and takes over."""
 
 from __future__ import annotations
 
