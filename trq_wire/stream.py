@@ -25,7 +25,8 @@ READ_SIZE = 65536
 
 class SerialStream:
     """A serial device (a UART, a USB serial adapter, one end of a pty pair) at `baud`, 8N1, raw.
-    A read error (the device went away) closes it and calls `on_lost`."""
+    A read error (the device went away) closes it and calls `on_lost`. POSIX (the event loop
+    watches the device's file descriptor), as on a companion computer's Linux."""
 
     def __init__(self, device: str, baud: int, on_bytes: Callable[[bytes], None], *,
                  pacer: LinePacer | None = None, on_lost: Callable[[], None] | None = None
@@ -47,7 +48,7 @@ class SerialStream:
         return self._fd is not None
 
     def open(self) -> None:
-        import serial  # pyserial: opening and configuring the port (termios, Windows)
+        import serial  # pyserial: opening and configuring the port (termios)
 
         self._loop = asyncio.get_running_loop()
         try:
