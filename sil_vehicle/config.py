@@ -21,8 +21,8 @@ from trq_params import loader, schema
 from trq_params.loader import ConfigError
 from trq_params.schema import STREAMS
 
-__all__ = ["ConfigError", "VehicleParams", "SimParams", "RotorParams", "load_vehicle", "load_sim",
-           "STREAMS", "PARAMS_DIR"]
+__all__ = ["ConfigError", "VehicleParams", "SimParams", "RotorParams", "LinkParams",
+           "SerialPort", "load_vehicle", "load_sim", "parse_serial", "STREAMS", "PARAMS_DIR"]
 
 from trq_params import DIR as PARAMS_DIR  # noqa: E402  (the shipped parameter files)
 
@@ -129,12 +129,26 @@ class Endpoint:
 
 
 @dataclass(frozen=True)
+class SerialPort:
+    device: str
+    baud: int                    # 8N1: the line carries baud / 10 bytes a second
+
+
+@dataclass(frozen=True)
 class LinkParams:
     name: str
     bind: Endpoint
     target: Endpoint
     rates_hz: tuple[tuple[str, int], ...]    # (stream, Hz), Hz divides the physics rate or is 0
     impair: ImpairParams = ImpairParams()    # a bad link on purpose (tests, lossy scenarios)
+    # the link on a byte stream instead of UDP (bind and target then unused): a serial device,
+    # or a TCP server on this endpoint (one client at a time)
+    serial: SerialPort | None = None
+    tcp: Endpoint | None = None
+
+    @property
+    def transport(self) -> str:
+        return "serial" if self.serial else "tcp" if self.tcp else "udp"
 
     def rate(self, stream: str) -> int:
         return dict(self.rates_hz)[stream]
@@ -198,6 +212,20 @@ def parse_endpoint(text: str, where: str) -> Endpoint:
         return Endpoint(*schema.parse_endpoint(text))
     except PydanticCustomError as exc:
         raise ConfigError(f"{where}: got {text!r}, expected {exc.context['expected']}") from None
+
+
+def parse_serial(text: str, where: str) -> SerialPort:
+    """`DEVICE[:BAUD]` (baud 921600 if left out), read as trq_wire.connection reads
+    `serial://DEVICE:BAUD`."""
+    from trq_wire.connection import Connection
+
+    try:
+        c = Connection.parse(f"serial://{text}")
+    except ValueError:
+        raise ConfigError(f"{where}: got {text!r}, expected DEVICE or DEVICE:BAUD (a device "
+                          "path such as /dev/ttyUSB0, BAUD a positive integer, 921600 if "
+                          "left out)") from None
+    return SerialPort(c.device, c.baud)
 
 
 def load_sim(path: Path | str, vehicle: Path | str | None = None) -> SimParams:

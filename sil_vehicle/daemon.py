@@ -1,5 +1,7 @@
 """The SIL vehicle daemon: the only loop. It wires the clock, the simulated autopilot (`Sitl`) and
-two UDP links (ground station, offboard) the way PX4 SITL does, and writes the logs.
+two links (ground station, offboard) the way PX4 SITL does, and writes the logs. Both links are
+UDP by default; the offboard link may instead be a serial line (`--offboard-serial`, as a
+companion computer's UART) or a TCP server (`--offboard-tcp`).
 
     python -m sil_vehicle [--sim params/sim/default.yaml] [--vehicle params/vehicle/quad.yaml] ...
 
@@ -21,14 +23,24 @@ import time
 from pathlib import Path
 
 import trq_params
+from pymavlink.dialects.v20 import common as mavlink
 
 from sil_vehicle.clock import RealTimePacer
-from sil_vehicle.config import ConfigError, SimParams, load_sim, parse_endpoint
+from sil_vehicle.config import (
+    ConfigError,
+    LinkParams,
+    SimParams,
+    load_sim,
+    parse_endpoint,
+    parse_serial,
+)
 from sil_vehicle.faultscript import load_script
 from sil_vehicle.mavlink.codec import COMPONENT_ID, SYSTEM_ID, Codec
 from sil_vehicle.sitl import LINKS, LOG_COLUMNS, Outgoing, Sitl
+from trq_wire.framing import NS_PER_S, LinePacer, StreamFramer, frame_size, line_bytes_per_s
 from trq_wire.logfile import CsvLog, Tlog
 from trq_wire.signing import SignatureCheck, SigningKeyError, load_key, sign_outgoing
+from trq_wire.stream import SerialStream, TcpStream
 
 log = logging.getLogger("sil_vehicle")
 
@@ -36,6 +48,45 @@ MAX_PEERS = 16
 PEER_TIMEOUT_S = 10.0      # a peer silent this long (wall clock) gets no more telemetry
 MAVLINK2_MAGIC, IFLAG_SIGNED = 0xFD, 0x01     # a MAVLink 2 frame, and its "signed" flag
 MAX_DATAGRAM = 1400          # bytes: frames to one address are packed up to this (below the MTU)
+SERIAL_WARN_FRACTION = 0.8   # of a serial line's bytes per second: above, the start warns
+
+
+def serial_budget(link: LinkParams, signed: bool) -> tuple[int, int]:
+    """(bytes per second the link's configured telemetry needs at most, bytes per second its
+    serial line carries): each stream's rate times its frame's full encoded size (MAVLink 2
+    header, payload, checksum, and the signature when signing), against BAUD / 10 (8N1)."""
+    needed = sum(hz * frame_size(getattr(mavlink, f"MAVLink_{stream.lower()}_message"), signed)
+                 for stream, hz in link.rates_hz)
+    return needed, line_bytes_per_s(link.serial.baud)
+
+
+class _StreamLink:
+    """A link on a byte stream: its one persistent framer and the stream it currently has (the
+    serial line, or the TCP server's one client)."""
+
+    def __init__(self) -> None:
+        self.framer = StreamFramer()
+        self.stream: SerialStream | TcpStream | None = None
+        self.server: asyncio.base_events.Server | None = None
+        self.refused = 0                     # TCP clients turned away while one was connected
+
+    @property
+    def peer(self) -> tuple[str, int] | None:
+        s = self.stream
+        return s.peer if isinstance(s, TcpStream) else None
+
+    def write(self, data: bytes) -> None:
+        if self.stream is not None and self.stream.connected:
+            self.stream.write(data)
+
+    def write_frames(self, frames: list[bytes]) -> None:
+        """Frames of one instant: on a paced line one by one (each arrives when its own last
+        byte is through, as on a UART), else in one write."""
+        if getattr(self.stream, "pacer", None) is None:
+            self.write(b"".join(frames))
+            return
+        for frame in frames:
+            self.write(frame)
 
 
 def _expire(answer: asyncio.Future) -> None:
@@ -86,6 +137,7 @@ class VehicleDaemon:
                     signing_key, allow_unsigned_read_only=allow_unsigned_gcs and name == "gcs")
                 sign_outgoing(codec.mav, signing_key, link_id)
         self.transports: dict[str, asyncio.DatagramTransport] = {}
+        self.streams: dict[str, _StreamLink] = {}      # links on a serial line or TCP
         # per link: address -> wall time of its last valid message (insertion-ordered)
         self.peers: dict[str, dict[tuple[str, int], float]] = {name: {} for name in LINKS}
         self._answer: asyncio.Future | None = None   # resolved when the lockstep target arrives
@@ -109,6 +161,9 @@ class VehicleDaemon:
     async def open(self) -> None:
         loop = asyncio.get_running_loop()
         for link in self.sim.links:
+            if link.transport != "udp":
+                await self._open_stream(link)
+                continue
             transport, _ = await loop.create_datagram_endpoint(
                 lambda name=link.name: _Protocol(self, name),
                 local_addr=(link.bind.host, link.bind.port))
@@ -118,7 +173,57 @@ class VehicleDaemon:
                             "can command the vehicle (use --signing-key-file)", link.name,
                             link.bind)
 
-    def bound(self, link: str) -> tuple[str, int]:
+    async def _open_stream(self, link: LinkParams) -> None:
+        loop = asyncio.get_running_loop()
+        sl = self.streams[link.name] = _StreamLink()
+        on_bytes = lambda data, name=link.name: self._on_stream_bytes(name, data)  # noqa: E731
+        if link.serial is not None:
+            port = link.serial
+            needed, available = serial_budget(link, self.signed)
+            line = (f"{link.name} link serial {port.device} at {port.baud} baud: {needed} B/s "
+                    f"needed of {available} ({100.0 * needed / available:.0f} %)")
+            print(line, flush=True)
+            if needed > SERIAL_WARN_FRACTION * available:
+                log.warning("%s: more than %.0f %% of the line; in real time the telemetry "
+                            "will queue (latency) as on hardware", line,
+                            100 * SERIAL_WARN_FRACTION)
+            # real time: writes leave at the line's rate; lockstep: the link is transparent
+            pacer = (LinePacer(available, lambda: round(self._monotonic() * NS_PER_S))
+                     if self.sim.clock_mode == "realtime" else None)
+            sl.stream = SerialStream(port.device, port.baud, on_bytes, pacer=pacer,
+                                     on_lost=lambda: log.warning(
+                                         "%s link: serial %s went away", link.name, port.device))
+            sl.stream.open()
+            return
+
+        def made(stream: TcpStream) -> None:
+            if sl.stream is not None and sl.stream.connected:
+                log.warning("%s link: refused a TCP client from %s:%d (%s:%d is connected)",
+                            link.name, *stream.peer, *sl.stream.peer)
+                sl.refused += 1
+                stream.on_lost = None
+                stream.close()
+                return
+            log.info("%s link: TCP client %s:%d", link.name, *stream.peer)
+            sl.stream, sl.framer = stream, StreamFramer()
+
+        def lost(stream: TcpStream) -> None:
+            if stream is sl.stream:
+                log.info("%s link: TCP client %s:%d went away", link.name, *stream.peer)
+                sl.stream = None
+
+        sl.server = await loop.create_server(lambda: TcpStream(on_bytes, made, lost),
+                                             link.tcp.host, link.tcp.port)
+        if link.tcp.host not in ("127.0.0.1", "localhost", "::1") and not self.signed:
+            log.warning("link %s serves TCP on %s without a signing key: anyone on the "
+                        "network can command the vehicle (use --signing-key-file)", link.name,
+                        link.tcp)
+
+    def bound(self, link: str) -> tuple[str, int] | None:
+        """The address a UDP link or a TCP server listens on (None for a serial line)."""
+        if link in self.streams:
+            server = self.streams[link].server
+            return None if server is None else server.sockets[0].getsockname()[:2]
         return self.transports[link].get_extra_info("sockname")[:2]
 
     def send(self, outgoing: list[Outgoing]) -> None:
@@ -127,12 +232,17 @@ class VehicleDaemon:
         sides of a lockstep exchange."""
         batches: dict[tuple[str, tuple[str, int]], list[bytes]] = {}
         live: dict[str, list[tuple[str, int]]] = {}
+        streamed: dict[str, list[bytes]] = {}
         for item in outgoing:
-            if item.link not in self.transports:
+            on_stream = item.link in self.streams
+            if not on_stream and item.link not in self.transports:
                 continue
             data = self.codecs[item.link].encode(item.msg)
             if self.tlog:
                 self.tlog.write(self._log_us(), data)
+            if on_stream:                 # one peer, the stream: in order
+                streamed.setdefault(item.link, []).append(data)
+                continue
             if item.to is not None:
                 dests = [item.to]
             else:
@@ -152,6 +262,8 @@ class VehicleDaemon:
                 chunk += frame
             if chunk:
                 transport.sendto(chunk, dest)
+        for link, frames in streamed.items():
+            self.streams[link].write_frames(frames)
 
     def _live_peers(self, link: str) -> list[tuple[str, int]]:
         peers = self.peers[link]
@@ -179,6 +291,23 @@ class VehicleDaemon:
         msgs = self.codecs[link].decode(data)
         if msgs:
             self._heard(link, addr)
+        self._on_messages(link, msgs, addr)
+
+    def _on_stream_bytes(self, link: str, data: bytes) -> None:
+        """A read of a stream link: the framer's whole, checksummed frames go through the codec
+        (signing, counters) as one datagram would; what the framer skipped counts as bad
+        frames, as a datagram's garbage does."""
+        try:
+            sl = self.streams[link]
+            bad_before = sl.framer.bad
+            frames = sl.framer.feed(data)
+            codec = self.codecs[link]
+            codec.counters.bad_frames += sl.framer.bad - bad_before
+            self._on_messages(link, codec.decode(b"".join(frames)), sl.peer)
+        except Exception:  # a daemon never dies on traffic: log it and go on
+            log.exception("error while handling bytes on %s", link)
+
+    def _on_messages(self, link: str, msgs: list, addr) -> None:
         for msg in msgs:
             frame = bytes(msg.get_msgbuf())
             if self.tlog:
@@ -209,6 +338,10 @@ class VehicleDaemon:
             if system != SYSTEM_ID or component in (0, COMPONENT_ID):
                 return
         if self.signed and not (frame[0] == MAVLINK2_MAGIC and frame[2] & IFLAG_SIGNED):
+            return
+        if to in self.streams:
+            self.streams[to].write(frame)
+            self.routed[to] += 1
             return
         if to not in self.transports:
             return
@@ -307,6 +440,11 @@ class VehicleDaemon:
     def close(self) -> None:
         for transport in self.transports.values():
             transport.close()
+        for sl in self.streams.values():
+            if sl.stream is not None:
+                sl.stream.close()
+            if sl.server is not None:
+                sl.server.close()
         if self.flight_log:
             self.flight_log.close()
         if self.tlog:
@@ -341,6 +479,14 @@ def build_parser() -> argparse.ArgumentParser:
                    "(default 127.0.0.1:14580)")
     p.add_argument("--offboard-target", default=None, help="HOST:PORT of the offboard controller "
                    "(default 127.0.0.1:14540)")
+    stream = p.add_mutually_exclusive_group()
+    stream.add_argument("--offboard-serial", default=None, metavar="DEVICE[:BAUD]",
+                        help="serve the offboard link on this serial device instead of UDP, "
+                             "8N1 at BAUD (default 921600); in real time writes are paced at "
+                             "the line's rate (the controller: --connect serial://DEVICE:BAUD)")
+    stream.add_argument("--offboard-tcp", default=None, metavar="HOST:PORT",
+                        help="serve the offboard link as a TCP server on HOST:PORT instead of "
+                             "UDP, one client at a time (the controller: --connect tcp:HOST:PORT)")
     p.add_argument("--wind-speed", type=float, default=None, help="mean wind speed, m/s")
     p.add_argument("--wind-dir", type=float, default=None,
                    help="direction the wind blows from, deg clockwise from north")
@@ -392,6 +538,12 @@ def apply_overrides(sim: SimParams, args: argparse.Namespace) -> SimParams:
             text = getattr(args, f"{link.name}_{end}")
             if text is not None:
                 updates[end] = parse_endpoint(text, f"command line: --{link.name}-{end}")
+        if getattr(args, f"{link.name}_serial", None) is not None:
+            updates["serial"] = parse_serial(getattr(args, f"{link.name}_serial"),
+                                             f"command line: --{link.name}-serial")
+        if getattr(args, f"{link.name}_tcp", None) is not None:
+            updates["tcp"] = parse_endpoint(getattr(args, f"{link.name}_tcp"),
+                                            f"command line: --{link.name}-tcp")
         links.append(dataclasses.replace(link, **updates))
     changes["links"] = tuple(links)
     return sim.with_changes(**changes)

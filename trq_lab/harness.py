@@ -93,6 +93,9 @@ class _Connection:
     host: str = "memory"
     port: int = 0
 
+    def __str__(self) -> str:
+        return "inprocess:memory"
+
 
 class _InlineExecutor(concurrent.futures.ThreadPoolExecutor):
     """`run_in_executor` on this executor calls the function at once in the loop's thread (the

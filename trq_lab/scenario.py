@@ -1,16 +1,20 @@
 #!/usr/bin/env python3
 """Run a scenario: the SIL vehicle and the offboard controller as separate processes over UDP,
-once per controller under the same wind, faults and seed; then metrics, report and figures.
+a serial pair or TCP, once per controller under the same wind, faults and seed; then metrics,
+report and figures.
 
     trq-scenario paper_fault50 --out out/paper_fault50
     trq-scenario SCENARIO.yaml --out DIR [--realtime] [--jobs N] [--only NAME]
+                 [--link udp|serial|tcp]
 
 Writes DIR/metrics.json, DIR/report.md, DIR/*.png and, per controller, DIR/<controller>/ with
 flight.csv and vehicle.tlog (the vehicle), controller.csv and offboard.tlog (the controller) and
 the processes' output. Lockstep by default (deterministic, faster than real time); --realtime flies
 against the wall clock. Run i's vehicle sends its ground-station telemetry to UDP 14550 + i, so
-QGroundControl on 14550 shows the first flight. Exit status: 0 when every run finished and every
-target of the scenario is met, 1 otherwise, 2 on a bad scenario file.
+QGroundControl on 14550 shows the first flight. --link serial flies the offboard link over a
+pair of pseudo-terminals at 921600 baud (trq_lab.ptypair, as a companion computer's UART; paced
+at the line's rate in real time), --link tcp over the vehicle's TCP server. Exit status: 0 when
+every run finished and every target of the scenario is met, 1 otherwise, 2 on a bad scenario file.
 """
 
 from __future__ import annotations
@@ -162,10 +166,14 @@ def load_scenario(path: Path) -> Scenario:
                     better, impair)
 
 
-def free_ports(n: int) -> list[int]:
+LINKS = ("udp", "serial", "tcp")
+SERIAL_BAUD = 921600
+
+
+def free_ports(n: int, kind: int = socket.SOCK_DGRAM) -> list[int]:
     socks = []
     for _ in range(n):
-        s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        s = socket.socket(socket.AF_INET, kind)
         s.bind(("127.0.0.1", 0))
         socks.append(s)
     ports = [s.getsockname()[1] for s in socks]
@@ -207,17 +215,54 @@ def prepare(scenario: Scenario, controller: str, out: Path) -> tuple[Path, Path,
     return ctrl_yaml, sim_yaml, Path(cfg.vehicle.file).resolve(), rate
 
 
+def serial_delay_s(signed: bool) -> float:
+    """How long the vehicle's paced serial line takes to carry one ODOMETRY (its full frame at
+    SERIAL_BAUD, 8N1): the state's extra age on that link in real time."""
+    from pymavlink.dialects.v20 import common as mavlink
+
+    from trq_wire.framing import frame_size, line_bytes_per_s
+    return frame_size(mavlink.MAVLink_odometry_message, signed) / line_bytes_per_s(SERIAL_BAUD)
+
+
+def offboard_link(link: str, p_vehicle: int, p_ctrl: int, pair=None
+                  ) -> tuple[list[str], str]:
+    """(the vehicle's offboard-link options, the controller's --connect) for `link`: UDP on
+    two ports, the two ends of a pty pair, or the vehicle's TCP server on p_vehicle."""
+    if link == "serial":
+        return ["--offboard-serial", f"{pair.a}:{SERIAL_BAUD}"], f"serial://{pair.b}:{SERIAL_BAUD}"
+    if link == "tcp":
+        return ["--offboard-tcp", f"127.0.0.1:{p_vehicle}"], f"tcp:127.0.0.1:{p_vehicle}"
+    return (["--offboard-bind", f"127.0.0.1:{p_vehicle}", "--offboard-target",
+             f"127.0.0.1:{p_ctrl}"], f"udpin:127.0.0.1:{p_ctrl}")
+
+
 def fly(scenario: Scenario, run: Run, realtime: bool, lock: threading.Lock,
         signing_key_file: Path | None = None, controller_prefix: tuple[str, ...] = (),
-        vehicle_prefix: tuple[str, ...] = ()) -> None:
+        vehicle_prefix: tuple[str, ...] = (), link: str = "udp") -> None:
+    from trq_lab.ptypair import PtyPair
+
     ctrl_yaml, sim_yaml, vehicle_file, _ = prepare(scenario, run.source or run.controller,
                                                    run.out)
-    p_vehicle, p_ctrl, p_gcs = free_ports(3)
+    p_ctrl, p_gcs = free_ports(2)
+    p_vehicle, = free_ports(1, socket.SOCK_STREAM if link == "tcp" else socket.SOCK_DGRAM)
+    pair = PtyPair() if link == "serial" else None
+    try:
+        vlink, connect = offboard_link(link, p_vehicle, p_ctrl, pair)
+        _fly(scenario, run, realtime, ctrl_yaml, sim_yaml, vehicle_file, vlink, connect, p_gcs,
+             signing_key_file, controller_prefix, vehicle_prefix)
+    finally:
+        if pair is not None:
+            pair.close()
+
+
+def _fly(scenario: Scenario, run: Run, realtime: bool, ctrl_yaml: Path, sim_yaml: Path,
+         vehicle_file: Path, vlink: list[str], connect: str, p_gcs: int,
+         signing_key_file: Path | None, controller_prefix: tuple[str, ...],
+         vehicle_prefix: tuple[str, ...]) -> None:
     vcmd = [sys.executable, "-m", "sil_vehicle", "--sim", str(sim_yaml), "--vehicle",
             str(vehicle_file), "--seed", str(scenario.seed), "--wind-speed",
             str(scenario.wind_speed_m_s), "--wind-dir", str(scenario.wind_from_deg),
-            "--offboard-bind", f"127.0.0.1:{p_vehicle}", "--offboard-target",
-            f"127.0.0.1:{p_ctrl}", "--gcs-bind", f"127.0.0.1:{p_gcs}", "--gcs-target",
+            *vlink, "--gcs-bind", f"127.0.0.1:{p_gcs}", "--gcs-target",
             f"127.0.0.1:{14550 + run.index}", "--log-dir", str(run.out),
             "--mode", "realtime" if realtime else "lockstep"]
     if scenario.gusts:
@@ -225,9 +270,12 @@ def fly(scenario: Scenario, run: Run, realtime: bool, lock: threading.Lock,
     if scenario.faults:
         vcmd += ["--faults", str(scenario.faults)]
     # how long a command takes to act: the link's round trip, plus in real time about a solve
-    delay_s = command_delay_s(scenario.offboard_impair, realtime)
+    # (and on a paced serial line, the time the line takes to carry an ODOMETRY)
+    delay_s = command_delay_s(scenario.offboard_impair, realtime) + (
+        serial_delay_s(signing_key_file is not None) if realtime and "--offboard-serial" in vlink
+        else 0.0)
     ccmd = [sys.executable, "-m", "trq_offboard", "--controller", str(ctrl_yaml), "--connect",
-            f"udpin:127.0.0.1:{p_ctrl}", "--log-dir", str(run.out),
+            connect, "--log-dir", str(run.out),
             "--applied-delay-s", f"{delay_s:g}"]
     if signing_key_file is not None:
         vcmd += ["--signing-key-file", str(signing_key_file)]
@@ -404,6 +452,9 @@ def main(argv: list[str] | None = None) -> int:
                     help="run each vehicle process under this command, e.g. 'taskset -c 0'")
     ap.add_argument("--signing-key-file", type=Path, default=None,
                     help="fly with MAVLink 2 signing (both daemons get the key file)")
+    ap.add_argument("--link", choices=LINKS, default="udp",
+                    help="the offboard link: udp (default), serial (a pty pair at 921600 baud, "
+                         "paced at the line's rate in real time) or tcp (the vehicle's server)")
     args = ap.parse_args(argv)
     try:
         scenario = load_scenario(trq_params.resolve("scenarios", args.scenario))
@@ -436,7 +487,8 @@ def main(argv: list[str] | None = None) -> int:
     runs = [Run(c, i, args.out / c, s) for i, (c, s) in enumerate(zip(names, sources))]
     jobs = max(1, min(args.jobs or os.cpu_count() or 1, len(runs)))
     print(f"trq-scenario: {scenario.name}: {scenario.description}")
-    print(f"  {len(runs)} flight(s) {'in real time' if args.realtime else 'in lockstep'}, "
+    print(f"  {len(runs)} flight(s) {'in real time' if args.realtime else 'in lockstep'} "
+          f"over {args.link}, "
           f"{jobs} at a time, seed {scenario.seed}, wind {scenario.wind_speed_m_s:g} m/s from "
           f"{scenario.wind_from_deg:g} deg{' with gusts' if scenario.gusts else ''}, faults "
           f"{scenario.faults.name if scenario.faults else 'none'}")
@@ -455,7 +507,7 @@ def main(argv: list[str] | None = None) -> int:
                 t = threading.Thread(target=fly, args=(
                     scenario, run, args.realtime, lock, args.signing_key_file,
                     tuple(shlex.split(args.controller_prefix or "")),
-                    tuple(shlex.split(args.vehicle_prefix or ""))))
+                    tuple(shlex.split(args.vehicle_prefix or "")), args.link))
                 t.start()
                 active.append(t)
             time.sleep(0.2)

@@ -3,6 +3,9 @@
     python -m trq_offboard [--controller params/controller/trq_nmpc_eso.yaml]
                            [--connect udpin:127.0.0.1:14540] [--log-dir DIR]
 
+--connect takes the ecosystem's connection strings (trq_wire.connection): udpin:, udpout:,
+tcpin:, tcp: (tcpout), serial://DEVICE:BAUD, DEVICE,BAUD and their MAVSDK spellings.
+
 It listens like a PX4 offboard API client, waits for the vehicle's heartbeat, arms, takes off,
 flies the reference of the controller file, lands, disarms and exits 0 with a one-line summary
 (1 when the flight could not be flown, 2 on a bad configuration). It knows the vehicle only
@@ -20,12 +23,15 @@ import time
 from pathlib import Path
 
 import trq_params
+
 from trq_offboard.config import ConfigError, load_controller
-from trq_offboard.link.udp import Connection, MavlinkUdp
+from trq_offboard.link.stream import MavlinkStream
+from trq_offboard.link.udp import MavlinkUdp
 from trq_offboard.link.wire import HOME_GROUND_DOWN_M
 from trq_offboard.log import ControllerLog
 from trq_offboard.loop import FlightError, OffboardFlight
 from trq_wire.actuators import tilt_half_range
+from trq_wire.connection import FORMS, Connection
 from trq_wire.logfile import Tlog
 from trq_wire.signing import load_key
 
@@ -45,7 +51,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="controller YAML or its name in params/controller/ "
                         "(trq_nmpc_eso, trq_nmpc, quad_nmpc); default trq_nmpc_eso")
     p.add_argument("--connect", default="udpin:127.0.0.1:14540",
-                   help="udpin:HOST:PORT (listen, PX4 offboard port, default) or udpout:HOST:PORT")
+                   help="the vehicle's link, one of " + ", ".join(FORMS) + " (udp: listens "
+                        "as udpin:, tcp: connects as tcpout:, BAUD 921600 if left out); default "
+                        "udpin:127.0.0.1:14540, PX4's offboard port")
     p.add_argument("--reference", default=None,
                    choices=("hover", "step", "circle", "helix", "figure8"),
                    help="override the reference kind of the controller file")
@@ -105,8 +113,9 @@ def main(argv: list[str] | None = None) -> int:
                               "frames": "world NED, body FRD"})
         tlog = Tlog(log_dir / "offboard.tlog")
 
-    link = MavlinkUdp(connection, on_message=lambda msg: None, signing_key=key)
-    if connection.mode == "udpin" and connection.host not in ("127.0.0.1", "localhost", "::1") \
+    transport = MavlinkStream if connection.is_stream else MavlinkUdp
+    link = transport(connection, on_message=lambda msg: None, signing_key=key)
+    if connection.listens and connection.host not in ("127.0.0.1", "localhost", "::1") \
             and key is None:
         log.warning("listening on %s without a signing key: anyone on the network can feed "
                     "this controller telemetry (use --signing-key-file)", connection.host)
@@ -155,7 +164,8 @@ def main(argv: list[str] | None = None) -> int:
             link.close()
         st = link.stats
         print(f"trq-offboard: {summary.line()}" + (f"; logs in {log_dir}" if log_dir else ""))
-        print(f"trq-offboard link: {st.messages} messages in {st.datagrams} datagrams, "
+        unit = "reads" if connection.is_stream else "datagrams"
+        print(f"trq-offboard link: {st.messages} messages in {st.datagrams} {unit}, "
               f"{st.bad} bad or untrusted, {st.other_peer} from another address, "
               f"{st.sent} sent", file=sys.stderr)
         return 0 if summary.disarmed and not summary.crashed else 1

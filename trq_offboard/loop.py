@@ -270,8 +270,7 @@ class OffboardFlight:
             await asyncio.wait_for(self._heartbeat_seen.wait(), self.connect_timeout_s)
         except asyncio.TimeoutError:
             raise FlightError(f"no vehicle heartbeat within {self.connect_timeout_s:g} s on "
-                              f"{self.link.connection.mode}:{self.link.connection.host}:"
-                              f"{self.link.connection.port}") from None
+                              f"{self.link.connection}") from None
         first = await self._next_odometry()
         # taking over a flying vehicle (a restarted controller, or after the vehicle's failsafe):
         # no take-off and no arming; observer and plan start from the measured state

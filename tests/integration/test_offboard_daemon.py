@@ -205,8 +205,15 @@ def test_bad_controller_file_exits_2_naming_file_and_key(tmp_path):
 
 
 def test_bad_connection_string_exits_2(tmp_path):
-    r = run_cli(tmp_path, "--connect", "tcp:127.0.0.1:5760", "--no-log")
-    assert r.returncode == 2 and "tcp:127.0.0.1:5760" in r.stderr, r.stderr
+    r = run_cli(tmp_path, "--connect", "tcp:127.0.0.1:99999", "--no-log")
+    assert r.returncode == 2 and "tcp:127.0.0.1:99999" in r.stderr, r.stderr
+    assert "serial://DEVICE[:BAUD]" in r.stderr and "udpin:HOST:PORT" in r.stderr, r.stderr
+
+
+def test_a_serial_device_that_is_not_there_exits_1_naming_it(tmp_path):
+    r = run_cli(tmp_path, "--connect", "/dev/nonexistent-uart,921600", "--no-log")
+    assert r.returncode == 1 and "cannot open" in r.stderr, r.stderr
+    assert "/dev/nonexistent-uart" in r.stderr, r.stderr
 
 
 def test_help_lists_every_option(tmp_path):

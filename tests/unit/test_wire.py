@@ -12,7 +12,6 @@ import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
 from trq_offboard.link import wire
-from trq_offboard.link.udp import Connection
 from trq_offboard.records import ActuatorCommand
 
 LIMIT = math.radians(30.0)
@@ -192,27 +191,3 @@ def test_arm_disarm_and_heartbeat():
     assert wire.is_armed(armed)
     assert not wire.is_armed(mavlink.MAVLink_heartbeat_message(
         2, 0, mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 0, 3, 3))
-
-
-# --- connection strings ----------------------------------------------------------------------
-
-@pytest.mark.parametrize("text, expected", [
-    ("udpin:127.0.0.1:14540", Connection("udpin", "127.0.0.1", 14540)),
-    ("udpout:192.168.1.10:14580", Connection("udpout", "192.168.1.10", 14580)),
-    ("udpin:0.0.0.0:1", Connection("udpin", "0.0.0.0", 1)),
-    ("udpout:localhost:65535", Connection("udpout", "localhost", 65535)),
-])
-def test_connection_parse(text, expected):
-    assert Connection.parse(text) == expected
-
-
-@pytest.mark.parametrize("text", [
-    "", "udpin", "udpin:", "udpin:127.0.0.1", "udpin::14540", "udp:127.0.0.1:14540",
-    "tcp:127.0.0.1:5760", "udpin:127.0.0.1:port", "udpin:127.0.0.1:-1", "udpin:127.0.0.1:0",
-    "udpin:127.0.0.1:65536", "udpin:127.0.0.1:14540x", "udpin:127.0.0.1:\u00b2",
-    "127.0.0.1:14540", "/dev/ttyACM0",
-])
-def test_connection_parse_rejects_bad_strings(text):
-    with pytest.raises(ValueError, match="expected udpin:HOST:PORT or udpout:HOST:PORT") as exc:
-        Connection.parse(text)
-    assert repr(text) in str(exc.value)

@@ -5,8 +5,10 @@
     client.command(mavlink.MAV_CMD_INJECT_FAILURE, 101, 1, 1)   # waits for COMMAND_ACK
 
 `udpout:HOST:PORT` sends to the vehicle from an ephemeral port (the vehicle answers any peer),
-so it works beside a ground station that holds 14550; `udpin:HOST:PORT` listens instead.
-Every wait has a timeout and raises `NoAnswer` with what was expected.
+so it works beside a ground station that holds 14550; `udpin:HOST:PORT` listens instead. Any
+connection string of trq_wire.connection works: `tcp:HOST:PORT`, `tcpin:HOST:PORT`,
+`serial:///dev/ttyUSB0:57600` (a telemetry radio), their MAVSDK spellings. Every wait has a
+timeout and raises `NoAnswer` with what was expected.
 """
 
 from __future__ import annotations
@@ -19,6 +21,9 @@ from typing import Callable
 
 from pymavlink.dialects.v20 import common as mavlink
 
+from trq_wire.connection import FORMS, Connection
+from trq_wire.framing import StreamFramer
+
 
 class NoAnswer(RuntimeError):
     """The vehicle did not answer as expected in time."""
@@ -28,17 +33,32 @@ class MavClient:
     def __init__(self, connect: str = "udpout:127.0.0.1:18570", *, system_id: int = 255,
                  component_id: int = 190, target_system: int = 1, target_component: int = 1,
                  signing_key: bytes | None = None, link_id: int = 2) -> None:
-        mode, _, rest = connect.partition(":")
-        host, _, port = rest.rpartition(":")
-        if mode not in ("udpin", "udpout") or not port.isdigit():
-            raise ValueError(f"connection {connect!r}: expected udpin:HOST:PORT or udpout:HOST:PORT")
-        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        if mode == "udpin":
-            self.sock.bind((host, int(port)))
-            self.peer = None
+        c = self.connection = Connection.parse(connect)
+        self.sock: socket.socket | None = None     # UDP, or the TCP connection
+        self._listener: socket.socket | None = None
+        self._serial = None
+        self._framer = StreamFramer() if c.is_stream else None
+        self.peer = None
+        if c.mode == "serial":
+            import serial  # pyserial
+
+            try:
+                self._serial = serial.Serial(c.device, c.baud, timeout=0)
+            except (serial.SerialException, ValueError) as exc:
+                raise OSError(f"{c}: {exc}") from None
+            self.peer = c.device
+        elif c.mode == "tcpout":
+            self.sock = socket.create_connection((c.host, c.port), timeout=5.0)
+            self.peer = (c.host, c.port)
+        elif c.mode == "tcpin":
+            self._listener = socket.create_server((c.host, c.port))
         else:
-            self.sock.bind(("0.0.0.0", 0))
-            self.peer = (host, int(port))
+            self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+            if c.mode == "udpin":
+                self.sock.bind((c.host, c.port))
+            else:
+                self.sock.bind(("0.0.0.0", 0))
+                self.peer = (c.host, c.port)
         self.mav = mavlink.MAVLink(None, srcSystem=system_id, srcComponent=component_id)
         if signing_key is not None:            # MAVLink 2 signing of everything this tool sends
             from trq_wire.signing import sign_outgoing
@@ -50,7 +70,9 @@ class MavClient:
         self.on_message: Callable[[object], None] | None = None
 
     def close(self) -> None:
-        self.sock.close()
+        for end in (self.sock, self._listener, self._serial):
+            if end is not None:
+                end.close()
 
     def __enter__(self) -> "MavClient":
         return self
@@ -61,15 +83,42 @@ class MavClient:
     # --- raw I/O ---------------------------------------------------------------------------
     def send(self, msg) -> None:
         if self.peer is None:
-            raise NoAnswer("udpin: no vehicle has sent anything yet, nowhere to send to")
+            raise NoAnswer(f"{self.connection}: no vehicle has sent anything or connected yet, "
+                           "nowhere to send to")
         data = msg.pack(self.mav)
         self.mav.seq = (self.mav.seq + 1) % 256
-        self.sock.sendto(data, self.peer)
+        if self._serial is not None:
+            self._serial.write(data)
+        elif self.connection.is_stream:
+            self.sock.sendall(data)
+        else:
+            self.sock.sendto(data, self.peer)
 
-    def poll(self, timeout_s: float) -> list:
-        """Messages of the datagrams that arrive within `timeout_s` (at least one wait)."""
-        self.sock.settimeout(max(timeout_s, 1e-3))
+    def _receive(self, timeout_s: float) -> list:
+        """The messages of one datagram, or of what a stream brought, within timeout_s."""
+        timeout_s = max(timeout_s, 1e-3)
+        if self._serial is not None:
+            end = time.monotonic() + timeout_s
+            data = b""
+            while not data and time.monotonic() < end:
+                data = self._serial.read(65536)
+                if not data:
+                    time.sleep(0.005)
+            return self._frames(data)
+        if self._listener is not None and self.sock is None:
+            self._listener.settimeout(timeout_s)
+            try:
+                self.sock, addr = self._listener.accept()
+            except socket.timeout:
+                return []
+            self.peer = addr[:2]
+        self.sock.settimeout(timeout_s)
         try:
+            if self.connection.is_stream:
+                data = self.sock.recv(65536)
+                if not data:
+                    raise NoAnswer(f"{self.connection}: the vehicle closed the connection")
+                return self._frames(data)
             data, addr = self.sock.recvfrom(65535)
         except (socket.timeout, ConnectionRefusedError):
             return []
@@ -77,10 +126,24 @@ class MavClient:
             self.peer = addr[:2]
         rx = mavlink.MAVLink(None)
         rx.robust_parsing = True
+        return [m for m in rx.parse_buffer(data) or []
+                if not isinstance(m, mavlink.MAVLink_bad_data)]
+
+    def _frames(self, data: bytes) -> list:
+        rx = mavlink.MAVLink(None)
         out = []
-        for msg in rx.parse_buffer(data) or []:
-            if isinstance(msg, mavlink.MAVLink_bad_data):
+        for frame in self._framer.feed(data):
+            try:
+                out.append(rx.decode(bytearray(frame)))
+            except Exception:    # checksummed, but a payload may still be odd
                 continue
+        return out
+
+    def poll(self, timeout_s: float) -> list:
+        """Messages of the datagram (or stream bytes) that arrive within `timeout_s` (at least
+        one wait)."""
+        out = []
+        for msg in self._receive(timeout_s):
             kind = msg.get_type()
             self.last[kind] = msg
             if kind == "ODOMETRY":
@@ -172,6 +235,16 @@ def gcs_parser(prog: str, doc: str) -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog=prog, description=doc.splitlines()[0],
                                 formatter_class=argparse.RawDescriptionHelpFormatter,
                                 epilog="\n".join(doc.splitlines()[2:]))
-    p.add_argument("--connect", default="udpout:127.0.0.1:18570",
-                   help="the vehicle's ground-station port (default udpout:127.0.0.1:18570)")
+    p.add_argument("--connect", default="udpout:127.0.0.1:18570", type=connection_arg,
+                   help="the vehicle's ground-station port (default udpout:127.0.0.1:18570); "
+                        "any of " + ", ".join(FORMS))
     return p
+
+
+def connection_arg(text: str) -> str:
+    """argparse's check of a connection string (the string itself goes to MavClient)."""
+    try:
+        Connection.parse(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return text

@@ -195,6 +195,9 @@ def main(argv: list[str] | None = None) -> int:
     except NoAnswer as exc:
         print(f"inject_fault: FAILED: {exc}", file=sys.stderr)
         return 1
+    except OSError as exc:
+        print(f"inject_fault: cannot open {args.connect}: {exc}", file=sys.stderr)
+        return 1
     return 0
 
 

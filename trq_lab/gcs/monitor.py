@@ -241,6 +241,9 @@ def main(argv: list[str] | None = None) -> int:
     except (ConfigError, ValueError) as exc:
         print(f"monitor: {exc}", file=sys.stderr)
         return 2
+    except OSError as exc:
+        print(f"monitor: cannot open {args.connect}: {exc}", file=sys.stderr)
+        return 1
     half_range = math.degrees(vp.tilt_limit_rad)       # max(|tilt.min_deg|, tilt.max_deg)
     with client:
         mon = Monitor(client, half_range, args.connect)

@@ -1,4 +1,4 @@
-"""A MAVLink endpoint over UDP for asyncio, with connection strings as in MAVProxy / MAVSDK:
+"""The controller's link over UDP, for asyncio (connection strings: trq_wire.connection):
 
     udpin:HOST:PORT    listen on HOST:PORT; answer the vehicle that sends (PX4's offboard API
                        port 14540): the first sender of a valid system-1 message, locked while
@@ -12,63 +12,32 @@ datagrams, and garbage in one datagram cannot corrupt the next) and handed to a 
 from __future__ import annotations
 
 import asyncio
-import logging
 import math
 import time
-from dataclasses import dataclass
 from typing import Callable
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from trq_wire.signing import SignatureCheck, sign_outgoing
+from trq_offboard.link.endpoint import LinkStats, MavlinkEndpoint, log
+from trq_wire.connection import Connection
 
-log = logging.getLogger("trq_offboard.link")
+__all__ = ["Connection", "LinkStats", "MavlinkUdp", "PEER_TIMEOUT_S"]
 
 PEER_TIMEOUT_S = 2.0       # udpin: silence after which another address may become the peer
 
 
-@dataclass(frozen=True)
-class Connection:
-    mode: str           # udpin | udpout
-    host: str
-    port: int
-
-    @staticmethod
-    def parse(text: str) -> "Connection":
-        mode, _, rest = text.partition(":")
-        host, _, port = rest.rpartition(":")
-        if mode not in ("udpin", "udpout") or not host or not port.isascii() \
-                or not port.isdigit() or not 1 <= int(port) <= 65535:
-            raise ValueError(f"connection {text!r}: expected udpin:HOST:PORT or udpout:HOST:PORT")
-        return Connection(mode, host, int(port))
-
-
-@dataclass
-class LinkStats:
-    datagrams: int = 0
-    messages: int = 0
-    bad: int = 0
-    sent: int = 0
-    other_peer: int = 0      # udpin: valid messages from an address other than the vehicle's
-
-
-class MavlinkUdp(asyncio.DatagramProtocol):
+class MavlinkUdp(MavlinkEndpoint, asyncio.DatagramProtocol):
     def __init__(self, connection: Connection, on_message: Callable[[object], None],
                  system_id: int = 1, component_id: int = 191,
                  signing_key: bytes | None = None, monotonic=time.monotonic) -> None:
-        self.connection = connection
-        self._monotonic = monotonic
+        if connection.mode not in ("udpin", "udpout"):
+            raise ValueError(f"MavlinkUdp: {connection} is not a UDP connection")
+        super().__init__(connection, on_message, system_id, component_id, signing_key,
+                         monotonic)
         self._peer_heard = -math.inf
-        self.on_message = on_message
-        self.stats = LinkStats()
-        self._tx = mavlink.MAVLink(None, srcSystem=system_id, srcComponent=component_id)
-        self._verifier = SignatureCheck(signing_key) if signing_key is not None else None
-        if signing_key is not None:
-            sign_outgoing(self._tx, signing_key)
         self._transport: asyncio.DatagramTransport | None = None
         self.peer: tuple[str, int] | None = (
             (connection.host, connection.port) if connection.mode == "udpout" else None)
-        self.on_frame: Callable[[bytes], None] | None = None   # raw frames in and out (.tlog)
 
     async def open(self) -> None:
         loop = asyncio.get_running_loop()
@@ -93,21 +62,12 @@ class MavlinkUdp(asyncio.DatagramProtocol):
             if isinstance(msg, mavlink.MAVLink_bad_data) or msg.get_type() == "UNKNOWN":
                 self.stats.bad += 1
                 continue
-            if msg.get_srcSystem() != 1:
-                continue
-            if self._verifier is not None and not self._verifier.accept(bytes(msg.get_msgbuf())):
-                self.stats.bad += 1            # unsigned, forged or replayed: not trusted
+            if not self._trusted(msg):
                 continue
             if self.connection.mode == "udpin" and not self._from_peer(tuple(addr[:2])):
                 self.stats.other_peer += 1
                 continue
-            self.stats.messages += 1
-            if self.on_frame:
-                self.on_frame(bytes(msg.get_msgbuf()))
-            try:
-                self.on_message(msg)
-            except Exception:
-                log.exception("error handling %s", msg.get_type())
+            self._deliver(msg)
 
     def _from_peer(self, addr: tuple[str, int]) -> bool:
         """udpin: the first sender of a valid system-1 message becomes the peer (where the
@@ -126,13 +86,10 @@ class MavlinkUdp(asyncio.DatagramProtocol):
     def error_received(self, exc: Exception) -> None:
         log.debug("link error: %s", exc)
 
-    def send(self, msg) -> bool:
-        if self._transport is None or self.peer is None:
-            return False
-        data = msg.pack(self._tx)
-        self._tx.seq = (self._tx.seq + 1) % 256
+    @property
+    def ready(self) -> bool:
+        return self._transport is not None and self.peer is not None
+
+    def _write(self, data: bytes) -> bool:
         self._transport.sendto(data, self.peer)
-        self.stats.sent += 1
-        if self.on_frame:
-            self.on_frame(bytes(data))
         return True
