@@ -32,7 +32,7 @@ from trq_offboard.log import ControllerLog
 from trq_offboard.loop import FlightError, OffboardFlight
 from trq_wire.actuators import tilt_half_range
 from trq_wire.connection import FORMS, Connection
-from trq_wire.logfile import Tlog
+from trq_wire.logfile import Tlog, VehicleTimeline
 from trq_wire.signing import load_key
 
 log = logging.getLogger("trq_offboard")
@@ -111,7 +111,8 @@ def main(argv: list[str] | None = None) -> int:
                              {"controller": cfg.name, "controller_file": cfg.file,
                               "vehicle_file": cfg.vehicle.file, "connect": args.connect,
                               "frames": "world NED, body FRD"})
-        tlog = Tlog(log_dir / "offboard.tlog")
+        timeline = VehicleTimeline()
+        tlog = Tlog(log_dir / "offboard.tlog", clock=timeline.now_us)
 
     transport = MavlinkStream if connection.is_stream else MavlinkUdp
     link = transport(connection, on_message=lambda msg: None, signing_key=key)
@@ -120,7 +121,10 @@ def main(argv: list[str] | None = None) -> int:
         log.warning("listening on %s without a signing key: anyone on the network can feed "
                     "this controller telemetry (use --signing-key-file)", connection.host)
     if tlog:
-        link.on_frame = tlog
+        def log_frame(frame: bytes) -> None:
+            timeline.heard(frame)
+            tlog(frame)
+        link.on_frame = log_frame
     flight = OffboardFlight(
         link, controller, lambda state, airborne=False: Reference(
             cfg.reference, state.pos_ned_m, state.euler_rad[2], airborne=airborne,

@@ -153,6 +153,10 @@ class OffboardFlight:
 
     # --- incoming --------------------------------------------------------------------------
     def on_message(self, msg) -> None:
+        if msg.get_srcComponent() != wire.VEHICLE_COMPONENT:
+            # another component of system 1 (a camera, a gimbal, a second companion that the
+            # autopilot routes to this link): its HEARTBEAT is not the vehicle's state
+            return
         kind = msg.get_type()
         if kind == "ODOMETRY":
             c0 = self.cpu_ns()

@@ -13,9 +13,9 @@ from __future__ import annotations
 import struct
 import time
 from pathlib import Path
-from typing import Iterable, TextIO
+from typing import Callable, Iterable, TextIO
 
-__all__ = ["CsvLog", "Tlog", "format_row", "read_header", "read_csv_log"]
+__all__ = ["CsvLog", "Tlog", "VehicleTimeline", "format_row", "read_header", "read_csv_log"]
 
 
 def format_row(row: Iterable[object]) -> str:
@@ -76,12 +76,14 @@ class Tlog:
     """pymavlink's telemetry log: each message as an 8-byte big-endian UNIX time in
     microseconds followed by the raw MAVLink frame (readable by mavlogdump.py)."""
 
-    def __init__(self, path: Path, flush_every: int = 500) -> None:
+    def __init__(self, path: Path, flush_every: int = 500,
+                 clock: Callable[[], int] = lambda: time.time_ns() // 1000) -> None:
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._f = open(self.path, "wb")
         self._n = 0
         self._every = max(1, flush_every)
+        self._clock = clock
 
     def write(self, unix_us: int, frame: bytes) -> None:
         """A frame with the UNIX time (us) it was sent or received."""
@@ -91,9 +93,47 @@ class Tlog:
             self._f.flush()
 
     def __call__(self, frame: bytes) -> None:
-        """A frame stamped with the wall clock now."""
-        self.write(time.time_ns() // 1000, frame)
+        """A frame stamped with the log's clock now (the wall clock unless given another)."""
+        self.write(self._clock(), frame)
 
     def close(self) -> None:
         if not self._f.closed:
             self._f.close()
+
+
+MAGIC_V2 = 0xFD
+ODOMETRY_ID = 331
+VEHICLE = (1, 1)              # the autopilot: system 1, component 1 (PROTOCOL.md)
+RESTART_US = 1_000_000        # the vehicle's time going back further than this: it restarted
+
+
+class VehicleTimeline:
+    """The controller's .tlog clock: the vehicle's own time, anchored at the wall.
+
+    `heard(frame)` reads the time_usec of each ODOMETRY the autopilot sends; `now_us()` is the
+    wall time at which the first was heard plus the vehicle time since then. In lockstep this
+    is the flight's own timeline (as the vehicle's vehicle.tlog is, PROTOCOL.md), however long
+    the run took; in real time it is the vehicle's clock, the wall clock of a vehicle running
+    at real time, and a real autopilot's boot clock: the controller's log lines up with the
+    vehicle's either way. Before the first ODOMETRY, the wall clock. A vehicle that restarts
+    (its time back by more than RESTART_US) is anchored again. Non-decreasing otherwise."""
+
+    def __init__(self, wall_us: Callable[[], int] = lambda: time.time_ns() // 1000) -> None:
+        self._wall_us = wall_us
+        self._offset: int | None = None
+        self._latest = 0
+
+    def heard(self, frame: bytes) -> None:
+        if len(frame) < 12 or frame[0] != MAGIC_V2 or (frame[5], frame[6]) != VEHICLE \
+                or frame[7] | frame[8] << 8 | frame[9] << 16 != ODOMETRY_ID:
+            return
+        # time_usec leads ODOMETRY's payload; MAVLink 2 drops trailing zero bytes
+        stamp = struct.unpack_from("<Q", frame[10:10 + min(frame[1], 8)].ljust(8, b"\0"))[0]
+        if self._offset is None or stamp < self._latest - RESTART_US:
+            self._offset, self._latest = self._wall_us() - stamp, stamp
+        self._latest = max(self._latest, stamp)
+
+    def now_us(self) -> int:
+        if self._offset is None:
+            return self._wall_us()
+        return self._offset + self._latest

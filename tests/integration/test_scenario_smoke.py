@@ -74,16 +74,23 @@ def test_smoke_logs(smoke):
     run_dir = out / "trq_nmpc_eso"
     for name in ("flight.csv", "vehicle.tlog", "controller.csv", "offboard.tlog"):
         assert (run_dir / name).stat().st_size > 0, name
-    counts = {}
+    counts, spans = {}, {}
     for name in ("vehicle.tlog", "offboard.tlog"):
         log = mavutil.mavlink_connection(str(run_dir / name))
         try:
             seen: dict[str, int] = {}
+            odometry = []                      # (the log's stamp s, the vehicle's time s)
             while (msg := log.recv_match()) is not None:
                 seen[msg.get_type()] = seen.get(msg.get_type(), 0) + 1
+                if msg.get_type() == "ODOMETRY":
+                    odometry.append((msg._timestamp, msg.time_usec / 1e6))
         finally:
             log.close()
         counts[name] = seen
+        spans[name] = (odometry[-1][0] - odometry[0][0], odometry[-1][1] - odometry[0][1])
+    # lockstep: both logs on the flight's own timeline (PROTOCOL.md, Logs), not the run's
+    for name, (logged_s, flown_s) in spans.items():
+        assert abs(logged_s - flown_s) < 0.05, (name, logged_s, flown_s)
     for seen in counts.values():
         assert seen.get("ODOMETRY", 0) > 100, seen
         assert seen.get("SET_ACTUATOR_CONTROL_TARGET", 0) > 100, seen

@@ -78,23 +78,36 @@ class FakeReference:
         return t_s >= self.done_at_s
 
 
-def heartbeat(armed: bool = False):
+_VEHICLE = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+
+
+def from_vehicle(msg, component: int = 1):
+    """The message as the controller receives it: packed by the vehicle's autopilot (1/1, or
+    another component of system 1) and parsed, so that its header names its sender."""
+    tx = _VEHICLE if component == 1 else mavlink.MAVLink(None, srcSystem=1,
+                                                         srcComponent=component)
+    rx = mavlink.MAVLink(None)
+    return rx.parse_buffer(msg.pack(tx))[0]
+
+
+def heartbeat(armed: bool = False, component: int = 1):
     mode = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | (
         mavlink.MAV_MODE_FLAG_SAFETY_ARMED if armed else 0)
-    return mavlink.MAVLink_heartbeat_message(mavlink.MAV_TYPE_QUADROTOR,
-                                             mavlink.MAV_AUTOPILOT_GENERIC, mode, 0,
-                                             mavlink.MAV_STATE_STANDBY, 3)
+    return from_vehicle(mavlink.MAVLink_heartbeat_message(mavlink.MAV_TYPE_QUADROTOR,
+                                                          mavlink.MAV_AUTOPILOT_GENERIC, mode, 0,
+                                                          mavlink.MAV_STATE_STANDBY, 3),
+                        component)
 
 
 def odometry(stamp_us: int, down_m: float = 0.0):
     nan21 = [math.nan] * 21
-    return mavlink.MAVLink_odometry_message(
+    return from_vehicle(mavlink.MAVLink_odometry_message(
         stamp_us, mavlink.MAV_FRAME_LOCAL_NED, mavlink.MAV_FRAME_LOCAL_NED, 0.0, 0.0, down_m,
-        [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, nan21, nan21, 0, 0, 100)
+        [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, nan21, nan21, 0, 0, 100))
 
 
 def ack(result: int):
-    return mavlink.MAVLink_command_ack_message(ARM, result)
+    return from_vehicle(mavlink.MAVLink_command_ack_message(ARM, result))
 
 
 def make_flight(reference: FakeReference | None = None, **kw):
@@ -216,6 +229,21 @@ def test_already_armed_vehicle_is_not_armed_again():
         task.cancel()
         with pytest.raises(asyncio.CancelledError):
             await task
+
+    asyncio.run(scenario())
+
+
+def test_another_components_heartbeat_is_not_the_vehicles():
+    async def scenario():
+        flight, link, _ = make_flight(connect_timeout_s=0.2)
+        # an armed heartbeat from a camera (1/100) routed to the controller by the autopilot
+        flight.on_message(heartbeat(armed=True, component=100))
+        flight.on_message(odometry(0))
+        with pytest.raises(FlightError, match=r"heartbeat"):
+            await flight.run()
+        assert not link.targets()
+        flight.on_message(heartbeat(armed=False))              # the autopilot's own
+        assert flight.heartbeat is not None and flight.heartbeat.get_srcComponent() == 1
 
     asyncio.run(scenario())
 

@@ -65,7 +65,10 @@ class MavClient:
             sign_outgoing(self.mav, signing_key, link_id)
         self.target = (target_system, target_component)
         self.vehicle_time_us = 0
-        self.last: dict[str, object] = {}
+        self.last: dict[str, object] = {}            # the vehicle's (target's) latest, by type
+        # what other components say (a companion computer routed through the vehicle: its
+        # HEARTBEAT must not read as the vehicle's): (system, component) -> type -> message
+        self.others: dict[tuple[int, int], dict[str, object]] = {}
         self.statustexts: list[str] = []
         self.on_message: Callable[[object], None] | None = None
 
@@ -145,10 +148,15 @@ class MavClient:
         out = []
         for msg in self._receive(timeout_s):
             kind = msg.get_type()
-            self.last[kind] = msg
-            if kind == "ODOMETRY":
+            mine = self.is_vehicle(msg)
+            if mine:
+                self.last[kind] = msg
+            else:
+                self.others.setdefault((msg.get_srcSystem(), msg.get_srcComponent()),
+                                       {})[kind] = msg
+            if kind == "ODOMETRY" and mine:
                 self.vehicle_time_us = max(self.vehicle_time_us, int(msg.time_usec))
-            elif kind in _BOOT_MS_STAMPED:
+            elif kind in _BOOT_MS_STAMPED and mine:
                 self.vehicle_time_us = max(self.vehicle_time_us, int(msg.time_boot_ms) * 1000)
             if kind == "STATUSTEXT":
                 text = msg.text if isinstance(msg.text, str) else msg.text.decode(errors="replace")
@@ -171,8 +179,12 @@ class MavClient:
         if self.peer is not None:
             self.send(mavlink.MAVLink_heartbeat_message(
                 mavlink.MAV_TYPE_GCS, mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 0, 3))
-        return self.wait(lambda m: m.get_type() == "HEARTBEAT" and m.get_srcSystem() == 1,
+        return self.wait(lambda m: m.get_type() == "HEARTBEAT" and self.is_vehicle(m),
                          timeout_s, "HEARTBEAT from the vehicle")
+
+    def is_vehicle(self, msg) -> bool:
+        """Sent by the vehicle's autopilot (the target), not by another component of it."""
+        return (msg.get_srcSystem(), msg.get_srcComponent()) == self.target
 
     # --- protocol helpers ------------------------------------------------------------------
     def command(self, command: int, *params: float, timeout_s: float = 1.0,

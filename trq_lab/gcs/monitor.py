@@ -12,7 +12,10 @@ Shows the vehicle time, armed / on the ground / crashed (HEARTBEAT), position an
 half-range for servos 1-4, the half-range read from the vehicle YAML), the active faults and the
 wind (the SIM_* parameters, read at start and again whenever a STATUSTEXT mentions faults, a
 script or a SIM_ parameter), link statistics (messages per second by type, datagrams, the
-vehicle's SYS_STATUS drop rate and error counts) and the last five STATUSTEXTs.
+vehicle's SYS_STATUS drop rate and error counts), what the offboard controller says through the
+vehicle's routing (its HEARTBEAT as component 191 and its NAMED_VALUE_FLOATs, MOT1_EFF..MOT4_EFF:
+the motor effectiveness it estimates) and the last five STATUSTEXTs, each with its sender when it
+is not the autopilot.
 
 It says hello (a GCS heartbeat, once a second) so the vehicle adds it as a peer. Plain ANSI
 (clear screen and home), no curses. Exit status 0; 1 if no heartbeat within --timeout; 2 on bad
@@ -67,6 +70,10 @@ class Monitor:
         self.datagrams_total = 0
         self.messages_total = 0
         self.last_heartbeat = time.monotonic()
+        # other components of the vehicle (the companion computer): (system, component) ->
+        # name -> value of its NAMED_VALUE_FLOATs, and when its last HEARTBEAT came
+        self.named: dict[tuple[int, int], dict[str, float]] = {}
+        self.component_heard: dict[tuple[int, int], float] = {}
         self.refresh_wanted = False
         self.started = time.monotonic()
         client.on_message = self.on_message
@@ -77,8 +84,16 @@ class Monitor:
         kind = msg.get_type()
         self.messages_total += 1
         self.arrivals.append((now, kind))
-        if kind == "HEARTBEAT" and msg.get_srcSystem() == 1:
-            self.last_heartbeat = now
+        src = (msg.get_srcSystem(), msg.get_srcComponent())
+        vehicle = self.client.is_vehicle(msg)
+        if kind == "HEARTBEAT":
+            if vehicle:
+                self.last_heartbeat = now
+            elif src[0] == self.client.target[0]:
+                self.component_heard[src] = now
+        elif kind == "NAMED_VALUE_FLOAT":
+            name = msg.name if isinstance(msg.name, str) else msg.name.decode(errors="replace")
+            self.named.setdefault(src, {})[name.rstrip("\0")] = float(msg.value)
         elif kind == "PARAM_VALUE":
             name = msg.param_id if isinstance(msg.param_id, str) else msg.param_id.decode()
             self.params[name] = float(msg.param_value)
@@ -86,7 +101,8 @@ class Monitor:
         elif kind == "STATUSTEXT":
             text = msg.text if isinstance(msg.text, str) else msg.text.decode(errors="replace")
             severity = SEVERITIES[msg.severity] if msg.severity < len(SEVERITIES) else "?"
-            self.texts.append(f"{severity:<8} {text}")
+            sender = "" if vehicle else f"[{src[0]}/{src[1]}] "
+            self.texts.append(f"{severity:<8} {sender}{text}")
             if any(w.lower() in text.lower() for w in FAULT_WORDS):
                 self.refresh_wanted = True
 
@@ -141,6 +157,22 @@ class Monitor:
             if p.get(f"SIM_SRV{n}_STK", 0.0) >= 0.5:
                 out.append(f"servo {n}: stuck at {p.get(f'SIM_SRV{n}_ANG', math.nan):.1f} deg")
         return out
+
+    def components(self) -> list[str]:
+        """A line per other component heard (the offboard controller: component 191): how long
+        since its heartbeat and its named values, MOTn_EFF in motor order first."""
+        now = time.monotonic()
+        lines = []
+        for src in sorted(set(self.named) | set(self.component_heard)):
+            heard = self.component_heard.get(src)
+            beat = "no heartbeat" if heard is None else f"heartbeat {now - heard:.1f} s ago"
+            values = self.named.get(src, {})
+            names = sorted(values, key=lambda n: (not n.startswith("MOT"), n))
+            shown = "  ".join(f"{n} {values[n]:.2f}" for n in names) or "(no named values)"
+            lines.append(f"component   {src[0]}/{src[1]} ({beat})  {shown}")
+        if not lines:
+            lines.append("component   (no offboard controller heard)")
+        return lines
 
     def render(self) -> str:
         c = self.client
@@ -211,6 +243,7 @@ class Monitor:
                          f"{st.errors_comm}, bad frames {st.errors_count1}, unknown ids "
                          f"{st.errors_count2}, other system {st.errors_count3}, rejected/stale "
                          f"targets {st.errors_count4}")
+        lines += self.components()
         lines.append("statustext  " + ("(none yet)" if not self.texts else ""))
         lines += [f"  {t}" for t in self.texts]
         return "\n".join(lines) + "\n"
