@@ -15,17 +15,16 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from pydantic_core import PydanticCustomError
-
-from sil_vehicle.impair import ImpairParams
 from trq_params import loader, schema
 from trq_params.loader import ConfigError
 from trq_params.schema import STREAMS
+
+from sil_vehicle.impair import ImpairParams
 
 __all__ = ["ConfigError", "VehicleParams", "SimParams", "RotorParams", "LinkParams",
            "SerialPort", "load_vehicle", "load_sim", "parse_serial", "STREAMS", "PARAMS_DIR"]
 
 from trq_params import DIR as PARAMS_DIR  # noqa: E402  (the shipped parameter files)
-
 
 
 @dataclass(frozen=True)

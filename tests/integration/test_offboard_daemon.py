@@ -25,7 +25,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from conftest import Daemons, Process
 
 from trq_lab import metrics

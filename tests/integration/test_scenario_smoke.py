@@ -10,7 +10,6 @@ import os
 import subprocess
 
 import pytest
-
 from conftest import PARAMS, cli
 
 pytestmark = pytest.mark.slow      # starts daemons or flies: the full run only
