@@ -27,6 +27,17 @@ TRQ_YAML = PARAMS / "vehicle" / "trq.yaml"
 QUAD_YAML = PARAMS / "vehicle" / "quad.yaml"
 
 
+class Ticks:
+    """A fake CPU clock (ns): each reading 1000 ns after the last."""
+
+    def __init__(self) -> None:
+        self.t = 0
+
+    def __call__(self) -> int:
+        self.t += 1000
+        return self.t
+
+
 def cli(command: str) -> list[str]:
     """The argv prefix of an installed console script (trq-scenario, ...): the one beside this
     interpreter, as a user of this environment runs it."""

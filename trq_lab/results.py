@@ -86,13 +86,8 @@ def _cell(value: object, fmt: str) -> str:
 
 def load_metrics(path: Path) -> dict:
     """One metrics.json, checked for the keys the tables read."""
-    if not path.is_file():
-        raise ResultsError(f"{path}: no such result file")
-    try:
-        doc = json.loads(path.read_text())
-    except (OSError, ValueError) as exc:
-        raise ResultsError(f"{path}: not a readable metrics.json ({exc})") from exc
-    if not isinstance(doc, dict) or not isinstance(doc.get("runs"), list):
+    doc = _read_json(path)
+    if not isinstance(doc.get("runs"), list):
         raise ResultsError(f"{path}: no 'runs' list (not a metrics.json of trq-scenario)")
     for i, run in enumerate(doc["runs"]):
         if not isinstance(run, dict) or "controller" not in run:

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import Ticks
 
 from trq_offboard.config import load_controller
 from trq_offboard.controller import Controller
@@ -24,17 +25,6 @@ from trq_offboard.records import (
 
 PARAMS = Path(__file__).resolve().parents[2] / "params" / "controller"
 CTRL = PARAMS / "trq_nmpc_eso.yaml"
-
-
-class _Ticks:
-    """A fake CPU clock: each reading is 1000 ns after the last."""
-
-    def __init__(self) -> None:
-        self.t = 0
-
-    def __call__(self) -> int:
-        self.t += 1000
-        return self.t
 
 
 class _HoverSolver:
@@ -54,7 +44,7 @@ def _hover_state(z=-2.0):
 
 def test_step_parts_come_from_the_injected_clock_and_add_up():
     cfg = dataclasses.replace(load_controller(CTRL), effectiveness=None)
-    clock = _Ticks()
+    clock = Ticks()
     probe = Controller(cfg, solver=_HoverSolver(np.zeros(8), cfg.horizon_steps))
     ctl = Controller(cfg, solver=_HoverSolver(probe.u_trim, cfg.horizon_steps), cpu_ns=clock)
     ctl.reset(0.0, _hover_state())

@@ -10,6 +10,7 @@ import math
 from types import SimpleNamespace
 
 import pytest
+from conftest import Ticks
 from pymavlink.dialects.v20 import common as mavlink
 
 from trq_offboard.link.udp import Connection
@@ -384,17 +385,6 @@ def test_a_lost_arm_is_resent_after_vehicle_time_not_wall_time():
     asyncio.run(scenario())
 
 
-class _Ticks:
-    """A fake CPU clock: each reading 1000 ns after the last."""
-
-    def __init__(self) -> None:
-        self.t = 0
-
-    def __call__(self) -> int:
-        self.t += 1000
-        return self.t
-
-
 @pytest.mark.parametrize("threaded", [False, True])
 def test_each_period_is_timed_by_part_directly_or_on_an_executor(threaded):
     import concurrent.futures
@@ -404,8 +394,8 @@ def test_each_period_is_timed_by_part_directly_or_on_an_executor(threaded):
 
     async def scenario():
         flight, link, ctl = make_flight(record=records.append, executor=executor,
-                                        direct=not threaded, cpu_ns=_Ticks(),
-                                        process_cpu_ns=_Ticks())
+                                        direct=not threaded, cpu_ns=Ticks(),
+                                        process_cpu_ns=Ticks())
         task = asyncio.create_task(flight.run())
         await take_off(flight, link)
         for k in (1, 2, 3):
