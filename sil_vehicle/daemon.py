@@ -37,10 +37,10 @@ from sil_vehicle.config import (
 from sil_vehicle.faultscript import load_script
 from sil_vehicle.mavlink.codec import COMPONENT_ID, SYSTEM_ID, Codec
 from sil_vehicle.sitl import LINKS, LOG_COLUMNS, Outgoing, Sitl
-from trq_wire.framing import NS_PER_S, LinePacer, StreamFramer, frame_size, line_bytes_per_s
+from trq_wire.framing import NS_PER_S, LinePacer, frame_size, line_bytes_per_s
 from trq_wire.logfile import CsvLog, Tlog
 from trq_wire.signing import SignatureCheck, SigningKeyError, load_key, sign_outgoing
-from trq_wire.stream import SerialStream, TcpStream
+from trq_wire.stream import OneStream, SerialStream, TcpStream
 
 log = logging.getLogger("sil_vehicle")
 
@@ -60,15 +60,13 @@ def serial_budget(link: LinkParams, signed: bool) -> tuple[int, int]:
     return needed, line_bytes_per_s(link.serial.baud)
 
 
-class _StreamLink:
-    """A link on a byte stream: its one persistent framer and the stream it currently has (the
-    serial line, or the TCP server's one client)."""
+class _StreamLink(OneStream):
+    """A link on a byte stream: the stream it currently has (the serial line, or the TCP
+    server's one client; others are refused) with its framer, and the server."""
 
-    def __init__(self) -> None:
-        self.framer = StreamFramer()
-        self.stream: SerialStream | TcpStream | None = None
+    def __init__(self, name: str = "offboard link") -> None:
+        super().__init__(name)
         self.server: asyncio.base_events.Server | None = None
-        self.refused = 0                     # TCP clients turned away while one was connected
 
     @property
     def peer(self) -> tuple[str, int] | None:
@@ -76,7 +74,7 @@ class _StreamLink:
         return s.peer if isinstance(s, TcpStream) else None
 
     def write(self, data: bytes) -> None:
-        if self.stream is not None and self.stream.connected:
+        if self.connected:
             self.stream.write(data)
 
     def write_frames(self, frames: list[bytes]) -> None:
@@ -175,7 +173,7 @@ class VehicleDaemon:
 
     async def _open_stream(self, link: LinkParams) -> None:
         loop = asyncio.get_running_loop()
-        sl = self.streams[link.name] = _StreamLink()
+        sl = self.streams[link.name] = _StreamLink(f"{link.name} link")
         on_bytes = lambda data, name=link.name: self._on_stream_bytes(name, data)  # noqa: E731
         if link.serial is not None:
             port = link.serial
@@ -196,23 +194,7 @@ class VehicleDaemon:
             sl.stream.open()
             return
 
-        def made(stream: TcpStream) -> None:
-            if sl.stream is not None and sl.stream.connected:
-                log.warning("%s link: refused a TCP client from %s:%d (%s:%d is connected)",
-                            link.name, *stream.peer, *sl.stream.peer)
-                sl.refused += 1
-                stream.on_lost = None
-                stream.close()
-                return
-            log.info("%s link: TCP client %s:%d", link.name, *stream.peer)
-            sl.stream, sl.framer = stream, StreamFramer()
-
-        def lost(stream: TcpStream) -> None:
-            if stream is sl.stream:
-                log.info("%s link: TCP client %s:%d went away", link.name, *stream.peer)
-                sl.stream = None
-
-        sl.server = await loop.create_server(lambda: TcpStream(on_bytes, made, lost),
+        sl.server = await loop.create_server(lambda: TcpStream(on_bytes, sl.made, sl.lost),
                                              link.tcp.host, link.tcp.port)
         if link.tcp.host not in ("127.0.0.1", "localhost", "::1") and not self.signed:
             log.warning("link %s serves TCP on %s without a signing key: anyone on the "
@@ -299,10 +281,9 @@ class VehicleDaemon:
         frames, as a datagram's garbage does."""
         try:
             sl = self.streams[link]
-            bad_before = sl.framer.bad
-            frames = sl.framer.feed(data)
+            frames, skipped = sl.frames(data)
             codec = self.codecs[link]
-            codec.counters.bad_frames += sl.framer.bad - bad_before
+            codec.counters.bad_frames += skipped
             self._on_messages(link, codec.decode(b"".join(frames)), sl.peer)
         except Exception:  # a daemon never dies on traffic: log it and go on
             log.exception("error while handling bytes on %s", link)

@@ -15,7 +15,7 @@ import logging
 import os
 from typing import Callable
 
-from trq_wire.framing import NS_PER_S, LinePacer
+from trq_wire.framing import NS_PER_S, LinePacer, StreamFramer
 
 log = logging.getLogger("trq_wire.stream")
 
@@ -203,3 +203,46 @@ class TcpStream(asyncio.Protocol):
     def close(self) -> None:
         if self.transport is not None:
             self.transport.close()
+
+
+class OneStream:
+    """The one stream a link holds at a time (a serial line, a TCP server's client, a TCP
+    client's connection) and its framer. While one is connected another TCP connection is
+    refused: closed at once, without its `on_lost`, and counted in `refused`. A connection
+    taken on starts a fresh StreamFramer (a new byte stream). `name` labels the log lines."""
+
+    def __init__(self, name: str = "link") -> None:
+        self.name = name
+        self.stream: SerialStream | TcpStream | None = None
+        self.framer = StreamFramer()
+        self.refused = 0
+
+    @property
+    def connected(self) -> bool:
+        return self.stream is not None and self.stream.connected
+
+    def made(self, stream: TcpStream) -> bool:
+        """A TCP connection came up: taken on (True), or refused while another is open."""
+        if self.connected:
+            log.warning("%s: refused a connection from %s:%d (%s:%d is connected)",
+                        self.name, *stream.peer, *self.stream.peer)
+            self.refused += 1
+            stream.on_lost = None
+            stream.close()
+            return False
+        log.info("%s: connected to %s:%d", self.name, *stream.peer)
+        self.stream, self.framer = stream, StreamFramer()
+        return True
+
+    def lost(self, stream: TcpStream) -> None:
+        """A TCP connection ended: forgotten if it was the one held."""
+        if stream is self.stream:
+            log.info("%s: %s:%d went away", self.name, *stream.peer)
+            self.stream = None
+
+    def frames(self, data: bytes) -> tuple[list[bytes], int]:
+        """The whole frames `data` completes, and how many runs of bytes it made the framer
+        skip (counted as bad, as a datagram's garbage is)."""
+        bad_before = self.framer.bad
+        frames = self.framer.feed(data)
+        return frames, self.framer.bad - bad_before

@@ -21,8 +21,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from trq_offboard.link.endpoint import MavlinkEndpoint, log
 from trq_wire.connection import Connection
-from trq_wire.framing import StreamFramer
-from trq_wire.stream import SerialStream, TcpStream
+from trq_wire.stream import OneStream, SerialStream, TcpStream
 
 RECONNECT_S = 0.5          # tcpout: wall time between attempts to reach the vehicle
 
@@ -35,9 +34,8 @@ class MavlinkStream(MavlinkEndpoint):
             raise ValueError(f"MavlinkStream: {connection} is not a TCP or serial connection")
         super().__init__(connection, on_message, system_id, component_id, signing_key,
                          monotonic)
-        self._framer = StreamFramer()
         self._rx = mavlink.MAVLink(None)
-        self._stream: SerialStream | TcpStream | None = None
+        self._one = OneStream(str(connection))     # the stream held, and its framer
         self._server: asyncio.base_events.Server | None = None
         self._connecting: asyncio.Task | None = None
         self._closed = False
@@ -50,7 +48,7 @@ class MavlinkStream(MavlinkEndpoint):
         if c.mode == "serial":
             stream = SerialStream(c.device, c.baud, self.bytes_received, on_lost=self._serial_lost)
             stream.open()
-            self._stream, self.peer = stream, c.device
+            self._one.stream, self.peer = stream, c.device
         elif c.mode == "tcpin":
             self._server = await loop.create_server(
                 lambda: TcpStream(self.bytes_received, self._accepted, self._disconnected),
@@ -64,7 +62,7 @@ class MavlinkStream(MavlinkEndpoint):
         c = self.connection
         warned = False
         while not self._closed:
-            if self._stream is None or not self._stream.connected:
+            if not self._one.connected:
                 try:
                     await loop.create_connection(
                         lambda: TcpStream(self.bytes_received, self._accepted,
@@ -76,43 +74,33 @@ class MavlinkStream(MavlinkEndpoint):
             await asyncio.sleep(RECONNECT_S)
 
     def _accepted(self, stream: TcpStream) -> None:
-        if self._stream is not None and self._stream.connected:
-            log.warning("%s: refused a second connection from %s:%d (the vehicle is %s:%d)",
-                        self.connection, *stream.peer, *self._stream.peer)
+        if self._one.made(stream):
+            self.peer = stream.peer
+        else:
             self.stats.other_peer += 1
-            stream.on_lost = None
-            stream.close()
-            return
-        log.info("vehicle peer is %s:%d (%s)", *stream.peer, self.connection)
-        self._stream, self.peer = stream, stream.peer
-        self._framer = StreamFramer()          # a new connection starts a new stream
 
     def _disconnected(self, stream: TcpStream) -> None:
-        if stream is self._stream:
-            log.info("%s: the vehicle at %s:%d disconnected", self.connection, *stream.peer)
-            self._stream = None
+        self._one.lost(stream)
 
     def _serial_lost(self) -> None:
         log.warning("%s: the serial device went away", self.connection)
-        self._stream = None
+        self._one.stream = None
 
     def close(self) -> None:
         self._closed = True
         if self._connecting is not None:
             self._connecting.cancel()
-        if self._stream is not None:
-            self._stream.close()
-            self._stream = None
+        if self._one.stream is not None:
+            self._one.stream.close()
+            self._one.stream = None
         if self._server is not None:
             self._server.close()
 
     # --- bytes in and out ------------------------------------------------------------------
     def bytes_received(self, data: bytes) -> None:
         self.stats.datagrams += 1
-        framer = self._framer
-        bad_before = framer.bad
-        frames = framer.feed(data)
-        self.stats.bad += framer.bad - bad_before
+        frames, skipped = self._one.frames(data)
+        self.stats.bad += skipped
         for frame in frames:
             try:
                 msg = self._rx.decode(bytearray(frame))
@@ -124,8 +112,8 @@ class MavlinkStream(MavlinkEndpoint):
 
     @property
     def ready(self) -> bool:
-        return self._stream is not None and self._stream.connected
+        return self._one.connected
 
     def _write(self, data: bytes) -> bool:
-        self._stream.write(data)
+        self._one.stream.write(data)
         return True
