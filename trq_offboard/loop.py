@@ -6,11 +6,14 @@ time it is simply an event-driven controller. A repeated stamp (the vehicle rese
 gets the same target again; an older stamp is stale and ignored: no command is ever computed from
 an old state.
 
-The controller's step and preparation run on a worker thread by default (`executor`: a
-concurrent.futures.Executor, None for the event loop's default one), off the event loop.
-`direct=True` calls them from the flight loop instead, which saves the hop's thread hand-offs
-and event-loop turns when the machine has a core to spare for the controller, and yields the
-core (os.sched_yield) once the answer is sent, to whoever it woke, before the log and the
+The controller's step and preparation run on a worker thread by default, off the event loop,
+as one job a period: the worker steps, hands the command to the event loop (which sends it at
+once) and goes straight on to the preparation of the next step, so a period costs one hand-off
+each way instead of two (`executor`: a concurrent.futures.Executor that runs one job at a time,
+so that the next step waits for the preparation; None: the flight's own one-thread executor).
+`direct=True` calls them from the flight loop instead, which saves the hand-offs and event-loop
+turns when the machine has a core to spare for the controller, and yields the core
+(os.sched_yield) once the answer is sent, to whoever it woke, before the log and the
 preparation. Measured (docs/decisions/2026-12-02-flight-loop-direct-calls.md): one lockstep
 flight alone is faster direct, two flights in parallel on two busy cores (the scenario runner's
 default) are slower, so the thread stays the default.
@@ -25,6 +28,7 @@ them. StepRecord.cpu holds them, completed as the period runs (records.PeriodTim
 from __future__ import annotations
 
 import asyncio
+import concurrent.futures
 import logging
 import math
 import os
@@ -111,6 +115,16 @@ class FlightSummary:
                 f"{'disarmed' if self.disarmed else 'armed'}")
 
 
+def _settle(fut: asyncio.Future, result, error: BaseException | None) -> None:
+    """The worker's answer into the awaiting future (unless the wait was cancelled)."""
+    if fut.done():
+        return
+    if error is not None:
+        fut.set_exception(error)
+    else:
+        fut.set_result(result)
+
+
 class OffboardFlight:
     def __init__(self, link: MavlinkUdp, controller, make_reference: Callable, *,
                  name: str, tilt_limit_rad: float, record: Callable[[StepRecord], None] | None = None,
@@ -120,7 +134,11 @@ class OffboardFlight:
                  cpu_ns: Callable[[], int] = time.thread_time_ns,
                  process_cpu_ns: Callable[[], int] = time.process_time_ns) -> None:
         self.link = link
-        self.executor = executor        # where step and prepare run (None: the loop's default)
+        self.executor = executor        # where step and prepare run, one job at a time (None:
+        self._own_executor = None       # a one-thread executor of the flight's own)
+        self._prepare_ns = 0            # the last preparation's CPU (set by the worker)
+        self._prepared_ns = 0           # the one before this step (handed over with it)
+        self._prepare_error: BaseException | None = None
         self.direct = direct            # or called directly from the flight loop
         self.cpu_ns = cpu_ns                    # the loop thread's parts (wire, log)
         self.process_cpu_ns = process_cpu_ns    # the whole period: every thread of the process
@@ -248,11 +266,59 @@ class OffboardFlight:
         self.link.send(self._last_target)
         self._wire_ns += self.cpu_ns() - c0
 
-    async def _call(self, fn, *args):
-        """fn(*args): on the executor (off the event loop), or directly with `direct`."""
+    def _worker(self) -> concurrent.futures.Executor:
+        if self.executor is not None:
+            return self.executor
+        if self._own_executor is None:
+            self._own_executor = concurrent.futures.ThreadPoolExecutor(
+                max_workers=1, thread_name_prefix="trq-step")
+        return self._own_executor
+
+    async def _step(self, prepare, t, state, applied, reference):
+        """The controller's step: called directly with `direct` (its preparation is the
+        caller's), else one job on the worker that steps, hands the result over and then runs
+        `prepare` (if any) while the event loop sends the answer. The next job, queued behind
+        that preparation, hands over with its answer the preparation's CPU (in
+        `_prepared_ns`) or its exception (raised here, before any step from it)."""
         if self.direct:
-            return fn(*args)
-        return await asyncio.get_running_loop().run_in_executor(self.executor, fn, *args)
+            return self.controller.step(t, state, applied, reference)
+        loop = asyncio.get_running_loop()
+        answer = loop.create_future()
+        self._worker().submit(self._job, loop, answer, prepare, (t, state, applied, reference))
+        result, self._prepared_ns = await answer
+        return result
+
+    def _job(self, loop, answer, prepare, args) -> None:
+        """On the worker thread: the last preparation's outcome, step, answer, prepare."""
+        before, error = self._prepare_ns, self._prepare_error
+        self._prepare_error = None
+        result = None
+        if error is None:
+            try:
+                result = self.controller.step(*args)
+            except BaseException as exc:  # handed to the awaiting coroutine
+                error = exc
+        try:
+            loop.call_soon_threadsafe(_settle, answer, (result, before), error)
+        except RuntimeError:          # the event loop has closed: nobody is waiting
+            return
+        if error is not None or prepare is None:
+            return
+        try:
+            prepare(args[3])
+            self._prepare_ns = getattr(self.controller, "last_prepare_cpu_ns", -1)
+        except Exception as exc:
+            self._prepare_error = exc
+
+    async def _last_prepared(self, rec: StepRecord | None, prepare) -> None:
+        """The flight loop ends: wait for the worker's last preparation, close its record."""
+        if self.direct or rec is None or prepare is None:
+            return
+        await asyncio.wrap_future(self._worker().submit(lambda: None))
+        rec.cpu.prepare_ns = self._prepare_ns
+        if self._prepare_error is not None:
+            exc, self._prepare_error = self._prepare_error, None
+            raise exc
 
     async def _heartbeats(self) -> None:
         while True:
@@ -266,6 +332,9 @@ class OffboardFlight:
             return await self._fly()
         finally:
             beat.cancel()
+            if self._own_executor is not None:
+                self._own_executor.shutdown(wait=False)
+                self._own_executor = None
             if self._mode_task is not None:
                 self._mode_task.cancel()
 
@@ -322,7 +391,9 @@ class OffboardFlight:
                 down_since = None
             applied = self.applied
             wire_rx, self._wire_ns = self._wire_ns, 0     # this state's decode
-            cmd, info = await self._call(self.controller.step, t, odo.state, applied, reference)
+            cmd, info = await self._step(prepare, t, odo.state, applied, reference)
+            if prev is not None and not self.direct and prepare is not None:
+                prev.cpu.prepare_ns = self._prepared_ns    # it ran first on the worker: over
             self._answer(odo.stamp_us, cmd)
             # direct: the answer is out, hand the core to whoever it woke (in lockstep the
             # vehicle) before the log and the preparation, which are off the latency path
@@ -340,18 +411,21 @@ class OffboardFlight:
             if answered == 2:
                 self._mode_task = asyncio.ensure_future(self._request_offboard())
             # the preparation phase of the next step (RTI), while the vehicle flies this one
-            if prepare is not None:
-                await self._call(prepare, reference)
+            # (on the worker it is already running, after the answer)
+            if self.direct and prepare is not None:
+                prepare(reference)
                 rec.cpu.prepare_ns = getattr(self.controller, "last_prepare_cpu_ns", -1)
-            else:
+            elif prepare is None:
                 rec.cpu.prepare_ns = 0
             if self.heartbeat is not None and wire.is_crashed(self.heartbeat):
                 self.summary.crashed = True
                 log.error("the vehicle reports a crash (EMERGENCY)")
+                await self._last_prepared(rec, prepare)
                 self._finish(t)
                 return self.summary
             if reference.done(t) and not getattr(getattr(reference, "cfg", None), "land", True):
                 break
+        await self._last_prepared(prev, prepare)
         if not self._touched_down(odo.state, ground_z):
             # a plan without landing ends in the air: never idle the motors or disarm there
             self._finish(t)

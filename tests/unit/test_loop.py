@@ -416,3 +416,90 @@ def test_each_period_is_timed_by_part_directly_or_on_an_executor(threaded):
         assert r.cpu.wire_ns >= 2000 and r.cpu.log_ns == 1000   # decode, encode; one log call
     # a period is closed by the next step's start; the last one is still open
     assert all(r.cpu.period_ns > 0 for r in records[:-1]) and records[-1].cpu.period_ns == -1
+
+
+class PreparingController(FakeController):
+    """A controller with a preparation phase that can be held (threading.Event) and fail."""
+
+    def __init__(self, fail_at: int | None = None) -> None:
+        import threading
+        super().__init__()
+        self.events: list[str] = []
+        self.go = threading.Event()
+        self.go.set()
+        self.fail_at = fail_at
+        self.prepares = 0
+        self.last_prepare_cpu_ns = 0
+
+    def step(self, t_s, state, applied, reference):
+        self.events.append(f"step {t_s:.2f}")
+        return super().step(t_s, state, applied, reference)
+
+    def prepare(self, reference) -> None:
+        self.go.wait(5.0)
+        self.prepares += 1
+        self.last_prepare_cpu_ns = 7_000 * self.prepares
+        self.events.append("prepare")
+        if self.prepares == self.fail_at:
+            raise ArithmeticError("preparation failed")
+
+
+def make_preparing_flight(ctl: PreparingController, **kw):
+    link = FakeLink()
+    flight = OffboardFlight(link, ctl, lambda state, airborne=False: FakeReference(1e9),
+                            name="fake", tilt_limit_rad=LIMIT, connect_timeout_s=1.0,
+                            ack_timeout_s=0.5, **kw)
+    return flight, link
+
+
+def test_worker_answers_before_its_preparation_and_steps_after_it():
+    """One job a period on the worker: the answer goes out while the preparation still runs,
+    the next step waits for it, and each period's record gets its preparation's CPU."""
+    records: list = []
+
+    async def scenario():
+        ctl = PreparingController()
+        flight, link = make_preparing_flight(ctl, record=records.append)
+        task = asyncio.create_task(flight.run())
+        await take_off(flight, link)
+        ctl.go.clear()                                  # hold the next preparation
+        flight.on_message(odometry(10_000, down_m=-0.5))
+        await until(lambda: link.targets(10_000), "the target of stamp 10000")
+        flight.on_message(odometry(20_000, down_m=-0.5))
+        await settle()
+        assert not link.targets(20_000), "stepped before the preparation was over"
+        assert ctl.events[-1] == "step 0.00"
+        ctl.go.set()
+        await until(lambda: link.targets(20_000), "the target of stamp 20000")
+        flight.on_message(odometry(30_000, down_m=-0.5))
+        await until(lambda: link.targets(30_000), "the target of stamp 30000")
+        await settle()
+        task.cancel()
+        with pytest.raises(asyncio.CancelledError):
+            await task
+        return ctl
+
+    ctl = asyncio.run(scenario())
+    assert ctl.events[:6] == ["step 0.00", "prepare", "step 0.01", "prepare", "step 0.02",
+                              "prepare"]
+    # every closed period carries its own preparation's CPU (the k-th: 7000 k ns)
+    assert [r.cpu.prepare_ns for r in records[:-1]] == [7_000 * (k + 1)
+                                                        for k in range(len(records) - 1)]
+
+
+def test_a_failed_preparation_on_the_worker_ends_the_flight():
+    async def scenario():
+        ctl = PreparingController(fail_at=1)
+        flight, link = make_preparing_flight(ctl)
+        task = asyncio.create_task(flight.run())
+        await take_off(flight, link)
+        flight.on_message(odometry(10_000, down_m=-0.5))
+        await until(lambda: link.targets(10_000), "the target of stamp 10000")
+        await until(lambda: ctl.prepares == 1, "the failing preparation")
+        flight.on_message(odometry(20_000, down_m=-0.5))
+        with pytest.raises(ArithmeticError, match="preparation failed"):
+            await asyncio.wait_for(task, WAIT_S)
+        return link
+
+    link = asyncio.run(scenario())
+    assert not link.targets(20_000)        # no command after the failure
