@@ -564,7 +564,9 @@ def fly_inprocess(controller, sim, fault_events=(), seed: int | None = None, *,
                 ground_down_m=0.0 if airborne else None),
             name=name or cfg.name,
             tilt_limit_rad=tilt_half_range(cfg.vehicle.tilt_min_rad, cfg.vehicle.tilt_max_rad),
-            record=record, direct=inline_solve)   # inline: called directly, no event-loop turn
+            # inline: called directly, no event-loop turn; nobody to yield the core to (the
+            # vehicle is this thread)
+            record=record, direct=inline_solve, yield_core=False)
 
         async def main() -> tuple[str, str]:
             if inline_solve:

@@ -14,7 +14,8 @@ so that the next step waits for the preparation; None: the flight's own one-thre
 `direct=True` calls them from the flight loop instead, which saves the hand-offs and event-loop
 turns when the machine has a core to spare for the controller, and yields the core
 (os.sched_yield) once the answer is sent, to whoever it woke, before the log and the
-preparation. Measured (docs/decisions/2026-12-02-flight-loop-direct-calls.md): one lockstep
+preparation (`yield_core=False`: not, where the answer woke nobody, as in the in-process
+harness, whose vehicle runs in the same thread). Measured (docs/decisions/2026-12-02-flight-loop-direct-calls.md): one lockstep
 flight alone is faster direct, two flights in parallel on two busy cores (the scenario runner's
 default) are slower, so the thread stays the default.
 
@@ -130,7 +131,7 @@ class OffboardFlight:
                  name: str, tilt_limit_rad: float, record: Callable[[StepRecord], None] | None = None,
                  connect_timeout_s: float = 30.0, telemetry_timeout_s: float = 2.0,
                  telemetry_lost_s: float = 10.0, ack_timeout_s: float = 1.0,
-                 executor=None, direct: bool = False,
+                 executor=None, direct: bool = False, yield_core: bool = True,
                  cpu_ns: Callable[[], int] = time.thread_time_ns,
                  process_cpu_ns: Callable[[], int] = time.process_time_ns) -> None:
         self.link = link
@@ -140,6 +141,7 @@ class OffboardFlight:
         self._prepared_ns = 0           # the one before this step (handed over with it)
         self._prepare_error: BaseException | None = None
         self.direct = direct            # or called directly from the flight loop
+        self.yield_core = yield_core and _sched_yield is not None   # direct: after the answer
         self.cpu_ns = cpu_ns                    # the loop thread's parts (wire, log)
         self.process_cpu_ns = process_cpu_ns    # the whole period: every thread of the process
         self._wire_ns = 0               # the wire's CPU since the last step's start
@@ -398,7 +400,7 @@ class OffboardFlight:
             # direct: the answer is out, hand the core to whoever it woke (in lockstep the
             # vehicle) before the log and the preparation, which are off the latency path
             # (docs/decisions/2026-12-02-flight-loop-direct-calls.md)
-            if self.direct and _sched_yield is not None:
+            if self.direct and self.yield_core:
                 _sched_yield()
             rec = self._account(t, odo, ref, cmd, applied, info)
             rec.cpu.wire_ns = wire_rx + self._wire_ns
