@@ -224,91 +224,113 @@ class Controller:
         return self._actuator_walk(t0, t1, cut)[0]
 
     def _actuator_walk(self, t0: float, t1: float, cut: float | None = None):
-        """(_actuator_path(t0, t1, cut), the actuators' outputs at t1, at `cut` (None without
-        one)). The steps are laid out here and the lag chain through them is one call of a
-        compiled function (`_chain`)."""
-        segs = self._in_effect(-math.inf, t1)
-        y0 = segs[0][2]
-        ops = []                  # (u, h, start, end: None before t0, where nothing is recorded)
-        cut_at = -1 if cut is not None and cut <= segs[0][0] else None   # -1: y0
-        for lo, hi, u in segs:
-            cuts = [lo] + [c for c in (t0, cut) if c is not None and lo < c < hi] + [hi]
-            for a, b in zip(cuts[:-1], cuts[1:]):
-                if b <= a or not math.isfinite(a):
-                    continue
-                if a >= t0:       # recorded: steps of at most PREDICT_STEP_S
-                    n = max(1, math.ceil((b - a) / PREDICT_STEP_S - 1e-9))
-                    h = (b - a) / n
-                    for i in range(n):
-                        ops.append((u, h, a + i * h, b if i == n - 1 else a + (i + 1) * h))
-                else:             # the history before the path: one step, nothing recorded
-                    ops.append((u, b - a, a, None))
-                if cut is not None and b == cut:
-                    cut_at = len(ops) - 1
-        ys, mids = self._chain(y0, ops)
-        path = [(op[2], op[3], mids[k]) for k, op in enumerate(ops) if op[3] is not None]
-        y = ys[-1].copy() if ops else y0.copy()
-        if cut is None:
-            y_cut = None
-        elif cut_at is None:
-            y_cut = y.copy()
+        """(_actuator_path(t0, t1, cut), the actuators' outputs at t1, at `cut` (in [t0, t1];
+        None without one)). The commands in effect (each from its state's stamp + applied_delay_s until the
+        next one's, the oldest remembered one's output held before it) are laid out as lag
+        steps: one for each piece of a command before t0 (nothing recorded there), steps of at
+        most PREDICT_STEP_S from t0 on, none straddling t0 or `cut`; the lag chain through them
+        is one call of a compiled function (`_chain`). The history before t0 is laid out with
+        NumPy (the same differences of the same floats as step by step)."""
+        sent = self._sent
+        if sent:
+            starts = np.array([ts for ts, _ in sent]) + self.cfg.applied_delay_s
+            cmds = np.array([u for _, u in sent])
+            # the oldest command's output held before it acts, then each command's piece
+            lo = np.concatenate(([-math.inf], starts))
+            hi = np.minimum(np.concatenate((starts[0:1], starts[1:], [math.inf])), t1)
+            which = np.concatenate(([0], np.arange(len(sent))))
         else:
-            y_cut = y0.copy() if cut_at < 0 else ys[cut_at].copy()
+            cmds = self._last_u[None, :]
+            lo, hi, which = np.array([-math.inf]), np.array([t1]), np.array([0])
+        keep = hi > lo
+        y0 = cmds[0]
+        # before t0: one step per piece, [lo, min(hi, t0)] (none before the oldest command)
+        hist = keep & np.isfinite(lo) & (lo < t0)
+        hist_b = np.minimum(hi[hist], t0)
+        hist_h = hist_b - lo[hist]
+        n_hist = int(hist_h.size)
+        cut_at = n_hist - 1 if cut is not None and n_hist and hist_b[-1] == cut else None
+        # from t0 on: steps of at most PREDICT_STEP_S, cut at `cut`
+        rec_h, rec_idx, rec_ab = [], [], []
+        for i in np.flatnonzero(keep & (hi > t0)):
+            a0, b0 = max(float(lo[i]), t0), float(hi[i])
+            cuts = [a0] + ([cut] if cut is not None and a0 < cut < b0 else []) + [b0]
+            for a, b in zip(cuts[:-1], cuts[1:]):
+                if b <= a:
+                    continue
+                n = max(1, math.ceil((b - a) / PREDICT_STEP_S - 1e-9))
+                h = (b - a) / n
+                for k in range(n):
+                    rec_h.append(h)
+                    rec_idx.append(which[i])
+                    rec_ab.append((a + k * h, b if k == n - 1 else a + (k + 1) * h))
+                if cut is not None and b == cut:
+                    cut_at = n_hist + len(rec_h) - 1
+        hs = np.concatenate((hist_h, rec_h))
+        idx = np.concatenate((which[hist], np.array(rec_idx, int)))
+        ys, mids = self._chain(y0, cmds[idx], hs)
+        path = [(a, b, mids[n_hist + k]) for k, (a, b) in enumerate(rec_ab)]
+        y = ys[-1].copy() if hs.size else y0.copy()
+        y_cut = None if cut is None else (y.copy() if cut_at is None else ys[cut_at].copy())
         return path, y, y_cut
 
-    def _chain(self, y0: np.ndarray, ops) -> tuple[np.ndarray, np.ndarray]:
-        """The actuators through `ops` ((u, h, ...) steps) from y0: (outputs after each step,
-        the lag's midpoint of each, `_lag(y, u, h / 2)`), as `_lag` step by step would give
-        them, in chunks of CHAIN_STEPS steps through the compiled chain."""
-        m, K = self.model.nu, CHAIN_STEPS
-        ys, mids = np.empty((len(ops), m)), np.empty((len(ops), m))
-        y = np.asarray(y0, float)
-        for s0 in range(0, len(ops), K):
-            chunk = ops[s0:s0 + K]
-            k = len(chunk)
-            hs = [op[1] for op in chunk]
-            half = [0.5 * h for h in hs]
-            gain = self._lag_gain
-            self._ch_u[:k] = [op[0] for op in chunk]
-            self._ch_g[:k] = [gain(h) for h in hs]
-            self._ch_gm[:k] = [gain(h) for h in half]
-            self._ch_h[:k, 0] = hs
-            self._ch_h[:k, 1] = half
-            self._ch_h[k:, 0] = -1.0      # inactive steps
-            # (K, m) row-major is the chain's (m, K) column-major
-            out = self._chain_fn.outputs(y, self._ch_u, self._ch_g, self._ch_gm, self._ch_h)
-            ys[s0:s0 + k] = out[0].reshape(K, m)[:k]
-            mids[s0:s0 + k] = out[1].reshape(K, m)[:k]
-            y = ys[s0 + k - 1]
+    def _chain(self, y0: np.ndarray, us: np.ndarray, hs: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray]:
+        """The actuators from y0 through the steps (commands us (n, m), lengths hs (n)):
+        (outputs after each step, the lag's midpoint of each, `_lag(y, u, h / 2)`), as `_lag`
+        step by step would give them, in chunks of CHAIN_STEPS steps through the compiled
+        chain (its inputs written in place)."""
+        m, K, n = self.model.nu, CHAIN_STEPS, len(hs)
+        ys, mids = np.empty((n, m)), np.empty((n, m))
+        fn = self._chain_fn
+        y_in, u_in, h_in = fn.args
+        u_in, h_in = u_in.reshape(K, m), h_in.reshape(K, 2)   # (m, K) column-major
+        out_y, out_mid = (r.reshape(K, m) for r in fn.results)
+        y_in[:] = y0
+        for s0 in range(0, n, K):
+            k = min(K, n - s0)
+            u_in[:k] = us[s0:s0 + k]
+            h_in[:k, 0] = hs[s0:s0 + k]
+            h_in[:k, 1] = 0.5 * h_in[:k, 0]
+            h_in[k:, 0] = -1.0      # inactive steps
+            fn.evaluate()
+            ys[s0:s0 + k] = out_y[:k]
+            mids[s0:s0 + k] = out_mid[:k]
+            y_in[:] = ys[s0 + k - 1]
         return ys, mids
 
     def _build_chain(self, codegen: bool):
         """The lag chain of `_chain` as one CasADi function, generated as C and compiled once
-        (nmpc/cache.py): (y0 (m), u, gain(h), gain(h/2) (m x K), [h; h/2] (2 x K)) -> (outputs
-        after each step, midpoints) (m x K each); a step with h < 0 leaves y as it is. The
-        gains come in from `_lag_gain` (NumPy's expm1), so that the chain's arithmetic is
-        `_lag`'s, in the same order."""
+        (nmpc/cache.py): (y0 (m), u (m x K), [h; h/2] (2 x K)) -> (outputs after each step,
+        midpoints) (m x K each); a step with h < 0 leaves y as it is. Each step is `_lag`'s
+        arithmetic in the same order, its gain `_lag_gain`'s: 1 - exp(-h / T) as -expm1(-h / T)
+        (libm's expm1, as NumPy's), 1 where T = 0."""
         from trq_offboard.model.dynamics import NumpyFunction
         from trq_offboard.nmpc.cache import compiled
 
         m, K = self.model.nu, CHAIN_STEPS
         y0 = ca.SX.sym("y0", m)
-        U, G, GM = (ca.SX.sym(name, m, K) for name in ("u", "gain", "gain_mid"))
+        U = ca.SX.sym("u", m, K)
         H = ca.SX.sym("h", 2, K)
         rate = ca.DM(self._rate_limit)
+        lagged = [tau > 0.0 for tau in self._tau]
+        tau = ca.DM(np.maximum(self._tau, 1e-12))
+
+        def gain(h):
+            g = -ca.expm1(-h / tau)
+            return ca.vertcat(*[g[i] if lagged[i] else ca.SX(1.0) for i in range(m)])
+
         y, outs, mids = y0, [], []
         for k in range(K):
             u = U[:, k]
             lim_m = rate * H[1, k]
-            mids.append(y + ca.fmin(ca.fmax(GM[:, k] * (u - y), -lim_m), lim_m))
+            mids.append(y + ca.fmin(ca.fmax(gain(H[1, k]) * (u - y), -lim_m), lim_m))
             lim = rate * H[0, k]
-            y1 = y + ca.fmin(ca.fmax(G[:, k] * (u - y), -lim), lim)
+            y1 = y + ca.fmin(ca.fmax(gain(H[0, k]) * (u - y), -lim), lim)
             y = ca.if_else(H[0, k] >= 0, y1, y)
             outs.append(y)
-        fn = ca.Function(f"actuator_chain_{m}_{K}", [y0, U, G, GM, H],
+        fn = ca.Function(f"actuator_chain_expm1_{m}_{K}", [y0, U, H],
                          [ca.horzcat(*outs), ca.horzcat(*mids)])
-        self._ch_u, self._ch_g, self._ch_gm = (np.zeros((K, m)) for _ in range(3))
-        self._ch_h = np.zeros((K, 2))
         return NumpyFunction(compiled(fn, codegen)[0])
 
     def _walk_from(self, y0: np.ndarray, t0: float, t1: float, scale: np.ndarray):

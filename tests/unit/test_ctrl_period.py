@@ -4,6 +4,7 @@ what their NumPy loops compute; the log writes every row, in order, after its pe
 
 from __future__ import annotations
 
+import collections
 import dataclasses
 import math
 from pathlib import Path
@@ -13,7 +14,7 @@ import pytest
 from conftest import Ticks
 
 from trq_offboard.config import load_controller
-from trq_offboard.controller import Controller
+from trq_offboard.controller import PREDICT_STEP_S, Controller
 from trq_offboard.effectiveness import MotorEffectivenessObserver
 from trq_offboard.eso import ExtendedStateObserver
 from trq_offboard.records import (
@@ -113,11 +114,11 @@ def test_lag_chain_is_the_step_by_step_lag():
     lo, hi = ctl._u_lo, ctl._u_hi
     for n in (1, 5, 48, 49, 100):                  # within one chunk, at and past its end
         y0 = rng.uniform(lo, hi)
-        ops = [(rng.uniform(lo, hi), float(rng.choice([0.0025, 0.005, 0.01, 0.03])), 0.0, None)
-               for _ in range(n)]
-        ys, mids = ctl._chain(y0, ops)
+        us = rng.uniform(lo, hi, (n, len(lo)))
+        hs = rng.choice([0.0025, 0.005, 0.01, 0.03, 0.0123456789], n)
+        ys, mids = ctl._chain(y0, us, hs)
         y = y0
-        for k, (u, h, _, _) in enumerate(ops):
+        for k, (u, h) in enumerate(zip(us, hs)):
             assert np.array_equal(mids[k], ctl._lag(y, u, 0.5 * h))
             y = ctl._lag(y, u, h)
             assert np.array_equal(ys[k], y)
@@ -147,3 +148,65 @@ def test_controller_log_writes_every_row_in_order_after_its_period(tmp_path):
     assert math.isnan(cols["cpu_period_ms"][7])        # the last period never closed
     assert cols["cpu_prepare_ms"].tolist() == [0.3] * 8
     assert np.isnan(cols["cpu_observer_ms"]).all()      # no StepInfo: not measured
+
+
+def _walk_step_by_step(ctl, t0, t1, cut=None):
+    """The actuator walk laid out command piece by command piece, each step through `_lag`:
+    the specification `Controller._actuator_walk` (NumPy layout, compiled chain) must meet to
+    the bit."""
+    segs = ctl._in_effect(-math.inf, t1)
+    y = segs[0][2].copy()
+    path, y_cut = [], None
+    for lo, hi, u in segs:
+        cuts = [lo] + [c for c in (t0, cut) if c is not None and lo < c < hi] + [hi]
+        for a, b in zip(cuts[:-1], cuts[1:]):
+            if b <= a or not math.isfinite(a):
+                continue
+            if a >= t0:
+                n = max(1, math.ceil((b - a) / PREDICT_STEP_S - 1e-9))
+                h = (b - a) / n
+                for i in range(n):
+                    path.append((a + i * h, b if i == n - 1 else a + (i + 1) * h,
+                                 ctl._lag(y, u, 0.5 * h)))
+                    y = ctl._lag(y, u, h)
+            else:
+                y = ctl._lag(y, u, b - a)
+            if cut is not None and b == cut:
+                y_cut = y.copy()
+    if cut is not None and y_cut is None:
+        y_cut = y.copy()
+    return path, y, y_cut
+
+
+@pytest.mark.parametrize("delay", [0.0, 0.004, 0.04])
+def test_actuator_walk_is_the_step_by_step_walk(delay):
+    """Random histories of commands (stamps in order: regular, jittered, repeated), walks over (t0, t1]
+    with and without a cut in [t0, t1], t0 = t1, the cut at t0 or t1, t0 before the oldest
+    command, and no commands at all: the same path, outputs and cut outputs, bit for bit."""
+    cfg = dataclasses.replace(load_controller(CTRL), effectiveness=None, applied_delay_s=delay)
+    ctl = Controller(cfg, solver=_HoverSolver(np.zeros(8), cfg.horizon_steps))
+    rng = np.random.default_rng(11)
+    lo, hi = ctl._u_lo, ctl._u_hi
+    for trial in range(300):
+        n = int(rng.integers(0, 40))
+        step = rng.choice([0.01, 0.0097])
+        stamps = np.cumsum(rng.choice([step, step, 0.0, 2 * step], n)) if n else np.zeros(0)
+        stamps = np.maximum.accumulate(stamps + rng.uniform(0, 1e-3, n) * (trial % 3 == 0))
+        ctl._sent = collections.deque(((float(t), rng.uniform(lo, hi)) for t in stamps),
+                                      maxlen=32)
+        ctl._last_u = rng.uniform(lo, hi)
+        last = float(stamps[-1]) if n else 0.0
+        t0 = last - float(rng.choice([0.0, 0.01, 0.02, 0.5]))
+        t1 = t0 + float(rng.choice([0.0, 0.01, 0.013, delay + 0.01]))
+        cut = [None, t0, t1, 0.5 * (t0 + t1), last, t0 + 0.004][trial % 6]
+        if cut is not None and not t0 <= cut <= t1:      # the controller's cut: in [t0, t1]
+            cut = None
+        got = ctl._actuator_walk(t0, t1, cut)
+        want = _walk_step_by_step(ctl, t0, t1, cut)
+        assert len(got[0]) == len(want[0])
+        for (a, b, ym), (a2, b2, ym2) in zip(got[0], want[0]):
+            assert (a, b) == (a2, b2) and np.array_equal(ym, ym2)
+        assert np.array_equal(got[1], want[1])
+        assert (got[2] is None) == (want[2] is None)
+        if got[2] is not None:
+            assert np.array_equal(got[2], want[2]), (trial, t0, t1, cut)

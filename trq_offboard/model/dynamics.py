@@ -196,3 +196,16 @@ class NumpyFunction:
     def outputs(self, *args) -> list[np.ndarray]:
         self._run(args)
         return [a.copy() for a in self._outs]
+
+    # in place: the caller writes the inputs into `args` (flat, column-major), calls
+    # `evaluate` and reads the outputs from `results` before the next evaluation
+    @property
+    def args(self) -> list[np.ndarray]:
+        return self._in
+
+    @property
+    def results(self) -> list[np.ndarray]:
+        return self._outs
+
+    def evaluate(self) -> None:
+        self._eval()
