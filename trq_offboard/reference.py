@@ -62,6 +62,10 @@ class Reference:
         self.airborne = airborne
         self.ground = float(self.start[2] if ground_down_m is None else ground_down_m)
         self.hover_point = self.start + np.array([0.0, 0.0, 0.0 if airborne else -cfg.altitude_m])
+        self._w = 2.0 * math.pi / cfg.period_s          # the phase's constants (_phase)
+        self._T, self._r = cfg.duration_s, cfg.ramp_s
+        self._full_ramp = self._ramp_integral(self._r)
+        self._phi_end = self._w * (2 * self._full_ramp + self._T - 2 * self._r)
         self._start = tuple(float(v) for v in self.start)
         self._hover = tuple(float(v) for v in self.hover_point)
         rise = self.hover_point[2] - self.start[2]
@@ -79,22 +83,20 @@ class Reference:
     # --- phase of the periodic manoeuvres -------------------------------------------------
     def _phase(self, tau: float) -> tuple[float, float]:
         """(phi, dphi/dt) at tau seconds into the manoeuvre; rate ramps 0 -> w -> 0."""
-        cfg = self.cfg
-        w = 2.0 * math.pi / cfg.period_s
-        T, r = cfg.duration_s, cfg.ramp_s
+        w, T, r = self._w, self._T, self._r
         tau = min(max(tau, 0.0), T)
-
-        def ramp_integral(s: float) -> float:      # integral of (1 - cos(pi x / r)) / 2
-            return 0.5 * (s - r / math.pi * math.sin(math.pi * s / r)) if r > 0 else s
-
-        full_ramp = ramp_integral(r)
         if tau < r:
-            return w * ramp_integral(tau), w * 0.5 * (1 - math.cos(math.pi * tau / r))
+            return w * self._ramp_integral(tau), w * 0.5 * (1 - math.cos(math.pi * tau / r))
         if tau <= T - r:
-            return w * (full_ramp + tau - r), w
+            return w * (self._full_ramp + tau - r), w
         back = T - tau
-        phi_end = w * (2 * full_ramp + T - 2 * r)
-        return phi_end - w * ramp_integral(back), w * 0.5 * (1 - math.cos(math.pi * back / r))
+        return (self._phi_end - w * self._ramp_integral(back),
+                w * 0.5 * (1 - math.cos(math.pi * back / r)))
+
+    def _ramp_integral(self, s: float) -> float:
+        """The integral of (1 - cos(pi x / r)) / 2 over [0, s]."""
+        r = self._r
+        return 0.5 * (s - r / math.pi * math.sin(math.pi * s / r)) if r > 0 else s
 
     def _manoeuvre_pv(self, tau: float) -> tuple[float, ...]:
         """(north, east, down, vn, ve, vd) at tau seconds into the manoeuvre (plain floats: the
@@ -147,9 +149,8 @@ class Reference:
     def grid(self, t_s: float, step_s: float, n: int) -> tuple[np.ndarray, np.ndarray]:
         """The plan at t_s + k step_s, k = 0..n-1: (pos_vel (n, 6) NED [m, m/s], yaw (n,) rad);
         the same values as `sample`, without a record per point."""
-        t0 = float(t_s)
-        pv = np.array([self._pv(t0 + k * step_s)[0] for k in range(n)])
-        return pv, np.full(n, self.yaw)
+        t0, pv = float(t_s), self._pv
+        return np.array([pv(t0 + k * step_s)[0] for k in range(n)]), np.full(n, self.yaw)
 
     def done(self, t_s: float) -> bool:
         """The plan is over: landed (or, without landing, the final hold has started)."""
