@@ -74,9 +74,10 @@ def _listening(port: int, proc: subprocess.Popen, timeout_s: float) -> None:
 
 
 def fly_daemons(seconds: float, controller: str, log_dir: Path,
-                python: str = sys.executable) -> dict:
+                python: str = sys.executable, direct: bool = False) -> dict:
     """One lockstep flight of both daemons for `seconds` of vehicle time: CPU s of each
-    process, the vehicle's wall time (start to exit) and its exit code."""
+    process, the vehicle's wall time (start to exit) and its exit code. `direct`: the
+    controller daemon's --direct (no worker thread)."""
     pv, pc, pg, pt = _free_ports(4)
     vcmd = [python, "-m", "sil_vehicle", "--duration", f"{seconds:g}", "--mode", "lockstep",
             "--offboard-bind", f"127.0.0.1:{pv}", "--offboard-target", f"127.0.0.1:{pc}",
@@ -84,6 +85,7 @@ def fly_daemons(seconds: float, controller: str, log_dir: Path,
             "--log-dir", str(log_dir)]
     ccmd = [python, "-m", "trq_offboard", "--controller", controller, "--connect",
             f"udpin:127.0.0.1:{pc}", "--log-dir", str(log_dir)]
+    ccmd += ["--direct"] if direct else []
     out = dict(stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     ctl = subprocess.Popen(ccmd, **out)
     _listening(pc, ctl, 60.0)              # built and listening: the vehicle's clock starts now
@@ -124,11 +126,12 @@ def _parts(csv_path: Path, lo_s: float, hi_s: float) -> dict:
 
 
 def daemons_period(short_s: float = 5.0, long_s: float = 35.0,
-                   controller: str = "trq_nmpc_eso", control_rate_hz: int = 100) -> dict:
+                   controller: str = "trq_nmpc_eso", control_rate_hz: int = 100,
+                   direct: bool = False) -> dict:
     """The two flights and what follows from them (see the module docstring)."""
     with tempfile.TemporaryDirectory(prefix="trq-bench-period-") as tmp:
-        short = fly_daemons(short_s, controller, Path(tmp) / "short")
-        long_ = fly_daemons(long_s, controller, Path(tmp) / "long")
+        short = fly_daemons(short_s, controller, Path(tmp) / "short", direct=direct)
+        long_ = fly_daemons(long_s, controller, Path(tmp) / "long", direct=direct)
         parts = _parts(Path(tmp) / "long" / "controller.csv", short_s, long_s)
     periods = (long_s - short_s) * control_rate_hz
     dwall = long_["wall_s"] - short["wall_s"]
