@@ -130,6 +130,13 @@ async def until(predicate, what: str) -> None:
         await asyncio.sleep(0.002)
 
 
+async def cancelled(task) -> None:
+    """Cancel the flight's task and see it end cancelled."""
+    task.cancel()
+    with pytest.raises(asyncio.CancelledError):
+        await task
+
+
 async def settle() -> None:
     """Give the loop (and its worker thread) time to do whatever it would do."""
     await asyncio.sleep(0.05)
@@ -227,9 +234,7 @@ def test_already_armed_vehicle_is_not_armed_again():
         flight.on_message(odometry(0))
         await until(lambda: link.targets(0), "the target of stamp 0")
         assert not link.commands()
-        task.cancel()
-        with pytest.raises(asyncio.CancelledError):
-            await task
+        await cancelled(task)
 
     asyncio.run(scenario())
 
@@ -402,9 +407,7 @@ def test_each_period_is_timed_by_part_directly_or_on_an_executor(threaded):
             flight.on_message(odometry(10_000 * k, down_m=-0.5))
             await until(lambda: link.targets(10_000 * k), f"the target of stamp {10_000 * k}")
             await settle()
-        task.cancel()
-        with pytest.raises(asyncio.CancelledError):
-            await task
+        await cancelled(task)
         return ctl
 
     ctl = asyncio.run(scenario())
@@ -474,9 +477,7 @@ def test_worker_answers_before_its_preparation_and_steps_after_it():
         flight.on_message(odometry(30_000, down_m=-0.5))
         await until(lambda: link.targets(30_000), "the target of stamp 30000")
         await settle()
-        task.cancel()
-        with pytest.raises(asyncio.CancelledError):
-            await task
+        await cancelled(task)
         return ctl
 
     ctl = asyncio.run(scenario())
