@@ -46,6 +46,8 @@ MAGIC_V2 = 0xFD
 HEADER = struct.Struct("<BBBBBBBHB")        # magic, len, incompat, compat, seq, sys, comp, id
 HEADER_LEN, CHECKSUM_LEN, SIGNATURE_LEN = HEADER.size, 2, 13
 SIGNED = mavlink.MAVLINK_IFLAG_SIGNED
+_BYTE = [bytes((k,)) for k in range(256)]
+_pack_checksum = struct.Struct("<H").pack
 
 # the vehicle's telemetry on the offboard link (params/sim: telemetry.offboard); any other
 # message takes pymavlink's path
@@ -100,40 +102,40 @@ class _Unpacker:
 
 _UNPACKERS = {cls.id: _Unpacker(cls) for cls in HOT}
 _new_header = mavlink.MAVLink_header
+_unpack_header = HEADER.unpack_from
 
 
 def _decode_at(data, i: int, n: int):
     """The frame at data[i:] and the offset after it, or (None, i)."""
     if n - i < HEADER_LEN + CHECKSUM_LEN or data[i] != MAGIC_V2:
         return None, i
-    _, mlen, flags, compat, seq, system, component, id_low, id_high = HEADER.unpack_from(data, i)
+    _, mlen, flags, compat, seq, system, component, id_low, id_high = _unpack_header(data, i)
     u = _UNPACKERS.get(id_low | id_high << 16)
     if u is None or flags & ~SIGNED or mlen > u.size:
         return None, i
     tail = CHECKSUM_LEN + (SIGNATURE_LEN if flags else 0)
-    body = i + HEADER_LEN + mlen
-    end = body + tail
-    if end > n:
+    body = HEADER_LEN + mlen                # the checksum's offset in the frame
+    if i + body + tail > n:
         return None, i
-    view = memoryview(data)
-    if crc(view[i + 1:body], u.crc_extra) != data[body] | data[body + 1] << 8:
+    msgbuf = bytearray(data[i:i + body + tail] if i or body + tail != n else data)
+    checksum = msgbuf[body] | msgbuf[body + 1] << 8
+    if crc(msgbuf[1:body], u.crc_extra) != checksum:
         return None, i
     if mlen == u.size:
-        values = u.struct.unpack_from(data, i + HEADER_LEN)
+        values = u.struct.unpack_from(msgbuf, HEADER_LEN)
     else:                                   # MAVLink 2 dropped the payload's trailing zeros
-        values = u.struct.unpack(view[i + HEADER_LEN:body].tobytes() + u.zeros[mlen])
-    fields = dict(zip(u.scalar_names, u.scalars(values)))
+        values = u.struct.unpack(msgbuf[HEADER_LEN:body] + u.zeros[mlen])
+    fields = u.constant.copy()
+    fields.update(zip(u.scalar_names, u.scalars(values)))
     for name, a, b in u.arrays:
         fields[name] = list(values[a:b])
-    msgbuf = bytearray(view[i:end])
-    fields.update(u.constant)
     fields["_header"] = _new_header(u.cls.id, flags, compat, mlen, seq, system, component)
     fields["_msgbuf"] = msgbuf
     fields["_payload"] = msgbuf[6:-tail]    # as pymavlink's decode sets it
-    fields["_crc"] = data[body] | data[body + 1] << 8
+    fields["_crc"] = checksum
     msg = object.__new__(u.cls)
     msg.__dict__ = fields
-    return msg, end
+    return msg, i + body + tail
 
 
 def decode(frame: bytes):
@@ -172,21 +174,22 @@ class Packer:
         `mav`'s seq, system, component and signing (which advances its signing timestamp)."""
         signing = mav.signing
         signed = signing.sign_outgoing
-        frame = bytearray(self.struct.pack(
-            MAGIC_V2, self.size, SIGNED if signed else 0, 0, mav.seq, mav.srcSystem,
-            mav.srcComponent, self.id_low, self.id_high, *payload))
+        frame = self.struct.pack(MAGIC_V2, self.size, SIGNED if signed else 0, 0, mav.seq,
+                                 mav.srcSystem, mav.srcComponent, self.id_low, self.id_high,
+                                 *payload)
         # MAVLink 2 drops the payload's trailing zeros (pymavlink keeps at least one byte)
-        plen = max(len(frame.rstrip(b"\x00")) - HEADER_LEN, 1)
+        plen = len(frame.rstrip(b"\x00")) - HEADER_LEN
         if plen < self.size:
-            del frame[HEADER_LEN + plen:]
-            frame[1] = plen
-        c = crc(memoryview(frame)[1:], self.crc_extra)
-        frame.append(c & 0xFF)
-        frame.append(c >> 8)
+            plen = plen if plen > 1 else 1
+            frame = b"\xfd" + _BYTE[plen] + frame[2:HEADER_LEN + plen]
+        frame += _pack_checksum(crc(frame[1:], self.crc_extra))
         if signed:
-            append_signature(frame, signing.secret_key, signing.link_id, signing.timestamp)
+            signed_frame = bytearray(frame)
+            append_signature(signed_frame, signing.secret_key, signing.link_id,
+                             signing.timestamp)
             signing.timestamp += 1
-        return bytes(frame)
+            return bytes(signed_frame)
+        return frame
 
 
 class ActuatorTarget(mavlink.MAVLink_set_actuator_control_target_message):
@@ -203,6 +206,6 @@ class ActuatorTarget(mavlink.MAVLink_set_actuator_control_target_message):
         data = self._packer.pack(mav, self.time_usec, c[0], c[1], c[2], c[3], c[4], c[5], c[6],
                                  c[7], self.group_mlx, self.target_system, self.target_component)
         self._msgbuf = bytearray(data)
-        self._crc = data[-2] | data[-1] << 8 if not mav.signing.sign_outgoing \
-            else data[-15] | data[-14] << 8
+        checksum = HEADER_LEN + data[1]
+        self._crc = data[checksum] | data[checksum + 1] << 8
         return data
