@@ -349,3 +349,13 @@ def test_stream_link_delivers_and_counts_as_pymavlink_alone(chunks, signed, cuts
     _same_traffic(fast, fast_got, slow, slow_got)
     if signed:
         assert fast_got
+
+
+def test_the_wire_bench_measures_every_pair():
+    from trq_lab.bench import wire as bench
+
+    figures = bench.measure(repeat=1, number=1)
+    assert set(figures) == set(bench.LABELS)
+    for f in figures.values():
+        assert f["pymavlink_us"] > 0 and f["fast_us"] > 0
+    assert figures["control_period"]["datagrams_per_period"] >= 1

@@ -13,9 +13,13 @@ least disturbed by a shared machine), and the ratio of the two:
 (4) the target built and packed (wire.actuator_target's message: pymavlink's class, or
     frames.ActuatorTarget), unsigned and (5) signed;
 (6) MavlinkUdp.datagram_received of an ODOMETRY datagram, the whole receive (system check,
-    .tlog callback and a callback that does nothing), fast_path off and on.
-The frames are the vehicle's own (a hovering ODOMETRY with unknown covariances, as the simulator
-sends it).
+    .tlog callback and a callback that does nothing), fast_path off and on;
+(7) one control period's wire on the controller's side: the receive of the vehicle's offboard
+    telemetry at the default sim's rates (params/sim/default.yaml: every stream's datagrams
+    over one second, one datagram per message as the vehicle sends them, divided by the
+    control rate's periods) and one target built and packed.
+The ODOMETRY and ACTUATOR_OUTPUT_STATUS frames are the vehicle's own kind (a hover, unknown
+covariances, unused outputs NaN); the other streams' frames carry seeded random field values.
 """
 
 from __future__ import annotations
@@ -23,11 +27,13 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import random
 import timeit
 from pathlib import Path
 
 from pymavlink.dialects.v20 import common as mavlink
 
+from sil_vehicle.config import PARAMS_DIR, load_sim
 from trq_lab.bench.nmpc import machine_line
 from trq_offboard.link.udp import Connection, MavlinkUdp, parse_datagram
 from trq_wire import frames
@@ -48,6 +54,31 @@ def _frames() -> tuple[bytes, bytes]:
     out = mavlink.MAVLink_actuator_output_status_message(
         12_340_000, 8, [0.55, 0.61, 0.58, 0.6, 0.12, -0.08, 0.0, 0.0] + [math.nan] * 24)
     return bytes(odo.pack(tx)), bytes(out.pack(tx))
+
+
+def _period_traffic(odo: bytes, out: bytes) -> tuple[list[bytes], int]:
+    """One second of the default sim's offboard telemetry (datagrams in send order: stream by
+    stream, which does not change the cost) and the control periods in that second."""
+    sim = load_sim(PARAMS_DIR / "sim" / "default.yaml")
+    rates = dict(next(link for link in sim.links if link.name == "offboard").rates_hz)
+    tx = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+    rng = random.Random(18)
+    own = {"ODOMETRY": odo, "ACTUATOR_OUTPUT_STATUS": out}
+    datagrams = []
+    for name, hz in sorted(rates.items()):
+        if not hz:
+            continue
+        if name in own:
+            frame = own[name]
+        else:
+            cls = mavlink.mavlink_map[getattr(mavlink, f"MAVLINK_MSG_ID_{name}")]
+            if cls not in frames.HOT:
+                raise ValueError(f"{name}: not one of trq_wire.frames.HOT")
+            values = cls.unpacker.unpack(bytes(rng.randrange(1, 256)
+                                               for _ in range(cls.unpacker.size)))
+            frame = frames.Packer(cls).pack(tx, *values)
+        datagrams += [frame] * hz
+    return datagrams, sim.control_rate_hz
 
 
 def _pair(slow, fast, repeat: int, number: int) -> dict:
@@ -89,6 +120,22 @@ def measure(repeat: int = 7, number: int = 2000) -> dict:
     figures["udp_receive_odometry"] = _pair(lambda: links[0].datagram_received(odo, peer),
                                             lambda: links[1].datagram_received(odo, peer),
                                             repeat, number)
+    traffic, periods = _period_traffic(odo, out)
+    tx = mavlink.MAVLink(None, srcSystem=1, srcComponent=191)
+
+    def second(link, target) -> None:
+        for d in traffic:
+            link.datagram_received(d, peer)
+        for _ in range(periods):
+            target(12_340_000, 0, 1, 1, CONTROLS).pack(tx)
+
+    per_period = _pair(lambda: second(links[0], mavlink.MAVLink_set_actuator_control_target_message),
+                       lambda: second(links[1], frames.ActuatorTarget),
+                       repeat, max(1, number // 100))
+    for k in ("pymavlink_us", "fast_us"):
+        per_period[k] /= periods
+    per_period["datagrams_per_period"] = len(traffic) / periods
+    figures["control_period"] = per_period
     return figures
 
 
@@ -99,6 +146,7 @@ LABELS = {
     "target": "target build + pack",
     "target_signed": "target build + pack, signed",
     "udp_receive_odometry": "MavlinkUdp receive of ODOMETRY",
+    "control_period": "a control period: telemetry in, one target out",
 }
 
 
