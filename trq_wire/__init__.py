@@ -6,8 +6,8 @@ must compute identically lives here, once:
 
 - `signing`: MAVLink 2 signing. In: a key file (64 hexadecimal characters), a pymavlink encoder,
   received frames as bytes. Out: the 32-byte secret (or `SigningKeyError`, naming the file but
-  never the key), an encoder that signs what it packs, a yes/no per received frame. Also the
-  signing clock (10-microsecond units since 2015-01-01 UTC, from the wall clock).
+  never the key), an encoder that signs what it packs, the signature appended to a frame
+  packed by `frames` (the same bytes), a yes/no per received frame. Also the signing clock (10-microsecond units since 2015-01-01 UTC, from the wall clock).
 - `actuators`: the scaling of throttles (percent) and tilts (rad) to and from the normalised
   values of SET_ACTUATOR_CONTROL_TARGET and ACTUATOR_OUTPUT_STATUS and the PWM microseconds of
   SERVO_OUTPUT_RAW, both directions, and the servo half-range a normalised tilt of 1 stands for.

@@ -1,5 +1,6 @@
 """MAVLink 2 signing, for both ends of a link: the key file, the signing clock, signing what is
-sent (pymavlink's own signing of packed frames) and the check of what is received.
+sent (pymavlink's own signing of packed frames, and `append_signature`, the same bytes, for
+the frames trq_wire.frames packs) and the check of what is received.
 
 The signature is the first 6 bytes of SHA-256(secret key + frame up to and including the link
 id and the 48-bit timestamp). A frame is accepted only if (1) its signature is right, and then
