@@ -220,6 +220,15 @@ def test_decode_full_and_truncated_payloads(cls):
     assert f[1] < cls.unpacker.size                 # the last one was truncated
 
 
+@pytest.mark.parametrize("cls", frames.HOT)
+def test_decode_of_an_empty_payload_is_pymavlinks(cls):
+    """A sender may cut an all-zero payload to nothing (pymavlink keeps one byte; the format
+    allows none)."""
+    f = frame(cls, b"", truncate=False, seq=3)
+    assert f[1] == 0
+    assert_same_message(frames.decode(f), pymavlink_decode(f))
+
+
 def test_decode_leaves_to_pymavlink_what_it_cannot_vouch_for():
     payload = bytes(range(1, OUTPUTS.unpacker.size + 1))
     good = frame(OUTPUTS, payload)
