@@ -7,6 +7,7 @@ receive paths (UDP, a stream) delivering and counting the same with the fast pat
 from __future__ import annotations
 
 import math
+import re
 import struct
 
 import pytest
@@ -178,7 +179,7 @@ def valid_values(cls, data) -> bytes:
 
 
 def _format_items(fmt: str):
-    import re
+    """A struct format's (code, count) items: '<Q4fB' -> [('Q', 1), ('f', 4), ('B', 1)]."""
     return [(code, int(n) if n else 1) for n, code in re.findall(r"(\d*)([a-zA-Z])", fmt)]
 
 
