@@ -21,6 +21,8 @@ from typing import Callable
 
 from pymavlink.dialects.v20 import common as mavlink
 
+from trq_wire.frames import crc as frame_crc
+
 MAGIC_V2, MAGIC_V1 = 0xFD, 0xFE
 HEADER_V2, HEADER_V1, CHECKSUM, SIGNATURE = 10, 6, 2, 13
 NS_PER_S = 1_000_000_000
@@ -90,9 +92,8 @@ class StreamFramer:
             total = end + signature
             if total > n:
                 break                                   # the rest of the frame is to come
-            crc = mavlink.x25crc(buf[i + 1:end - CHECKSUM])
-            crc.accumulate(bytes((kind.crc_extra,)))
-            if crc.crc != buf[end - 2] | buf[end - 1] << 8:
+            if frame_crc(buf[i + 1:end - CHECKSUM], kind.crc_extra) \
+                    != buf[end - 2] | buf[end - 1] << 8:
                 self._lost()
                 i += 1
                 continue

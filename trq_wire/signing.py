@@ -1,5 +1,6 @@
 """MAVLink 2 signing, for both ends of a link: the key file, the signing clock, signing what is
-sent (pymavlink's own signing of packed frames) and the check of what is received.
+sent (pymavlink's own signing of packed frames, and `append_signature`, the same bytes, for
+the frames trq_wire.frames packs) and the check of what is received.
 
 The signature is the first 6 bytes of SHA-256(secret key + frame up to and including the link
 id and the 48-bit timestamp). A frame is accepted only if (1) its signature is right, and then
@@ -23,7 +24,7 @@ from typing import Callable
 from pymavlink.dialects.v20 import common as mavlink
 
 __all__ = ["EPOCH_2015_S", "ONE_MINUTE", "READ_ONLY_IDS", "SignatureCheck", "SigningKeyError",
-           "load_key", "now_10us", "sign_outgoing"]
+           "append_signature", "load_key", "now_10us", "sign_outgoing"]
 
 EPOCH_2015_S = 1_420_070_400     # 2015-01-01 00:00:00 UTC in UNIX seconds
 ONE_MINUTE = 60 * 100_000        # in the signing clock's 10 us units
@@ -39,6 +40,20 @@ def now_10us(wall: Callable[[], float] = time.time) -> int:
     """MAVLink signing time: 10 us units since 2015-01-01 00:00:00 UTC (the wall clock, as the
     signing specification asks; it never enters the simulation)."""
     return int((wall() - EPOCH_2015_S) * 100_000)
+
+
+def _signature(key: bytes, signed_part) -> bytes:
+    """The 6 signature bytes of a frame whose signed part (up to and including the link id and
+    the timestamp) is `signed_part`."""
+    return hashlib.sha256(key + signed_part).digest()[:6]
+
+
+def append_signature(frame: bytearray, key: bytes, link_id: int, stamp_10us: int) -> None:
+    """Sign a packed MAVLink 2 frame (its signed flag already set) in place: the link id, the
+    48-bit timestamp and the signature, the 13 bytes pymavlink's own signing appends."""
+    frame.append(link_id)
+    frame += (stamp_10us & 0xFFFF_FFFF_FFFF).to_bytes(6, "little")
+    frame += _signature(key, frame)
 
 
 class SigningKeyError(ValueError):
@@ -100,7 +115,7 @@ class SignatureCheck:
         if len(frame) < _MIN_SIGNED:
             self.bad_signature += 1
             return False
-        expected = hashlib.sha256(self._key + frame[:-6]).digest()[:6]
+        expected = _signature(self._key, frame[:-6])
         if not hmac.compare_digest(expected, frame[-6:]):
             self.bad_signature += 1
             return False

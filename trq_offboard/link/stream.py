@@ -8,7 +8,8 @@
 The same object as the UDP link for OffboardFlight (open, close, send, on_message, on_frame,
 stats, signing, the system-1 filter). One persistent parser (trq_wire.framing.StreamFramer)
 makes frames of the stream: it re-synchronises after garbage or a cut; skipped runs count as
-bad, as a datagram's garbage does on UDP.
+bad, as a datagram's garbage does on UDP. The vehicle's telemetry frames are unpacked by
+trq_wire.frames (one struct each), every other frame by pymavlink's decode.
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ from typing import Callable
 from pymavlink.dialects.v20 import common as mavlink
 
 from trq_offboard.link.endpoint import MavlinkEndpoint, log
+from trq_wire import frames
 from trq_wire.connection import Connection
 from trq_wire.stream import OneStream, SerialStream, TcpStream
 
@@ -27,6 +29,8 @@ RECONNECT_S = 0.5          # tcpout: wall time between attempts to reach the veh
 
 
 class MavlinkStream(MavlinkEndpoint):
+    fast_path = True           # False: every frame through pymavlink's decode (tests, benches)
+
     def __init__(self, connection: Connection, on_message: Callable[[object], None],
                  system_id: int = 1, component_id: int = 191,
                  signing_key: bytes | None = None, monotonic=time.monotonic) -> None:
@@ -99,14 +103,16 @@ class MavlinkStream(MavlinkEndpoint):
     # --- bytes in and out ------------------------------------------------------------------
     def bytes_received(self, data: bytes) -> None:
         self.stats.datagrams += 1
-        frames, skipped = self._one.frames(data)
+        found, skipped = self._one.frames(data)
         self.stats.bad += skipped
-        for frame in frames:
-            try:
-                msg = self._rx.decode(bytearray(frame))
-            except Exception:  # the framer checked the checksum; a payload may still be odd
-                self.stats.bad += 1
-                continue
+        for frame in found:
+            msg = frames.decode(frame) if self.fast_path else None
+            if msg is None:
+                try:
+                    msg = self._rx.decode(bytearray(frame))
+                except Exception:  # the framer checked the checksum; a payload may be odd
+                    self.stats.bad += 1
+                    continue
             if self._trusted(msg):
                 self._deliver(msg)
 

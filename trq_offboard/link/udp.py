@@ -6,7 +6,10 @@
     udpout:HOST:PORT   send to HOST:PORT from an ephemeral port
 
 Incoming datagrams are parsed frame by frame (a fresh parse per datagram: frames never span
-datagrams, and garbage in one datagram cannot corrupt the next) and handed to a callback.
+datagrams, and garbage in one datagram cannot corrupt the next) and handed to a callback. The
+frames of the vehicle's telemetry at the start of a datagram are unpacked by trq_wire.frames
+(one struct each, into pymavlink's own message objects); pymavlink's parser takes whatever that
+path does not vouch for, from there to the datagram's end, so counters and refusals are its.
 """
 
 from __future__ import annotations
@@ -19,6 +22,7 @@ from typing import Callable
 from pymavlink.dialects.v20 import common as mavlink
 
 from trq_offboard.link.endpoint import LinkStats, MavlinkEndpoint, log
+from trq_wire import frames
 from trq_wire.connection import Connection
 
 __all__ = ["Connection", "LinkStats", "MavlinkUdp", "PEER_TIMEOUT_S"]
@@ -26,7 +30,18 @@ __all__ = ["Connection", "LinkStats", "MavlinkUdp", "PEER_TIMEOUT_S"]
 PEER_TIMEOUT_S = 2.0       # udpin: silence after which another address may become the peer
 
 
+def parse_datagram(data: bytes) -> list:
+    """pymavlink's parse of one datagram (a fresh parser): messages, MAVLink_bad_data for
+    garbage and refused frames, MAVLink_unknown for ids outside the dialect. Raises on what
+    even its robust parsing cannot take."""
+    rx = mavlink.MAVLink(None)
+    rx.robust_parsing = True
+    return rx.parse_buffer(data) or []
+
+
 class MavlinkUdp(MavlinkEndpoint, asyncio.DatagramProtocol):
+    fast_path = True           # False: every frame through pymavlink's parser (tests, benches)
+
     def __init__(self, connection: Connection, on_message: Callable[[object], None],
                  system_id: int = 1, component_id: int = 191,
                  signing_key: bytes | None = None, monotonic=time.monotonic) -> None:
@@ -51,13 +66,13 @@ class MavlinkUdp(MavlinkEndpoint, asyncio.DatagramProtocol):
 
     def datagram_received(self, data: bytes, addr) -> None:
         self.stats.datagrams += 1
-        rx = mavlink.MAVLink(None)
-        rx.robust_parsing = True
-        try:
-            msgs = rx.parse_buffer(data) or []
-        except Exception:  # malformed traffic never stops the controller
-            self.stats.bad += 1
-            return
+        msgs, done = frames.decode_leading(data) if self.fast_path else ([], 0)
+        if done < len(data):
+            try:
+                msgs += parse_datagram(data[done:] if done else data)
+            except Exception:  # malformed traffic never stops the controller
+                self.stats.bad += 1
+                return
         for msg in msgs:
             if isinstance(msg, mavlink.MAVLink_bad_data) or msg.get_type() == "UNKNOWN":
                 self.stats.bad += 1

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from pymavlink.dialects.v20 import common as mavlink
 
 from trq_offboard.records import ActuatorCommand, StateEstimate
-from trq_wire import actuators
+from trq_wire import actuators, frames
 
 VEHICLE_SYSTEM = 1
 HOME_GROUND_DOWN_M = 0.0     # PROTOCOL.md: the NED origin is home, on the ground
@@ -70,15 +70,15 @@ def parse_actuator_outputs(msg, tilt_limit_rad: float) -> ActuatorCommand | None
 
 
 def actuator_target(stamp_us: int, cmd: ActuatorCommand, tilt_limit_rad: float):
-    """SET_ACTUATOR_CONTROL_TARGET for the vehicle. Raises ValueError on a non-finite value: the
-    caller must never get that far (the controller clips), this is the last check."""
+    """SET_ACTUATOR_CONTROL_TARGET for the vehicle (pymavlink's message, packed by one struct:
+    trq_wire.frames.ActuatorTarget). Raises ValueError on a non-finite value: the caller must
+    never get that far (the controller clips), this is the last check."""
     # check before clipping: min/max would turn an infinity into a limit (and may hide a NaN)
     if not all(math.isfinite(v) for v in (*cmd.throttle_pct, *cmd.tilt_rad)):
         raise ValueError(f"non-finite actuator command {cmd}")
     controls = actuators.clip_controls(
         actuators.to_normalised(cmd.throttle_pct, cmd.tilt_rad, tilt_limit_rad))
-    return mavlink.MAVLink_set_actuator_control_target_message(
-        stamp_us, 0, VEHICLE_SYSTEM, VEHICLE_COMPONENT, controls)
+    return frames.ActuatorTarget(stamp_us, 0, VEHICLE_SYSTEM, VEHICLE_COMPONENT, controls)
 
 
 def arm_command(arm: bool, force: bool = False):
