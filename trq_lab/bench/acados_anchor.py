@@ -328,12 +328,14 @@ def _shift(s, v, h: float, dt: float, a_sent) -> tuple[np.ndarray, np.ndarray]:
 # --- recording a flight of ours ------------------------------------------------------------------
 
 class Recorder:
-    """Wraps a Controller's RTI solver to record what each solve was handed and returned (copies
-    made outside the solver's own timing) and each preparation's own time."""
+    """Wraps a Controller's RTI solver to record what each solve was handed and returned, and
+    each preparation's own time: per step, copies of the solve's arguments and of the bounds
+    (the effectiveness observer changes them in place), a few microseconds outside the solver's
+    own timing (inside the controller's step and period); `arrays` packs them."""
 
     def __init__(self, ctl):
         self.ctl = ctl
-        self.rows: list[dict] = []
+        self.rows: list[tuple] = []
         self.prep_s: list[float] = []
         solver = ctl.solver
         self._solve, self._prepare = solver.solve, solver.prepare
@@ -341,16 +343,11 @@ class Recorder:
         solver.prepare = self._rec_prepare
 
     def _rec_solve(self, x0, x_ref, d, u_prev, guess, y0=None):
-        o = self.ctl.solver.ocp
-        a_prev = np.array(u_prev, float)[0:4]
-        w = o.pack(guess[1], guess[0], a_prev)
-        row = dict(x0=np.array(x0, float), alpha_prev=a_prev, x_ref=np.array(x_ref, float),
-                   d=np.array(d, float), v_lo=o.lbw[o.v_index].copy(),
-                   v_hi=o.ubw[o.v_index].copy(), guess_s=w[o.s_index], guess_v=w[o.v_index])
+        o, c = self.ctl.solver.ocp, np.array
+        row = [c(x0, float), c(x_ref, float), c(d, float), c(u_prev, float),
+               (c(guess[0], float), c(guess[1], float)), o.lbw.copy(), o.ubw.copy()]
         out = self._solve(x0, x_ref, d, u_prev, guess, y0=y0)
-        row["u0"] = np.array(out[0][0], float)
-        row["ok"] = out[2].status.name == "OK"
-        self.rows.append(row)
+        self.rows.append((*row, c(out[0][0], float), out[2].status))
         return out
 
     def _rec_prepare(self, *args, **kwargs):
@@ -358,12 +355,29 @@ class Recorder:
         self.prep_s.append(self.ctl.solver.last_prepare_s)
         return out
 
+    def arrays(self) -> dict:
+        """The recording as arrays, one row a step (see `replay`)."""
+        from trq_offboard.records import SolveStatus
+
+        o = self.ctl.solver.ocp
+        out = {k: [] for k in ("x0", "alpha_prev", "x_ref", "d", "v_lo", "v_hi", "guess_s",
+                               "guess_v", "u0", "ok")}
+        for x0, x_ref, d, u_prev, guess, lbw, ubw, u_plan, status in self.rows:
+            a_prev = np.array(u_prev, float)[0:4]
+            w = o.pack(guess[1], guess[0], a_prev)
+            for key, val in (("x0", x0), ("alpha_prev", a_prev), ("x_ref", x_ref), ("d", d),
+                             ("v_lo", lbw[o.v_index]), ("v_hi", ubw[o.v_index]),
+                             ("guess_s", w[o.s_index]), ("guess_v", w[o.v_index]),
+                             ("u0", u_plan),
+                             ("ok", status is SolveStatus.OK)):
+                out[key].append(np.array(val, float) if key != "ok" else val)
+        arrays = {k: np.array(v) for k, v in out.items()}
+        arrays["solver_prep_s"] = np.array(self.prep_s)
+        arrays["u_trim"] = np.asarray(self.ctl.u_trim, float)
+        return arrays
+
     def save(self, path: Path, **meta) -> None:
-        keys = ("x0", "alpha_prev", "x_ref", "d", "v_lo", "v_hi", "guess_s", "guess_v", "u0",
-                "ok")
-        arrays = {k: np.array([r[k] for r in self.rows]) for k in keys}
-        np.savez(path, **arrays, solver_prep_s=np.array(self.prep_s),
-                 u_trim=np.asarray(self.ctl.u_trim, float), meta=json.dumps(meta))
+        np.savez(path, **self.arrays(), meta=json.dumps(meta))
 
 
 # --- the replay ------------------------------------------------------------------------------------
@@ -373,6 +387,7 @@ def replay(recording: Path, hessian: str, controller: str = "trq_nmpc_eso",
     """acados' RTI through a recorded flight of ours: per-step times and first commands against
     ours (see the module's docstring)."""
     import trq_params
+
     from trq_offboard.config import load_controller
     from trq_offboard.model import PredictionModel
 
@@ -401,7 +416,7 @@ def replay(recording: Path, hessian: str, controller: str = "trq_nmpc_eso",
             st_f, wf, cf = rti.feedback(s0)
             tf = rti.solver.get_stats("time_feedback")
             qp_it = np.atleast_1d(rti.solver.get_stats("qp_iter"))
-            failures += int(st_p not in (0, 2) or st_f not in (0, 2))
+            failures += int(st_p not in (0, 5) or st_f != 0)     # 5: ACADOS_READY (prepared)
             s, v = rti.solution()
             if not (np.all(np.isfinite(s)) and np.all(np.isfinite(v))):
                 failures += 1
