@@ -29,13 +29,16 @@ model and the cost are the project's, term for term:
                iteration cap, QP cold-started; code generated with acados' default flags
 
 Replay (`replay`): a flight of ours (trq-bench-nmpc's transient) is recorded per step (x0, the
-applied tilt, the reference states, d, the input bounds, our first command and our guess) and
-acados is stepped through the same sequence: per step the reference, d and bounds are set, the
-preparation phase runs (timed), x0 is embedded and the feedback phase runs (timed). Warm start:
-acados' own previous solution shifted by one control period as the controller shifts its plan
-(states interpolated, inputs held; s_0's tilt = the command just sent), or (init="ours") the very
-guess our solver was handed, so that both linearise at the same point. acados' multipliers stay
-its own (exact Hessian). Times: wall (time.perf_counter) and CPU (time.thread_time) around each
+applied tilt, the reference states, d, the input bounds, our first command and the point our
+solver linearised at) and acados is stepped through the same sequence: per step the reference,
+d and bounds are set, the preparation phase runs (timed), x0 is embedded and the feedback phase
+runs (timed). Warm start: acados' own previous solution shifted by one control period as the
+controller shifts its plan (states interpolated, inputs held; s_0's tilt = the command just
+sent), or (init="ours") our solver's linearisation point (its preparation's guess; on the first
+step the solve's), so that both take their step from the same point. acados is handed the step's
+reference and d before its preparation; ours prepared with the previous ones and corrects them
+in its feedback (exactly for the reference, to first order for d). acados' multipliers stay its
+own (exact Hessian). Times: wall (time.perf_counter) and CPU (time.thread_time) around each
 acados call, and acados' own time_preparation / time_feedback.
 """
 
@@ -337,6 +340,7 @@ class Recorder:
         self.ctl = ctl
         self.rows: list[tuple] = []
         self.prep_s: list[float] = []
+        self._pending = None           # the guess of the last preparation (its linearisation)
         solver = ctl.solver
         self._solve, self._prepare = solver.solve, solver.prepare
         solver.solve = self._rec_solve
@@ -344,14 +348,18 @@ class Recorder:
 
     def _rec_solve(self, x0, x_ref, d, u_prev, guess, y0=None):
         o, c = self.ctl.solver.ocp, np.array
-        row = [c(x0, float), c(x_ref, float), c(d, float), c(u_prev, float),
-               (c(guess[0], float), c(guess[1], float)), o.lbw.copy(), o.ubw.copy()]
+        lin = self._pending or (c(guess[0], float), c(guess[1], float), c(u_prev, float))
+        self._pending = None
+        row = [c(x0, float), c(x_ref, float), c(d, float), c(u_prev, float), lin,
+               o.lbw.copy(), o.ubw.copy()]
         out = self._solve(x0, x_ref, d, u_prev, guess, y0=y0)
         self.rows.append((*row, c(out[0][0], float), out[2].status))
         return out
 
-    def _rec_prepare(self, *args, **kwargs):
-        out = self._prepare(*args, **kwargs)
+    def _rec_prepare(self, x_ref, d, u_prev, guess, y0=None):
+        c = np.array
+        self._pending = (c(guess[0], float), c(guess[1], float), c(u_prev, float))
+        out = self._prepare(x_ref, d, u_prev, guess, y0=y0)
         self.prep_s.append(self.ctl.solver.last_prepare_s)
         return out
 
@@ -362,9 +370,9 @@ class Recorder:
         o = self.ctl.solver.ocp
         out = {k: [] for k in ("x0", "alpha_prev", "x_ref", "d", "v_lo", "v_hi", "guess_s",
                                "guess_v", "u0", "ok")}
-        for x0, x_ref, d, u_prev, guess, lbw, ubw, u_plan, status in self.rows:
+        for x0, x_ref, d, u_prev, lin, lbw, ubw, u_plan, status in self.rows:
             a_prev = np.array(u_prev, float)[0:4]
-            w = o.pack(guess[1], guess[0], a_prev)
+            w = np.clip(o.pack(lin[1], lin[0], lin[2][0:4]), lbw, ubw)   # as rti.prepare
             for key, val in (("x0", x0), ("alpha_prev", a_prev), ("x_ref", x_ref), ("d", d),
                              ("v_lo", lbw[o.v_index]), ("v_hi", ubw[o.v_index]),
                              ("guess_s", w[o.s_index]), ("guess_v", w[o.v_index]),
