@@ -250,7 +250,8 @@ class AcadosRti:
         self.ocp, self.pb = build_ocp(cfg, model, u_trim, hessian)
         workdir = Path(workdir)
         workdir.mkdir(parents=True, exist_ok=True)
-        self.ocp.code_export_directory = str(workdir / "c_generated_code")
+        gen = getattr(self.ocp, "code_gen_options", self.ocp)   # acados >= 0.5.4: there
+        gen.code_export_directory = str(workdir / "c_generated_code")
         t0 = time.perf_counter()
         cwd = os.getcwd()
         os.chdir(workdir)              # acados writes its build files next to the json
@@ -391,9 +392,11 @@ class Recorder:
 # --- the replay ------------------------------------------------------------------------------------
 
 def replay(recording: Path, hessian: str, controller: str = "trq_nmpc_eso",
-           init: str = "shift", workdir: Path | None = None) -> dict:
+           init: str = "shift", workdir: Path | None = None,
+           split_s: float | None = None) -> dict:
     """acados' RTI through a recorded flight of ours: per-step times and first commands against
-    ours (see the module's docstring)."""
+    ours (see the module's docstring). `split_s`: the first commands also compared apart before
+    and after this time of the flight (step k at k control periods; the bench's fault)."""
     import trq_params
 
     from trq_offboard.config import load_controller
@@ -411,7 +414,7 @@ def replay(recording: Path, hessian: str, controller: str = "trq_nmpc_eso",
         K = rec["x0"].shape[0]
         rows = np.zeros((K, 8))    # prep wall, prep CPU, fb wall, fb CPU, acados prep, fb, qp it
         u0 = np.zeros((K, 8))
-        failures, prev = 0, None
+        failures, prev, statuses = 0, None, {}
         for k in range(K):
             if init == "ours" or prev is None:
                 rti.set_init(rec["guess_s"][k], rec["guess_v"][k])
@@ -424,7 +427,11 @@ def replay(recording: Path, hessian: str, controller: str = "trq_nmpc_eso",
             st_f, wf, cf = rti.feedback(s0)
             tf = rti.solver.get_stats("time_feedback")
             qp_it = np.atleast_1d(rti.solver.get_stats("qp_iter"))
-            failures += int(st_p not in (0, 5) or st_f != 0)     # 5: ACADOS_READY (prepared)
+            failed = st_p not in (0, 5) or st_f != 0        # 5: ACADOS_READY (prepared)
+            failures += int(failed)
+            if failed:
+                key = f"prep {st_p}, feedback {st_f}"
+                statuses[key] = statuses.get(key, 0) + 1
             s, v = rti.solution()
             if not (np.all(np.isfinite(s)) and np.all(np.isfinite(v))):
                 failures += 1
@@ -437,11 +444,24 @@ def replay(recording: Path, hessian: str, controller: str = "trq_nmpc_eso",
     ms = 1e3
     total = rows[:, 0] + rows[:, 2]
     total_cpu = rows[:, 1] + rows[:, 3]
-    du = np.abs(u0 - rec["u0"])
+    du_all = np.abs(u0 - rec["u0"])
     ok_ours = rec["ok"].astype(bool)
-    du = du[ok_ours] if ok_ours.any() else du
     med = lambda a: float(np.median(a) * ms)                   # noqa: E731
     p99 = lambda a: float(np.percentile(a, 99) * ms)           # noqa: E731
+    t_s = np.arange(K) * cfg.control_dt_s
+    parts = {"": np.ones(K, bool)}
+    if split_s is not None:
+        parts.update({"_before": t_s < split_s, "_after": t_s >= split_s})
+    close = {}
+    for tag, sel in parts.items():
+        du = du_all[sel & ok_ours]
+        if du.size:
+            close.update({
+                f"du_tilt_deg_median{tag}": float(np.degrees(np.median(du[:, 0:4]))),
+                f"du_tilt_deg_max{tag}": float(np.degrees(du[:, 0:4].max())),
+                f"du_throttle_pct_median{tag}": float(np.median(du[:, 4:8])),
+                f"du_throttle_pct_max{tag}": float(du[:, 4:8].max())})
+    first_fail = next((k for k in range(K) if rows[k, 7] != 0), None)
     return dict(
         name=f"acados-rti-{'exact' if hessian == 'exact' else 'gn'}", hessian=hessian,
         init=init, steps=int(K), failures=int(failures), build_s=build_s,
@@ -454,10 +474,8 @@ def replay(recording: Path, hessian: str, controller: str = "trq_nmpc_eso",
         internal_total_median_ms=med(rows[:, 4] + rows[:, 5]),
         qp_iterations_median=float(np.median(rows[:, 6])),
         qp_iterations_max=int(rows[:, 6].max()),
-        du_tilt_deg_median=float(np.degrees(np.median(du[:, 0:4]))),
-        du_tilt_deg_max=float(np.degrees(du[:, 0:4].max())),
-        du_throttle_pct_median=float(np.median(du[:, 4:8])),
-        du_throttle_pct_max=float(du[:, 4:8].max()),
+        **close, failure_statuses=statuses,
+        first_failure_s=(math.nan if first_fail is None else float(t_s[first_fail])),
         ours_solver_prep_median_ms=(med(rec["solver_prep_s"]) if rec["solver_prep_s"].size
                                     else math.nan),
         acados=_describe(Path(os.environ["ACADOS_SOURCE_DIR"])))
@@ -471,12 +489,15 @@ def main(argv=None) -> int:
     ap.add_argument("--hessian", choices=sorted(_HESSIAN), default="exact")
     ap.add_argument("--controller", default="trq_nmpc_eso")
     ap.add_argument("--init", choices=("shift", "ours"), default="shift")
+    ap.add_argument("--split-s", type=float, default=None,
+                    help="compare the first commands also before and after this time")
     args = ap.parse_args(argv)
     ok, why = available()
     if not ok:
         print(why, file=sys.stderr)
         return 2
-    print(json.dumps(replay(args.replay, args.hessian, args.controller, args.init)), flush=True)
+    print(json.dumps(replay(args.replay, args.hessian, args.controller, args.init,
+                            split_s=args.split_s)), flush=True)
     return 0
 
 

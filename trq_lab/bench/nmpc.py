@@ -215,7 +215,8 @@ def run_anchor(recording: Path, hessian: str, controller: str, init: str = "shif
 
     with tempfile.TemporaryDirectory(prefix="trq-bench-acados-") as work:
         cmd = [sys.executable, "-m", "trq_lab.bench.acados_anchor", "--replay", str(recording),
-               "--hessian", hessian, "--controller", controller, "--init", init]
+               "--hessian", hessian, "--controller", controller, "--init", init,
+               "--split-s", str(FAULT_T_S)]
         out = subprocess.run(cmd, env=acados_anchor.library_env(), cwd=work,
                              capture_output=True, text=True)
     if out.returncode != 0:
@@ -231,19 +232,27 @@ def anchor_table(results: list[dict], anchors: dict[str, dict],
     ours = {r["name"]: r for r in results}
     head = ("| acados (replaying) | prep p50 ms | feedback p50 ms | feedback p99 ms "
             "| prep+feedback p50 ms | prep+feedback p99 ms | CPU p50 ms | acados' own p50 ms "
-            "| QP it p50/max | failures | first command vs ours: tilt deg p50/max "
+            "| QP it p50/max | failures (first at s) | first command vs ours before the fault: "
+            "tilt deg p50/max | throttle % p50/max | after the fault: tilt deg p50/max "
             "| throttle % p50/max | build s |")
     lines = [head, "|" + "---|" * head.count(" | ") + "---|"]
+
+    def close(a, tag):
+        if f"du_tilt_deg_median{tag}" not in a:
+            return "- | -"
+        return (f"{a[f'du_tilt_deg_median{tag}']:.2g}/{a[f'du_tilt_deg_max{tag}']:.2g} "
+                f"| {a[f'du_throttle_pct_median{tag}']:.2g}/{a[f'du_throttle_pct_max{tag}']:.2g}")
+
     for mode, a in anchors.items():
+        first = a.get("first_failure_s", math.nan)
         lines.append(
             f"| {a['name']} ({mode}'s flight) | {a['prep_median_ms']:.3f} "
             f"| {a['feedback_median_ms']:.3f} | {a['feedback_p99_ms']:.3f} "
             f"| {a['total_median_ms']:.3f} | {a['total_p99_ms']:.3f} "
             f"| {a['total_cpu_median_ms']:.3f} | {a['internal_total_median_ms']:.3f} "
-            f"| {a['qp_iterations_median']:.0f}/{a['qp_iterations_max']} | {a['failures']} "
-            f"| {a['du_tilt_deg_median']:.2g}/{a['du_tilt_deg_max']:.2g} "
-            f"| {a['du_throttle_pct_median']:.2g}/{a['du_throttle_pct_max']:.2g} "
-            f"| {a['build_s']:.1f} |")
+            f"| {a['qp_iterations_median']:.0f}/{a['qp_iterations_max']} "
+            f"| {a['failures']}{'' if math.isnan(first) else f' ({first:.2f})'} "
+            f"| {close(a, '_before')} | {close(a, '_after')} | {a['build_s']:.1f} |")
     lines.append("")
     head = ("| ours / acados | prep p50 | feedback p50 | prep+feedback p50 (target <= 1.0) "
             "| prep+feedback p99 (target <= 1.2) | ctl period CPU p50 / acados' step p50 "
