@@ -162,6 +162,7 @@ def test_the_acados_ocp_is_ours(setup):
     assert ocp.solver_options.nlp_solver_type == "SQP_RTI"
     assert ocp.solver_options.qp_solver_cond_N == cfg.horizon_steps
     np.testing.assert_array_equal(ocp.cost.W, pb.W)
+    np.testing.assert_array_equal(ocp.solver_options.cost_scaling, np.ones(cfg.horizon_steps + 1))
     f = ca.Function("f", [m.x, m.u, m.p], [m.disc_dyn_expr])
     rng = np.random.default_rng(2)
     for _ in range(3):

@@ -16,7 +16,8 @@ model and the cost are the project's, term for term:
                as its CasADi expression (integrator DISCRETE, `disc_dyn_expr`)
     cost       linear least squares on y = [x, a + h w, c, w], W = 2 diag(Q, R, w_rate) and
                yref = [x_ref_k, u_trim (scaled), 0]: acados' 1/2 |y - yref|_W^2 is the stage cost
-               of ocp.py; terminal y_e = x, W_e = 2 c_N Q
+               of ocp.py; terminal y_e = x, W_e = 2 c_N Q; cost_scaling 1 on every stage
+               (acados' default scales the stage costs by h, the terminal by 1)
     bounds     s_0 = [x0, alpha_prev]; roll, pitch, body rates and tilts on s_k (k >= 1, N);
                tilt rates and throttles on v_k, per step as our solver had them (the first tilt
                rate within rate * control period / h; the throttles within the motors'
@@ -236,6 +237,9 @@ def build_ocp(cfg, model, u_trim, hessian: str = "exact", name: str | None = Non
     o.qp_solver_iter_max = int(cfg.solver.qp_max_iterations)
     o.qp_solver_warm_start = 0
     o.levenberg_marquardt = float(pb.regularization)
+    # acados scales the stage costs by the interval length by default ([h, ..., h, 1]): ours
+    # are summed unscaled beside the terminal cost
+    o.cost_scaling = np.ones(pb.n_steps + 1)
     o.print_level = 0
     return ocp, pb
 
