@@ -121,6 +121,7 @@ def test_recorder_keeps_the_solves_and_the_linearisation_points(setup):
     np.testing.assert_allclose(a["d"][:, 0], [0, 1, 2])
     np.testing.assert_allclose(a["u0"][0], u_trim + 1.0)
     assert a["ok"].all() and a["solver_prep_s"].tolist() == [0.25] * 3
+    assert a["solve_s"].tolist() == [1e-3] * 3
     # step 0 linearised at its solve's guess; step 1 at the preceding preparation's guess
     w0 = np.clip(ocp.pack(guesses[0][0][1], guesses[0][0][0], u_trim[0:4]), ocp.lbw, ocp.ubw)
     np.testing.assert_allclose(a["guess_v"][0], w0[ocp.v_index])

@@ -358,7 +358,7 @@ class Recorder:
         row = [c(x0, float), c(x_ref, float), c(d, float), c(u_prev, float), lin,
                o.lbw.copy(), o.ubw.copy()]
         out = self._solve(x0, x_ref, d, u_prev, guess, y0=y0)
-        self.rows.append((*row, c(out[0][0], float), out[2].status))
+        self.rows.append((*row, c(out[0][0], float), out[2].status, out[2].solve_time_s))
         return out
 
     def _rec_prepare(self, x_ref, d, u_prev, guess, y0=None):
@@ -375,7 +375,7 @@ class Recorder:
         o = self.ctl.solver.ocp
         out = {k: [] for k in ("x0", "alpha_prev", "x_ref", "d", "v_lo", "v_hi", "guess_s",
                                "guess_v", "u0", "ok")}
-        for x0, x_ref, d, u_prev, lin, lbw, ubw, u_plan, status in self.rows:
+        for x0, x_ref, d, u_prev, lin, lbw, ubw, u_plan, status, _ in self.rows:
             a_prev = np.array(u_prev, float)[0:4]
             w = np.clip(o.pack(lin[1], lin[0], lin[2][0:4]), lbw, ubw)   # as rti.prepare
             for key, val in (("x0", x0), ("alpha_prev", a_prev), ("x_ref", x_ref), ("d", d),
@@ -386,6 +386,7 @@ class Recorder:
                 out[key].append(np.array(val, float) if key != "ok" else val)
         arrays = {k: np.array(v) for k, v in out.items()}
         arrays["solver_prep_s"] = np.array(self.prep_s)
+        arrays["solve_s"] = np.array([r[-1] for r in self.rows])
         arrays["u_trim"] = np.asarray(self.ctl.u_trim, float)
         return arrays
 
@@ -480,9 +481,21 @@ def replay(recording: Path, hessian: str, controller: str = "trq_nmpc_eso",
         qp_iterations_max=int(rows[:, 6].max()),
         **close, failure_statuses=statuses,
         first_failure_s=(math.nan if first_fail is None else float(t_s[first_fail])),
-        ours_solver_prep_median_ms=(med(rec["solver_prep_s"]) if rec["solver_prep_s"].size
-                                    else math.nan),
+        **_ours_solver_step(rec, med, p99),
         acados=_describe(Path(os.environ["ACADOS_SOURCE_DIR"])))
+
+
+def _ours_solver_step(rec, med, p99) -> dict:
+    """Our solver's own step from the recording: the feedback (SolveInfo.solve_time_s) of step
+    k plus the solver's preparation that preceded it (RtiSolver.last_prepare_s; none before the
+    first step, whose solve prepared itself), without the controller's work around them."""
+    solve, prep = rec["solve_s"], rec["solver_prep_s"]
+    if not solve.size:
+        return {}
+    before = np.concatenate([[0.0], prep[:solve.size - 1]])
+    total = solve + before
+    return dict(ours_solver_prep_median_ms=med(prep), ours_solver_total_median_ms=med(total),
+                ours_solver_total_p99_ms=p99(total))
 
 
 def main(argv=None) -> int:

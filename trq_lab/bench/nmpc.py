@@ -228,7 +228,9 @@ def anchor_table(results: list[dict], anchors: dict[str, dict],
                  daemons: dict | None = None) -> str:
     """acados' figures beside ours, and the ratios ours / acados' (issue 18's targets: the
     solver's preparation + feedback at most 1.0x acados' RTI step on the median and 1.2x on the
-    p99; the controller's whole CPU per period at most 1.5x)."""
+    p99; the controller's whole CPU per period at most 1.5x). prep, prep+feedback: the bench's
+    (Controller.prepare, with the controller's guess and reference); "solver's own": the
+    solver's feedback plus its own preparation, per step, from the recorded flight."""
     ours = {r["name"]: r for r in results}
     head = ("| acados (replaying) | prep p50 ms | feedback p50 ms | feedback p99 ms "
             "| prep+feedback p50 ms | prep+feedback p99 ms | CPU p50 ms | acados' own p50 ms "
@@ -255,19 +257,23 @@ def anchor_table(results: list[dict], anchors: dict[str, dict],
             f"| {close(a, '_before')} | {close(a, '_after')} | {a['build_s']:.1f} |")
     lines.append("")
     head = ("| ours / acados | prep p50 | feedback p50 | prep+feedback p50 (target <= 1.0) "
-            "| prep+feedback p99 (target <= 1.2) | ctl period CPU p50 / acados' step p50 "
-            "(target <= 1.5) |")
+            "| prep+feedback p99 (target <= 1.2) | solver's own p50 | solver's own p99 "
+            "| ctl period CPU p50 / acados' step p50 (target <= 1.5) |")
     lines += [head, "|" + "---|" * head.count(" | ") + "---|"]
     for mode, a in anchors.items():     # the exact one (issue 18's anchor) against every mode
         names = [mode] + ([n for n in ours if n != mode] if a["hessian"] == "exact" else [])
         for name in names:
             r = ours[name]
+            own = anchors.get(name, {})          # our solver's own step, from its recording
             label = f"{name} / {a['name']}" + ("" if name == mode else " (another flight)")
+            solver = (f"{own['ours_solver_total_median_ms'] / a['total_median_ms']:.2f} "
+                      f"| {own['ours_solver_total_p99_ms'] / a['total_p99_ms']:.2f}"
+                      if "ours_solver_total_median_ms" in own else "- | -")
             lines.append(
                 f"| {label} | {r['prep_median_ms'] / a['prep_median_ms']:.2f} "
                 f"| {r['median_ms'] / a['feedback_median_ms']:.2f} "
                 f"| {r['total_median_ms'] / a['total_median_ms']:.2f} "
-                f"| {r['total_p99_ms'] / a['total_p99_ms']:.2f} "
+                f"| {r['total_p99_ms'] / a['total_p99_ms']:.2f} | {solver} "
                 f"| {r['period_cpu_median_ms'] / a['total_median_ms']:.2f} |")
     if daemons is not None:
         for mode, a in anchors.items():
