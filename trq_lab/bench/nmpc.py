@@ -5,6 +5,7 @@
     trq-bench-nmpc --modes rti-gn,ipopt --json out/bench_nmpc.json
     trq-bench-nmpc --quick --repeat 3   # median of 3 interleaved runs
     trq-bench-nmpc --modes rti-gn --daemons    # and the whole period over both daemons
+    trq-bench-nmpc --quick --modes rti-gn,rti-exact --anchor acados   # acados' RTI beside ours
 
 The flight is trq_lab.harness's (`fly_inprocess`, the loop the campaigns and tests fly): the
 vehicle's `Sitl` and the controller's `OffboardFlight` in one process, joined by an in-memory link
@@ -28,6 +29,11 @@ harness's StepSample.period_wall_s). Wall times from time.perf_counter, CPU time
 time.thread_time (the harness's PerfTimer). Tracking errors: the vehicle's truth position at each
 step's stamp against the reference there. The machine is shared: compare medians and the ratios
 to the fastest mode.
+
+--anchor acados (trq_lab/bench/acados_anchor.py): the flights of rti-gn and rti-exact are
+recorded (what the solver was handed per step) and acados' real-time iteration on the same OCP,
+Gauss-Newton and exact Hessian, replays each right after it in its own process; its preparation
+and feedback times are printed beside ours with the ratios ours / acados'.
 """
 
 from __future__ import annotations
