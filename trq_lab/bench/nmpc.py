@@ -5,6 +5,7 @@
     trq-bench-nmpc --modes rti-gn,ipopt --json out/bench_nmpc.json
     trq-bench-nmpc --quick --repeat 3   # median of 3 interleaved runs
     trq-bench-nmpc --modes rti-gn --daemons    # and the whole period over both daemons
+    trq-bench-nmpc --quick --modes rti-gn,rti-exact --anchor acados   # acados' RTI beside ours
 
 The flight is trq_lab.harness's (`fly_inprocess`, the loop the campaigns and tests fly): the
 vehicle's `Sitl` and the controller's `OffboardFlight` in one process, joined by an in-memory link
@@ -28,6 +29,11 @@ harness's StepSample.period_wall_s). Wall times from time.perf_counter, CPU time
 time.thread_time (the harness's PerfTimer). Tracking errors: the vehicle's truth position at each
 step's stamp against the reference there. The machine is shared: compare medians and the ratios
 to the fastest mode.
+
+--anchor acados (trq_lab/bench/acados_anchor.py): the flights of rti-gn and rti-exact are
+recorded (what the solver was handed per step) and acados' real-time iteration on the same OCP,
+Gauss-Newton and exact Hessian, replays each right after it in its own process; its preparation
+and feedback times are printed beside ours with the ratios ours / acados'.
 """
 
 from __future__ import annotations
@@ -71,8 +77,10 @@ DEFAULT_MODES = "rti-gn,rti-gn-conic,rti-exact,rti-gn-py,sqp-gn,ipopt"
 FAULT_T_S, EFFECTIVENESS, WIND_M_S = 12.0, 0.5, 8.0
 
 
-def fly(mode: str, seconds: float | None, controller: str = "trq_nmpc_eso") -> dict:
-    """Child process: build twice (cold, cached), fly on the harness, return the figures."""
+def fly(mode: str, seconds: float | None, controller: str = "trq_nmpc_eso",
+        record: Path | None = None) -> dict:
+    """Child process: build twice (cold, cached), fly on the harness, return the figures.
+    `record`: also save what the solver was handed per step (acados_anchor.Recorder) there."""
     from sil_vehicle.config import load_sim
     from trq_lab import harness
     from trq_offboard.config import load_controller
@@ -96,6 +104,10 @@ def fly(mode: str, seconds: float | None, controller: str = "trq_nmpc_eso") -> d
         _rebuild_qp(ctl.solver, qp_args)
     build_cached = timer.wall_s() - t0
     compiled_cached = cache.COUNTS["compiled"] - compiled_cold
+    recorder = None
+    if record is not None:
+        from trq_lab.bench.acados_anchor import Recorder
+        recorder = Recorder(ctl)
 
     seed = load_sim(harness.SIM_DEFAULT, cfg.vehicle.file).seed
     sim = harness.sim_params(cfg.vehicle.file, cfg.control_rate_hz, seed=seed,
@@ -109,6 +121,8 @@ def fly(mode: str, seconds: float | None, controller: str = "trq_nmpc_eso") -> d
         on_step=lambda sample: qp_iterations.append(getattr(ctl.solver, "qp_iterations", 0)))
     if res.status.startswith("failed"):
         raise RuntimeError(f"{mode}: {res.summary}")
+    if recorder is not None:
+        recorder.save(record, mode=mode, controller=controller, seconds=seconds)
     steps = res.trace.steps
     rows = np.array([(s.info.solve.solve_time_s, s.step_cpu_s, s.prepare_wall_s, s.prepare_cpu_s,
                       s.info.solve.iterations, q, s.period_wall_s, s.period_cpu_s)
@@ -184,17 +198,95 @@ def _qp_line(solver) -> str:
     return f"hpipm direct {solver.hpipm_mode}{opts}, {shim}{pc}"
 
 
-def run_mode(mode: str, seconds: float | None, controller: str = "trq_nmpc_eso") -> dict:
+def run_mode(mode: str, seconds: float | None, controller: str = "trq_nmpc_eso",
+             record: Path | None = None) -> dict:
     with tempfile.TemporaryDirectory(prefix="trq-bench-cache-") as cache_dir:
         env = dict(os.environ, TRQ_CACHE_DIR=cache_dir)
         cmd = [sys.executable, "-m", "trq_lab.bench.nmpc", "--child", mode,
                "--controller", controller]
         if seconds is not None:
             cmd += ["--seconds", str(seconds)]
+        if record is not None:
+            cmd += ["--record", str(record)]
         out = subprocess.run(cmd, env=env, capture_output=True, text=True)
     if out.returncode != 0:
         raise RuntimeError(f"mode {mode} failed:\n{out.stderr[-2000:]}")
     return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def run_anchor(recording: Path, hessian: str, controller: str, init: str = "shift") -> dict:
+    """acados' RTI replaying a recorded flight, in its own subprocess (acados' libhpipm and
+    CasADi's share a soname: they cannot be loaded in one process)."""
+    from trq_lab.bench import acados_anchor
+
+    with tempfile.TemporaryDirectory(prefix="trq-bench-acados-") as work:
+        cmd = [sys.executable, "-m", "trq_lab.bench.acados_anchor", "--replay", str(recording),
+               "--hessian", hessian, "--controller", controller, "--init", init,
+               "--split-s", str(FAULT_T_S)]
+        out = subprocess.run(cmd, env=acados_anchor.library_env(), cwd=work,
+                             capture_output=True, text=True)
+    if out.returncode != 0:
+        raise RuntimeError(f"acados anchor ({hessian}) failed:\n{out.stderr[-2000:]}")
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def anchor_table(results: list[dict], anchors: dict[str, dict],
+                 daemons: dict | None = None) -> str:
+    """acados' figures beside ours, and the ratios ours / acados' (issue 18's targets: the
+    solver's preparation + feedback at most 1.0x acados' RTI step on the median and 1.2x on the
+    p99; the controller's whole CPU per period at most 1.5x). prep, prep+feedback: the bench's
+    (Controller.prepare, with the controller's guess and reference); "solver's own": the
+    solver's feedback plus its own preparation, per step, from the recorded flight."""
+    ours = {r["name"]: r for r in results}
+    head = ("| acados (replaying) | prep p50 ms | feedback p50 ms | feedback p99 ms "
+            "| prep+feedback p50 ms | prep+feedback p99 ms | CPU p50 ms | acados' own p50 ms "
+            "| QP it p50/max | failures (first at s) | first command vs ours before the fault: "
+            "tilt deg p50/max | throttle % p50/max | after the fault: tilt deg p50/max "
+            "| throttle % p50/max | build s |")
+    lines = [head, "|" + "---|" * head.count(" | ") + "---|"]
+
+    def close(a, tag):
+        if f"du_tilt_deg_median{tag}" not in a:
+            return "- | -"
+        return (f"{a[f'du_tilt_deg_median{tag}']:.2g}/{a[f'du_tilt_deg_max{tag}']:.2g} "
+                f"| {a[f'du_throttle_pct_median{tag}']:.2g}/{a[f'du_throttle_pct_max{tag}']:.2g}")
+
+    for mode, a in anchors.items():
+        first = a.get("first_failure_s", math.nan)
+        lines.append(
+            f"| {a['name']} ({mode}'s flight) | {a['prep_median_ms']:.3f} "
+            f"| {a['feedback_median_ms']:.3f} | {a['feedback_p99_ms']:.3f} "
+            f"| {a['total_median_ms']:.3f} | {a['total_p99_ms']:.3f} "
+            f"| {a['total_cpu_median_ms']:.3f} | {a['internal_total_median_ms']:.3f} "
+            f"| {a['qp_iterations_median']:.0f}/{a['qp_iterations_max']} "
+            f"| {a['failures']}{'' if math.isnan(first) else f' ({first:.2f})'} "
+            f"| {close(a, '_before')} | {close(a, '_after')} | {a['build_s']:.1f} |")
+    lines.append("")
+    head = ("| ours / acados | prep p50 | feedback p50 | prep+feedback p50 (target <= 1.0) "
+            "| prep+feedback p99 (target <= 1.2) | solver's own p50 | solver's own p99 "
+            "| ctl period CPU p50 / acados' step p50 (target <= 1.5) |")
+    lines += [head, "|" + "---|" * head.count(" | ") + "---|"]
+    for mode, a in anchors.items():     # the exact one (issue 18's anchor) against every mode
+        names = [mode] + ([n for n in ours if n != mode] if a["hessian"] == "exact" else [])
+        for name in names:
+            r = ours[name]
+            own = anchors.get(name, {})          # our solver's own step, from its recording
+            label = f"{name} / {a['name']}" + ("" if name == mode else " (another flight)")
+            solver = (f"{own['ours_solver_total_median_ms'] / a['total_median_ms']:.2f} "
+                      f"| {own['ours_solver_total_p99_ms'] / a['total_p99_ms']:.2f}"
+                      if "ours_solver_total_median_ms" in own else "- | -")
+            lines.append(
+                f"| {label} | {r['prep_median_ms'] / a['prep_median_ms']:.2f} "
+                f"| {r['median_ms'] / a['feedback_median_ms']:.2f} "
+                f"| {r['total_median_ms'] / a['total_median_ms']:.2f} "
+                f"| {r['total_p99_ms'] / a['total_p99_ms']:.2f} | {solver} "
+                f"| {r['period_cpu_median_ms'] / a['total_median_ms']:.2f} |")
+    if daemons is not None:
+        for mode, a in anchors.items():
+            lines.append(f"\nthe controller daemon's CPU per period from outside / "
+                         f"{a['name']}'s step p50: "
+                         f"{daemons['controller_cpu_ms'] / a['total_median_ms']:.2f}")
+    return "\n".join(lines)
 
 
 def combine(runs: list[dict]) -> dict:
@@ -207,7 +299,7 @@ def combine(runs: list[dict]) -> dict:
         vals = [r[key] for r in runs]
         out[key] = max(vals) if key in ("failures", "qp_iterations_max", "iterations_max") \
             else float(np.median(vals))
-    out["crashed"] = any(r["crashed"] for r in runs)
+    out["crashed"] = any(r.get("crashed", False) for r in runs)
     out["runs"] = len(runs)
     return out
 
@@ -303,23 +395,47 @@ def main(argv=None) -> int:
                          "control period measured from outside, its parts from its log, the "
                          "vehicle's CPU per period and the closed loop's real-time factor "
                          "(trq_lab/bench/period.py)")
+    ap.add_argument("--anchor", choices=("acados",), default=None,
+                    help="also step acados' real-time iteration (the same OCP, built from our "
+                         "model, weights and bounds) through the flights of rti-gn (Gauss-Newton) "
+                         "and rti-exact (exact Hessian) that this run flies, each replay right "
+                         "after its flight, and print its preparation and feedback times beside "
+                         "ours with the ratios (needs acados: trq_lab/bench/acados_anchor.py)")
+    ap.add_argument("--anchor-init", choices=("shift", "ours"), default="shift",
+                    help="acados' warm start: its own previous solution shifted by one control "
+                         "period (shift, default) or the guess our solver was handed (ours)")
     ap.add_argument("--child", default=None, help=argparse.SUPPRESS)
+    ap.add_argument("--record", type=Path, default=None, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if not (trq_params.resolve("controller", args.controller)).is_file():
         ap.error(f"--controller {args.controller}: no params/controller/{args.controller}.yaml")
     seconds = args.seconds if args.seconds is not None else (16.0 if args.quick else None)
     if args.child:
-        print(json.dumps(fly(args.child, seconds, args.controller)), flush=True)
+        print(json.dumps(fly(args.child, seconds, args.controller, args.record)), flush=True)
         return 0
     modes = [m.strip() for m in args.modes.split(",") if m.strip()]
     unknown = [m for m in modes if m not in MODES]
     if unknown:
         ap.error(f"unknown mode(s) {unknown}; known: {', '.join(MODES)}")
+    anchored: dict[str, str] = {}
+    if args.anchor == "acados":
+        from trq_lab.bench import acados_anchor
+        ok, why = acados_anchor.available()
+        if not ok:
+            ap.error(f"--anchor acados: {why}")
+        anchored = {m: acados_anchor.ANCHORED_MODES[m] for m in modes
+                    if m in acados_anchor.ANCHORED_MODES}
+        if not anchored:
+            ap.error("--anchor acados replays the flights of "
+                     f"{' and '.join(acados_anchor.ANCHORED_MODES)}: add one to --modes")
     print(machine_line(), flush=True)
     print(f"controller: params/controller/{args.controller}.yaml", flush=True)
+    if anchored:
+        print(f"anchor: {why}; warm start {args.anchor_init}", flush=True)
     if args.repeat < 1:
         ap.error(f"--repeat {args.repeat}: expected at least 1")
     runs: dict[str, list[dict]] = {m: [] for m in modes}
+    anchor_runs: dict[str, list[dict]] = {m: [] for m in anchored}
     daemon_runs: list[dict] = []
     for k in range(args.repeat):
         if args.daemons:      # interleaved with the modes, as they are with each other
@@ -331,7 +447,19 @@ def main(argv=None) -> int:
                   f"{d['vehicle_cpu_ms']:.2f} ms, lockstep {d['realtime_factor']:.2f}x real "
                   "time", flush=True)
         for m in modes:       # one after the other: the modes do not share the cores
-            r = run_mode(m, seconds, args.controller)
+            if m in anchored:     # the flight recorded, acados replays it right after
+                with tempfile.TemporaryDirectory(prefix="trq-bench-rec-") as rec_dir:
+                    rec = Path(rec_dir) / "flight.npz"
+                    r = run_mode(m, seconds, args.controller, record=rec)
+                    a = run_anchor(rec, anchored[m], args.controller, args.anchor_init)
+                anchor_runs[m].append(a)
+                print(f"  {a['name']} on {m}'s flight{f' (run {k + 1})' if args.repeat > 1 else ''}"
+                      f": {a['steps']} steps, failures {a['failures']}, prep/feedback p50 "
+                      f"{a['prep_median_ms']:.3f}/{a['feedback_median_ms']:.3f} ms, "
+                      f"prep+feedback p50/p99 {a['total_median_ms']:.3f}/"
+                      f"{a['total_p99_ms']:.3f} ms", flush=True)
+            else:
+                r = run_mode(m, seconds, args.controller)
             runs[m].append(r)
             print(f"  {m}{f' (run {k + 1})' if args.repeat > 1 else ''}: {r['steps']} steps, "
                   f"crashed {r['crashed']}, build {r['build_mode']}, compilations cold/cached "
@@ -356,12 +484,19 @@ def main(argv=None) -> int:
         print(f"controller CPU per period / the solver's own step (feedback wall + preparation "
               f"CPU, same flights): {daemons['ratio_to_solver']:.2f}; closed loop "
               f"{daemons['realtime_factor']:.2f}x real time")
+    anchors = {m: combine(anchor_runs[m]) for m in anchored}
+    if anchors:
+        print(f"\nacados' real-time iteration on the same OCP, replaying our flights (median of "
+              f"{args.repeat} run(s); times around acados' calls, wall unless said):")
+        print(anchor_table(results, anchors, daemons))
     print(f"calibration at the end {calibration_ms():.2f} ms")
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps({"machine": machine_line(), "modes": results,
-                                         "daemons": daemons, "daemon_runs": daemon_runs},
-                                        indent=1))
+        out = {"machine": machine_line(), "modes": results, "daemons": daemons,
+               "daemon_runs": daemon_runs}
+        if anchors:
+            out["anchor"] = {"modes": anchors, "runs": anchor_runs}
+        args.json.write_text(json.dumps(out, indent=1))
     return 0
 
 

@@ -1,0 +1,175 @@
+"""trq_lab.bench.acados_anchor: a clear word when acados is missing (CI has none), the recording
+of a flight's solver calls, the controller-like shift of a solution, and (only where acados_template
+is importable) that the OCP handed to acados is ours: dimensions, cost, dynamics and bounds."""
+
+from __future__ import annotations
+
+import sys
+import types
+
+import numpy as np
+import pytest
+import trq_params
+
+from trq_lab.bench import acados_anchor as aa
+from trq_lab.bench import nmpc as bench
+from trq_offboard.allocation import Allocator
+from trq_offboard.config import load_controller
+from trq_offboard.model import PredictionModel
+from trq_offboard.records import SolveInfo, SolveStatus
+
+
+@pytest.fixture(scope="module")
+def setup():
+    cfg = load_controller(trq_params.resolve("controller", "trq_nmpc_eso"))
+    model = PredictionModel(cfg.vehicle)
+    al = Allocator(cfg.vehicle)
+    return cfg, model, al.command_vector(al.hover())
+
+
+def test_not_installed_is_said_not_raised(monkeypatch):
+    monkeypatch.setitem(sys.modules, "acados_template", None)     # import raises ImportError
+    ok, why = aa.available()
+    assert not ok
+    assert "acados not installed" in why and "acados_template" in why
+
+
+def test_acados_source_dir_is_required(monkeypatch):
+    monkeypatch.setitem(sys.modules, "acados_template", types.ModuleType("acados_template"))
+    monkeypatch.delenv("ACADOS_SOURCE_DIR", raising=False)
+    ok, why = aa.available()
+    assert not ok and "ACADOS_SOURCE_DIR" in why
+
+
+def test_missing_libraries_and_renderer_are_named(monkeypatch, tmp_path):
+    monkeypatch.setitem(sys.modules, "acados_template", types.ModuleType("acados_template"))
+    monkeypatch.setenv("ACADOS_SOURCE_DIR", str(tmp_path))
+    monkeypatch.delenv("TERA_PATH", raising=False)
+    ok, why = aa.available()
+    assert not ok and "libacados.so" in why
+    (tmp_path / "lib").mkdir()
+    for name in ("libacados.so", "libhpipm.so", "libblasfeo.so"):
+        (tmp_path / "lib" / name).write_bytes(b"")
+    ok, why = aa.available()
+    assert not ok and "t_renderer" in why
+
+
+def test_bench_refuses_the_anchor_cleanly(monkeypatch, capsys):
+    monkeypatch.setitem(sys.modules, "acados_template", None)
+    with pytest.raises(SystemExit) as exc:
+        bench.main(["--quick", "--modes", "rti-gn", "--anchor", "acados"])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert "--anchor acados" in err and "acados not installed" in err
+
+
+def test_library_env_puts_acados_lib_first_once(tmp_path):
+    env = aa.library_env({"ACADOS_SOURCE_DIR": str(tmp_path), "LD_LIBRARY_PATH": "/x"})
+    assert env["LD_LIBRARY_PATH"] == f"{tmp_path / 'lib'}:/x"
+    assert aa.library_env(env)["LD_LIBRARY_PATH"] == env["LD_LIBRARY_PATH"]
+    assert "LD_LIBRARY_PATH" not in aa.library_env({})
+
+
+def test_shift_is_the_controllers_shift():
+    """States interpolated at dt + k h, inputs held (the one in force), s_0's tilt replaced."""
+    N, h, dt = 4, 0.05, 0.01
+    s = np.arange(N + 1, dtype=float)[:, None] * np.ones((1, 16))
+    v = np.arange(N, dtype=float)[:, None] * np.ones((1, 8))
+    s2, v2 = aa._shift(s, v, h, dt, np.full(4, -1.0))
+    np.testing.assert_allclose(s2[:, 0], [0.2, 1.2, 2.2, 3.2, 4.0])   # the end clamped
+    np.testing.assert_allclose(s2[0, 12:16], -1.0)
+    np.testing.assert_allclose(s2[1:, 12], [1.2, 2.2, 3.2, 4.0])
+    np.testing.assert_allclose(v2[:, 0], [0, 1, 2, 3])
+
+
+class _FakeSolver:
+    def __init__(self, ocp):
+        self.ocp = ocp
+        self.last_prepare_s = 0.25
+        self.prepared = []
+
+    def solve(self, x0, x_ref, d, u_prev, guess, y0=None):
+        u, x = guess
+        return u + 1.0, x, SolveInfo(SolveStatus.OK, 1, 1e-3, 0.0, "rti")
+
+    def prepare(self, x_ref, d, u_prev, guess, y0=None):
+        self.prepared.append(guess)
+
+
+def test_recorder_keeps_the_solves_and_the_linearisation_points(setup):
+    from trq_offboard.nmpc.ocp import Ocp
+
+    cfg, model, u_trim = setup
+    ocp = Ocp.build(cfg, model)
+    ctl = types.SimpleNamespace(solver=_FakeSolver(ocp), u_trim=u_trim)
+    rec = aa.Recorder(ctl)
+    N = cfg.horizon_steps
+    rng = np.random.default_rng(3)
+    u_prev = u_trim.copy()
+    guesses = []
+    for k in range(3):
+        x0 = rng.normal(size=12) * 0.1
+        guess = (np.tile(u_trim, (N, 1)) + 0.01 * k, np.tile(x0, (N + 1, 1)))
+        u, _, _ = ctl.solver.solve(x0, np.zeros((N + 1, 12)), np.full(6, k), u_prev, guess)
+        prep_guess = (guess[0] + 0.5, guess[1])
+        ctl.solver.prepare(np.zeros((N + 1, 12)), np.zeros(6), u[0], prep_guess)
+        guesses.append((guess, prep_guess))
+        u_prev = u[0]
+    a = rec.arrays()
+    assert a["x0"].shape == (3, 12) and a["x_ref"].shape == (3, N + 1, 12)
+    assert a["v_lo"].shape == (3, N, 8) and a["guess_s"].shape == (3, N + 1, 16)
+    np.testing.assert_allclose(a["d"][:, 0], [0, 1, 2])
+    np.testing.assert_allclose(a["u0"][0], u_trim + 1.0)
+    assert a["ok"].all() and a["solver_prep_s"].tolist() == [0.25] * 3
+    assert a["solve_s"].tolist() == [1e-3] * 3
+    # step 0 linearised at its solve's guess; step 1 at the preceding preparation's guess
+    w0 = np.clip(ocp.pack(guesses[0][0][1], guesses[0][0][0], u_trim[0:4]), ocp.lbw, ocp.ubw)
+    np.testing.assert_allclose(a["guess_v"][0], w0[ocp.v_index])
+    w1 = np.clip(ocp.pack(guesses[0][1][1], guesses[0][1][0], (u_trim + 1.0)[0:4]),
+                 ocp.lbw, ocp.ubw)
+    np.testing.assert_allclose(a["guess_v"][1], w1[ocp.v_index])
+
+
+def test_the_problem_is_ours(setup):
+    """The least-squares form of the cost is the stage cost of nmpc/ocp.py (no acados needed)."""
+    cfg, model, u_trim = setup
+    pb = aa.problem(cfg, model, u_trim)
+    assert (pb.ns, pb.nv, pb.n_steps, pb.nx) == (16, 8, cfg.horizon_steps, 12)
+    rng = np.random.default_rng(1)
+    for _ in range(5):
+        s, v, xr = rng.normal(size=16), rng.normal(size=8), rng.normal(size=12)
+        y = pb.Vx @ s + pb.Vu @ v - pb.yref(xr)
+        assert 0.5 * y @ pb.W @ y == pytest.approx(
+            float(pb.stage.cost(s, v, xr, pb.u_trim_scaled)), rel=1e-12)
+        e = pb.Vx_e @ s - xr
+        assert 0.5 * e @ pb.W_e @ e == pytest.approx(float(pb.stage.terminal_cost(s, xr)),
+                                                     rel=1e-12)
+    assert pb.idxbx.tolist() == [6, 7, 9, 10, 11, 12, 13, 14, 15]
+    assert pb.ubv0[0] == pytest.approx(pb.ubv[0] * cfg.control_dt_s / cfg.step_s)
+
+
+def test_the_acados_ocp_is_ours(setup):
+    """With acados_template importable: the AcadosOcp's dimensions, cost, dynamics and options
+    are the project's (nothing generated or compiled)."""
+    pytest.importorskip("acados_template")
+    import casadi as ca
+
+    cfg, model, u_trim = setup
+    ocp, pb = aa.build_ocp(cfg, model, u_trim, "exact")
+    m = ocp.model
+    assert (m.x.shape[0], m.u.shape[0], m.p.shape[0]) == (16, 8, 6)
+    assert ocp.solver_options.N_horizon == cfg.horizon_steps
+    assert ocp.solver_options.hessian_approx == "EXACT"
+    assert ocp.solver_options.nlp_solver_type == "SQP_RTI"
+    assert ocp.solver_options.qp_solver_cond_N == cfg.horizon_steps
+    np.testing.assert_array_equal(ocp.cost.W, pb.W)
+    np.testing.assert_array_equal(ocp.solver_options.cost_scaling, np.ones(cfg.horizon_steps + 1))
+    f = ca.Function("f", [m.x, m.u, m.p], [m.disc_dyn_expr])
+    rng = np.random.default_rng(2)
+    for _ in range(3):
+        s, v, d = rng.normal(size=16) * 0.2, rng.normal(size=8) * 0.2, rng.normal(size=6)
+        np.testing.assert_allclose(np.array(f(s, v, d)).ravel(),
+                                   np.array(pb.stage.dynamics(s, v, d)).ravel(), rtol=1e-14)
+    ocp_gn, _ = aa.build_ocp(cfg, model, u_trim, "gauss_newton")
+    assert ocp_gn.solver_options.hessian_approx == "GAUSS_NEWTON"
+    assert ocp_gn.solver_options.hpipm_mode == "SPEED_ABS"
