@@ -243,7 +243,7 @@ def anchor_table(results: list[dict], anchors: dict[str, dict],
             "| QP it p50/max | failures (first at s) | first command vs ours before the fault: "
             "tilt deg p50/max | throttle % p50/max | after the fault: tilt deg p50/max "
             "| throttle % p50/max | build s |")
-    lines = [head, "|" + "---|" * head.count(" | ") + "---|"]
+    lines = _table_head(head)
 
     def close(a, tag):
         if f"du_tilt_deg_median{tag}" not in a:
@@ -265,7 +265,7 @@ def anchor_table(results: list[dict], anchors: dict[str, dict],
     head = ("| ours / acados | prep p50 | feedback p50 | prep+feedback p50 (target <= 1.0) "
             "| prep+feedback p99 (target <= 1.2) | solver's own p50 | solver's own p99 "
             "| ctl period CPU p50 / acados' step p50 (target <= 1.5) |")
-    lines += [head, "|" + "---|" * head.count(" | ") + "---|"]
+    lines += _table_head(head)
     for mode, a in anchors.items():     # the exact one (issue 18's anchor) against every mode
         names = [mode] + ([n for n in ours if n != mode] if a["hessian"] == "exact" else [])
         for name in names:
@@ -304,6 +304,11 @@ def combine(runs: list[dict]) -> dict:
     return out
 
 
+def _table_head(head: str) -> list[str]:
+    """A markdown table's header row and its separator."""
+    return [head, "|" + "---|" * head.count(" | ") + "---|"]
+
+
 def table(results: list[dict]) -> str:
     fastest = min(r["total_median_ms"] for r in results)
     head = ("| mode | solve p50 ms | solve p99 ms | solve max ms | step CPU p50 ms | prep p50 ms "
@@ -311,7 +316,7 @@ def table(results: list[dict]) -> str:
             "| x fastest | SQP it | QP it p50/max "
             "| failures | pos RMSE m | RMSE after fault m | max yaw err deg | build cold s "
             "| build cached s | peak RSS MB |")
-    lines = [head, "|" + "---|" * head.count(" | ") + "---|"]
+    lines = _table_head(head)
     for r in results:
         lines.append(
             f"| {r['name']} | {r['median_ms']:.2f} | {r['p99_ms']:.2f} | {r['max_ms']:.1f} "
