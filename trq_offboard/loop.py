@@ -15,9 +15,10 @@ so that the next step waits for the preparation; None: the flight's own one-thre
 turns when the machine has a core to spare for the controller, and yields the core
 (os.sched_yield) once the answer is sent, to whoever it woke, before the log and the
 preparation (`yield_core=False`: not, where the answer woke nobody, as in the in-process
-harness, whose vehicle runs in the same thread). Measured (docs/decisions/2026-12-02-flight-loop-direct-calls.md): one lockstep
-flight alone is faster direct, two flights in parallel on two busy cores (the scenario runner's
-default) are slower, so the thread stays the default.
+harness, whose vehicle runs in the same thread). Measured
+(docs/decisions/2026-12-02-flight-loop-direct-calls.md): one lockstep flight alone is faster
+direct, two flights in parallel on two busy cores (the scenario runner's default) are slower, so
+the thread stays the default.
 
 Every period is timed by part with injected CPU clocks: `cpu_ns` (default time.thread_time_ns:
 the calling thread's) for the wire (the telemetry's decode into a state, the target's encode and
@@ -306,8 +307,9 @@ class OffboardFlight:
             return
         if error is not None or prepare is None:
             return
+        reference = args[3]
         try:
-            prepare(args[3])
+            prepare(reference)
             self._prepare_ns = getattr(self.controller, "last_prepare_cpu_ns", -1)
         except Exception as exc:
             self._prepare_error = exc
