@@ -227,11 +227,11 @@ class Controller:
         """(_actuator_path(t0, t1, cut), the actuators' outputs at t1, at `cut` (in [t0, t1];
         None without one)). The commands in effect (each from its state's stamp +
         applied_delay_s until the next one's, the oldest remembered one's output held before
-        it) are laid out as lag
-        steps: one for each piece of a command before t0 (nothing recorded there), steps of at
-        most PREDICT_STEP_S from t0 on, none straddling t0 or `cut`; the lag chain through them
-        is one call of a compiled function (`_chain`). The history before t0 is laid out with
-        NumPy (the same differences of the same floats as step by step)."""
+        it) are laid out as lag steps: one for each piece of a command before t0 (nothing
+        recorded there), steps of at most PREDICT_STEP_S from t0 on, none straddling t0 or
+        `cut`; the lag chain through them is one call of a compiled function (`_chain`). The
+        history before t0 is laid out with NumPy (the same differences of the same floats as
+        step by step)."""
         sent = self._sent
         if sent:
             starts = np.array([ts for ts, _ in sent]) + self.cfg.applied_delay_s
