@@ -238,7 +238,7 @@ class Controller:
             cmds = np.array([u for _, u in sent])
             # the oldest command's output held before it acts, then each command's piece
             lo = np.concatenate(([-math.inf], starts))
-            hi = np.minimum(np.concatenate((starts[0:1], starts[1:], [math.inf])), t1)
+            hi = np.minimum(np.append(starts, math.inf), t1)
             which = np.concatenate(([0], np.arange(len(sent))))
         else:
             cmds = self._last_u[None, :]
