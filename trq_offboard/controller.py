@@ -47,6 +47,8 @@ from trq_offboard.config import ControllerConfig, load_controller
 from trq_offboard.effectiveness import MotorEffectivenessObserver
 from trq_offboard.eso import ExtendedStateObserver
 from trq_offboard.model import PredictionModel
+from trq_offboard.model.dynamics import NumpyFunction
+from trq_offboard.nmpc.cache import compiled
 from trq_offboard.nmpc.solver import Solver, make_solver
 from trq_offboard.records import (
     ActuatorCommand,
@@ -128,6 +130,11 @@ class Controller:
         self._gains: dict[float, np.ndarray] = {}
         codegen = cfg.solver.codegen == "auto"
         self._chain_fn = self._build_chain(codegen)
+        # the observer's b0 and the motors' deficit, compiled (nmpc/cache.py): the same
+        # arithmetic as CasADi's interpreter and the NumPy of _motor_deficit_numpy
+        self._b0_fn = NumpyFunction(compiled(self.model.b0.fn, codegen)[0])
+        self._deficit_fn = (self._build_deficit(codegen) if self.effectiveness is not None
+                            else None)
         # the NMPC's stage carries the actuators' lag states (actuator_states): its plan starts
         # from the actuators' outputs predicted for t + delay (self._y_act)
         self._act_states = bool(getattr(getattr(self.solver, "ocp", None), "n_lag", 0))
@@ -180,7 +187,7 @@ class Controller:
     def _b0(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
         """The observer's b0(u): the nominal model's accelerations under u (9: NED, Euler,
         body angular; the observer picks its channels' with b0_of)."""
-        return self.model.b0(x, u)
+        return self._b0_fn(x, u)
 
     def _b0_delayed(self, x: np.ndarray, t0: float, t1: float, path=None) -> np.ndarray:
         """b0 averaged over [t0, t1] with each command acting applied_delay_s after it was sent
@@ -306,9 +313,6 @@ class Controller:
         midpoints) (m x K each); a step with h < 0 leaves y as it is. Each step is `_lag`'s
         arithmetic in the same order, its gain `_lag_gain`'s: 1 - exp(-h / T) as -expm1(-h / T)
         (libm's expm1, as NumPy's), 1 where T = 0."""
-        from trq_offboard.model.dynamics import NumpyFunction
-        from trq_offboard.nmpc.cache import compiled
-
         m, K = self.model.nu, CHAIN_STEPS
         y0 = ca.SX.sym("y0", m)
         U = ca.SX.sym("u", m, K)
@@ -468,29 +472,48 @@ class Controller:
         """The motors' outputs less their healthy ones y_nom (4, throttle %) that explain the
         disturbance d: one motor at a time, the one whose pattern (the model's sensitivity of
         the vertical, roll and pitch accelerations to its throttle) explains most of d[2:5]
-        with a deficit; the others 0."""
-        nt = self._nt
-        jac = self.model.motor_jacobian(x, y_nom).reshape(4, 4, order="F")[0:3]
+        with a deficit; the others 0. One call of the compiled `_build_deficit`."""
+        return self._deficit_fn(x, d, y_nom)
+
+    def _build_deficit(self, codegen: bool):
+        """`_motor_deficit` as one CasADi function (x, d, y_nom) -> dz, generated as C and
+        compiled once: each motor's least-squares deficit alone and its share of |r|^2
+        (r = d[2:5]), the first motor with the largest share (np.argmax's), and for it, if it
+        explains some of r with a deficit, Gauss-Newton on |A(y + delta) - A(y) - r| (the
+        thrust and torque curves are quadratic in the throttle: the change A is the mean of the
+        two end slopes times delta, exactly) from the tangent's estimate, 3 steps (quadratic
+        convergence), clamped to a deficit. Every motor's candidate is computed and the chosen
+        one selected: the same operations in the same order as the step-by-step
+        `_motor_deficit_numpy`, which a test holds it to."""
+        nt, nu = self._nt, self.model.nu
+        jac_fn = self.model.motor_jacobian.fn
+        x, d, y = ca.SX.sym("x", 12), ca.SX.sym("d", 6), ca.SX.sym("y_nom", nu)
         r = d[2:5]
-        # the least-squares deficit of each motor alone; the largest share of |r|^2 explained
-        num = jac.T @ r
-        den = np.maximum(np.einsum("ij,ij->j", jac, jac), 1e-12)
-        fit = np.where(num < 0.0, num * num / den, -1.0)
-        i = int(np.argmax(fit))
-        dz = np.zeros(4)
-        if fit[i] > 0.0:
-            # the thrust and torque curves are quadratic in the throttle: Gauss-Newton on
-            # |A(y + delta) - A(y) - r| (the change A is the mean of the two end slopes times
-            # delta, exactly), from the tangent's estimate; quadratic convergence, 3 steps
-            delta = num[i] / den[i]
-            col0, u_end = jac[:, i], y_nom.copy()
+        jac = jac_fn(x, y)[0:3, :]
+
+        def dot3(a, b):
+            return (a[0] * b[0] + a[1] * b[1]) + a[2] * b[2]
+
+        num = [dot3(jac[:, j], r) for j in range(4)]
+        den = [ca.fmax(dot3(jac[:, j], jac[:, j]), 1e-12) for j in range(4)]
+        fit = [ca.if_else(num[j] < 0.0, num[j] * num[j] / den[j], -1.0) for j in range(4)]
+        deficit = []
+        for j in range(4):
+            delta, col0 = num[j] / den[j], jac[:, j]
             for _ in range(3):
-                u_end[nt + i] = y_nom[nt + i] + delta
-                col1 = self.model.motor_jacobian(x, u_end).reshape(4, 4, order="F")[0:3, i]
+                u_end = ca.vertcat(y[:nt + j], y[nt + j] + delta, y[nt + j + 1:])
+                col1 = jac_fn(x, u_end)[0:3, j]
                 rho = 0.5 * (col0 + col1) * delta - r
-                delta -= float(col1 @ rho) / max(float(col1 @ col1), 1e-12)
-            dz[i] = min(0.0, delta)
-        return dz
+                delta = delta - dot3(col1, rho) / ca.fmax(dot3(col1, col1), 1e-12)
+            deficit.append(ca.fmin(0.0, delta))
+        best, pick = fit[0], ca.SX(0)
+        for j in range(1, 4):                          # the first of the largest (np.argmax)
+            better = fit[j] > best
+            best, pick = ca.if_else(better, fit[j], best), ca.if_else(better, j, pick)
+        dz = ca.vertcat(*[ca.if_else(ca.logic_and(pick == j, best > 0.0), deficit[j], 0.0)
+                          for j in range(4)])
+        fn = ca.Function(f"motor_deficit_{nu}", [x, d, y], [dz], ["x", "d", "y_nom"], ["dz"])
+        return NumpyFunction(compiled(fn, codegen)[0])
 
     def _effective(self, x, d, y_nom, t0, t1, t_act):
         """With the motor effectiveness observer: advance it over [t0, t1] and return (d less

@@ -166,3 +166,64 @@ def test_the_faulty_motor_is_isolated_from_the_disturbance(motor, loss):
     # whose roll and pitch pattern it shares: the isolation's known limit, README)
     over = ctl._motor_deficit(x, -d, y_nom)
     assert over[motor] == 0.0 and np.all(over <= 0.0) and np.count_nonzero(over) <= 1
+
+
+def _deficit_step_by_step(ctl, x, d, y_nom):
+    """The specification of Controller._motor_deficit in plain floats: each motor's
+    least-squares deficit alone, the first with the largest share of |d[2:5]|^2 among those
+    with a deficit, three Gauss-Newton steps on the quadratic curves' exact change; dots summed
+    left to right."""
+    nt = 4 if ctl.model.tilting else 0
+
+    def col(u, j):
+        jac = ctl.model.motor_jacobian(x, u).reshape(4, 4, order="F")
+        return [float(v) for v in jac[0:3, j]]
+
+    def dot(a, b):
+        return (a[0] * b[0] + a[1] * b[1]) + a[2] * b[2]
+
+    r = [float(v) for v in d[2:5]]
+    cols = [col(y_nom, j) for j in range(4)]
+    num = [dot(c, r) for c in cols]
+    den = [max(dot(c, c), 1e-12) for c in cols]
+    fit = [n * n / q if n < 0.0 else -1.0 for n, q in zip(num, den)]
+    i = max(range(4), key=lambda j: (fit[j], -j))      # the first of the largest
+    dz = np.zeros(4)
+    if fit[i] > 0.0:
+        delta, u_end = num[i] / den[i], y_nom.copy()
+        for _ in range(3):
+            u_end[nt + i] = y_nom[nt + i] + delta
+            c1 = col(u_end, i)
+            rho = [0.5 * (c0 + c) * delta - rk for c0, c, rk in zip(cols[i], c1, r)]
+            delta -= dot(c1, rho) / max(dot(c1, c1), 1e-12)
+        dz[i] = min(0.0, delta)
+    return dz
+
+
+def test_the_compiled_deficit_is_its_specification_bit_for_bit():
+    """The compiled motor deficit against the step-by-step specification on random states,
+    commands and disturbances (deficits, surpluses, and nothing to explain), bit for bit."""
+    from trq_offboard.controller import Controller
+
+    class _Ocp:
+        n_lag = 0
+
+        def set_throttle_scale(self, e):
+            pass
+
+    class _Solver:
+        ocp = _Ocp()
+
+    ctl = Controller(load_controller(PARAMS / "controller/trq_nmpc_eso.yaml"), solver=_Solver())
+    rng = np.random.default_rng(18)
+    picked = set()
+    for k in range(300):
+        x = np.zeros(12)
+        x[6:12] = rng.normal(0.0, 0.2, 6)
+        y_nom = np.concatenate([rng.uniform(-0.3, 0.3, 4), rng.uniform(30.0, 90.0, 4)])
+        d = rng.normal(0.0, 1.0, 6) if k % 10 else np.zeros(6)
+        got = ctl._motor_deficit(x, d, y_nom)
+        want = _deficit_step_by_step(ctl, x, d, y_nom)
+        assert np.array_equal(got, want), (k, got, want)
+        picked.update(np.flatnonzero(got).tolist())
+    assert picked == {0, 1, 2, 3}           # every motor was found in some draw
