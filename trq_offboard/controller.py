@@ -312,7 +312,7 @@ class Controller:
         (nmpc/cache.py): (y0 (m), u (m x K), [h; h/2] (2 x K)) -> (outputs after each step,
         midpoints) (m x K each); a step with h < 0 leaves y as it is. Each step is `_lag`'s
         arithmetic in the same order, its gain `_lag_gain`'s: 1 - exp(-h / T) as -expm1(-h / T)
-        (libm's expm1, as NumPy's), 1 where T = 0."""
+        (libm's expm1), 1 where T = 0."""
         m, K = self.model.nu, CHAIN_STEPS
         y0 = ca.SX.sym("y0", m)
         U = ca.SX.sym("u", m, K)
@@ -390,7 +390,9 @@ class Controller:
     def _lag_gain(self, dt: float) -> np.ndarray:
         gain = self._gains.get(dt)           # the same few step lengths come back every period
         if gain is None:
-            gain = np.where(self._tau > 0.0, -np.expm1(-dt / np.maximum(self._tau, 1e-12)), 1.0)
+            # libm's expm1 (math's, as the compiled chain's): NumPy's own may differ in the
+            # last bit (its SIMD loops); cached, so once per step length
+            gain = np.array([-math.expm1(-dt / t) if t > 0.0 else 1.0 for t in self._tau])
             if len(self._gains) < 256:
                 self._gains[dt] = gain
         return gain
@@ -450,7 +452,9 @@ class Controller:
         x0 = self._predict(x, t_s, t_act, d, path) if self.delay_s > 0.0 else x
         c3 = clock()
         x_ref = self._reference_states(t_act, x0, reference)
-        guess = self._guess(t_act, x0, d)
+
+        def guess():           # a prepared real-time iteration needs it only to fail with
+            return self._guess(t_act, x0, d)
         if self._act_states:
             self._y_act = y_act
             u_plan, x_plan, info = self.solver.solve(x0, x_ref, d, u_applied, guess, y0=y_act)

@@ -16,6 +16,7 @@ from trq_lab.bench import nmpc as bench
 from trq_offboard.allocation import Allocator
 from trq_offboard.config import load_controller
 from trq_offboard.model import PredictionModel
+from trq_offboard.nmpc.solver import plan_of
 from trq_offboard.records import SolveInfo, SolveStatus
 
 
@@ -89,7 +90,7 @@ class _FakeSolver:
         self.prepared = []
 
     def solve(self, x0, x_ref, d, u_prev, guess, y0=None):
-        u, x = guess
+        u, x = plan_of(guess)
         return u + 1.0, x, SolveInfo(SolveStatus.OK, 1, 1e-3, 0.0, "rti")
 
     def prepare(self, x_ref, d, u_prev, guess, y0=None):

@@ -353,7 +353,11 @@ class Recorder:
 
     def _rec_solve(self, x0, x_ref, d, u_prev, guess, y0=None):
         o, c = self.ctl.solver.ocp, np.array
-        lin = self._pending or (c(guess[0], float), c(guess[1], float), c(u_prev, float))
+        lin = self._pending
+        if lin is None:                # not prepared: the solve linearises at its guess
+            from trq_offboard.nmpc.solver import plan_of
+            guess = plan_of(guess)
+            lin = (c(guess[0], float), c(guess[1], float), c(u_prev, float))
         self._pending = None
         row = [c(x0, float), c(x_ref, float), c(d, float), c(u_prev, float), lin,
                o.lbw.copy(), o.ubw.copy()]

@@ -48,6 +48,7 @@ from trq_offboard.model.dynamics import NumpyFunction
 from trq_offboard.nmpc import hpipm
 from trq_offboard.nmpc.cache import compiled_many
 from trq_offboard.nmpc.ocp import Ocp, Stage
+from trq_offboard.nmpc.solver import plan_of
 from trq_offboard.records import SolveInfo, SolveStatus
 
 __all__ = ["RtiSolver", "HPIPM_AUTO"]
@@ -283,14 +284,15 @@ class RtiSolver:
                 self._prepared = None      # stale: the state is far from the linearisation
             for it in range(1, self.max_iterations + 1):
                 if self._prepared is None or it > 1:
+                    guess = plan_of(guess)
                     self.prepare(x_ref, d, u_prev, guess, y0)
                 w, status = self._feedback(x0, x_ref, d, u_prev, y0)
                 if w is None:
-                    return self._failed(guess, t0, it, status)
+                    return self._failed(plan_of(guess), t0, it, status)
                 guess = self.ocp.unpack(w)
         except RuntimeError as exc:      # casadi evaluation errors
             self._prepared = None
-            return self._failed(guess, t0, 0, f"exception: {exc}")
+            return self._failed(plan_of(guess), t0, 0, f"exception: {exc}")
         u, x = guess
         return u, x, SolveInfo(SolveStatus.OK, it, time.perf_counter() - t0,
                                self._cost(w, x_ref), status)

@@ -17,7 +17,7 @@ measures its wall time with time.perf_counter (a measurement, returned in SolveI
 from __future__ import annotations
 
 import time
-from typing import Protocol
+from typing import Callable, Protocol, Union
 
 import casadi as ca
 import numpy as np
@@ -27,22 +27,31 @@ from trq_offboard.model import PredictionModel
 from trq_offboard.nmpc.ocp import Ocp
 from trq_offboard.records import SolveInfo, SolveStatus
 
-__all__ = ["Solver", "SqpSolver", "IpoptSolver", "make_solver", "Plan"]
+__all__ = ["Solver", "SqpSolver", "IpoptSolver", "make_solver", "Plan", "Guess", "plan_of"]
 
 Plan = tuple[np.ndarray, np.ndarray]      # (u (N, nu) physical, x (N+1, 12))
+# a plan, or a function making one: called only if the solver needs it (a real-time iteration
+# that was prepared needs it only to fail with)
+Guess = Union[Plan, Callable[[], Plan]]
+
+
+def plan_of(guess: Guess) -> Plan:
+    """The plan of a Guess (calling it if it is a function)."""
+    return guess() if callable(guess) else guess
 
 
 class Solver(Protocol):
     ocp: Ocp
 
     def solve(self, x0: np.ndarray, x_ref: np.ndarray, d: np.ndarray, u_prev: np.ndarray,
-              guess: Plan, y0: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray,
+              guess: Guess, y0: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray,
                                                                  SolveInfo]:
         """x0 (12) measured state, x_ref (N+1, 12) reference states, d (6) disturbance held
         over the horizon, u_prev (nu) the command applied now (its tilts bound the first tilt
-        step), guess an initial plan (u, x), y0 (nu, physical; only with actuator lag states,
-        default u_prev) the actuators' outputs when the plan starts. Returns the plan (u (N, nu)
-        physical [alpha, zeta] or [zeta]: the commands, x (N+1, 12)) and a SolveInfo."""
+        step), guess an initial plan (u, x) or a function making one (plan_of), y0 (nu,
+        physical; only with actuator lag states, default u_prev) the actuators' outputs when
+        the plan starts. Returns the plan (u (N, nu) physical [alpha, zeta] or [zeta]: the
+        commands, x (N+1, 12)) and a SolveInfo."""
         ...
 
 
@@ -115,7 +124,7 @@ class SqpSolver(_Base):
 
     def solve(self, x0, x_ref, d, u_prev, guess, y0=None):
         t0 = time.perf_counter()
-        ocp = self.ocp
+        ocp, guess = self.ocp, plan_of(guess)
         try:
             p, lbw, ubw, w = self._setup(x0, x_ref, d, u_prev, guess, y0)
             lam = self._lam
@@ -166,7 +175,7 @@ class IpoptSolver(_Base):
 
     def solve(self, x0, x_ref, d, u_prev, guess, y0=None):
         t0 = time.perf_counter()
-        ocp = self.ocp
+        ocp, guess = self.ocp, plan_of(guess)
         try:
             p, lbw, ubw, w0 = self._setup(x0, x_ref, d, u_prev, guess, y0)
             r = self._nlp(x0=w0, p=p, lbx=lbw, ubx=ubw, lbg=ocp.lbg, ubg=ocp.ubg)
