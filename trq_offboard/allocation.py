@@ -129,7 +129,7 @@ class Allocator:
         return np.array([*cmd.tilt_rad, *cmd.throttle_pct], dtype=float)
 
     def command_of(self, u) -> ActuatorCommand:
-        u = np.asarray(u, dtype=float).reshape(-1)
+        u = np.asarray(u, dtype=float).reshape(-1).tolist()         # Python floats
         if self.vehicle.tilt_locked:
-            return ActuatorCommand(tuple(float(v) for v in u[0:4]), (0.0, 0.0, 0.0, 0.0))
-        return ActuatorCommand(tuple(float(v) for v in u[4:8]), tuple(float(v) for v in u[0:4]))
+            return ActuatorCommand(tuple(u[0:4]), (0.0, 0.0, 0.0, 0.0))
+        return ActuatorCommand(tuple(u[4:8]), tuple(u[0:4]))

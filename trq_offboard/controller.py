@@ -33,7 +33,6 @@ the solver prepares inside `step` (same result, longer latency).
 
 from __future__ import annotations
 
-import collections
 import math
 import time
 from pathlib import Path
@@ -65,6 +64,37 @@ __all__ = ["Controller"]
 
 PREDICT_STEP_S = 0.005        # RK4 step of the delay predictor
 CHAIN_STEPS = 48              # steps of the compiled actuator lag chain per call
+SENT_KEPT = 32                # commands remembered (many actuator time constants)
+
+
+class CommandHistory:
+    """The last `size` commands sent, oldest first: the stamp (s) of the state each answered and
+    the command u (nu), in two NumPy arrays that the actuator walk reads whole every period.
+    `times` and `commands` are views, valid until the next append."""
+
+    def __init__(self, size: int, nu: int, items=()) -> None:
+        self._t, self._u, self._n = np.empty(size), np.empty((size, nu)), 0
+        for t, u in items:
+            self.append(t, u)
+
+    def append(self, t_s: float, u: np.ndarray) -> None:
+        n, size = self._n, self._t.size
+        if n == size:                               # full: drop the oldest
+            self._t[:-1], self._u[:-1] = self._t[1:], self._u[1:]
+            n -= 1
+        self._t[n], self._u[n] = t_s, u
+        self._n = n + 1
+
+    @property
+    def times(self) -> np.ndarray:
+        return self._t[:self._n]
+
+    @property
+    def commands(self) -> np.ndarray:
+        return self._u[:self._n]
+
+    def __len__(self) -> int:
+        return self._n
 
 
 def _wrap(a):
@@ -148,7 +178,7 @@ class Controller:
         self._last_d = np.zeros(6)
         self._last_u = self.u_trim.copy()
         self._prev_u = self.u_trim.copy()
-        self._sent: collections.deque = collections.deque(maxlen=32)   # (t_s, u) of commands
+        self._sent = CommandHistory(SENT_KEPT, self.model.nu)
         self.clip_count = 0
         self.failures = 0
 
@@ -166,7 +196,7 @@ class Controller:
                         else self.u_trim.copy())
         self._last_u = np.clip(self._last_u, self._u_lo, self._u_hi)
         self._prev_u = self._last_u.copy()
-        self._sent = collections.deque([(float(t_s), self._last_u.copy())], maxlen=32)
+        self._sent = CommandHistory(SENT_KEPT, self.model.nu, [(float(t_s), self._last_u)])
         if self.eso is not None:
             eta_dot = np.asarray(self._euler_rate(x)).ravel()
             self.eso.reset(self.eso.measurement(x), np.concatenate([x[3:6], eta_dot]))
@@ -198,7 +228,7 @@ class Controller:
                 if t0 < 0.5 * (a + b) < t1:        # steps never straddle t0 or t1
                     total += (b - a) * self._b0(x, y)
             return total / (t1 - t0)
-        if self.cfg.applied_delay_s <= 0.0 or not self._sent:
+        if self.cfg.applied_delay_s <= 0.0 or not len(self._sent):
             return self._b0(x, self._last_u)
         for lo, hi, u in self._in_effect(t0, t1):
             total += (hi - lo) * self._b0(x, u)
@@ -208,16 +238,18 @@ class Controller:
         """The commands acting over [t0, t1] as (start, end, u) segments: each command acts
         from the stamp of the state it answered plus applied_delay_s until the next one does;
         before the oldest remembered command, the oldest one."""
-        delay = self.cfg.applied_delay_s
-        acts = [(ts + delay, u) for ts, u in self._sent] or [(t0, self._last_u)]
+        sent = self._sent
+        if not len(sent):
+            return [(t0, t1, self._last_u)] if t1 > t0 else []
+        starts, cmds = sent.times + self.cfg.applied_delay_s, sent.commands
         segs = []
-        if acts[0][0] > t0:
-            segs.append((t0, min(acts[0][0], t1), acts[0][1]))
-        for i, (start, u) in enumerate(acts):
-            end = acts[i + 1][0] if i + 1 < len(acts) else math.inf
-            lo, hi = max(start, t0), min(end, t1)
-            if hi > lo:
-                segs.append((lo, hi, u))
+        if starts[0] > t0:
+            segs.append((t0, min(float(starts[0]), t1), cmds[0]))
+        # each command from its start to the next one's (the last one on), within [t0, t1]
+        lo = np.maximum(starts, t0).tolist()
+        hi = np.minimum(np.append(starts[1:], math.inf), t1).tolist()
+        for i in np.flatnonzero(np.greater(hi, lo)).tolist():
+            segs.append((lo[i], hi[i], cmds[i]))
         return segs
 
     def _actuator_path(self, t0: float, t1: float, cut: float | None = None):
@@ -240,9 +272,9 @@ class Controller:
         history before t0 is laid out with NumPy (the same differences of the same floats as
         step by step)."""
         sent = self._sent
-        if sent:
-            starts = np.array([ts for ts, _ in sent]) + self.cfg.applied_delay_s
-            cmds = np.array([u for _, u in sent])
+        if len(sent):
+            starts = sent.times + self.cfg.applied_delay_s
+            cmds = sent.commands
             # the oldest command's output held before it acts, then each command's piece
             lo = np.concatenate(([-math.inf], starts))
             hi = np.minimum(np.append(starts, math.inf), t1)
@@ -618,21 +650,23 @@ class Controller:
         """The command of the step (clipped, finite) and its StepInfo; `marks`: the CPU clock
         at the step's start and after its observer, effectiveness and predictor parts (any of
         them the same when a part did not run)."""
-        u = np.asarray(u, float).copy()
+        u = np.array(u, float)
         bad = ~np.isfinite(u)
-        u[bad] = self.u_trim[bad]
-        clipped_u = np.clip(u, self._u_lo, self._u_hi)
-        n_clip = int(np.sum(bad) + np.sum(np.abs(clipped_u - u) > 1e-9))
+        n_bad = int(np.count_nonzero(bad))
+        if n_bad:
+            u[bad] = self.u_trim[bad]
+        clipped_u = np.minimum(np.maximum(u, self._u_lo), self._u_hi)    # np.clip's values
+        n_clip = n_bad + int(np.count_nonzero(np.abs(clipped_u - u) > 1e-9))
         self.clip_count += n_clip
         self._prev_u = self._last_u
         self._last_u = clipped_u
-        self._sent.append((self._last_t, clipped_u.copy()))   # sent for the state at _last_t
+        self._sent.append(self._last_t, clipped_u)       # sent for the state at _last_t
         cmd = self.allocator.command_of(clipped_u)
         c0, c1, c2, c3 = marks
         cpu = StepTimes(c1 - c0, c2 - c1, c3 - c2, self.cpu_ns() - c3)
-        info = StepInfo(source, info, tuple(float(v) for v in d), out_err, n_clip,
-                        self.clip_count, self.failures,
-                        tuple(float(v) for v in self._scale[self._nt:]), cpu)
+        info = StepInfo(source, info, tuple(d.tolist()), out_err, n_clip,
+                        self.clip_count, self.failures, tuple(self._scale[self._nt:].tolist()),
+                        cpu)
         return cmd, info
 
     def _emergency(self, t_s, why, c0) -> tuple[ActuatorCommand, StepInfo]:

@@ -4,7 +4,6 @@ what their NumPy loops compute; the log writes every row, in order, after its pe
 
 from __future__ import annotations
 
-import collections
 import dataclasses
 import math
 from pathlib import Path
@@ -14,7 +13,7 @@ import pytest
 from conftest import Ticks
 
 from trq_offboard.config import load_controller
-from trq_offboard.controller import PREDICT_STEP_S, Controller
+from trq_offboard.controller import PREDICT_STEP_S, CommandHistory, Controller
 from trq_offboard.effectiveness import MotorEffectivenessObserver
 from trq_offboard.eso import ExtendedStateObserver
 from trq_offboard.records import (
@@ -192,8 +191,8 @@ def test_actuator_walk_is_the_step_by_step_walk(delay):
         step = rng.choice([0.01, 0.0097])
         stamps = np.cumsum(rng.choice([step, step, 0.0, 2 * step], n)) if n else np.zeros(0)
         stamps = np.maximum.accumulate(stamps + rng.uniform(0, 1e-3, n) * (trial % 3 == 0))
-        ctl._sent = collections.deque(((float(t), rng.uniform(lo, hi)) for t in stamps),
-                                      maxlen=32)
+        ctl._sent = CommandHistory(32, ctl.model.nu,
+                                   [(float(t), rng.uniform(lo, hi)) for t in stamps])
         ctl._last_u = rng.uniform(lo, hi)
         last = float(stamps[-1]) if n else 0.0
         t0 = last - float(rng.choice([0.0, 0.01, 0.02, 0.5]))

@@ -4,7 +4,6 @@ act, driven by the commands in flight, through the actuators' lags when asked to
 
 from __future__ import annotations
 
-import collections
 import dataclasses
 import math
 from pathlib import Path
@@ -13,7 +12,7 @@ import numpy as np
 import pytest
 
 from trq_offboard.config import load_controller
-from trq_offboard.controller import Controller
+from trq_offboard.controller import CommandHistory, Controller
 
 CTRL = Path(__file__).resolve().parents[2] / "params" / "controller" / "trq_nmpc_eso.yaml"
 DELAY_S = 0.04
@@ -38,7 +37,7 @@ def hover_state() -> np.ndarray:
 
 
 def fill(ctl: Controller, commands: list[tuple[float, np.ndarray]]) -> None:
-    ctl._sent = collections.deque(commands, maxlen=32)
+    ctl._sent = CommandHistory(32, ctl.model.nu, commands)
 
 
 def test_hover_commands_in_flight_predict_no_motion():

@@ -4,7 +4,6 @@ inputs are the commands. Off (the default on a clean link) is the old stage exac
 
 from __future__ import annotations
 
-import collections
 import dataclasses
 import math
 from pathlib import Path
@@ -239,7 +238,7 @@ def test_controller_starts_the_plan_from_the_lagged_actuators():
     """With a 40 ms round trip the controller builds the lag-state NMPC (auto) and starts its
     plan from the actuators' outputs predicted for t + delay: the lag of the commands in
     flight, as its delay predictor computes them."""
-    from trq_offboard.controller import Controller
+    from trq_offboard.controller import CommandHistory, Controller
 
     cfg = dataclasses.replace(load_controller(CTRL / "trq_nmpc_eso.yaml"), applied_delay_s=0.04)
     ctl = Controller(cfg, solver=_LagSolver())
@@ -247,8 +246,8 @@ def test_controller_starts_the_plan_from_the_lagged_actuators():
     hover = ctl.u_trim
     up = hover.copy()
     up[4:8] += 10.0
-    ctl._sent = collections.deque([(-0.01 * k, hover) for k in range(32, 0, -1)]
-                                  + [(0.0, up)], maxlen=32)
+    ctl._sent = CommandHistory(32, ctl.model.nu, [(-0.01 * k, hover) for k in range(32, 0, -1)]
+                               + [(0.0, up)])
     # the step command (sent for the state at 0) acts from 0.04; at 0.07 it has lagged 30 ms
     path, y, y_cut = ctl._actuator_walk(0.0, 0.07, 0.05)
     tau = cfg.vehicle.motor_time_constant_s
