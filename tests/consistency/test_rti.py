@@ -115,6 +115,26 @@ def test_direct_hpipm_step_equals_the_conic_one(cache_env, hessian):
                 np.testing.assert_allclose(a, b, atol=atol)
 
 
+@pytest.mark.parametrize("name", ["trq_nmpc_eso", "quad_nmpc"])
+def test_the_logged_cost_is_the_nlps(cache_env, name):
+    """The cost an RTI step reports (its compiled function) is the NLP's objective (Ocp.cost_fn,
+    interpreted) at the returned plan, to rounding; at random points too."""
+    cfg = _cfg(name=name, hessian="gauss_newton")
+    model, u_trim, x0, x_ref, d, guess = ocp_problem(cfg)
+    rti = RtiSolver(cfg, model, u_trim)
+    o = rti.ocp
+    u, x, info = rti.solve(x0, x_ref, d, u_trim, guess)
+    p = o.params(x_ref, u_trim, d)
+    a_prev = u_trim[0:4] if o.tilting else None
+    w = np.clip(o.pack(x, u, a_prev), o.lbw, o.ubw)
+    assert info.cost == pytest.approx(float(o.cost_fn(w, p)), rel=1e-9)
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        w, xr = rng.normal(size=o.lbw.size), rng.normal(size=x_ref.shape)
+        assert rti._cost(w, xr) == pytest.approx(float(o.cost_fn(w, o.params(xr, u_trim, d))),
+                                                 rel=1e-12)
+
+
 def test_direct_hpipm_missing_falls_back_to_conic(cache_env, monkeypatch):
     """No usable libhpipm (an exotic casadi build): the RTI says so and uses casadi.conic."""
     from trq_offboard.nmpc import hpipm

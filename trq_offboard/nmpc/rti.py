@@ -106,8 +106,13 @@ class RtiSolver:
         if hessian == "exact":
             fns.append(ca.Function(f"rti_hess_{tag}", [s, v, d, lam],
                                    [ca.hessian(ca.dot(lam, phi), z)[0]], {"cse": True}))
+        # the NLP's cost (logged with every solve), the Ocp's own expression compiled
+        w_sym, p_sym = ca.SX.sym("w", nw), ca.SX.sym("p", o.n_params)
+        fns.append(ca.Function(f"rti_cost_{tag}_{N}", [w_sym, p_sym], [o.cost_fn(w_sym, p_sym)]))
         enabled = sc.codegen == "auto"
         built = compiled_many(fns, enabled)
+        self._cost_fn = NumpyFunction(built[-1][0])
+        self._cost_fn.args[1][(N + 1) * nx:(N + 1) * nx + nu] = self.u_trim / o.u_scale
         self.build_mode = built[0][1]                  # compiled | cached | interpreted
         lin = built[0][0].map(N)
         # constant cost Hessians (stage and terminal)
@@ -220,9 +225,6 @@ class RtiSolver:
         self._q2_w = np.zeros(nw)
         self._q2_w[self._x_pos[:N]] = q2
         self._q2_w[self._x_pos[N]] = wts.terminal_factor * q2
-        self._cost_w = (q2 / 2.0, np.array(([wts.tilt] * 4 if o.tilting else [])
-                                           + [wts.throttle] * 4),
-                        wts.terminal_factor, wts.tilt_rate)
         self._prepared: _Prepared | None = None
         self.last_prepare_s = 0.0
         self.qp_iterations = 0
@@ -359,17 +361,14 @@ class RtiSolver:
         return w, ("rti" if hq.status == 0 else f"rti (QP: HPIPM status {hq.status})")
 
     def _cost(self, w, x_ref) -> float:
-        """The NLP's cost at w (NumPy; the cost is quadratic: see ocp.Stage)."""
-        o, (q, r, c_n, w_rate) = self.ocp, self._cost_w
-        s, v = w[o.s_index], w[o.v_index]
-        ex = s[:, 0:o.nx] - np.asarray(x_ref, float).reshape(o.n_steps + 1, o.nx)
-        cost = float(np.sum(q * ex[:-1] ** 2) + c_n * np.sum(q * ex[-1] ** 2))
-        if o.tilt_states:
-            us = np.hstack([s[:-1, o.nx:o.nx + 4] + o.step_s * v[:, 0:4], v[:, 4:8]])
-            cost += w_rate * float(np.sum(v[:, 0:4] ** 2))
-        else:
-            us = v
-        return cost + float(np.sum(r * (us - self.u_trim / o.u_scale) ** 2))
+        """The NLP's cost at w (the Ocp's cost function, compiled; p's u_trim part set once,
+        its d part unused by the cost)."""
+        fn = self._cost_fn
+        w_in, p_in = fn.args
+        w_in[:] = w
+        p_in[:x_ref.size] = np.ravel(x_ref)          # (N+1, nx) rows: vec of (nx, N+1)
+        fn.evaluate()
+        return float(fn.results[0][0])
 
     def _failed(self, guess, t0, iters, msg):
         u, x = (np.nan_to_num(np.asarray(a, float)) for a in guess)
