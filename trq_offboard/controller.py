@@ -179,6 +179,8 @@ class Controller:
         self._last_u = self.u_trim.copy()
         self._prev_u = self.u_trim.copy()
         self._sent = CommandHistory(SENT_KEPT, self.model.nu)
+        self._grid_key: tuple | None = None     # (reference, t) of the last reference grid
+        self._grid_val: tuple | None = None
         self.clip_count = 0
         self.failures = 0
 
@@ -603,11 +605,21 @@ class Controller:
 
     # --- helpers --------------------------------------------------------------------------------
     def _reference_states(self, t_s: float, x: np.ndarray, reference) -> np.ndarray:
+        """The reference states of the horizon from t_s (N+1, 12), the yaw unwrapped next to
+        x's. A reference with `grid` (Reference, ConstantReference) is a pure function of time:
+        the same object asked for the same t gives the same grid."""
         xr = np.zeros((self.N + 1, 12))
         yaw = x[8]
         grid = getattr(reference, "grid", None)
         if grid is not None:                              # Reference, ConstantReference
-            pv, yaw_ref = grid(t_s, self.h, self.N + 1)
+            # the preparation samples the time the next step then asks for (when the two
+            # floats agree): the last grid kept
+            key = self._grid_key
+            if key is not None and key[0] is reference and key[1] == t_s:
+                pv, yaw_ref = self._grid_val
+            else:
+                pv, yaw_ref = grid(t_s, self.h, self.N + 1)
+                self._grid_key, self._grid_val = (reference, t_s), (pv, yaw_ref)
             xr[:, 0:6] = pv
             xr[:, 8] = yaw + _wrap(yaw_ref - yaw)
             return xr

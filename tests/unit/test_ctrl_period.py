@@ -209,3 +209,33 @@ def test_actuator_walk_is_the_step_by_step_walk(delay):
         assert (got[2] is None) == (want[2] is None)
         if got[2] is not None:
             assert np.array_equal(got[2], want[2]), (trial, t0, t1, cut)
+
+
+def test_reference_grid_is_sampled_once_for_the_same_time():
+    """The preparation and the next step ask for the same time: one grid for both, the same
+    states as a fresh one; another time or another reference object samples again."""
+    from trq_offboard.reference import Reference
+
+    cfg = dataclasses.replace(load_controller(CTRL), effectiveness=None)
+    ctl = Controller(cfg, solver=_HoverSolver(np.zeros(8), cfg.horizon_steps))
+
+    class Counting(Reference):
+        calls = 0
+
+        def grid(self, t_s, step_s, n):
+            Counting.calls += 1
+            return super().grid(t_s, step_s, n)
+
+    ref = Counting(cfg.reference, [0.0, 0.0, 0.0], 0.0)
+    fresh = Reference(cfg.reference, [0.0, 0.0, 0.0], 0.0)
+    x = np.zeros(12)
+    x[8] = 3.0                                   # the yaw is unwrapped next to this one
+    for t in (12.3, 12.3, 12.31, 12.31, 12.3):
+        got = ctl._reference_states(t, x, ref)
+        want = Controller(cfg, solver=_HoverSolver(np.zeros(8), cfg.horizon_steps)
+                          )._reference_states(t, x, fresh)
+        assert np.array_equal(got, want)
+    assert Counting.calls == 3
+    other = Counting(cfg.reference, [0.0, 0.0, 0.0], 0.0)
+    ctl._reference_states(12.3, x, other)
+    assert Counting.calls == 4
