@@ -20,8 +20,11 @@ __all__ = ["CsvLog", "Tlog", "VehicleTimeline", "format_row", "read_header", "re
 
 def format_row(row: Iterable[object]) -> str:
     """One CSV line (without its newline)."""
-    return ",".join(v if isinstance(v, str) else repr(float(v)) if isinstance(v, float)
-                    else str(v) for v in row)
+    # exact types first (a list, not a generator: both cheaper per value); a float subclass
+    # (NumPy's float64) as the float it is
+    return ",".join([v if type(v) is str else repr(v) if type(v) is float
+                     else repr(float(v)) if isinstance(v, float)
+                     else v if isinstance(v, str) else str(v) for v in row])
 
 
 class CsvLog:
