@@ -247,6 +247,8 @@ class Controller:
         segs = []
         if starts[0] > t0:
             segs.append((t0, min(float(starts[0]), t1), cmds[0]))
+        if t1 <= t0:                    # an empty interval: no command's piece is in it
+            return segs
         # each command from its start to the next one's (the last one on), within [t0, t1]
         lo = np.maximum(starts, t0).tolist()
         hi = np.minimum(np.append(starts[1:], math.inf), t1).tolist()
@@ -593,9 +595,11 @@ class Controller:
         elapsed = t_next - self._plan_t
         if elapsed >= self.N * self.h:
             return
-        x_pred = _interp_rows(self._plan[1], self.h, np.array([elapsed]))[0]
+        # the plan's states from t_next on: the guess's, its first row the predicted state
+        xs = _interp_rows(self._plan[1], self.h, elapsed + self.h * np.arange(self.N + 1))
+        x_pred = xs[0].copy()
         x_ref = self._reference_states(t_next, x_pred, reference)
-        guess = self._guess(t_next, x_pred, self._last_d)
+        guess = self._guess(t_next, x_pred, self._last_d, xs)
         if self._act_states and self._y_act is not None:
             # the actuators one period on, under the command just sent (it acts from t_act)
             y_next = self._lag(self._y_act, self._last_u * self._scale, self.cfg.control_dt_s)
@@ -630,7 +634,10 @@ class Controller:
             xr[k, 8] = yaw + _wrap(s.yaw_rad - yaw)       # unwrapped next to the measured yaw
         return xr
 
-    def _guess(self, t_s: float, x: np.ndarray, d: np.ndarray):
+    def _guess(self, t_s: float, x: np.ndarray, d: np.ndarray, xs: np.ndarray | None = None):
+        """The plan (u, x) shifted to t_s, x its first state (the yaw kept next to x's), or
+        the hover trim rolled out from x without a plan (or past its end). `xs`: the plan's
+        states interpolated at t_s + k h, when the caller has them."""
         N, h = self.N, self.h
         if self._plan is not None:
             u_old, x_old = self._plan
@@ -639,7 +646,7 @@ class Controller:
             if elapsed < N * h:
                 idx = np.minimum((times[:N] / h + 1e-9).astype(int), N - 1)
                 u = u_old[idx]
-                xg = _interp_rows(x_old, h, times)
+                xg = _interp_rows(x_old, h, times) if xs is None else xs
                 xg[:, 8] += x[8] - xg[0, 8]          # keep yaw next to the measured one
                 xg[0] = x
                 return u, xg

@@ -239,3 +239,43 @@ def test_reference_grid_is_sampled_once_for_the_same_time():
     other = Counting(cfg.reference, [0.0, 0.0, 0.0], 0.0)
     ctl._reference_states(12.3, x, other)
     assert Counting.calls == 4
+
+
+def _in_effect_spec(sent, last_u, delay, t0, t1):
+    """The segments in effect, written out command by command (the specification)."""
+    acts = [(ts + delay, u) for ts, u in sent] or [(t0, last_u)]
+    segs = []
+    if acts[0][0] > t0:
+        segs.append((t0, min(acts[0][0], t1), acts[0][1]))
+    for i, (start, u) in enumerate(acts):
+        end = acts[i + 1][0] if i + 1 < len(acts) else math.inf
+        lo, hi = max(start, t0), min(end, t1)
+        if hi > lo:
+            segs.append((lo, hi, u))
+    return segs
+
+
+@pytest.mark.parametrize("delay", [0.0, 0.004, 0.04])
+def test_commands_in_effect_are_the_command_by_command_segments(delay):
+    """Random histories (in order, with repeats, out of order, empty), intervals inside,
+    before, after and across them, empty ones: the same segments, bit for bit."""
+    cfg = dataclasses.replace(load_controller(CTRL), effectiveness=None, applied_delay_s=delay)
+    ctl = Controller(cfg, solver=_HoverSolver(np.zeros(8), cfg.horizon_steps))
+    rng = np.random.default_rng(17)
+    lo, hi = ctl._u_lo, ctl._u_hi
+    for trial in range(400):
+        n = int(rng.integers(0, 40))
+        stamps = np.cumsum(rng.choice([0.01, 0.01, 0.0, 0.02], n))
+        if trial % 4 == 0:
+            stamps = rng.permutation(stamps)               # out of order: still the spec's
+        sent = [(float(t), rng.uniform(lo, hi)) for t in stamps]
+        ctl._sent = CommandHistory(32, ctl.model.nu, sent)
+        ctl._last_u = rng.uniform(lo, hi)
+        last = float(stamps[-1]) if n else 0.0
+        t0 = last - float(rng.choice([-0.01, 0.0, 0.01, 0.03, 0.5]))
+        t1 = t0 + float(rng.choice([-0.01, 0.0, 0.01, 0.013, delay + 0.01]))
+        got = ctl._in_effect(t0, t1)
+        want = _in_effect_spec(sent[-32:], ctl._last_u, delay, t0, t1)
+        assert len(got) == len(want), (trial, got, want)
+        for (a, b, u), (a2, b2, u2) in zip(got, want):
+            assert a == a2 and b == b2 and np.array_equal(u, u2), trial
