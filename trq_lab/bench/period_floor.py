@@ -337,8 +337,11 @@ def _median(vals) -> float:
     return float(np.median(vals)) if vals else math.nan
 
 
-def summary(runs: list[dict], acados_ms: float | None) -> dict:
-    """Medians over the runs, the floor's ratios, and the best cases against the target."""
+def summary(runs: list[dict], acados_ms: float | None,
+            acados_runs: list[float] | None = None) -> dict:
+    """Medians over the runs, the floor's ratios, and the best cases against the target
+    (`acados_ms`: acados' step, the median of `acados_runs` when measured in each run; then
+    also the ratios within each run, their median and range)."""
     med = {}
     for who in ("real", "floor"):
         med[who] = {k: _median([r[who][k] for r in runs])
@@ -357,6 +360,10 @@ def summary(runs: list[dict], acados_ms: float | None) -> dict:
             best_with_acados=(floor["controller_cpu_ms"] + acados_ms) / acados_ms,
             best_with_ours=(floor["controller_cpu_ms"] + solver_ms) / acados_ms,
             real_over_acados=real["controller_cpu_ms"] / acados_ms)
+    if acados_runs:
+        per_run = [r["floor"]["controller_cpu_ms"] / a for r, a in zip(runs, acados_runs)]
+        out["floor_over_acados_runs"] = per_run
+        out["floor_over_acados_paired"] = _median(per_run)
     return out
 
 
@@ -384,7 +391,10 @@ def table(s: dict, acados_label: str) -> str:
             return "reachable" if ratio <= TARGET_RATIO else "out of reach"
         lines += [
             f"acados' exact-Hessian RTI step ({acados_label}): {a:.3f} ms",
-            f"the floor / acados' step: {s['floor_over_acados']:.2f}",
+            f"the floor / acados' step: {s['floor_over_acados']:.2f}" + (
+                f" (within each run: {' '.join(f'{v:.2f}' for v in s['floor_over_acados_runs'])}"
+                f", median {s['floor_over_acados_paired']:.2f})"
+                if "floor_over_acados_runs" in s else ""),
             f"best case, the floor + a solver as fast as acados: {s['best_with_acados']:.2f}x "
             f"acados' step (target <= {TARGET_RATIO:g}x: {verdict(s['best_with_acados'])})",
             f"the floor + our solver's own step: {s['best_with_ours']:.2f}x (target <= "
@@ -492,7 +502,12 @@ def main(argv: list[str] | None = None) -> int:
     if anchors:
         acados_ms = _median([a["total_median_ms"] for a in anchors])
         label = f"measured in this run, median of {len(anchors)}"
-    s = summary(runs, acados_ms)
+    s = summary(runs, acados_ms, [a["total_median_ms"] for a in anchors] or None)
+    print("per run, CPU per period from outside, ms: the real controller "
+          + " ".join(f"{r['real']['controller_cpu_ms']:.3f}" for r in runs) + "; the floor "
+          + " ".join(f"{r['floor']['controller_cpu_ms']:.3f}" for r in runs)
+          + ("; acados' step " + " ".join(f"{a['total_median_ms']:.3f}" for a in anchors)
+             if anchors else ""))
     print(table(s, label))
     cal = calibration_ms()
     print(f"calibration at the end {cal:.2f} ms")
