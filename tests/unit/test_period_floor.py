@@ -225,3 +225,28 @@ def test_the_injection_point_builds_the_given_controller(monkeypatch, free_port,
                       "--connect", f"udpin:127.0.0.1:{free_port()}"], make_controller=make)
     assert rc == 1 and seen == ["trq_nmpc"]
     assert "no vehicle heartbeat" in capsys.readouterr().err
+
+
+def _run(real_ms: float, floor_ms: float) -> dict:
+    parts = {p: {"mean_ms": 0.1} for p in ("observer", "feedback", "prepare", "wire", "log",
+                                             "period", "solve (wall)")}
+    fig = lambda ms: {"controller_cpu_ms": ms, "vehicle_cpu_ms": 0.5,   # noqa: E731
+                      "realtime_factor": 3.0, "parts": parts}
+    return {"real": fig(real_ms), "floor": fig(floor_ms)}
+
+
+def test_the_summary_puts_the_floor_against_acados_step():
+    runs = [_run(3.0, 0.4), _run(2.0, 0.6), _run(2.5, 0.5)]
+    s = pf.summary(runs, 1.0, [1.0, 1.0, 1.0])
+    assert s["floor"]["controller_cpu_ms"] == 0.5 and s["real"]["controller_cpu_ms"] == 2.5
+    assert set(s["floor"]["parts"]) == {"wire", "log", "period"}   # the replay's own only
+    assert s["our_solver_ms"] == pytest.approx(0.2)          # solve (wall) + prepare
+    assert s["best_with_acados"] == pytest.approx(1.5)
+    assert s["best_with_ours"] == pytest.approx(0.7)
+    assert s["floor_over_acados_runs"] == [0.4, 0.6, 0.5]
+    text = pf.table(s, "measured")
+    assert "1.50x acados' step (target <= 1.5x: reachable)" in text
+    s = pf.summary([_run(3.0, 0.6)], 1.0)
+    assert "1.60x acados' step (target <= 1.5x: out of reach)" in pf.table(s, "given")
+    s = pf.summary([_run(3.0, 0.6)], None)
+    assert "needs acados' step to be at least 1.200 ms" in pf.table(s, "-")

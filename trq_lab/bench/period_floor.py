@@ -73,6 +73,7 @@ STEP_CPU_COLUMNS = [f"cpu_{p}_ms" for p in ("observer", "effectiveness", "predic
                                             "feedback")]
 # what the loop itself measures: the replay's log differs from the recording only there
 LOOP_COLUMNS = ("cpu_wire_ms", "cpu_log_ms", "cpu_period_ms")
+_LOOP_PARTS = ("wire", "log", "period")
 
 
 class RecordingError(ValueError):
@@ -346,8 +347,11 @@ def summary(runs: list[dict], acados_ms: float | None,
     for who in ("real", "floor"):
         med[who] = {k: _median([r[who][k] for r in runs])
                     for k in ("controller_cpu_ms", "vehicle_cpu_ms", "realtime_factor")}
+        # the replay's log holds the recording's step parts (and preparation): only the
+        # loop's own measurements are the floor's
+        names = [p for p in runs[0][who]["parts"] if who == "real" or p in _LOOP_PARTS]
         med[who]["parts"] = {p: _median([r[who]["parts"][p]["mean_ms"] for r in runs])
-                             for p in runs[0][who]["parts"]}
+                             for p in names}
     real, floor = med["real"], med["floor"]
     solver_ms = real["parts"]["solve (wall)"] + real["parts"]["prepare"]
     out = {"runs": len(runs), "real": real, "floor": floor,
