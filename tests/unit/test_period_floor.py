@@ -249,4 +249,7 @@ def test_the_summary_puts_the_floor_against_acados_step():
     s = pf.summary([_run(3.0, 0.6)], 1.0)
     assert "1.60x acados' step (target <= 1.5x: out of reach)" in pf.table(s, "given")
     s = pf.summary([_run(3.0, 0.6)], None)
-    assert "needs acados' step to be at least 1.200 ms" in pf.table(s, "-")
+    s["calibration_ms"] = 4.0
+    text = pf.table(s, "-")
+    assert "needs acados' step to be at least 1.200 ms" in text
+    assert "the floor / the calibration at the end (4.00 ms): 0.150" in text

@@ -409,6 +409,11 @@ def table(s: dict, acados_label: str) -> str:
                      f"({TARGET_RATIO:g}x with a solver as fast as acados) needs acados' step to "
                      f"be at least {floor['controller_cpu_ms'] / (TARGET_RATIO - 1):.3f} ms on "
                      "this machine at this moment")
+        cal = s.get("calibration_ms")
+        if cal:
+            lines.append(f"the floor / the calibration at the end ({cal:.2f} ms): "
+                         f"{floor['controller_cpu_ms'] / cal:.3f} (to compare with a record's "
+                         "acados step over its calibration)")
     return "\n".join(lines)
 
 
@@ -507,13 +512,16 @@ def main(argv: list[str] | None = None) -> int:
         acados_ms = _median([a["total_median_ms"] for a in anchors])
         label = f"measured in this run, median of {len(anchors)}"
     s = summary(runs, acados_ms, [a["total_median_ms"] for a in anchors] or None)
+    s["calibration_ms"] = cal = calibration_ms()
     print("per run, CPU per period from outside, ms: the real controller "
           + " ".join(f"{r['real']['controller_cpu_ms']:.3f}" for r in runs) + "; the floor "
           + " ".join(f"{r['floor']['controller_cpu_ms']:.3f}" for r in runs)
           + ("; acados' step " + " ".join(f"{a['total_median_ms']:.3f}" for a in anchors)
              if anchors else ""))
     print(table(s, label))
-    cal = calibration_ms()
+    if any(r[w]["controller_cpu_ms"] <= 0 for r in runs for w in ("real", "floor")):
+        print("note: a CPU per period at or below zero: the long flight did not cost more than "
+              "the short one (flights too short for the machine's noise: lengthen --long-s)")
     print(f"calibration at the end {cal:.2f} ms")
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
