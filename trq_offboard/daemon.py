@@ -21,10 +21,11 @@ import signal
 import sys
 import time
 from pathlib import Path
+from typing import Callable
 
 import trq_params
 
-from trq_offboard.config import ConfigError, load_controller
+from trq_offboard.config import ConfigError, ControllerConfig, load_controller
 from trq_offboard.link.stream import MavlinkStream
 from trq_offboard.link.udp import MavlinkUdp
 from trq_offboard.link.wire import HOME_GROUND_DOWN_M
@@ -81,7 +82,12 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def main(argv: list[str] | None = None) -> int:
+def main(argv: list[str] | None = None,
+         make_controller: Callable[[ControllerConfig], object] | None = None) -> int:
+    """The daemon (`argv`: its options, default sys.argv's). `make_controller(cfg)` builds the
+    object the flight steps (step, reset, optional prepare: trq_offboard/loop.py's contract)
+    from the loaded configuration; None, the default: `Controller(cfg)`, the NMPC + ESO. Another
+    one is for measurement devices (trq_lab/bench/period_floor.py's replay)."""
     args = build_parser().parse_args(argv)
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO,
                         format="%(asctime)s %(name)s %(levelname)s %(message)s")
@@ -104,9 +110,11 @@ def main(argv: list[str] | None = None) -> int:
         return 2
 
     # building the NMPC takes a moment: do it before listening
-    from trq_offboard.controller import Controller
     from trq_offboard.reference import Reference
-    controller = Controller(cfg)
+    if make_controller is None:
+        from trq_offboard.controller import Controller
+        make_controller = Controller
+    controller = make_controller(cfg)
 
     log_dir = None if args.no_log else (
         args.log_dir or Path("logs") / time.strftime(f"offboard-{cfg.name}-%Y%m%d-%H%M%S"))

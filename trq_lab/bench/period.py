@@ -22,6 +22,7 @@ scenario's do (the log's cost is one of the parts).
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import socket
@@ -74,17 +75,21 @@ def _listening(port: int, proc: subprocess.Popen, timeout_s: float) -> None:
 
 
 def fly_daemons(seconds: float, controller: str, log_dir: Path,
-                python: str = sys.executable, direct: bool = False) -> dict:
+                python: str = sys.executable, direct: bool = False,
+                controller_cmd: list[str] | None = None) -> dict:
     """One lockstep flight of both daemons for `seconds` of vehicle time: CPU s of each
-    process, the vehicle's wall time (start to exit) and its exit code. `direct`: the
-    controller daemon's --direct (no worker thread)."""
+    process, the vehicle's wall time (start to exit) and both exit codes. `direct`: the
+    controller daemon's --direct (no worker thread). `controller_cmd`: the command that starts
+    the controller daemon, before its options (default `python -m trq_offboard`; another
+    program taking trq-offboard's options, e.g. trq_lab/bench/period_floor.py's replay)."""
     pv, pc, pg, pt = _free_ports(4)
     vcmd = [python, "-m", "sil_vehicle", "--duration", f"{seconds:g}", "--mode", "lockstep",
             "--offboard-bind", f"127.0.0.1:{pv}", "--offboard-target", f"127.0.0.1:{pc}",
             "--gcs-bind", f"127.0.0.1:{pg}", "--gcs-target", f"127.0.0.1:{pt}",
             "--log-dir", str(log_dir)]
-    ccmd = [python, "-m", "trq_offboard", "--controller", controller, "--connect",
-            f"udpin:127.0.0.1:{pc}", "--log-dir", str(log_dir)]
+    ccmd = list(controller_cmd or [python, "-m", "trq_offboard"])
+    ccmd += ["--controller", controller, "--connect", f"udpin:127.0.0.1:{pc}",
+             "--log-dir", str(log_dir)]
     ccmd += ["--direct"] if direct else []
     out = dict(stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     ctl = subprocess.Popen(ccmd, **out)
@@ -104,7 +109,7 @@ def fly_daemons(seconds: float, controller: str, log_dir: Path,
             ctl.kill()
             ctl_cpu = _reap(ctl)
     return {"seconds": seconds, "controller_cpu_s": ctl_cpu, "vehicle_cpu_s": veh_cpu,
-            "wall_s": wall, "vehicle_rc": veh.returncode}
+            "wall_s": wall, "vehicle_rc": veh.returncode, "controller_rc": ctl.returncode}
 
 
 def _parts(csv_path: Path, lo_s: float, hi_s: float) -> dict:
@@ -127,12 +132,19 @@ def _parts(csv_path: Path, lo_s: float, hi_s: float) -> dict:
 
 def daemons_period(short_s: float = 5.0, long_s: float = 35.0,
                    controller: str = "trq_nmpc_eso", control_rate_hz: int = 100,
-                   direct: bool = False) -> dict:
-    """The two flights and what follows from them (see the module docstring)."""
-    with tempfile.TemporaryDirectory(prefix="trq-bench-period-") as tmp:
-        short = fly_daemons(short_s, controller, Path(tmp) / "short", direct=direct)
-        long_ = fly_daemons(long_s, controller, Path(tmp) / "long", direct=direct)
-        parts = _parts(Path(tmp) / "long" / "controller.csv", short_s, long_s)
+                   direct: bool = False, controller_cmd: list[str] | None = None,
+                   log_root: Path | None = None) -> dict:
+    """The two flights and what follows from them (see the module docstring).
+    `controller_cmd`: fly_daemons'. `log_root`: the flights' logs go to its `short/` and
+    `long/` and stay (default: a temporary directory, removed)."""
+    with contextlib.ExitStack() as stack:
+        root = Path(log_root) if log_root is not None else Path(
+            stack.enter_context(tempfile.TemporaryDirectory(prefix="trq-bench-period-")))
+        short = fly_daemons(short_s, controller, root / "short", direct=direct,
+                            controller_cmd=controller_cmd)
+        long_ = fly_daemons(long_s, controller, root / "long", direct=direct,
+                            controller_cmd=controller_cmd)
+        parts = _parts(root / "long" / "controller.csv", short_s, long_s)
     periods = (long_s - short_s) * control_rate_hz
     dwall = long_["wall_s"] - short["wall_s"]
     return {
