@@ -177,13 +177,18 @@ def _walk_step_by_step(ctl, t0, t1, cut=None):
     return path, y, y_cut
 
 
+def _history_controller(delay: float) -> Controller:
+    """A controller without the effectiveness observer, on a hover solver, `delay` applied."""
+    cfg = dataclasses.replace(load_controller(CTRL), effectiveness=None, applied_delay_s=delay)
+    return Controller(cfg, solver=_HoverSolver(np.zeros(8), cfg.horizon_steps))
+
+
 @pytest.mark.parametrize("delay", [0.0, 0.004, 0.04])
 def test_actuator_walk_is_the_step_by_step_walk(delay):
     """Random histories of commands (stamps in order: regular, jittered, repeated), walks over (t0, t1]
     with and without a cut in [t0, t1], t0 = t1, the cut at t0 or t1, t0 before the oldest
     command, and no commands at all: the same path, outputs and cut outputs, bit for bit."""
-    cfg = dataclasses.replace(load_controller(CTRL), effectiveness=None, applied_delay_s=delay)
-    ctl = Controller(cfg, solver=_HoverSolver(np.zeros(8), cfg.horizon_steps))
+    ctl = _history_controller(delay)
     rng = np.random.default_rng(11)
     lo, hi = ctl._u_lo, ctl._u_hi
     for trial in range(300):
@@ -259,8 +264,7 @@ def _in_effect_spec(sent, last_u, delay, t0, t1):
 def test_commands_in_effect_are_the_command_by_command_segments(delay):
     """Random histories (in order, with repeats, out of order, empty), intervals inside,
     before, after and across them, empty ones: the same segments, bit for bit."""
-    cfg = dataclasses.replace(load_controller(CTRL), effectiveness=None, applied_delay_s=delay)
-    ctl = Controller(cfg, solver=_HoverSolver(np.zeros(8), cfg.horizon_steps))
+    ctl = _history_controller(delay)
     rng = np.random.default_rng(17)
     lo, hi = ctl._u_lo, ctl._u_hi
     for trial in range(400):
