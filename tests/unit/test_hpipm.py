@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -148,3 +150,49 @@ def test_partial_condensing_gives_the_same_solution(shim, blocks):
         out.append((x.copy(), u.copy(), pi.copy()))
     for a, c in zip(*out):
         np.testing.assert_allclose(a, c, atol=1e-6)
+
+
+def _fake_blasfeo(tmp_path, cpu_ok: int) -> Path:
+    """A libblasfeo.so whose processor check answers cpu_ok, beside a libhpipm.so path."""
+    import subprocess
+
+    from trq_offboard.nmpc import cache
+    cc = cache.find_compiler()
+    if cc is None:
+        pytest.skip("no C compiler")
+    src = tmp_path / "fake.c"
+    src.write_text("#include <string.h>\n"
+                   f"int blasfeo_processor_cpu_features(int *f) {{ *f = 0; return {cpu_ok}; }}\n"
+                   "void blasfeo_processor_library_string(char *s) { strcpy(s, \"AVX2 FMA\"); }\n")
+    subprocess.run([cc, "-shared", "-fPIC", "-o", str(tmp_path / "libblasfeo.so"), str(src)],
+                   check=True)
+    return tmp_path / "libhpipm.so"
+
+
+def test_another_build_needing_instructions_this_cpu_lacks_is_refused(tmp_path, monkeypatch):
+    """The BLASFEO beside another build's libhpipm says this processor lacks what it was built
+    for: the library is refused, naming the file and what it needs, before anything of it
+    runs."""
+    path = _fake_blasfeo(tmp_path, cpu_ok=0)
+    monkeypatch.setattr(hpipm, "_mapped", lambda p: False)     # CasADi's not loaded yet
+    with pytest.raises(OSError, match=r"lacks instructions .*libblasfeo.so.*AVX2 FMA"):
+        hpipm._load_other(path)
+
+
+def test_another_build_is_refused_where_casadis_own_is_loaded(tmp_path, monkeypatch):
+    """CasADi's libhpipm already in the process (casadi.conic's plugin): another build, which
+    shares its soname, is refused (the caller falls back to the bundled one)."""
+    path = _fake_blasfeo(tmp_path, cpu_ok=1)
+    monkeypatch.setattr(hpipm, "_mapped", lambda p: True)
+    with pytest.raises(OSError, match="CasADi's own libhpipm is already loaded"):
+        hpipm._load_other(path)
+
+
+def test_conic_is_refused_while_another_build_is_in_use(monkeypatch, tmp_path):
+    """casadi.conic('hpipm') would bind to another build's libhpipm by their common soname:
+    a clear error instead of a crash; none with the bundled library."""
+    hpipm.check_conic()                            # the bundled one (or none): allowed
+    monkeypatch.setattr(hpipm, "_LIB", object())
+    monkeypatch.setattr(hpipm, "_LIB_PATH", tmp_path / "libhpipm.so")
+    with pytest.raises(RuntimeError, match=r"cannot run in a process that loaded .*TRQ_HPIPM"):
+        hpipm.check_conic()

@@ -36,7 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["OcpQp", "available", "library_path", "MODES"]
+__all__ = ["OcpQp", "available", "library_path", "other_loaded", "check_conic", "MODES"]
 
 MODES = {"speed_abs": 0, "speed": 1, "balance": 2, "robust": 3}   # enum hpipm_mode
 # further IPM options (d_ocp_qp_ipm_arg_set_<name>, after the mode's defaults): name -> C type
@@ -141,6 +141,64 @@ def bundled_path() -> Path | None:
     return None
 
 
+_LOCAL = os.RTLD_LOCAL if hasattr(os, "RTLD_LOCAL") else 0
+BLASFEO_NAMES = ("libblasfeo.so", "libblasfeo.so.0", "libblasfeo.dylib", "blasfeo.dll")
+
+
+def _mapped(path: Path) -> bool:
+    """`path` is already mapped into this process (Linux: /proc/self/maps; elsewhere False)."""
+    try:
+        with open("/proc/self/maps", encoding="ascii", errors="replace") as f:
+            target = str(path.resolve())
+            return any(line.rstrip("\n").endswith(target) for line in f)
+    except OSError:
+        return False
+
+
+def _load_other(path: Path) -> ctypes.CDLL:
+    """Another build's libhpipm (OSError, naming the reason, if it cannot serve here). Its
+    BLASFEO beside it is loaded first, locally: the library's NEEDED entry resolves to it, and
+    its symbols stay out of CasADi's way. A BLASFEO that reports (blasfeo_processor_cpu_features)
+    that this processor lacks an instruction set it was built for is refused before any of its
+    kernels runs. CasADi's own libhpipm already in the process (casadi.conic's plugin loaded it)
+    shares this one's soname, so the compiled shim could bind to either: refused too."""
+    bundled = bundled_path()
+    if bundled is not None and _mapped(bundled):
+        raise OSError("CasADi's own libhpipm is already loaded in this process "
+                      "(casadi.conic('hpipm')): the two share a soname")
+    for name in BLASFEO_NAMES:
+        blas_path = path.parent / name
+        if not blas_path.is_file():
+            continue
+        blas = ctypes.CDLL(str(blas_path), mode=_LOCAL)
+        check = getattr(blas, "blasfeo_processor_cpu_features", None)
+        if check is not None:
+            check.restype, check.argtypes = ctypes.c_int, [ctypes.POINTER(ctypes.c_int)]
+            have = ctypes.c_int(0)
+            if check(ctypes.byref(have)) == 0:
+                need = ctypes.create_string_buffer(256)
+                blas.blasfeo_processor_library_string(need)
+                raise OSError(f"this processor lacks instructions {blas_path} was built for "
+                              f"(it needs {need.value.decode(errors='replace').strip()})")
+        break
+    return ctypes.CDLL(str(path), mode=_LOCAL)
+
+
+def other_loaded() -> Path | None:
+    """The libhpipm of another build ($TRQ_HPIPM_LIBRARY) in use in this process, or None."""
+    return _LIB_PATH if _LIB is not None and _LIB_PATH != bundled_path() else None
+
+
+def check_conic() -> None:
+    """Before casadi.conic('hpipm'): RuntimeError if another build's libhpipm is in use here
+    (CasADi's plugin would bind to it by their common soname, a different ABI)."""
+    other = other_loaded()
+    if other is not None:
+        raise RuntimeError(f"casadi.conic('hpipm') cannot run in a process that loaded {other} "
+                           f"(${LIBRARY_ENV}): CasADi's plugin would bind to it; use the direct "
+                           "interface (hpipm_interface: direct) or unset the variable")
+
+
 def _load() -> ctypes.CDLL | None:
     global _LIB, _LIB_ERROR
     if _LIB is not None or _LIB_ERROR is not None:
@@ -151,7 +209,8 @@ def _load() -> ctypes.CDLL | None:
         return None
     try:
         try:
-            lib = ctypes.CDLL(str(path), mode=os.RTLD_LOCAL if hasattr(os, "RTLD_LOCAL") else 0)
+            lib = (ctypes.CDLL(str(path), mode=_LOCAL) if path == bundled_path()
+                   else _load_other(path))
         except OSError as exc:
             if path == bundled_path():
                 raise
@@ -161,7 +220,7 @@ def _load() -> ctypes.CDLL | None:
             path = bundled_path()
             if path is None:
                 raise
-            lib = ctypes.CDLL(str(path), mode=os.RTLD_LOCAL if hasattr(os, "RTLD_LOCAL") else 0)
+            lib = ctypes.CDLL(str(path), mode=_LOCAL)
         global _LIB_PATH
         _LIB_PATH = path
         P, I, S = ctypes.c_void_p, ctypes.c_int, ctypes.c_size_t

@@ -212,6 +212,7 @@ class RtiSolver:
             # the QP: HPIPM (Riccati, stage structure detected from the sparsity)
             qp_opts = {"error_on_fail": False, "print_time": False}
             if sc.qp_solver == "hpipm":
+                hpipm.check_conic()
                 qp_opts["hpipm"] = {"iter_max": sc.qp_max_iterations, "warm_start": 0}
             elif sc.qp_solver == "qrqp":
                 qp_opts.update({"print_iter": False, "print_header": False,

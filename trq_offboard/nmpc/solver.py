@@ -24,6 +24,7 @@ import numpy as np
 
 from trq_offboard.config import ControllerConfig
 from trq_offboard.model import PredictionModel
+from trq_offboard.nmpc import hpipm
 from trq_offboard.nmpc.ocp import Ocp
 from trq_offboard.records import SolveInfo, SolveStatus
 
@@ -112,6 +113,7 @@ class SqpSolver(_Base):
         a_sp = self._lin.sparsity_out(1)
         qp_opts = {"error_on_fail": False, "print_time": False}
         if sc.qp_solver == "hpipm":
+            hpipm.check_conic()
             qp_opts["hpipm"] = {"iter_max": sc.qp_max_iterations, "warm_start": 0}
         elif sc.qp_solver == "qrqp":
             qp_opts.update({"print_iter": False, "print_header": False, "print_info": False})
