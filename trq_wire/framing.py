@@ -6,7 +6,10 @@ persistent parser of a stream: it keeps the bytes of an incomplete frame for the
 accepts a frame only when its header is plausible (a MAVLink 1 or 2 magic, known incompat flags,
 a message id of the `common` dialect with a payload no longer than that message's) and its
 checksum (with the message's CRC_EXTRA) is right; otherwise it skips one byte and looks for the
-next magic, so it re-synchronises after garbage or a cut. A message id outside the dialect cannot
+next magic, so it re-synchronises after garbage or a cut. Garbage that looks like a plausible
+header waits, as a real frame's start would, for the bytes that complete or refute it (its
+checksum): a frame right behind it comes out once the stream has carried that many more bytes
+(at most one frame's length). A message id outside the dialect cannot
 have its checksum checked and is skipped as garbage on a stream. Signatures are checked by the
 receiver (trq_wire.signing), not here.
 
