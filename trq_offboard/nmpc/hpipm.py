@@ -117,9 +117,9 @@ LIBRARY_ENV = "TRQ_HPIPM_LIBRARY"
 
 
 def library_path() -> Path | None:
-    """The libhpipm to load: $TRQ_HPIPM_LIBRARY if set (another build, e.g. one with BLASFEO's
-    AVX2 kernels; it must carry BLASFEO inside or beside it), else the one of the installed
-    CasADi (next to its own libraries), or None."""
+    """The libhpipm to load: $TRQ_HPIPM_LIBRARY if set (another build, e.g. one on BLASFEO's
+    tuned kernels: `trq-hpipm-fetch` unpacks one; its BLASFEO inside it or beside it), else the
+    one of the installed CasADi (next to its own libraries), or None."""
     other = os.environ.get(LIBRARY_ENV)
     if other:
         return Path(other)
