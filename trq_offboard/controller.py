@@ -59,6 +59,7 @@ from trq_offboard.records import (
     StepInfo,
     StepTimes,
 )
+from trq_offboard.walk import WalkPath, build_walk, run_walk, walk_sizes
 
 __all__ = ["Controller"]
 
@@ -160,6 +161,15 @@ class Controller:
         self._gains: dict[float, np.ndarray] = {}
         codegen = cfg.solver.codegen == "auto"
         self._chain_fn = self._build_chain(codegen)
+        # the walk's layout, lag chain and the observer's b0 sum in one compiled function
+        # (walk.py), in two sizes: a regular period's (the pieces of the round trip delay and
+        # one more), then a larger one for late or lost samples; the NumPy layout serves what
+        # fits neither
+        self._walk_fns = [build_walk(self._tau, self._rate_limit, self.model.b0.fn, SENT_KEPT,
+                                     PREDICT_STEP_S, codegen, pieces, substeps)
+                          for pieces, substeps in walk_sizes(cfg.applied_delay_s,
+                                                             cfg.control_dt_s)
+                          ] if self._lagged else []
         # the observer's b0 and the motors' deficit, compiled (nmpc/cache.py): the same
         # arithmetic as CasADi's interpreter and the NumPy of _motor_deficit_numpy
         self._b0_fn = NumpyFunction(compiled(self.model.b0.fn, codegen)[0])
@@ -224,6 +234,10 @@ class Controller:
     def _b0_delayed(self, x: np.ndarray, t0: float, t1: float, path=None) -> np.ndarray:
         """b0 averaged over [t0, t1] with each command acting applied_delay_s after it was sent
         (the time of the state it answered): the commands that were really in effect."""
+        if isinstance(path, WalkPath):             # the compiled walk's sum, if for these
+            got = path.b0_over(x, t0, t1)
+            if got is not None:
+                return got / (t1 - t0)
         total = np.zeros(9)
         if self._lagged:
             for a, b, y in (path if path is not None else self._actuator_path(t0, t1)):
@@ -266,7 +280,8 @@ class Controller:
         it)."""
         return self._actuator_walk(t0, t1, cut)[0]
 
-    def _actuator_walk(self, t0: float, t1: float, cut: float | None = None):
+    def _actuator_walk(self, t0: float, t1: float, cut: float | None = None,
+                       x: np.ndarray | None = None):
         """(_actuator_path(t0, t1, cut), the actuators' outputs at t1, at `cut` (in [t0, t1];
         None without one)). The commands in effect (each from its state's stamp +
         applied_delay_s until the next one's, the oldest remembered one's output held before
@@ -274,8 +289,15 @@ class Controller:
         recorded there), steps of at most PREDICT_STEP_S from t0 on, none straddling t0 or
         `cut`; the lag chain through them is one call of a compiled function (`_chain`). The
         history before t0 is laid out with NumPy (the same differences of the same floats as
-        step by step)."""
+        step by step). The compiled walk (walk.py) does all of it in one call when the layout
+        fits it (its path then also carries the observer's b0 sum for the state `x`)."""
         sent = self._sent
+        if len(sent):
+            for fn in self._walk_fns:
+                got = run_walk(fn, sent.times, sent.commands, self.cfg.applied_delay_s,
+                               t0, t1, cut, x)
+                if got is not None:
+                    return got
         if len(sent):
             starts = sent.times + self.cfg.applied_delay_s
             cmds = sent.commands
@@ -463,7 +485,7 @@ class Controller:
             # with the effectiveness observer the predictor's part (after t_s) is walked in
             # effective throttles by _effective: the healthy walk stops at t_s
             t_end = t_s if self.effectiveness is not None else t_act
-            path, y_act, y_now = self._actuator_walk(min(self._last_t, t_s), t_end, t_s)
+            path, y_act, y_now = self._actuator_walk(min(self._last_t, t_s), t_end, t_s, x)
         elif self._act_states:
             y_act = self._actuator_walk(t_act, t_act)[1]
         if self.eso is not None:

@@ -79,7 +79,7 @@ def test_compiled_eso_period_is_the_numpy_loop(name, kind):
     ref.z, ref._y_prev = fast.z.copy(), fast._y_prev.copy()
     worst = 0.0
     for k in range(300):
-        y = fast._y_prev + rng.normal(size=6) * (0.05 if k % 7 else 3.0)   # in and out of fal's band
+        y = fast._y_prev + rng.normal(size=6) * (0.05 if k % 7 else 3.0)  # in and out of fal's band
         b0 = rng.normal(size=6) * 5.0
         fast.update(y, b0)
         ref.update(y, b0)
@@ -177,43 +177,72 @@ def _walk_step_by_step(ctl, t0, t1, cut=None):
     return path, y, y_cut
 
 
-def _history_controller(delay: float) -> Controller:
+def _history_controller(delay: float, lagged: str = "auto") -> Controller:
     """A controller without the effectiveness observer, on a hover solver, `delay` applied."""
-    cfg = dataclasses.replace(load_controller(CTRL), effectiveness=None, applied_delay_s=delay)
+    cfg = dataclasses.replace(load_controller(CTRL), effectiveness=None, applied_delay_s=delay,
+                              lagged_actuators=lagged)
     return Controller(cfg, solver=_HoverSolver(np.zeros(8), cfg.horizon_steps))
+
+
+def _same_walk(got, want, why):
+    assert len(got[0]) == len(want[0]), why
+    for (a, b, ym), (a2, b2, ym2) in zip(got[0], want[0]):
+        assert (a, b) == (a2, b2) and np.array_equal(ym, ym2), why
+    assert np.array_equal(got[1], want[1]), why
+    assert (got[2] is None) == (want[2] is None), why
+    if got[2] is not None:
+        assert np.array_equal(got[2], want[2]), why
 
 
 @pytest.mark.parametrize("delay", [0.0, 0.004, 0.04])
 def test_actuator_walk_is_the_step_by_step_walk(delay):
-    """Random histories of commands (stamps in order: regular, jittered, repeated), walks over (t0, t1]
-    with and without a cut in [t0, t1], t0 = t1, the cut at t0 or t1, t0 before the oldest
-    command, and no commands at all: the same path, outputs and cut outputs, bit for bit."""
-    ctl = _history_controller(delay)
+    """Random histories of commands (stamps regular, jittered, repeated, some out of order),
+    walks over (t0, t1] with and without a cut in [t0, t1], t0 = t1, the cut at t0 or t1, t0
+    before the oldest command, gaps of lost samples, and no commands at all: the NumPy layout
+    and each compiled walk that fits (walk.py) give the same path, outputs and cut outputs as
+    the step-by-step walk, bit for bit, and the compiled b0 sum is the observer's loop's."""
+    from trq_offboard.walk import run_walk
+
+    ctl = _history_controller(delay, lagged="on")
+    fns = list(ctl._walk_fns)
+    assert len(fns) == 2
+    fitted = [0] * len(fns)
     rng = np.random.default_rng(11)
     lo, hi = ctl._u_lo, ctl._u_hi
-    for trial in range(300):
+    x = np.zeros(12)
+    for trial in range(400):
         n = int(rng.integers(0, 40))
         step = rng.choice([0.01, 0.0097])
         stamps = np.cumsum(rng.choice([step, step, 0.0, 2 * step], n)) if n else np.zeros(0)
         stamps = np.maximum.accumulate(stamps + rng.uniform(0, 1e-3, n) * (trial % 3 == 0))
+        if trial % 7 == 0 and n > 3:                      # a late sample: an older stamp last
+            stamps[-1] = stamps[-3] - 0.001
         ctl._sent = CommandHistory(32, ctl.model.nu,
                                    [(float(t), rng.uniform(lo, hi)) for t in stamps])
         ctl._last_u = rng.uniform(lo, hi)
         last = float(stamps[-1]) if n else 0.0
-        t0 = last - float(rng.choice([0.0, 0.01, 0.02, 0.5]))
-        t1 = t0 + float(rng.choice([0.0, 0.01, 0.013, delay + 0.01]))
+        t0 = last - float(rng.choice([0.0, 0.0, 0.01, 0.02, 0.5]))
+        t1 = t0 + float(rng.choice([0.0, 0.01, 0.01, 0.0102, 0.013, 0.03, delay + 0.01]))
         cut = [None, t0, t1, 0.5 * (t0 + t1), last, t0 + 0.004][trial % 6]
         if cut is not None and not t0 <= cut <= t1:      # the controller's cut: in [t0, t1]
             cut = None
-        got = ctl._actuator_walk(t0, t1, cut)
+        x = rng.normal(size=12) * 0.3
         want = _walk_step_by_step(ctl, t0, t1, cut)
-        assert len(got[0]) == len(want[0])
-        for (a, b, ym), (a2, b2, ym2) in zip(got[0], want[0]):
-            assert (a, b) == (a2, b2) and np.array_equal(ym, ym2)
-        assert np.array_equal(got[1], want[1])
-        assert (got[2] is None) == (want[2] is None)
-        if got[2] is not None:
-            assert np.array_equal(got[2], want[2]), (trial, t0, t1, cut)
+        ctl._walk_fns = []
+        _same_walk(ctl._actuator_walk(t0, t1, cut), want, ("numpy", trial))
+        ctl._walk_fns = fns
+        for i, fn in enumerate(fns):
+            got = (run_walk(fn, ctl._sent.times, ctl._sent.commands, delay, t0, t1, cut, x)
+                   if len(ctl._sent) else None)
+            if got is None:
+                continue
+            fitted[i] += 1
+            _same_walk(got, want, ("compiled", i, trial))
+            if cut is not None and cut > t0:              # the observer's b0 over (t0, cut)
+                b0 = ctl._b0_delayed(x, t0, cut, got[0])
+                loop = ctl._b0_delayed(x, t0, cut, list(got[0]))
+                assert np.array_equal(b0, loop), ("b0", i, trial)
+    assert min(fitted) >= 40, fitted                     # each size serves many of them
 
 
 def test_reference_grid_is_sampled_once_for_the_same_time():
