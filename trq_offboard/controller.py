@@ -263,6 +263,8 @@ class Controller:
             segs.append((t0, min(float(starts[0]), t1), cmds[0]))
         if t1 <= t0:                    # an empty interval: no command's piece is in it
             return segs
+        if float(starts.max()) <= t0:   # every command acts from t0 or before: the newest,
+            return [(t0, t1, cmds[-1])]  # from max(start, t0) = t0 to min(inf, t1) = t1
         # each command from its start to the next one's (the last one on), within [t0, t1]
         lo = np.maximum(starts, t0).tolist()
         hi = np.minimum(np.append(starts[1:], math.inf), t1).tolist()
