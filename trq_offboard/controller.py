@@ -106,11 +106,20 @@ def _wrap(a):
 def _interp_rows(x: np.ndarray, h: float, times: np.ndarray) -> np.ndarray:
     """Rows of x (n+1, m), sampled every h seconds from 0, linearly interpolated at `times`
     (clamped to [0, n h], as np.interp does), all columns at once: (len(times), m)."""
-    n = x.shape[0] - 1
+    return _interp_with(x, _interp_weights(x.shape[0] - 1, h, times))
+
+
+def _interp_weights(n: int, h: float, times: np.ndarray):
+    """`_interp_rows`' rows and weights for n + 1 rows: (i, i + 1, 1 - f, f)."""
     s = np.clip(times / h, 0.0, n)
     i = np.minimum(s.astype(int), n - 1)
     f = (s - i)[:, None]
-    return x[i] * (1.0 - f) + x[i + 1] * f
+    return i, i + 1, 1.0 - f, f
+
+
+def _interp_with(x: np.ndarray, w) -> np.ndarray:
+    i, i1, g, f = w
+    return x[i] * g + x[i1] * f
 
 
 class Controller:
@@ -159,6 +168,7 @@ class Controller:
         self._rate_limit = np.array([vm.servo_rate_limit_rad_s] * tilts
                                     + [vm.motor_rate_limit_pct_s] * 4)
         self._gains: dict[float, np.ndarray] = {}
+        self._shifts: dict[float, tuple] = {}     # _shift's, by elapsed time
         codegen = cfg.solver.codegen == "auto"
         self._chain_fn = self._build_chain(codegen)
         # the walk's layout, lag chain and the observer's b0 sum in one compiled function
@@ -173,8 +183,11 @@ class Controller:
         # the observer's b0 and the motors' deficit, compiled (nmpc/cache.py): the same
         # arithmetic as CasADi's interpreter and the NumPy of _motor_deficit_numpy
         self._b0_fn = NumpyFunction(compiled(self.model.b0.fn, codegen)[0])
-        self._deficit_fn = (self._build_deficit(codegen) if self.effectiveness is not None
-                            else None)
+        self._deficit_fn = (NumpyFunction(compiled(self._deficit_function(), codegen)[0])
+                            if self.effectiveness is not None else None)
+        # the regular period of _effective (one command in effect) as one compiled function
+        self._effective_fn = (NumpyFunction(compiled(self._effective_function(), codegen)[0])
+                              if self.effectiveness is not None else None)
         # the NMPC's stage carries the actuators' lag states (actuator_states): its plan starts
         # from the actuators' outputs predicted for t + delay (self._y_act)
         self._act_states = bool(getattr(getattr(self.solver, "ocp", None), "n_lag", 0))
@@ -536,12 +549,12 @@ class Controller:
         """The motors' outputs less their healthy ones y_nom (4, throttle %) that explain the
         disturbance d: one motor at a time, the one whose pattern (the model's sensitivity of
         the vertical, roll and pitch accelerations to its throttle) explains most of d[2:5]
-        with a deficit; the others 0. One call of the compiled `_build_deficit`."""
+        with a deficit; the others 0. One call of the compiled `_deficit_function`."""
         return self._deficit_fn(x, d, y_nom)
 
-    def _build_deficit(self, codegen: bool):
-        """`_motor_deficit` as one CasADi function (x, d, y_nom) -> dz, generated as C and
-        compiled once: each motor's least-squares deficit alone and its share of |r|^2
+    def _deficit_function(self) -> ca.Function:
+        """`_motor_deficit` as one CasADi function (x, d, y_nom) -> dz (generated as C and
+        compiled once): each motor's least-squares deficit alone and its share of |r|^2
         (r = d[2:5]), the first motor with the largest share (np.argmax's), and for it, if it
         explains some of r with a deficit, Gauss-Newton on |A(y + delta) - A(y) - r| (the
         thrust and torque curves are quadratic in the throttle: the change A is the mean of the
@@ -576,8 +589,29 @@ class Controller:
             best, pick = ca.if_else(better, fit[j], best), ca.if_else(better, j, pick)
         dz = ca.vertcat(*[ca.if_else(ca.logic_and(pick == j, best > 0.0), deficit[j], 0.0)
                           for j in range(4)])
-        fn = ca.Function(f"motor_deficit_{nu}", [x, d, y], [dz], ["x", "d", "y_nom"], ["dz"])
-        return NumpyFunction(compiled(fn, codegen)[0])
+        return ca.Function(f"motor_deficit_{nu}", [x, d, y], [dz], ["x", "d", "y_nom"], ["dz"])
+
+    def _effective_function(self) -> ca.Function:
+        """`_effective` over a period with one command in effect, as one CasADi function of
+        (x, d, y_nom, the effectiveness observer's y, e and last measured outputs, the
+        command's throttles c, [dur, 0, dt, n]) -> (y, e, y_meas, d less the motors' share):
+        the deficit, the observer's piece and b0(y_true) - b0(y_nom) composed symbolically,
+        each the same operations as its own compiled function in `_effective`'s order."""
+        nt, nu = self._nt, self.model.nu
+        x, d, y_nom = ca.SX.sym("x", 12), ca.SX.sym("d", 6), ca.SX.sym("y_nom", nu)
+        y, e, y0, c = (ca.SX.sym(name, 4) for name in ("y", "e", "y0", "c"))
+        p = ca.SX.sym("p", 4)
+        dz = self._deficit_function()(x, d, y_nom)
+        y_meas = y_nom[nt:] + dz
+        y1, e1, _ = self.effectiveness.piece_function()(y, e, y0, y_meas, c, p)
+        y_true = ca.vertcat(y_nom[:nt], y1)
+        b0 = self.model.b0.fn
+        share = b0(x, y_true) - b0(x, y_nom)
+        d1 = d - share[[0, 1, 2, 6, 7, 8]]
+        return ca.Function(f"effective_step_{nu}_{self.effectiveness.cfg.substeps}",
+                           [x, d, y_nom, y, e, y0, c, p], [y1, e1, y_meas, d1],
+                           ["x", "d", "y_nom", "y", "e", "y_meas_prev", "c", "p"],
+                           ["y_next", "e_next", "y_meas", "d_less_share"])
 
     def _effective(self, x, d, y_nom, t0, t1, t_act):
         """With the motor effectiveness observer: advance it over [t0, t1] and return (d less
@@ -585,19 +619,35 @@ class Controller:
         outputs at t_act, both in effective throttles). y_nom: the actuators' outputs at t1 if
         the motors were healthy (the observer's b0 flies those)."""
         nt, eff = self._nt, self.effectiveness
+        if t1 > t0:
+            segs = self._in_effect(t0, t1)
+            n = eff.piece_steps(segs[0][1] - segs[0][0]) if len(segs) == 1 else 0
+            if n and self._effective_fn is not None:     # one command in effect: one call
+                lo, hi, u = segs[0]
+                y, e, y_meas, d = self._effective_fn.outputs(
+                    x, d, y_nom, eff.y, eff.e, eff._y_meas_prev, u[nt:], (hi - lo, 0.0, t1 - t0, n))
+                eff.advance(y, e, y_meas)
+                return self._effective_end(e, y_nom, d, t1, t_act)
         dz = self._motor_deficit(x, d, y_nom)
         if t1 > t0:
             segs = [(hi - lo, u[nt:]) for lo, hi, u in self._in_effect(t0, t1)]
             e = eff.update(y_nom[nt:] + dz, segs, t1 - t0)
         else:
             e = eff.e.copy()
+        y_true = y_nom.copy()
+        y_true[nt:] = eff.y
+        share = self._b0(x, y_true) - self._b0(x, y_nom)
+        return self._effective_end(e, y_nom, d - share[[0, 1, 2, 6, 7, 8]], t1, t_act)
+
+    def _effective_end(self, e, y_nom, d, t1, t_act):
+        """`_effective`'s result once the observer has its e and outputs: the plan's throttle
+        scale and bounds, and the predictor's walk from the estimated outputs."""
+        nt = self._nt
         self._scale = np.ones(self.model.nu)
         self._scale[nt:] = e
         self.solver.ocp.set_throttle_scale(e)
         y_true = y_nom.copy()
-        y_true[nt:] = eff.y
-        share = self._b0(x, y_true) - self._b0(x, y_nom)
-        d = d - share[[0, 1, 2, 6, 7, 8]]
+        y_true[nt:] = self.effectiveness.y
         path, y_act = self._walk_from(y_true, t1, t_act, self._scale)
         return d, path, y_act
 
@@ -620,7 +670,7 @@ class Controller:
         if elapsed >= self.N * self.h:
             return
         # the plan's states from t_next on: the guess's, its first row the predicted state
-        xs = _interp_rows(self._plan[1], self.h, elapsed + self.h * np.arange(self.N + 1))
+        xs = _interp_with(self._plan[1], self._shift(elapsed)[1])
         x_pred = xs[0].copy()
         x_ref = self._reference_states(t_next, x_pred, reference)
         guess = self._guess(t_next, x_pred, self._last_d, xs)
@@ -666,11 +716,10 @@ class Controller:
         if self._plan is not None:
             u_old, x_old = self._plan
             elapsed = t_s - self._plan_t
-            times = elapsed + h * np.arange(N + 1)
             if elapsed < N * h:
-                idx = np.minimum((times[:N] / h + 1e-9).astype(int), N - 1)
+                idx, weights = self._shift(elapsed)
                 u = u_old[idx]
-                xg = _interp_rows(x_old, h, times) if xs is None else xs
+                xg = _interp_with(x_old, weights) if xs is None else xs
                 xg[:, 8] += x[8] - xg[0, 8]          # keep yaw next to the measured one
                 xg[0] = x
                 return u, xg
@@ -680,6 +729,20 @@ class Controller:
             nxt = np.asarray(self._rollout(xs[-1], u[k], d)).ravel()
             xs.append(nxt if np.all(np.isfinite(nxt)) else xs[-1])
         return u, np.array(xs)
+
+    def _shift(self, elapsed: float):
+        """The plan shifted by `elapsed` s: its input rows at elapsed + k h (k < N, held) and
+        `_interp_rows`' weights of its states at elapsed + k h (k <= N). Cached: the same
+        elapsed time (one control period, and the delay) comes back every period."""
+        got = self._shifts.get(elapsed)
+        if got is None:
+            N, h = self.N, self.h
+            times = elapsed + h * np.arange(N + 1)
+            idx = np.minimum((times[:N] / h + 1e-9).astype(int), N - 1)
+            got = (idx, _interp_weights(N, h, times))
+            if len(self._shifts) < 256:
+                self._shifts[elapsed] = got
+        return got
 
     def _fallback(self, t_s: float) -> tuple[np.ndarray, CommandSource]:
         if self._plan is not None:

@@ -74,11 +74,15 @@ class MotorEffectivenessObserver:
         self._piece_fn = self._build_piece(codegen)
 
     def _build_piece(self, codegen: bool):
-        """One piece of `update` (up to `substeps` Euler steps, n of them active) as a compiled
-        function: (y, e, y0, y_meas, c (4 each), [dur, t, dt_s, n]) -> (y, e, [t])."""
+        """`piece_function`, compiled."""
         from trq_offboard.model.dynamics import NumpyFunction
         from trq_offboard.nmpc.cache import compiled
 
+        return NumpyFunction(compiled(self.piece_function(), codegen)[0])
+
+    def piece_function(self) -> ca.Function:
+        """One piece of `update` (up to `substeps` Euler steps, n of them active) as a CasADi
+        function: (y, e, y0, y_meas, c (4 each), [dur, t, dt_s, n]) -> (y, e, [t])."""
         m, n_max = self.n, self.cfg.substeps
         y, e, y0, ym, c_in = (ca.SX.sym(name, m) for name in ("y", "e", "y0", "y_meas", "c"))
         p = ca.SX.sym("p", 4)                          # dur, t, dt_s, n
@@ -97,9 +101,22 @@ class MotorEffectivenessObserver:
             y1 = yk + h * dy
             e1 = ca.fmin(ca.fmax(ek + h * de, lo), 1.0)
             yk, ek, tk = ca.if_else(on, y1, yk), ca.if_else(on, e1, ek), ca.if_else(on, t1, tk)
-        fn = ca.Function(f"effectiveness_piece_{m}_{n_max}", [y, e, y0, ym, c_in, p],
-                         [yk, ek, tk])
-        return NumpyFunction(compiled(fn, codegen)[0])
+        return ca.Function(f"effectiveness_piece_{m}_{n_max}", [y, e, y0, ym, c_in, p],
+                           [yk, ek, tk])
+
+    def piece_steps(self, dur: float) -> int:
+        """The Euler steps `update` takes for a piece of dur s when `piece_function` serves it
+        (dur > 0, at most `substeps` steps, compiled), else 0."""
+        if dur <= 0.0 or self._piece_fn is None or self._y_meas_prev is None:
+            return 0
+        n = max(1, int(math.ceil(dur / self.h_max - 1e-9)))
+        return n if n <= self.cfg.substeps else 0
+
+    def advance(self, y: np.ndarray, e: np.ndarray, y_meas: np.ndarray) -> None:
+        """Take the state `update` would reach over a period of one piece, computed outside
+        (the controller's compiled step, from `piece_function`): outputs y, effectiveness e,
+        the measured outputs y_meas it reached."""
+        self.y, self.e, self._y_meas_prev = y, e, y_meas
 
     def reset(self, y_outputs: np.ndarray) -> None:
         """Healthy motors producing y_outputs (throttle %)."""

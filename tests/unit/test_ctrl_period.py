@@ -312,3 +312,62 @@ def test_commands_in_effect_are_the_command_by_command_segments(delay):
         assert len(got) == len(want), (trial, got, want)
         for (a, b, u), (a2, b2, u2) in zip(got, want):
             assert a == a2 and b == b2 and np.array_equal(u, u2), trial
+
+
+class _ScaledHoverSolver(_HoverSolver):
+    """The hover solver with the throttle bounds the effectiveness observer sets (recorded)."""
+
+    class _Ocp:
+        def __init__(self):
+            self.scales = []
+
+        def set_throttle_scale(self, e):
+            self.scales.append(np.array(e, float))
+
+    def __init__(self, u, n):
+        super().__init__(u, n)
+        self.ocp = self._Ocp()
+
+
+def test_compiled_effective_step_is_the_step_by_step_one():
+    """The effectiveness observer's period as one compiled call (deficit, observer piece, the
+    motors' share of d) against the same period call by call: the same estimates, outputs, d
+    and throttle bounds after every step of a flight with disturbances, regular periods, late
+    and lost samples (those take the call-by-call path in both)."""
+    cfg = load_controller(CTRL)
+    probe = Controller(dataclasses.replace(cfg, effectiveness=None),
+                       solver=_HoverSolver(np.zeros(8), cfg.horizon_steps))
+    ctls = [Controller(cfg, solver=_ScaledHoverSolver(probe.u_trim, cfg.horizon_steps))
+            for _ in range(2)]
+    ctls[1]._effective_fn = None                 # call by call
+    calls = [0]
+    fused = ctls[0]._effective_fn
+    real = fused.outputs
+
+    def counted(*args):
+        calls[0] += 1
+        return real(*args)
+    fused.outputs = counted
+    rng = np.random.default_rng(23)
+    x = np.zeros(12)
+    x[2] = -2.0
+    t = 0.0
+    for c in ctls:
+        c.reset(t, StateEstimate.from_vector(x))
+    for k in range(300):
+        t += float(rng.choice([0.01, 0.01, 0.01, 0.02, 0.0, 0.0103]))
+        x[3:6] += rng.normal(size=3) * 0.02 + (0.0, 0.0, 0.004 if k > 100 else 0.0)   # sinking
+        x[6:9] += rng.normal(size=3) * 0.002
+        x[9:12] = rng.normal(size=3) * 0.05
+        s = StateEstimate.from_vector(x)
+        out = [c.step(t, s, None, _Const()) for c in ctls]
+        a, b = ctls
+        assert out[0][0] == out[1][0], k
+        assert np.array_equal(a._last_d, b._last_d), k
+        for name in ("e", "y", "_y_meas_prev"):
+            assert np.array_equal(getattr(a.effectiveness, name),
+                                  getattr(b.effectiveness, name)), (k, name)
+        assert np.array_equal(a._scale, b._scale)
+        assert np.array_equal(a.solver.ocp.scales[-1], b.solver.ocp.scales[-1])
+    assert calls[0] > 150                        # the compiled call served most periods
+    assert np.min(ctls[0].effectiveness.e) < 1.0  # and the deficit was read
