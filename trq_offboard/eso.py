@@ -103,6 +103,8 @@ class ExtendedStateObserver:
         self._y_prev = np.zeros(6)
         lim_t, lim_r = cfg.max_disturbance
         self._lim = np.array([lim_t] * 3 + [lim_r] * 3)
+        self._neg_lim = -self._lim
+        self._any_angle = bool(self._angles.any())
         self._acol = np.array(self.alpha, float).reshape(3, 1)   # fal's exponent per row
         self._period_fn = self._build_period(codegen)
 
@@ -227,17 +229,18 @@ class ExtendedStateObserver:
     def output_error(self, y: np.ndarray) -> float:
         """(y_hat - y)^T (y_hat - y) of the current estimate (angles wrapped)."""
         e = self.z[0] - np.asarray(y, float)
-        e[self._angles] = _wrap(e[self._angles])
+        if self._any_angle:
+            e[self._angles] = _wrap(e[self._angles])
         return float(e @ e)
 
     def disturbance(self, euler_rad: np.ndarray) -> np.ndarray:
         """d (6) for the prediction model: NED acceleration, body angular acceleration."""
         if self._rates:                                     # x3 is already a body acceleration
-            return np.clip(self.z[2], -self._lim, self._lim)
+            return np.minimum(np.maximum(self.z[2], self._neg_lim), self._lim)   # np.clip's
         roll, pitch = float(euler_rad[0]), float(euler_rad[1])
         sr, cr = math.sin(roll), math.cos(roll)
         sp, cp = math.sin(pitch), math.cos(pitch)
         # W^-1 (eta_dot -> omega), ZYX
         w_inv = np.array([[1.0, 0.0, -sp], [0.0, cr, sr * cp], [0.0, -sr, cr * cp]])
         d = np.concatenate([self.z[2, 0:3], w_inv @ self.z[2, 3:6]])
-        return np.clip(d, -self._lim, self._lim)
+        return np.minimum(np.maximum(d, self._neg_lim), self._lim)
