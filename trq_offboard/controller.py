@@ -47,7 +47,7 @@ from trq_offboard.effectiveness import MotorEffectivenessObserver
 from trq_offboard.eso import ExtendedStateObserver
 from trq_offboard.model import PredictionModel
 from trq_offboard.model.dynamics import NumpyFunction
-from trq_offboard.nmpc.cache import compiled
+from trq_offboard.nmpc.cache import compiled_many
 from trq_offboard.nmpc.solver import Solver, make_solver
 from trq_offboard.records import (
     ActuatorCommand,
@@ -59,7 +59,7 @@ from trq_offboard.records import (
     StepInfo,
     StepTimes,
 )
-from trq_offboard.walk import WalkPath, build_walk, run_walk, walk_sizes
+from trq_offboard.walk import WalkPath, run_walk, walk_function, walk_sizes
 
 __all__ = ["Controller"]
 
@@ -169,25 +169,27 @@ class Controller:
                                     + [vm.motor_rate_limit_pct_s] * 4)
         self._gains: dict[float, np.ndarray] = {}
         self._shifts: dict[float, tuple] = {}     # _shift's, by elapsed time
-        codegen = cfg.solver.codegen == "auto"
-        self._chain_fn = self._build_chain(codegen)
-        # the walk's layout, lag chain and the observer's b0 sum in one compiled function
-        # (walk.py), in two sizes: a regular period's (the pieces of the round trip delay and
-        # one more), then a larger one for late or lost samples; the NumPy layout serves what
-        # fits neither
-        self._walk_fns = [build_walk(self._tau, self._rate_limit, self.model.b0.fn, SENT_KEPT,
-                                     PREDICT_STEP_S, codegen, pieces, substeps)
-                          for pieces, substeps in walk_sizes(cfg.applied_delay_s,
-                                                             cfg.control_dt_s)
-                          ] if self._lagged else []
-        # the observer's b0 and the motors' deficit, compiled (nmpc/cache.py): the same
-        # arithmetic as CasADi's interpreter and the NumPy of _motor_deficit_numpy
-        self._b0_fn = NumpyFunction(compiled(self.model.b0.fn, codegen)[0])
-        self._deficit_fn = (NumpyFunction(compiled(self._deficit_function(), codegen)[0])
-                            if self.effectiveness is not None else None)
-        # the regular period of _effective (one command in effect) as one compiled function
-        self._effective_fn = (NumpyFunction(compiled(self._effective_function(), codegen)[0])
-                              if self.effectiveness is not None else None)
+        # the controller's own functions, compiled (nmpc/cache.py; in parallel, one per core):
+        # the lag chain; the observer's b0; the walk's layout, lag chain and the observer's b0
+        # sum in one function (walk.py), in two sizes: a regular period's (the pieces of the
+        # round trip delay and one more), then a larger one for late or lost samples (the
+        # NumPy layout serves what fits neither); the motors' deficit and the regular period
+        # of _effective (one command in effect) in one
+        fns = {"chain": self._chain_function(), "b0": self.model.b0.fn}
+        if self._lagged:
+            for i, (pieces, substeps) in enumerate(walk_sizes(cfg.applied_delay_s,
+                                                              cfg.control_dt_s)):
+                fns[f"walk{i}"] = walk_function(self._tau, self._rate_limit, self.model.b0.fn,
+                                                SENT_KEPT, PREDICT_STEP_S, pieces, substeps)
+        if self.effectiveness is not None:
+            fns["deficit"] = self._deficit_function()
+            fns["effective"] = self._effective_function()
+        built = {name: NumpyFunction(fn) for name, (fn, _) in
+                 zip(fns, compiled_many(list(fns.values()), cfg.solver.codegen == "auto"))}
+        self._chain_fn, self._b0_fn = built["chain"], built["b0"]
+        self._walk_fns = [built[name] for name in built if name.startswith("walk")]
+        self._deficit_fn = built.get("deficit")
+        self._effective_fn = built.get("effective")
         # the NMPC's stage carries the actuators' lag states (actuator_states): its plan starts
         # from the actuators' outputs predicted for t + delay (self._y_act)
         self._act_states = bool(getattr(getattr(self.solver, "ocp", None), "n_lag", 0))
@@ -380,10 +382,10 @@ class Controller:
             y_in[:] = ys[s0 + k - 1]
         return ys, mids
 
-    def _build_chain(self, codegen: bool):
-        """The lag chain of `_chain` as one CasADi function, generated as C and compiled once
-        (nmpc/cache.py): (y0 (m), u (m x K), [h; h/2] (2 x K)) -> (outputs after each step,
-        midpoints) (m x K each); a step with h < 0 leaves y as it is. Each step is `_lag`'s
+    def _chain_function(self) -> ca.Function:
+        """The lag chain of `_chain` as one CasADi function (generated as C and compiled
+        once): (y0 (m), u (m x K), [h; h/2] (2 x K)) -> (outputs after each step, midpoints)
+        (m x K each); a step with h < 0 leaves y as it is. Each step is `_lag`'s
         arithmetic in the same order, its gain `_lag_gain`'s: 1 - exp(-h / T) as -expm1(-h / T)
         (libm's expm1), 1 where T = 0."""
         m, K = self.model.nu, CHAIN_STEPS
@@ -407,9 +409,8 @@ class Controller:
             y1 = y + ca.fmin(ca.fmax(gain(H[0, k]) * (u - y), -lim), lim)
             y = ca.if_else(H[0, k] >= 0, y1, y)
             outs.append(y)
-        fn = ca.Function(f"actuator_chain_expm1_{m}_{K}", [y0, U, H],
-                         [ca.horzcat(*outs), ca.horzcat(*mids)])
-        return NumpyFunction(compiled(fn, codegen)[0])
+        return ca.Function(f"actuator_chain_expm1_{m}_{K}", [y0, U, H],
+                           [ca.horzcat(*outs), ca.horzcat(*mids)])
 
     def _walk_from(self, y0: np.ndarray, t0: float, t1: float, scale: np.ndarray):
         """(path, outputs at t1) of the actuators from y0 at t0 under the commands in effect

@@ -36,10 +36,7 @@ import math
 import casadi as ca
 import numpy as np
 
-from trq_offboard.model.dynamics import NumpyFunction
-from trq_offboard.nmpc.cache import compiled
-
-__all__ = ["WalkPath", "build_walk", "run_walk", "walk_sizes"]
+__all__ = ["WalkPath", "walk_function", "run_walk", "walk_sizes"]
 
 
 def walk_sizes(delay_s: float, period_s: float) -> list[tuple[int, int]]:
@@ -49,11 +46,11 @@ def walk_sizes(delay_s: float, period_s: float) -> list[tuple[int, int]]:
     first size fits a regular period with some jitter (the slots are evaluated whether active
     or not: the smallest that fits costs least); the second a few lost samples."""
     pieces = 2 + max(0, math.ceil(delay_s / period_s - 1e-9))
-    return [(pieces, 3), (pieces + 2, 6)]
+    return [(pieces, 3), (pieces + 2, 4)]
 
 
-def build_walk(tau: np.ndarray, rate: np.ndarray, b0_fn: ca.Function, kept: int,
-               step_s: float, codegen: bool, pieces: int, substeps: int) -> NumpyFunction:
+def walk_function(tau: np.ndarray, rate: np.ndarray, b0_fn: ca.Function, kept: int,
+                  step_s: float, pieces: int, substeps: int) -> ca.Function:
     """The walk above for actuators with time constants `tau` (m; 0: no lag) and rate limits
     `rate`, `kept` remembered commands, steps of at most `step_s`; `b0_fn` the model's (x, u)
     -> accelerations (9), an SXFunction (inlined)."""
@@ -103,7 +100,7 @@ def build_walk(tau: np.ndarray, rate: np.ndarray, b0_fn: ca.Function, kept: int,
         split = ca.logic_and(a0 < cut, cut < b_end)
         parts = ((a0, ca.if_else(split, cut, b_end), recent[p]),
                  (cut, b_end, ca.logic_and(recent[p], split)))
-        for a, b, part_on in parts:
+        for part, (a, b, part_on) in enumerate(parts):
             n = ca.fmax(1.0, ca.ceil((b - a) / step_s - 1e-9))
             overflow = ca.logic_or(overflow, ca.logic_and(part_on, n > substeps))
             h = (b - a) / n
@@ -117,9 +114,10 @@ def build_walk(tau: np.ndarray, rate: np.ndarray, b0_fn: ca.Function, kept: int,
                 at_cut = ca.logic_and(last, b == cut)
                 has_cut = ca.if_else(at_cut, 1, has_cut)
                 y_cut = ca.if_else(at_cut, y, y_cut)
-                centre = 0.5 * (s + e)
-                use = ca.logic_and(on, ca.logic_and(t0 < centre, centre < cut))
-                b0 = ca.if_else(use, b0 + (e - s) * b0_fn(x, mid), b0)
+                if part == 0:     # after the cut s >= cut, so the midpoint is never below it
+                    centre = 0.5 * (s + e)
+                    use = ca.logic_and(on, ca.logic_and(t0 < centre, centre < cut))
+                    b0 = ca.if_else(use, b0 + (e - s) * b0_fn(x, mid), b0)
                 out_a.append(s)
                 out_b.append(e)
                 out_on.append(on)
@@ -128,10 +126,8 @@ def build_walk(tau: np.ndarray, rate: np.ndarray, b0_fn: ca.Function, kept: int,
     outs = [y, y_cut, b0, ca.vertcat(*out_a), ca.vertcat(*out_b), ca.vertcat(*out_on),
             ca.horzcat(*out_mid), overflow]
     name = f"actuator_walk_{m}_{K}_{pieces}_{substeps}"
-    fn = ca.Function(name, [starts, U, tt, x], ca.cse(outs),
-                     ["starts", "u", "t", "x"],
-                     ["y", "y_cut", "b0", "a", "b", "on", "y_mid", "overflow"])
-    return NumpyFunction(compiled(fn, codegen)[0])
+    return ca.Function(name, [starts, U, tt, x], ca.cse(outs), ["starts", "u", "t", "x"],
+                       ["y", "y_cut", "b0", "a", "b", "on", "y_mid", "overflow"])
 
 
 class WalkPath:
@@ -171,9 +167,9 @@ class WalkPath:
         return None
 
 
-def run_walk(fn: NumpyFunction, times: np.ndarray, commands: np.ndarray, delay_s: float,
+def run_walk(fn, times: np.ndarray, commands: np.ndarray, delay_s: float,
              t0: float, t1: float, cut: float | None, x: np.ndarray | None):
-    """(WalkPath, y at t1, y at the cut or None) of `build_walk`'s function over the remembered
+    """(WalkPath, y at t1, y at the cut or None) of `walk_function`, compiled, over the remembered
     commands (times (n >= 1), commands (n, m), n <= kept), or None when the layout overflows."""
     st, u, tt, xin = fn.args
     K = st.size
