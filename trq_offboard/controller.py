@@ -561,8 +561,8 @@ class Controller:
         thrust and torque curves are quadratic in the throttle: the change A is the mean of the
         two end slopes times delta, exactly) from the tangent's estimate, 3 steps (quadratic
         convergence), clamped to a deficit. Every motor's candidate is computed and the chosen
-        one selected: the same operations in the same order as the step-by-step
-        `_motor_deficit_numpy`, which a test holds it to."""
+        one selected: the same operations in the same order as the plain-float specification
+        that a test (test_ctrl_effectiveness.py) holds it to."""
         nt, nu = self._nt, self.model.nu
         jac_fn = self.model.motor_jacobian.fn
         x, d, y = ca.SX.sym("x", 12), ca.SX.sym("d", 6), ca.SX.sym("y_nom", nu)
@@ -620,19 +620,17 @@ class Controller:
         outputs at t_act, both in effective throttles). y_nom: the actuators' outputs at t1 if
         the motors were healthy (the observer's b0 flies those)."""
         nt, eff = self._nt, self.effectiveness
-        if t1 > t0:
-            segs = self._in_effect(t0, t1)
-            n = eff.piece_steps(segs[0][1] - segs[0][0]) if len(segs) == 1 else 0
-            if n and self._effective_fn is not None:     # one command in effect: one call
-                lo, hi, u = segs[0]
-                y, e, y_meas, d = self._effective_fn.outputs(
-                    x, d, y_nom, eff.y, eff.e, eff._y_meas_prev, u[nt:], (hi - lo, 0.0, t1 - t0, n))
-                eff.advance(y, e, y_meas)
-                return self._effective_end(e, y_nom, d, t1, t_act)
+        segs = self._in_effect(t0, t1) if t1 > t0 else []
+        n = eff.piece_steps(segs[0][1] - segs[0][0]) if len(segs) == 1 else 0
+        if n and self._effective_fn is not None:         # one command in effect: one call
+            lo, hi, u = segs[0]
+            y, e, y_meas, d = self._effective_fn.outputs(
+                x, d, y_nom, eff.y, eff.e, eff._y_meas_prev, u[nt:], (hi - lo, 0.0, t1 - t0, n))
+            eff.advance(y, e, y_meas)
+            return self._effective_end(e, y_nom, d, t1, t_act)
         dz = self._motor_deficit(x, d, y_nom)
         if t1 > t0:
-            segs = [(hi - lo, u[nt:]) for lo, hi, u in self._in_effect(t0, t1)]
-            e = eff.update(y_nom[nt:] + dz, segs, t1 - t0)
+            e = eff.update(y_nom[nt:] + dz, [(hi - lo, u[nt:]) for lo, hi, u in segs], t1 - t0)
         else:
             e = eff.e.copy()
         y_true = y_nom.copy()
