@@ -131,7 +131,7 @@ def test_garbage_on_the_serial_line_costs_time_not_the_flight(udp_flight, daemon
     def spray(pair: PtyPair) -> None:
         # bursts that look like MAVLink (magics, plausible headers) into both ends
         junk = bytes([0xFD, 0x09, 0x00, 0x00, 0x07, 0x01, 0x01, 0x00, 0x00, 0x00, 0x55]) * 3
-        while not stop.wait(0.05):
+        while not stop.wait(0.01):   # the flight outruns a slower spray
             t = controller_time(csv)
             if 1.5 <= t <= 4.0:
                 for end in (pair.a, pair.b):
