@@ -238,7 +238,8 @@ def offboard_link(link: str, p_vehicle: int, p_ctrl: int, pair=None
 
 def fly(scenario: Scenario, run: Run, realtime: bool, lock: threading.Lock,
         signing_key_file: Path | None = None, controller_prefix: tuple[str, ...] = (),
-        vehicle_prefix: tuple[str, ...] = (), link: str = "udp") -> None:
+        vehicle_prefix: tuple[str, ...] = (), link: str = "udp",
+        controller_args: tuple[str, ...] = ()) -> None:
     from trq_lab.ptypair import PtyPair
 
     ctrl_yaml, sim_yaml, vehicle_file, _ = prepare(scenario, run.source or run.controller,
@@ -249,7 +250,7 @@ def fly(scenario: Scenario, run: Run, realtime: bool, lock: threading.Lock,
     try:
         vlink, connect = offboard_link(link, p_vehicle, p_ctrl, pair)
         _fly(scenario, run, realtime, ctrl_yaml, sim_yaml, vehicle_file, vlink, connect, p_gcs,
-             signing_key_file, controller_prefix, vehicle_prefix)
+             signing_key_file, controller_prefix, vehicle_prefix, controller_args)
     finally:
         if pair is not None:
             pair.close()
@@ -258,7 +259,7 @@ def fly(scenario: Scenario, run: Run, realtime: bool, lock: threading.Lock,
 def _fly(scenario: Scenario, run: Run, realtime: bool, ctrl_yaml: Path, sim_yaml: Path,
          vehicle_file: Path, vlink: list[str], connect: str, p_gcs: int,
          signing_key_file: Path | None, controller_prefix: tuple[str, ...],
-         vehicle_prefix: tuple[str, ...]) -> None:
+         vehicle_prefix: tuple[str, ...], controller_args: tuple[str, ...] = ()) -> None:
     vcmd = [sys.executable, "-m", "sil_vehicle", "--sim", str(sim_yaml), "--vehicle",
             str(vehicle_file), "--seed", str(scenario.seed), "--wind-speed",
             str(scenario.wind_speed_m_s), "--wind-dir", str(scenario.wind_from_deg),
@@ -276,7 +277,7 @@ def _fly(scenario: Scenario, run: Run, realtime: bool, ctrl_yaml: Path, sim_yaml
         else 0.0)
     ccmd = [sys.executable, "-m", "trq_offboard", "--controller", str(ctrl_yaml), "--connect",
             connect, "--log-dir", str(run.out),
-            "--applied-delay-s", f"{delay_s:g}"]
+            "--applied-delay-s", f"{delay_s:g}", *controller_args]
     if signing_key_file is not None:
         vcmd += ["--signing-key-file", str(signing_key_file)]
         ccmd += ["--signing-key-file", str(signing_key_file)]
@@ -450,6 +451,9 @@ def main(argv: list[str] | None = None) -> int:
                          "or 'nice -n 10' (trq-bench-cpu-budget uses it for a CPU quota)")
     ap.add_argument("--vehicle-prefix", default=None, metavar="CMD",
                     help="run each vehicle process under this command, e.g. 'taskset -c 0'")
+    ap.add_argument("--controller-args", default=None, metavar="ARGS",
+                    help="more options for each controller process (trq-offboard's), given "
+                         "with '=': --controller-args=--direct")
     ap.add_argument("--signing-key-file", type=Path, default=None,
                     help="fly with MAVLink 2 signing (both daemons get the key file)")
     ap.add_argument("--link", choices=LINKS, default="udp",
@@ -461,6 +465,14 @@ def main(argv: list[str] | None = None) -> int:
     except ConfigError as exc:
         print(f"trq-scenario: {exc}", file=sys.stderr)
         return 2
+    if args.controller_args:        # checked by the controller's own parser before any flight
+        from trq_offboard.daemon import build_parser
+        try:
+            build_parser().parse_args(shlex.split(args.controller_args))
+        except SystemExit:
+            print(f"trq-scenario: --controller-args {args.controller_args!r}: not options of "
+                  "trq-offboard (its error above)", file=sys.stderr)
+            return 2
     sources = args.controller or list(scenario.controllers)
     sources = [c for c in sources if not args.only or c in args.only]
     names = [Path(c).stem if not trq_params.is_name(c) else c for c in sources]
@@ -507,7 +519,8 @@ def main(argv: list[str] | None = None) -> int:
                 t = threading.Thread(target=fly, args=(
                     scenario, run, args.realtime, lock, args.signing_key_file,
                     tuple(shlex.split(args.controller_prefix or "")),
-                    tuple(shlex.split(args.vehicle_prefix or "")), args.link))
+                    tuple(shlex.split(args.vehicle_prefix or "")), args.link,
+                    tuple(shlex.split(args.controller_args or ""))))
                 t.start()
                 active.append(t)
             time.sleep(0.2)

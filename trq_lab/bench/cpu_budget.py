@@ -11,9 +11,15 @@ which needs root). A quota of a third is the closest this machine comes to a com
 three times slower per core: the controller runs at full speed for a third of each period and
 waits for the rest, so the granularity of the period (4 ms by default, the kernel's minimum quota
 being 1 ms) adds to the latency of a step that overruns its share. It prints, per share: the
-scenario's outcome (its targets met or not), the tracking after the fault, the solve times, and how
-often and how long the kernel held the controller back; and the tracking as a ratio of the
-anchor's, so that what degrades first is read off one table.
+scenario's outcome (its targets met or not), the tracking after the fault, the solve times, the
+controller's own CPU per control period (every thread of its process, from its controller.csv),
+and how often and how long the kernel held the controller back; and the tracking as a ratio of
+the anchor's, so that what degrades first is read off one table.
+
+`--direct` flies the controller with trq-offboard's `--direct` (the flight loop calls the
+controller itself, no worker thread: a companion computer whose core is the controller's alone).
+The controller loads the HPIPM that `$TRQ_HPIPM_LIBRARY` names (trq-hpipm-fetch), else CasADi's
+bundled one; the header says which.
 """
 
 from __future__ import annotations
@@ -28,7 +34,10 @@ from dataclasses import asdict, dataclass
 from fractions import Fraction
 from pathlib import Path
 
+import numpy as np
+
 import trq_params
+from trq_offboard.nmpc.hpipm import LIBRARY_ENV
 
 CGROUP_V1 = Path("/sys/fs/cgroup/cpu")
 CGROUP_V2 = Path("/sys/fs/cgroup")
@@ -107,20 +116,25 @@ class Row:
     max_yaw_err_deg: float | None
     solve_ms_p50: float | None
     solve_ms_p99: float | None
+    cpu_period_ms_p50: float | None = None
+    cpu_period_ms_p99: float | None = None
     periods: int = 0
     throttled_periods: int = 0
     throttled_s: float = 0.0
 
 
 def fly(scenario: str, controller: str, share: float, period_us: int, out: Path,
-        name: str) -> Row:
-    """One real-time flight of `controller` in `scenario` at `share` of a core."""
+        name: str, direct: bool = False) -> Row:
+    """One real-time flight of `controller` in `scenario` at `share` of a core (`direct`: the
+    controller daemon with --direct)."""
     quota = None if share >= 1.0 else CpuQuota(name, share, period_us)
     try:
         prefix = quota.prefix(1) if quota else "taskset -c 1"
         cmd = [sys.executable, "-m", "trq_lab.scenario", scenario, "--realtime", "--only",
                controller, "--out", str(out), "--no-figures", "--jobs", "1",
                "--controller-prefix", prefix, "--vehicle-prefix", "taskset -c 0"]
+        if direct:
+            cmd.append("--controller-args=--direct")
         out.mkdir(parents=True, exist_ok=True)
         with open(out / "run.log", "w") as log:
             rc = subprocess.run(cmd, stdout=log, stderr=subprocess.STDOUT).returncode
@@ -133,8 +147,25 @@ def fly(scenario: str, controller: str, share: float, period_us: int, out: Path,
                 if r.get("controller") == controller]
     except (OSError, ValueError, KeyError):
         m = {}
+    period = period_cpu_ms(out / controller / "controller.csv")
     return Row(share, rc, rc == 0, m.get("crashed"), m.get("rmse_pos_after_fault_m"),
-               m.get("max_yaw_err_deg"), m.get("solve_ms_p50"), m.get("solve_ms_p99"), **held)
+               m.get("max_yaw_err_deg"), m.get("solve_ms_p50"), m.get("solve_ms_p99"),
+               *period, **held)
+
+
+def period_cpu_ms(path: Path) -> tuple[float | None, float | None]:
+    """(p50, p99) of the controller's CPU per control period (cpu_period_ms: every thread of its
+    process) over the steps of its log; (None, None) without one."""
+    from trq_lab.metrics import read_csv
+    try:
+        _, cols = read_csv(path)
+        v = np.asarray(cols["cpu_period_ms"], float)
+    except (OSError, KeyError, ValueError):
+        return None, None
+    v = v[np.isfinite(v)]
+    if not v.size:
+        return None, None
+    return float(np.percentile(v, 50)), float(np.percentile(v, 99))
 
 
 def table(rows: list[Row]) -> str:
@@ -144,8 +175,9 @@ def table(rows: list[Row]) -> str:
         return "-" if v is None else format(v, fmt)
 
     lines = ["| CPU share | targets met | crashed | pos RMSE after fault m | x the whole core "
-             "| max yaw err deg | solve p50 / p99 ms | throttled periods | held back s |",
-             "|---|---|---|---|---|---|---|---|---|"]
+             "| max yaw err deg | solve p50 / p99 ms | CPU a period p50 / p99 ms "
+             "| throttled periods | held back s |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         ratio = (r.rmse_pos_after_fault_m / anchor.rmse_pos_after_fault_m
                  if anchor and r.rmse_pos_after_fault_m is not None else None)
@@ -154,6 +186,7 @@ def table(rows: list[Row]) -> str:
             f"| {num(r.rmse_pos_after_fault_m, '.4f')} | {num(ratio, '.1f')} "
             f"| {num(r.max_yaw_err_deg, '.2f')} "
             f"| {num(r.solve_ms_p50, '.2f')} / {num(r.solve_ms_p99, '.2f')} "
+            f"| {num(r.cpu_period_ms_p50, '.2f')} / {num(r.cpu_period_ms_p99, '.2f')} "
             f"| {r.throttled_periods} of {r.periods} | {r.throttled_s:.2f} |")
     return "\n".join(lines)
 
@@ -173,6 +206,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="the quota's period in microseconds (default 4000)")
     ap.add_argument("--out", type=Path, default=Path("out/cpu_budget"), help="output folder")
     ap.add_argument("--json", type=Path, default=None, help="also write the rows as JSON")
+    ap.add_argument("--direct", action="store_true",
+                    help="fly the controller daemon with --direct (no worker thread)")
     args = ap.parse_args(argv)
     try:
         shares = [float(Fraction(s)) for s in args.shares.split(",")]
@@ -194,12 +229,16 @@ def main(argv: list[str] | None = None) -> int:
     from trq_lab.bench.nmpc import machine_line
 
     print(machine_line())
-    print(f"{args.scenario} in real time, {args.controller}, quota period {args.period_us} us")
+    print(f"{args.scenario} in real time, {args.controller}"
+          f"{' (--direct)' if args.direct else ''}, quota period {args.period_us} us; HPIPM: "
+          + (f"${LIBRARY_ENV}={os.environ[LIBRARY_ENV]}" if os.environ.get(LIBRARY_ENV)
+             else "CasADi's bundled library"))
     rows = []
     try:
         for k, share in enumerate(shares):
             row = fly(args.scenario, args.controller, share, args.period_us,
-                      args.out / f"share_{share:.3f}", f"trq-cpu-budget-{os.getpid()}-{k}")
+                      args.out / f"share_{share:.3f}", f"trq-cpu-budget-{os.getpid()}-{k}",
+                      args.direct)
             print(f"  share {share:.3f}: exit {row.exit_code}, RMSE after fault "
                   f"{row.rmse_pos_after_fault_m}, crashed {row.crashed}", flush=True)
             rows.append(row)
