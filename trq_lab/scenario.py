@@ -236,6 +236,11 @@ def offboard_link(link: str, p_vehicle: int, p_ctrl: int, pair=None
              f"127.0.0.1:{p_ctrl}"], f"udpin:127.0.0.1:{p_ctrl}")
 
 
+# trq-offboard's options that every flight of a scenario sets itself (--controller-args may not)
+SCENARIO_SETS = ("controller", "connect", "log_dir", "no_log", "applied_delay_s",
+                 "signing_key_file", "reference")
+
+
 def fly(scenario: Scenario, run: Run, realtime: bool, lock: threading.Lock,
         signing_key_file: Path | None = None, controller_prefix: tuple[str, ...] = (),
         vehicle_prefix: tuple[str, ...] = (), link: str = "udp",
@@ -467,11 +472,19 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     if args.controller_args:        # checked by the controller's own parser before any flight
         from trq_offboard.daemon import build_parser
+        parser = build_parser()
         try:
-            build_parser().parse_args(shlex.split(args.controller_args))
+            given = parser.parse_args(shlex.split(args.controller_args))
         except SystemExit:
             print(f"trq-scenario: --controller-args {args.controller_args!r}: not options of "
                   "trq-offboard (its error above)", file=sys.stderr)
+            return 2
+        # what the scenario sets itself (abbreviations included: compared by value)
+        taken = [dest for dest in SCENARIO_SETS if getattr(given, dest) != parser.get_default(dest)]
+        if taken:
+            print(f"trq-scenario: --controller-args {args.controller_args!r}: sets "
+                  f"{', '.join('--' + d.replace('_', '-') for d in taken)}, which every flight "
+                  "of the scenario sets itself", file=sys.stderr)
             return 2
     sources = args.controller or list(scenario.controllers)
     sources = [c for c in sources if not args.only or c in args.only]

@@ -90,3 +90,15 @@ def test_scenario_refuses_controller_args_the_controller_does_not_take(tmp_path,
     err = capsys.readouterr().err
     assert "--bogus" in err and "not options of trq-offboard" in err
     assert not (tmp_path / "out").exists()               # nothing flown, nothing written
+
+
+@pytest.mark.parametrize("extra, named", [("--connect udpin:0.0.0.0:1", "--connect"),
+                                          ("--log-d /tmp/x", "--log-dir"),   # abbreviated
+                                          ("--direct --no-log", "--no-log"),
+                                          ("--applied-delay-s 0.1", "--applied-delay-s")])
+def test_scenario_refuses_controller_args_it_sets_itself(tmp_path, capsys, extra, named):
+    rc = scenario.main(["smoke", "--out", str(tmp_path / "out"), f"--controller-args={extra}"])
+    assert rc == 2
+    err = capsys.readouterr().err
+    assert named in err and "sets itself" in err
+    assert not (tmp_path / "out").exists()

@@ -35,9 +35,9 @@ from fractions import Fraction
 from pathlib import Path
 
 import numpy as np
-
 import trq_params
-from trq_offboard.nmpc.hpipm import LIBRARY_ENV
+
+from trq_lab.metrics import read_csv
 
 CGROUP_V1 = Path("/sys/fs/cgroup/cpu")
 CGROUP_V2 = Path("/sys/fs/cgroup")
@@ -156,7 +156,6 @@ def fly(scenario: str, controller: str, share: float, period_us: int, out: Path,
 def period_cpu_ms(path: Path) -> tuple[float | None, float | None]:
     """(p50, p99) of the controller's CPU per control period (cpu_period_ms: every thread of its
     process) over the steps of its log; (None, None) without one."""
-    from trq_lab.metrics import read_csv
     try:
         _, cols = read_csv(path)
         v = np.asarray(cols["cpu_period_ms"], float)
@@ -227,6 +226,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"trq-bench-cpu-budget: {exc}", file=sys.stderr)
         return 2
     from trq_lab.bench.nmpc import machine_line
+    from trq_offboard.nmpc.hpipm import LIBRARY_ENV
 
     print(machine_line())
     print(f"{args.scenario} in real time, {args.controller}"
