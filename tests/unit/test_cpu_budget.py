@@ -13,18 +13,18 @@ from conftest import PARAMS
 from trq_lab import scenario
 from trq_lab.bench import cpu_budget
 
-HEADER = "# controller: trq_nmpc_eso\nt_s,solve_ms,cpu_period_ms\n"
+HEADER = "# controller: trq_nmpc_eso\nt_s,stamp_us,solve_ms,cpu_period_ms\n"
 
 
 def test_period_cpu_from_the_log(tmp_path):
     csv = tmp_path / "controller.csv"
     # 100 periods of 1..100 ms, and one row without the column's value (nan): left out
-    csv.write_text(HEADER + "".join(f"{k / 100},0.5,{k}\n" for k in range(1, 101))
-                   + "1.01,0.5,nan\n")
+    csv.write_text(HEADER + "".join(f"{k / 100},{k * 10000},0.5,{k}\n" for k in range(1, 101))
+                   + "1.01,1010000,0.5,nan\n")
     p50, p99 = cpu_budget.period_cpu_ms(csv)
     assert p50 == pytest.approx(50.5) and p99 == pytest.approx(99.01)
     assert cpu_budget.period_cpu_ms(tmp_path / "missing.csv") == (None, None)
-    (tmp_path / "old.csv").write_text("# controller: x\nt_s,solve_ms\n0.0,0.5\n")
+    (tmp_path / "old.csv").write_text("# controller: x\nt_s,stamp_us,solve_ms\n0.0,0,0.5\n")
     assert cpu_budget.period_cpu_ms(tmp_path / "old.csv") == (None, None)
 
 
@@ -47,7 +47,7 @@ def test_direct_reaches_the_scenario_command(tmp_path, monkeypatch, direct):
         seen.append(cmd)
         out = Path(cmd[cmd.index("--out") + 1])
         (out / "trq_nmpc_eso").mkdir(parents=True)
-        (out / "trq_nmpc_eso" / "controller.csv").write_text(HEADER + "0.0,1.0,2.0\n")
+        (out / "trq_nmpc_eso" / "controller.csv").write_text(HEADER + "0.0,0,1.0,2.0\n")
         (out / "metrics.json").write_text(json.dumps({"runs": [
             {"controller": "trq_nmpc_eso", "crashed": False, "rmse_pos_after_fault_m": 0.003,
              "max_yaw_err_deg": 0.4, "solve_ms_p50": 1.0, "solve_ms_p99": 2.0}]}))

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import shlex
 import subprocess
@@ -34,10 +35,9 @@ from dataclasses import asdict, dataclass
 from fractions import Fraction
 from pathlib import Path
 
-import numpy as np
 import trq_params
 
-from trq_lab.metrics import read_csv
+from trq_lab.bench.period import cpu_parts
 
 CGROUP_V1 = Path("/sys/fs/cgroup/cpu")
 CGROUP_V2 = Path("/sys/fs/cgroup")
@@ -157,14 +157,10 @@ def period_cpu_ms(path: Path) -> tuple[float | None, float | None]:
     """(p50, p99) of the controller's CPU per control period (cpu_period_ms: every thread of its
     process) over the steps of its log; (None, None) without one."""
     try:
-        _, cols = read_csv(path)
-        v = np.asarray(cols["cpu_period_ms"], float)
+        got = cpu_parts(path, -math.inf, math.inf)["period"]
     except (OSError, KeyError, ValueError):
         return None, None
-    v = v[np.isfinite(v)]
-    if not v.size:
-        return None, None
-    return float(np.percentile(v, 50)), float(np.percentile(v, 99))
+    return (got["p50_ms"], got["p99_ms"]) if math.isfinite(got["p50_ms"]) else (None, None)
 
 
 def table(rows: list[Row]) -> str:

@@ -112,18 +112,22 @@ def fly_daemons(seconds: float, controller: str, log_dir: Path,
             "wall_s": wall, "vehicle_rc": veh.returncode, "controller_rc": ctl.returncode}
 
 
-def _parts(csv_path: Path, lo_s: float, hi_s: float) -> dict:
+def cpu_parts(csv_path: Path, lo_s: float, hi_s: float) -> dict:
+    """{part: {mean_ms, p50_ms, p99_ms}} of a controller.csv's cpu_*_ms columns and its solve
+    time, over the steps stamped in (lo_s, hi_s] (nan for a column the log lacks)."""
     from trq_lab import metrics
     _, cols = metrics.read_csv(csv_path)
     t = np.asarray(cols["stamp_us"], float) * 1e-6
     keep = (t > lo_s) & (t <= hi_s)
     out = {}
+    nan = float("nan")
     for part in PARTS:
         name = f"cpu_{part}_ms"        # a controller older than these columns: nan
-        v = np.asarray(cols[name], float)[keep] if name in cols else np.array([np.nan])
-        out[part] = {"mean_ms": float(np.nanmean(v)) if v.size else float("nan"),
-                     "p50_ms": float(np.nanmedian(v)) if v.size else float("nan"),
-                     "p99_ms": float(np.nanpercentile(v, 99)) if v.size else float("nan")}
+        v = np.asarray(cols[name], float)[keep] if name in cols else np.empty(0)
+        v = v[~np.isnan(v)]            # no value at all: nan, without numpy's empty-slice warning
+        out[part] = ({"mean_ms": float(np.mean(v)), "p50_ms": float(np.median(v)),
+                      "p99_ms": float(np.percentile(v, 99))} if v.size else
+                     {"mean_ms": nan, "p50_ms": nan, "p99_ms": nan})
     s = np.asarray(cols["solve_ms"], float)[keep]
     out["solve (wall)"] = {"mean_ms": float(np.nanmean(s)), "p50_ms": float(np.nanmedian(s)),
                            "p99_ms": float(np.nanpercentile(s, 99))}
@@ -144,7 +148,7 @@ def daemons_period(short_s: float = 5.0, long_s: float = 35.0,
                             controller_cmd=controller_cmd)
         long_ = fly_daemons(long_s, controller, root / "long", direct=direct,
                             controller_cmd=controller_cmd)
-        parts = _parts(root / "long" / "controller.csv", short_s, long_s)
+        parts = cpu_parts(root / "long" / "controller.csv", short_s, long_s)
     periods = (long_s - short_s) * control_rate_hz
     dwall = long_["wall_s"] - short["wall_s"]
     return {
