@@ -103,6 +103,12 @@ def _wrap(a):
     return (a + math.pi) % (2.0 * math.pi) - math.pi
 
 
+def _on_microseconds(t_s: float) -> float:
+    """t_s on the microsecond grid, as a time formed from MAVLink's integer microseconds:
+    (stamp_us - t0_us) * 1e-6 (trq_offboard/loop.py)."""
+    return round(t_s * 1e6) * 1e-6
+
+
 def _interp_rows(x: np.ndarray, h: float, times: np.ndarray) -> np.ndarray:
     """Rows of x (n+1, m), sampled every h seconds from 0, linearly interpolated at `times`
     (clamped to [0, n h], as np.interp does), all columns at once: (len(times), m)."""
@@ -664,7 +670,10 @@ class Controller:
         prep = getattr(self.solver, "prepare", None)
         if prep is None or self._plan is None or self._last_t is None:
             return
-        t_next = self._last_t + self.delay_s + self.cfg.control_dt_s   # when the next acts
+        # when the next step's command acts: the next state's time formed as the flight loop
+        # forms a state's (whole microseconds times 1e-6), so that the next step, one period
+        # on, finds this reference grid and this preparation's reference as its own
+        t_next = _on_microseconds(self._last_t + self.cfg.control_dt_s) + self.delay_s
         elapsed = t_next - self._plan_t
         if elapsed >= self.N * self.h:
             return

@@ -275,6 +275,60 @@ def test_reference_grid_is_sampled_once_for_the_same_time():
     assert Counting.calls == 4
 
 
+class _PreparingSolver(_HoverSolver):
+    """_HoverSolver with a preparation phase: records the reference each phase is handed."""
+
+    def __init__(self, u, n, nx=12):
+        super().__init__(u, n, nx)
+        self.solved, self.prepared = [], []
+
+    def solve(self, x0, x_ref, d, u_prev, guess, y0=None):
+        self.solved.append(np.array(x_ref))
+        return super().solve(x0, x_ref, d, u_prev, guess, y0)
+
+    def prepare(self, x_ref, d, u_prev, guess, y0=None):
+        self.prepared.append(np.array(x_ref))
+
+
+@pytest.mark.parametrize("delay", [0.0, 0.004, 0.023])
+def test_the_preparation_samples_the_reference_the_next_step_flies(delay):
+    """Times as the flight loop forms them (whole microseconds times 1e-6), one period apart:
+    the preparation asks for the very time the next step asks for (adding the period to the
+    last float would miss it by a rounding, most periods), so one grid a period serves both,
+    and the prepared reference is the next step's."""
+    from trq_offboard.reference import Reference
+
+    cfg = dataclasses.replace(load_controller(CTRL), effectiveness=None, applied_delay_s=delay,
+                              delay_compensation="predict")
+    probe = Controller(cfg, solver=_HoverSolver(np.zeros(8), cfg.horizon_steps))
+    solver = _PreparingSolver(probe.u_trim, cfg.horizon_steps)
+    ctl = Controller(cfg, solver=solver)
+    assert ctl.delay_s == pytest.approx(delay)
+
+    class Counting(Reference):
+        calls = 0
+
+        def grid(self, t_s, step_s, n):
+            Counting.calls += 1
+            return super().grid(t_s, step_s, n)
+
+    ref = Counting(cfg.reference, [0.0, 0.0, 0.0], 0.0)
+    period_us = round(cfg.control_dt_s * 1e6)
+    start_us = 7_654_321
+    ctl.reset(start_us * 1e-6, _hover_state())
+    steps = 60
+    for k in range(1, steps + 1):
+        ctl.step((start_us + k * period_us) * 1e-6, _hover_state(), None, ref)
+        ctl.prepare(ref)
+    assert Counting.calls == steps + 1          # the first step's own, then one a period
+    assert len(solver.prepared) == steps and len(solver.solved) == steps
+    for prepared, flown in zip(solver.prepared, solver.solved[1:]):
+        # the yaw is unwrapped next to each phase's own state (predicted, then measured): the
+        # same angle to a rounding
+        assert np.array_equal(np.delete(prepared, 8, axis=1), np.delete(flown, 8, axis=1))
+        assert np.max(np.abs(prepared[:, 8] - flown[:, 8])) < 1e-12
+
+
 def _in_effect_spec(sent, last_u, delay, t0, t1):
     """The segments in effect, written out command by command (the specification)."""
     acts = [(ts + delay, u) for ts, u in sent] or [(t0, last_u)]
