@@ -36,7 +36,8 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["OcpQp", "available", "library_path", "other_loaded", "check_conic", "MODES"]
+__all__ = ["MODES", "OcpQp", "available", "check_conic", "compiled_against", "library_path",
+           "other_loaded"]
 
 MODES = {"speed_abs": 0, "speed": 1, "balance": 2, "robust": 3}   # enum hpipm_mode
 # further IPM options (d_ocp_qp_ipm_arg_set_<name>, after the mode's defaults): name -> C type
@@ -69,8 +70,9 @@ extern void d_ocp_qp_sol_get_pi(int, void *, double *);
 extern void d_part_cond_qp_cond(void *, void *, void *, void *);
 extern void d_part_cond_qp_expand_sol(void *, void *, void *, void *, void *);
 
+/* A and B: stage k's block (column-major) at A + k sa and B + k sb */
 int trq_hpipm_solve(int N, int ns, int nv, int nb, void *qp, void *sol, void *arg, void *ws,
-                    double *A, double *B, double *b, double *q, double *r,
+                    double *A, int sa, double *B, int sb, double *b, double *q, double *r,
                     double *lbx, double *ubx, double *lbu, double *ubu,
                     double *x, double *u, double *pi, int *iter,
                     void *qp2, void *sol2, void *arg2, void *ws2, void *carg, void *cws)
@@ -78,12 +80,12 @@ int trq_hpipm_solve(int N, int ns, int nv, int nb, void *qp, void *sol, void *ar
     int k, status;
     for (k = 0; k < N; ++k) {
         if (k > 0) {
-            d_ocp_qp_set_A(k, A + k * ns * ns, qp);
+            d_ocp_qp_set_A(k, A + k * sa, qp);
             d_ocp_qp_set_q(k, q + k * ns, qp);
             d_ocp_qp_set_lbx(k, lbx + k * nb, qp);
             d_ocp_qp_set_ubx(k, ubx + k * nb, qp);
         }
-        d_ocp_qp_set_B(k, B + k * ns * nv, qp);
+        d_ocp_qp_set_B(k, B + k * sb, qp);
         d_ocp_qp_set_b(k, b + k * ns, qp);
         d_ocp_qp_set_r(k, r + k * nv, qp);
         d_ocp_qp_set_lbu(k, lbu + k * nv, qp);
@@ -270,23 +272,31 @@ def _load() -> ctypes.CDLL | None:
     return lib
 
 
+def compiled_against(name: str, source: str) -> Path | None:
+    """A shared library built from C `source` and linked against the libhpipm loaded here (by
+    its file name: it calls into that one), compiled once and cached (`cache.compiled_c`); None
+    without a compiler or when the build fails. Without contraction into fused multiply-adds,
+    so that its arithmetic is NumPy's on every platform."""
+    from trq_offboard.nmpc.cache import compiled_c
+    loaded = _LIB_PATH or library_path()
+    lib_dir = str(loaded.parent)
+    return compiled_c(name, source, ("-ffp-contract=off", f"-L{lib_dir}",
+                                     f"-Wl,-rpath,{lib_dir}", f"-l:{loaded.name}"))
+
+
 def _load_shim() -> ctypes.CDLL | None:
     """The compiled per-solve shim, or None (no compiler: the loop runs through ctypes)."""
     global _SHIM
     if _SHIM is None:
         _SHIM = False
-        from trq_offboard.nmpc.cache import compiled_c
-        loaded = _LIB_PATH or library_path()
-        lib_dir = str(loaded.parent)
-        # linked by the loaded library's file name: the shim calls into that one
-        path = compiled_c("trq_hpipm_shim", _SHIM_SOURCE,
-                          (f"-L{lib_dir}", f"-Wl,-rpath,{lib_dir}", f"-l:{loaded.name}"))
+        path = compiled_against("trq_hpipm_shim", _SHIM_SOURCE)
         if path is not None:
             try:
                 shim = ctypes.CDLL(str(path))
                 f = shim.trq_hpipm_solve
                 f.restype = ctypes.c_int
-                f.argtypes = [ctypes.c_int] * 4 + [ctypes.c_void_p] * 23
+                f.argtypes = ([ctypes.c_int] * 4 + [ctypes.c_void_p] * 5 + [ctypes.c_int]
+                              + [ctypes.c_void_p, ctypes.c_int] + [ctypes.c_void_p] * 17)
                 _SHIM = shim
             except OSError:
                 pass
@@ -420,6 +430,13 @@ class OcpQp:
         self._shim = _load_shim() if shim else None
         self.uses_shim = self._shim is not None
 
+    @property
+    def handles(self) -> tuple:
+        """The addresses of HPIPM's QP, solution, argument and workspace structs, then
+        partial condensing's six (None without it): `trq_hpipm_solve`'s arguments, for
+        compiled callers that solve this QP themselves (nmpc/feedback.py)."""
+        return (self._qp, self._sol, self._arg, self._ws, *self._pc)
+
     # --- data ------------------------------------------------------------------------------
     def set_hessian(self, H, HN) -> None:
         """Stage Hessians H (N, ns + nv, ns + nv) of [s; v] (or one for all stages) and the
@@ -454,7 +471,8 @@ class OcpQp:
         if self._shim is not None:
             self.status = self._shim.trq_hpipm_solve(
                 N, self.ns, self.nv, self.idxbx.size, qp, self._sol, self._arg, self._ws,
-                A.ctypes.data, B.ctypes.data, b.ctypes.data, q.ctypes.data, r.ctypes.data,
+                A.ctypes.data, self.ns * self.ns, B.ctypes.data, self.ns * self.nv,
+                b.ctypes.data, q.ctypes.data, r.ctypes.data,
                 lbx.ctypes.data, ubx.ctypes.data, lbu.ctypes.data, ubu.ctypes.data,
                 self.x.ctypes.data, self.u.ctypes.data, self.pi.ctypes.data,
                 ctypes.addressof(self._iter), *self._pc)

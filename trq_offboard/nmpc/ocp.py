@@ -247,12 +247,18 @@ class Ocp:
                              "the plan starts) is required")
         return np.asarray(y0, float).reshape(self.nu) / self.u_scale
 
-    def bounds(self, x0, alpha_prev, y0=None) -> tuple[np.ndarray, np.ndarray]:
-        """Bounds of w with s_0 fixed to [x0, alpha_prev (TRQ), y0 (with lag states)]."""
-        lbw, ubw = self.lbw.copy(), self.ubw.copy()
+    def initial_stage(self, x0, alpha_prev, y0=None) -> np.ndarray:
+        """s_0 (ns): x0, the applied tilt (tilts as states) and the actuators' outputs (lag
+        states, scaled)."""
         s0 = np.concatenate([x0, alpha_prev]) if self.tilt_states else np.asarray(x0, float)
         if self.n_lag:
             s0 = np.concatenate([s0, self._lag_rows(y0)])
+        return s0
+
+    def bounds(self, x0, alpha_prev, y0=None) -> tuple[np.ndarray, np.ndarray]:
+        """Bounds of w with s_0 fixed to [x0, alpha_prev (TRQ), y0 (with lag states)]."""
+        lbw, ubw = self.lbw.copy(), self.ubw.copy()
+        s0 = self.initial_stage(x0, alpha_prev, y0)
         lbw[self.s_index[0]] = s0
         ubw[self.s_index[0]] = s0
         if self.tilting and not self.tilt_states:       # the servos' rate over the first step

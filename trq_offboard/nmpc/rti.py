@@ -45,7 +45,7 @@ import numpy as np
 from trq_offboard.config import ControllerConfig
 from trq_offboard.model import PredictionModel
 from trq_offboard.model.dynamics import NumpyFunction
-from trq_offboard.nmpc import hpipm
+from trq_offboard.nmpc import feedback, hpipm
 from trq_offboard.nmpc.cache import compiled_many
 from trq_offboard.nmpc.ocp import Ocp, Stage
 from trq_offboard.nmpc.solver import plan_of
@@ -69,7 +69,8 @@ class _Prepared:
     h: ca.DM | np.ndarray | None   # conic: Hessian (sparse); direct: stage blocks (exact) or None
     gaps: np.ndarray         # F(s_k, v_k) - s_{k+1}, stage-major (N ns)
     grad: np.ndarray         # cost gradient (nw)
-    jd: np.ndarray           # (N, ns, 6) dF/dd per stage
+    jd: np.ndarray           # (N, ns, 6) dF/dd per stage (direct: a view of jd_raw)
+    jd_raw: np.ndarray | None  # direct: the (N, 6, ns) array jd views (the compiled feedback's)
     d: np.ndarray            # d and the reference the preparation used
     xr_w: np.ndarray         # x_ref placed at the state positions of w (nw)
 
@@ -226,6 +227,11 @@ class RtiSolver:
         self._q2_w = np.zeros(nw)
         self._q2_w[self._x_pos[:N]] = q2
         self._q2_w[self._x_pos[N]] = wts.terminal_factor * q2
+        # the feedback in one compiled call where it can be built (else the NumPy one below)
+        self._kernel = None
+        if direct and enabled and self._hqp.uses_shim and feedback.available():
+            self._kernel = feedback.FeedbackKernel(o, self._hqp, self._q2_w)
+            self._s0_hess = np.ascontiguousarray(self._hc[ns:, :ns])
         self._prepared: _Prepared | None = None
         self.last_prepare_s = 0.0
         self.qp_iterations = 0
@@ -265,10 +271,10 @@ class RtiSolver:
             a, h = out[0], (out[4] if self.hessian == "exact" else self._h_const)
         xr_w = np.zeros(w.size)
         xr_w[self._x_pos] = x_ref
+        jd_raw = np.asarray(out[3]).reshape(self._N, 6, self._ns)
         self._prepared = _Prepared(
             w, a, h, np.asarray(out[1]).ravel(), np.asarray(out[2]).ravel(),
-            np.asarray(out[3]).reshape(self._N, 6, self._ns).transpose(0, 2, 1),
-            d, xr_w)
+            jd_raw.transpose(0, 2, 1), jd_raw if self._kernel is not None else None, d, xr_w)
         self.last_prepare_s = time.perf_counter() - t0
 
     def discard(self) -> None:
@@ -305,6 +311,9 @@ class RtiSolver:
         self._prepared = None
         x0 = np.asarray(x0, float).reshape(12)
         d = np.asarray(d, float).reshape(6)
+        tilt = np.asarray(u_prev, float)[0:4] if o.tilting else None
+        if self._kernel is not None:
+            return self._feedback_compiled(P, x0, x_ref, d, tilt, y0)
         gaps = P.gaps
         dd = d - P.d
         if np.any(dd):
@@ -314,7 +323,7 @@ class RtiSolver:
         xr_w[self._x_pos] = np.asarray(x_ref, float).reshape(self._N + 1, self._nx)
         if not np.array_equal(xr_w, P.xr_w):
             grad = grad - self._q2_w * (xr_w - P.xr_w)
-        lbw, ubw = o.bounds(x0, np.asarray(u_prev, float)[0:4] if o.tilting else None, y0)
+        lbw, ubw = o.bounds(x0, tilt, y0)
         if self.qp_interface == "direct":
             return self._solve_direct(P, gaps, grad, lbw, ubw)
         res = self._qp(h=P.h, g=grad, a=P.a, lba=-gaps, uba=-gaps, lbx=lbw - P.w, ubx=ubw - P.w)
@@ -329,6 +338,27 @@ class RtiSolver:
         w = np.clip(P.w + dw, lbw, ubw)
         msg = "rti" if st.get("success", False) else f"rti (QP: {st.get('return_status')})"
         return w, msg
+
+    def _feedback_compiled(self, P, x0, x_ref, d, tilt, y0):
+        """`_feedback` through the compiled kernel (nmpc/feedback.py): the same corrections,
+        bounds, QP and step in one call."""
+        ns = self._ns
+        if P.h is not None:                               # exact Hessian: per-stage blocks
+            self._hqp.set_hessian(P.h, self._hcN)
+            s0_hess = np.ascontiguousarray(P.h[0][ns:, :ns])
+        else:
+            s0_hess = self._s0_hess
+        w, status = self._kernel(
+            P.w, P.a, P.gaps, P.jd_raw, P.d, d, P.grad, P.xr_w,
+            np.ascontiguousarray(x_ref, float).reshape(self._N + 1, self._nx),
+            np.ascontiguousarray(self.ocp.initial_stage(x0, tilt, y0), float),
+            None if tilt is None else np.ascontiguousarray(tilt), s0_hess)
+        self.qp_iterations = self._hqp.iterations
+        if w is None:
+            return None, "non-finite QP step"
+        if self.hessian == "exact":
+            self._lam = self._hqp.pi.ravel().copy()
+        return w, ("rti" if status == 0 else f"rti (QP: HPIPM status {status})")
 
     def _solve_direct(self, P, gaps, grad, lbw, ubw):
         """The QP through nmpc/hpipm.py: s_0 eliminated (ds_0 is known), only finite bounds."""

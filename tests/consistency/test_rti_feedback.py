@@ -1,0 +1,110 @@
+"""The RTI's compiled feedback (trq_offboard/nmpc/feedback.py) against its NumPy feedback
+(RtiSolver._feedback without the kernel): the same step on the same prepared QP, with the
+reference and the disturbance moved after the preparation, in every layout of the stage (tilts
+as states or as inputs, actuator lag states, the fixed-rotor quadcopter) and with the exact
+Hessian. Solvers run interpreted (codegen off), the kernel attached by hand: only the kernel is
+compiled, into a temporary cache."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+import trq_params
+from ocp_problem import ocp_problem
+
+from trq_offboard.config import load_controller
+from trq_offboard.nmpc import feedback, hpipm
+from trq_offboard.nmpc.rti import RtiSolver
+
+pytestmark = pytest.mark.skipif(not hpipm.available()[0], reason="no libhpipm in casadi")
+CTRL = trq_params.DIR / "controller"
+
+
+@pytest.fixture(autouse=True)
+def _cache(tmp_path_factory, monkeypatch):
+    monkeypatch.setenv("TRQ_CACHE_DIR", str(tmp_path_factory.getbasetemp() / "trq-cache"))
+
+
+def _solver(name, hessian="gauss_newton", tilt_rate_limit="horizon"):
+    cfg = load_controller(CTRL / f"{name}.yaml")
+    cfg = dataclasses.replace(cfg, tilt_rate_limit=tilt_rate_limit, solver=dataclasses.replace(
+        cfg.solver, kind="rti", codegen="off", hpipm_interface="direct"))
+    model, u_trim, x0, x_ref, d, guess = ocp_problem(cfg)
+    rti = RtiSolver(cfg, model, u_trim, hessian)
+    if not feedback.available():
+        pytest.skip("the compiled feedback cannot be built here (no C compiler)")
+    assert rti._kernel is None                   # codegen off: the NumPy feedback
+    kernel = feedback.FeedbackKernel(rti.ocp, rti._hqp, rti._q2_w)
+    rti._s0_hess = np.ascontiguousarray(rti._hc[rti._ns:, :rti._ns])
+    return rti, kernel, (u_trim, x0, x_ref, d, guess)
+
+
+def _both(rti, kernel, prepared, x0, x_ref, d, u_prev, y0):
+    """The feedback on a copy of `prepared` by NumPy, then by the kernel: (w, message,
+    iterations, multipliers) each."""
+    out = []
+    for k in (None, kernel):
+        rti._kernel = k
+        rti._prepared = dataclasses.replace(prepared)
+        w, msg = rti._feedback(x0, x_ref, d, u_prev, y0)
+        out.append((w, msg, rti.qp_iterations, rti._hqp.pi.copy()))
+    return out
+
+
+@pytest.mark.parametrize("name,hessian,tilt_rate_limit", [
+    ("trq_nmpc_eso", "gauss_newton", "horizon"),
+    ("trq_nmpc_eso", "gauss_newton", "first_step"),
+    ("trq_nmpc_eso_lag", "gauss_newton", "horizon"),
+    ("quad_nmpc", "gauss_newton", "horizon"),
+    ("trq_nmpc_eso", "exact", "horizon")])
+def test_the_compiled_feedback_takes_numpys_step(name, hessian, tilt_rate_limit):
+    rti, kernel, (u_trim, x0, x_ref, d, guess) = _solver(name, hessian, tilt_rate_limit)
+    y0 = u_trim if rti.ocp.n_lag else None
+    u, x, _ = rti.solve(x0, x_ref, d, u_trim, guess, y0=y0)          # a plan to prepare at
+    rti._kernel = kernel                          # (so that the preparation keeps jd_raw)
+    rti.prepare(x_ref, d, u_trim, (u, x), y0=y0)
+    prepared = rti._prepared
+    # the step measured something else than the preparation assumed: state, reference, d,
+    # and an applied tilt far from the plan's (the first step's rate bound then binds)
+    x_ref2 = x_ref.copy()
+    x_ref2[:, 0] += 0.05
+    x_ref2[3:, 8] += 0.02
+    d2 = d + np.array([0.1, -0.05, 0.2, -0.3, 0.1, 0.05])
+    x02 = x0 + 0.01
+    u_prev = u_trim.copy()
+    if rti.ocp.tilting:
+        u_prev[0:4] += (0.3, -0.3, 0.2, -0.2)
+    (w_np, msg_np, it_np, pi_np), (w_k, msg_k, it_k, pi_k) = _both(
+        rti, kernel, prepared, x02, x_ref2, d2, u_prev, y0)
+    assert w_np is not None and w_k is not None
+    assert msg_k == msg_np and it_k == it_np
+    assert np.max(np.abs(w_k - w_np)) < 1e-9
+    assert np.max(np.abs(pi_k - pi_np)) < 1e-6 * max(1.0, np.max(np.abs(pi_np)))
+    s0 = rti.ocp.initial_stage(x02, u_prev[0:4] if rti.ocp.tilting else None, y0)
+    np.testing.assert_array_equal(w_k[rti.ocp.s_index[0]], s0)      # clipped onto s_0
+    lbw, ubw = rti.ocp.bounds(x02, u_prev[0:4] if rti.ocp.tilting else None, y0)
+    assert np.all(w_k >= lbw) and np.all(w_k <= ubw)
+    if tilt_rate_limit == "first_step":                # the applied tilts bound the first
+        tilts0 = w_k[rti.ocp.v_index[0][0:4]]
+        assert np.any(np.abs(np.abs(tilts0 - u_prev[0:4]) - rti.ocp.tilt_step0) < 1e-12)
+
+
+def test_a_non_finite_step_is_refused_as_numpy_refuses_it():
+    rti, kernel, (u_trim, x0, x_ref, d, guess) = _solver("trq_nmpc_eso")
+    rti._kernel = kernel
+    rti.prepare(x_ref, d, u_trim, guess)
+    bad = d.copy()
+    bad[3] = np.nan
+    (w_np, msg_np, _, _), (w_k, msg_k, _, _) = _both(rti, kernel, rti._prepared, x0, x_ref, bad,
+                                                     u_trim, None)
+    assert w_np is None and w_k is None
+    assert msg_k == msg_np == "non-finite QP step"
+
+
+def test_the_kernel_refuses_an_ocp_it_cannot_read():
+    rti, _, _ = _solver("trq_nmpc_eso")
+    ocp = dataclasses.replace(rti.ocp, s_index=rti.ocp.s_index[::-1].copy())
+    with pytest.raises(ValueError, match="stage-major"):
+        feedback.FeedbackKernel(ocp, rti._hqp, rti._q2_w)

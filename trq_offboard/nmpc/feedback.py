@@ -1,0 +1,257 @@
+"""The real-time iteration's feedback phase in one compiled call (RtiSolver, direct HPIPM).
+
+Between two preparations the feedback takes the QP prepared at the linearisation point w and
+corrects it for what the step measured, then solves it:
+
+    gaps  += dF/dd (d - d_prep)                       (when the disturbance estimate moved)
+    grad  -= q2 (x_ref - x_ref_prep)                   (when the reference moved)
+    bounds: s_0 fixed to the measured [x0, tilt, lags], the first tilt's rate (tilts as inputs)
+    ds_0 = s_0 - w_0 eliminated: b_0 += A_0 ds_0, r_0 += S_0 ds_0
+    HPIPM (nmpc/hpipm.py's shim: the stage fields set, the QP solved, its solution read)
+    w+ = clip(w + dw, lbw, ubw), with dw finite
+
+In NumPy that is some forty array operations and a copy of every stage's [A B] a period, each
+costing more in the interpreter than in arithmetic; here it is one ctypes call into C compiled
+with the shim's source (the same HPIPM entry points), linked against the libhpipm in use. The
+arithmetic is NumPy's operation for operation (elementwise; np.minimum, np.maximum and np.clip with
+their NaN propagation), except the three small products (dF/dd d, A_0 ds_0, S_0 ds_0),
+summed in index order where NumPy's BLAS may order or fuse them differently: the same plan to
+rounding. RtiSolver keeps its NumPy feedback as the reference and the path without a C compiler;
+tests/consistency/test_rti_feedback.py holds the two to each other.
+
+The decision vector w is stage-major, [s_0, v_0, s_1, v_1, ..., s_N] (Ocp.build's layout, which
+`FeedbackKernel` checks); the stage Jacobians come as the preparation's (N, ns + nv, ns) array,
+[A_k B_k]' per stage, that is A_k then B_k column-major, handed to HPIPM in place.
+"""
+
+from __future__ import annotations
+
+import ctypes
+
+import numpy as np
+
+from trq_offboard.nmpc import hpipm
+
+__all__ = ["FeedbackKernel", "available"]
+
+_SOURCE = hpipm._SHIM_SOURCE + r"""
+/* trq_rti_feedback: the RTI's feedback phase (nmpc/feedback.py). */
+/* NumPy's np.maximum / np.minimum (a NaN in either propagates) and np.clip's steps */
+static double maximum(double a, double b) { return (a >= b || a != a) ? a : b; }
+static double minimum(double a, double b) { return (a <= b || a != a) ? a : b; }
+static double clip(double x, double lo, double hi)
+{
+    x = (x != x || x > lo) ? x : lo;
+    return (x != x || x < hi) ? x : hi;
+}
+
+/* dims: N, ns, nv, nb, nx, tilt_clamp (1: the first stage's tilts are inputs whose rate is
+   bounded from the applied tilt), nw.
+   st: HPIPM's qp, sol, arg, ws and partial condensing's six (hpipm.OcpQp.handles), then
+   idxbx (int, nb), q2w (nw), lbw0, ubw0 (nw: the OCP's bounds), work (3 nw + 2 (N+1) ns
+   + 4 N nv + 2 (N+1) nb + 6 doubles), x ((N+1) ns), u (N nv), pi (N ns), iter (int).
+   Returns HPIPM's status (0 converged), or -1 when the step or the multipliers are not finite
+   (w_out then untouched). */
+int trq_rti_feedback(const int *dims, void *const *st, double tilt_step0,
+                     const double *w, const double *a, const double *gaps, const double *jd,
+                     const double *d_prep, const double *d, const double *grad,
+                     const double *xr_prep, const double *x_ref, const double *s0,
+                     const double *tilt, const double *S0, double *w_out)
+{
+    const int N = dims[0], ns = dims[1], nv = dims[2], nb = dims[3], nx = dims[4];
+    const int tilt_clamp = dims[5], nw = dims[6], nz = ns + nv;
+    const int *idxbx = (const int *) st[10];
+    const double *q2w = st[11], *lbw0 = st[12], *ubw0 = st[13];
+    double *work = st[14], *x = st[15], *u = st[16], *pi = st[17];
+    int *iter = st[18];
+    double *lbw = work, *ubw = lbw + nw, *g = ubw + nw, *b = g + nw;
+    double *q = b + N * ns, *r = q + (N + 1) * ns, *lbx = r + N * nv, *ubx = lbx + (N + 1) * nb;
+    double *lbu = ubx + (N + 1) * nb, *ubu = lbu + N * nv, *ds0 = ubu + N * nv, *dd = ds0 + ns;
+    int k, i, j, moved, status;
+
+    /* the dynamics' constants, for the disturbance estimate the step has */
+    moved = 0;
+    for (j = 0; j < 6; ++j) {
+        dd[j] = d[j] - d_prep[j];
+        moved |= dd[j] != 0.0;
+    }
+    for (k = 0; k < N * ns; ++k)
+        b[k] = gaps[k];
+    if (moved)
+        for (k = 0; k < N; ++k)
+            for (i = 0; i < ns; ++i) {
+                double acc = 0.0;                  /* jd: (N, 6, ns), dF_k/dd column-major */
+                for (j = 0; j < 6; ++j)
+                    acc += jd[(k * 6 + j) * ns + i] * dd[j];
+                b[k * ns + i] += acc;
+            }
+    /* the cost's gradient, for the reference the step has */
+    for (i = 0; i < nw; ++i)
+        g[i] = grad[i];
+    moved = 0;
+    for (k = 0; k <= N && !moved; ++k)
+        for (i = 0; i < nx; ++i)
+            moved |= x_ref[k * nx + i] != xr_prep[k * nz + i];
+    if (moved)
+        for (k = 0; k <= N; ++k)
+            for (i = 0; i < nx; ++i) {
+                const int p = k * nz + i;
+                g[p] = grad[p] - q2w[p] * (x_ref[k * nx + i] - xr_prep[p]);
+            }
+    /* bounds: s_0 fixed, the first tilt's rate from the applied tilt */
+    for (i = 0; i < nw; ++i) {
+        lbw[i] = lbw0[i];
+        ubw[i] = ubw0[i];
+    }
+    for (i = 0; i < ns; ++i) {
+        lbw[i] = ubw[i] = s0[i];
+        ds0[i] = s0[i] - w[i];
+    }
+    if (tilt_clamp)
+        for (i = ns; i < ns + 4; ++i) {
+            const double t = tilt[i - ns];
+            lbw[i] = minimum(maximum(lbw[i], t - tilt_step0), ubw[i]);
+            ubw[i] = maximum(minimum(ubw[i], t + tilt_step0), lbw[i]);
+        }
+    /* s_0 eliminated: b_0 += A_0 ds_0 (a[0]'s first ns rows are A_0' row-major) */
+    for (j = 0; j < ns; ++j) {
+        double acc = 0.0;
+        for (i = 0; i < ns; ++i)
+            acc += ds0[i] * a[i * ns + j];
+        b[j] += acc;
+    }
+    for (k = 0; k <= N; ++k) {
+        const double *gs = g + k * nz, *ls = lbw + k * nz, *us = ubw + k * nz, *ws = w + k * nz;
+        for (i = 0; i < ns; ++i)
+            q[k * ns + i] = gs[i];
+        for (i = 0; i < nb; ++i) {
+            lbx[k * nb + i] = ls[idxbx[i]] - ws[idxbx[i]];
+            ubx[k * nb + i] = us[idxbx[i]] - ws[idxbx[i]];
+        }
+        if (k == N)
+            break;
+        for (i = 0; i < nv; ++i) {
+            r[k * nv + i] = gs[ns + i];
+            lbu[k * nv + i] = ls[ns + i] - ws[ns + i];
+            ubu[k * nv + i] = us[ns + i] - ws[ns + i];
+        }
+    }
+    for (i = 0; i < nv; ++i) {       /* r_0 += S_0 ds_0 (S_0: (nv, ns) row-major) */
+        double acc = 0.0;
+        for (j = 0; j < ns; ++j)
+            acc += S0[i * ns + j] * ds0[j];
+        r[i] += acc;
+    }
+    status = trq_hpipm_solve(N, ns, nv, nb, st[0], st[1], st[2], st[3],
+                             (double *) a, nz * ns, (double *) a + ns * ns, nz * ns, b, q, r,
+                             lbx, ubx, lbu, ubu, x, u, pi, iter,
+                             st[4], st[5], st[6], st[7], st[8], st[9]);
+    for (k = 0; k < N * ns; ++k)
+        if (!(pi[k] - pi[k] == 0.0))
+            return -1;
+    for (i = 0; i < N * nv; ++i)
+        if (!(u[i] - u[i] == 0.0))
+            return -1;
+    for (i = ns; i < (N + 1) * ns; ++i)
+        if (!(x[i] - x[i] == 0.0))
+            return -1;
+    for (i = 0; i < ns; ++i)
+        if (!(ds0[i] - ds0[i] == 0.0))
+            return -1;
+    for (k = 0; k <= N; ++k) {
+        const double *ls = lbw + k * nz, *us = ubw + k * nz, *ws = w + k * nz;
+        double *wo = w_out + k * nz;
+        const double *dx = k == 0 ? ds0 : x + k * ns;
+        for (i = 0; i < ns; ++i)
+            wo[i] = clip(ws[i] + dx[i], ls[i], us[i]);
+        if (k == N)
+            break;
+        for (i = 0; i < nv; ++i)
+            wo[ns + i] = clip(ws[ns + i] + u[k * nv + i], ls[ns + i], us[ns + i]);
+    }
+    return status;
+}
+"""
+
+_LIB: ctypes.CDLL | None | bool = None       # False: tried, not available
+
+
+def _load() -> ctypes.CDLL | None:
+    global _LIB
+    if _LIB is None:
+        _LIB = False
+        if hpipm.available()[0]:
+            path = hpipm.compiled_against("trq_rti_feedback", _SOURCE)
+            if path is not None:
+                try:
+                    lib = ctypes.CDLL(str(path))
+                    f = lib.trq_rti_feedback
+                    f.restype = ctypes.c_int
+                    f.argtypes = ([ctypes.c_void_p] * 2 + [ctypes.c_double]
+                                  + [ctypes.c_void_p] * 13)
+                    _LIB = lib
+                except OSError:
+                    pass
+    return _LIB or None
+
+
+def available() -> bool:
+    """The compiled feedback could be built and loaded here (a C compiler, HPIPM)."""
+    return _load() is not None
+
+
+class FeedbackKernel:
+    """The feedback of one RtiSolver's QP: its OCP's layout and bounds, its HPIPM workspace
+    (`qp`: hpipm.OcpQp, whose x, u, pi, status and iterations it fills) and the gradient's
+    reference weights q2w (nw). Raises RuntimeError when the compiled kernel is unavailable."""
+
+    def __init__(self, ocp, qp, q2w: np.ndarray):
+        lib = _load()
+        if lib is None:
+            raise RuntimeError("the compiled RTI feedback is not available (no C compiler, or "
+                               "HPIPM not loaded)")
+        N, ns, nv, nx = ocp.n_steps, ocp.ns, ocp.nv, ocp.nx
+        nz, nw = ns + nv, ocp.lbw.size
+        base = np.arange(N + 1)[:, None] * nz
+        if nw != N * nz + ns or not np.array_equal(ocp.s_index, base + np.arange(ns)) \
+                or not np.array_equal(ocp.v_index, base[:N] + ns + np.arange(nv)):
+            raise ValueError("the OCP's decision vector is not stage-major [s_0, v_0, ..., s_N]")
+        self._fn = lib.trq_rti_feedback
+        self.ocp, self.qp, self.N, self.ns, self.nv, self.nx, self.nw = ocp, qp, N, ns, nv, nx, nw
+        tilt_clamp = int(ocp.tilting and not ocp.tilt_states)
+        self._dims = np.array([N, ns, nv, qp.idxbx.size, nx, tilt_clamp, nw], np.intc)
+        self._idxbx = np.ascontiguousarray(qp.idxbx, np.intc)
+        self._q2w = np.ascontiguousarray(q2w, float)
+        nb = self._idxbx.size
+        self._work = np.zeros(3 * nw + 2 * (N + 1) * ns + 4 * N * nv + 2 * (N + 1) * nb + 6)
+        self._iter = ctypes.c_int(0)
+        # ocp.lbw / ubw are updated in place (Ocp.set_throttle_scale): their addresses hold
+        self._lbw0, self._ubw0 = ocp.lbw, ocp.ubw
+        assert self._lbw0.flags.c_contiguous and self._ubw0.flags.c_contiguous
+        handles = [h or 0 for h in qp.handles]
+        ptrs = handles + [self._idxbx.ctypes.data, self._q2w.ctypes.data,
+                          self._lbw0.ctypes.data, self._ubw0.ctypes.data, self._work.ctypes.data,
+                          qp.x.ctypes.data, qp.u.ctypes.data, qp.pi.ctypes.data,
+                          ctypes.addressof(self._iter)]
+        self._st = (ctypes.c_void_p * len(ptrs))(*ptrs)
+        self._tilt0 = np.zeros(4)
+        self._out = np.zeros(nw)
+
+    def __call__(self, w, a, gaps, jd_raw, d_prep, d, grad, xr_prep, x_ref, s0, tilt, S0):
+        """The feedback from the prepared (w, a (N, nz, ns), gaps, jd_raw (N, 6, ns), d_prep,
+        grad, xr_prep (nw)) and the step's d (6), x_ref (N+1, nx), s0 (ns), applied tilt (4,
+        or None) and S_0 (nv, ns). All float64 C-contiguous. Returns (w+ (a new array), HPIPM's
+        status), or (None, -1) for a non-finite step."""
+        if self.ocp.lbw is not self._lbw0 or self.ocp.ubw is not self._ubw0:
+            raise RuntimeError("the OCP's bounds were replaced: the kernel holds their address")
+        tilt = self._tilt0 if tilt is None else tilt
+        status = self._fn(self._dims.ctypes.data, self._st, self.ocp.tilt_step0,
+                          w.ctypes.data, a.ctypes.data, gaps.ctypes.data, jd_raw.ctypes.data,
+                          d_prep.ctypes.data, d.ctypes.data, grad.ctypes.data,
+                          xr_prep.ctypes.data, x_ref.ctypes.data, s0.ctypes.data,
+                          tilt.ctypes.data, S0.ctypes.data, self._out.ctypes.data)
+        self.qp.iterations = self._iter.value
+        if status < 0:
+            return None, status
+        self.qp.status = status
+        return self._out.copy(), status
