@@ -197,6 +197,12 @@ class NumpyFunction:
         self._run(args)
         return [a.copy() for a in self._outs]
 
+    def outputs_in_place(self, *args) -> list[np.ndarray]:
+        """`outputs` without the copies: the result buffers themselves, which the next
+        evaluation overwrites (for a caller that is done with them by then)."""
+        self._run(args)
+        return self._outs
+
     # in place: the caller writes the inputs into `args` (flat, column-major), calls
     # `evaluate` and reads the outputs from `results` before the next evaluation
     @property

@@ -268,36 +268,53 @@ class Ocp:
             ubw[i] = np.maximum(np.minimum(ubw[i], a + self.tilt_step0), lbw[i])
         return lbw, ubw
 
+    def stages(self, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Views of w's stages: (N, ns + nv) rows [s_k, v_k] and s_N. `build` lays w out stage
+        by stage, [s_0, v_0, s_1, ..., s_N] (s_index and v_index say the same), so plain
+        slices of these views replace fancy indexing in pack and unpack."""
+        nz, N = self.ns + self.nv, self.n_steps
+        return w[:N * nz].reshape(N, nz), w[N * nz:]
+
     def pack(self, x_plan, u_plan, alpha_prev, y0=None) -> np.ndarray:
         """w from physical plans x (N+1, 12), u (N, nu), the previously applied tilt and (with
         lag states) the actuators' outputs y0 when the plan starts, rolled out through the
         lags under the plan's commands."""
+        N, nx, ns = self.n_steps, self.nx, self.ns
         w = np.zeros(self.lbw.size)
+        W, sN = self.stages(w)
         x_plan = np.asarray(x_plan, float)
         u_plan = np.asarray(u_plan, float)
-        if self.tilt_states:
-            tilts = np.vstack([np.asarray(alpha_prev, float).reshape(1, 4), u_plan[:, 0:4]])
-            s_main = np.hstack([x_plan, tilts])
-            rates = np.diff(tilts, axis=0) / self.step_s
-            w[self.v_index] = np.hstack([rates, u_plan[:, 4:8] / 100.0])
+        W[:, :nx] = x_plan[:N]
+        sN[:nx] = x_plan[N]
+        if self.tilt_states:          # s_k's tilts: the applied one, then the plan's
+            W[0, nx:nx + 4] = np.asarray(alpha_prev, float).reshape(4)
+            W[1:, nx:nx + 4] = u_plan[:N - 1, 0:4]
+            sN[nx:nx + 4] = u_plan[N - 1, 0:4]
+            # the servos' rates: the differences of [applied tilt; the plan's tilts]
+            W[:, ns:ns + 4] = (u_plan[:, 0:4] - W[:, nx:nx + 4]) / self.step_s
+            W[:, ns + 4:] = u_plan[:, 4:8] / 100.0
         else:
-            s_main = x_plan
-            w[self.v_index] = u_plan / self.u_scale
+            W[:, ns:] = u_plan / self.u_scale
         if self.n_lag:
             ys = [self._lag_rows(y0)]
             for u in u_plan / self.u_scale:
                 ys.append(ys[-1] + self.lag_gain * (u - ys[-1]))
-            s_main = np.hstack([s_main, np.array(ys)])
-        w[self.s_index] = s_main
+            W[:, ns - self.n_lag:ns] = ys[:N]
+            sN[ns - self.n_lag:] = ys[N]
         return w
 
     def unpack(self, w) -> tuple[np.ndarray, np.ndarray]:
         """(u_plan (N, nu) physical [alpha, zeta], x_plan (N+1, 12)) of w."""
-        w = np.asarray(w, float).reshape(-1)
-        s = w[self.s_index]
-        v = w[self.v_index]
-        if self.tilt_states:
-            u = np.hstack([s[1:, self.nx:self.nx + 4], 100.0 * v[:, 4:8]])
+        N, nx, ns = self.n_steps, self.nx, self.ns
+        W, sN = self.stages(np.asarray(w, float).reshape(-1))
+        x = np.empty((N + 1, nx))
+        x[:N] = W[:, :nx]
+        x[N] = sN[:nx]
+        if self.tilt_states:          # the plan's tilts are s_1..s_N's
+            u = np.empty((N, self.nu))
+            u[:N - 1, 0:4] = W[1:, nx:nx + 4]
+            u[N - 1, 0:4] = sN[nx:nx + 4]
+            u[:, 4:8] = 100.0 * W[:, ns + 4:ns + 8]
         else:
-            u = v * self.u_scale
-        return u, s[:, 0:self.nx]
+            u = W[:, ns:] * self.u_scale
+        return u, x

@@ -260,8 +260,11 @@ class RtiSolver:
         d = np.asarray(d, float).reshape(6)
         if self.qp_interface == "direct":
             N, ns, nz = self._N, self._ns, self._ns + self._nv
-            # x_ref (N+1, nx) row-major is the (nx, N+1) input column-major
-            out = self._prep_np.outputs(w, x_ref, self.u_trim / o.u_scale, d, self._lam)
+            # x_ref (N+1, nx) row-major is the (nx, N+1) input column-major; the outputs are
+            # the buffers themselves: a preparation is consumed by the feedback before the
+            # next one evaluates (solve() prepares again only after its feedback)
+            out = self._prep_np.outputs_in_place(w, x_ref, self.u_trim / o.u_scale, d,
+                                                 self._lam)
             a = out[0].reshape(N, nz, ns)            # [A_k B_k]' per stage (A_k column-major)
             h = None
             if self.hessian == "exact":        # (nz, nz N) column-major -> (N, nz, nz) + cost
