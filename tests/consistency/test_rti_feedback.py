@@ -108,3 +108,24 @@ def test_the_kernel_refuses_an_ocp_it_cannot_read():
     ocp = dataclasses.replace(rti.ocp, s_index=rti.ocp.s_index[::-1].copy())
     with pytest.raises(ValueError, match="stage-major"):
         feedback.FeedbackKernel(ocp, rti._hqp, rti._q2_w)
+
+
+def test_the_kernel_refuses_arrays_it_would_misread():
+    """A wrong size, dtype or layout is a ValueError that names the array, never a read past
+    an array's end."""
+    rti, kernel, (u_trim, x0, x_ref, d, guess) = _solver("trq_nmpc_eso")
+    rti._kernel = kernel
+    rti.prepare(x_ref, d, u_trim, guess)
+    P = rti._prepared
+    s0 = rti.ocp.initial_stage(x0, u_trim[0:4])
+    S0 = rti._s0_hess
+    good = [P.w, P.a, P.gaps, P.jd_raw, P.d, d, P.grad, P.xr_w, x_ref, s0, u_trim[0:4], S0]
+    w, _ = kernel(*good)
+    assert w is not None
+    bad_cases = {1: P.a[:, :, :-1], 5: d[:5], 8: np.asfortranarray(x_ref),
+                 9: s0.astype(np.float32), 10: u_trim[0:8:2]}
+    for i, bad in bad_cases.items():
+        args = list(good)
+        args[i] = bad
+        with pytest.raises(ValueError, match=f": {feedback._ARGS[i]} must be "):
+            kernel(*args)

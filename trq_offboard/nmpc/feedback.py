@@ -174,6 +174,8 @@ int trq_rti_feedback(const int *dims, void *const *st, double tilt_step0,
 """
 
 _LIB: ctypes.CDLL | None | bool = None       # False: tried, not available
+_ARGS = ("w", "a", "gaps", "jd_raw", "d_prep", "d", "grad", "xr_prep", "x_ref", "s0", "tilt",
+         "S0")
 
 
 def _load() -> ctypes.CDLL | None:
@@ -236,6 +238,8 @@ class FeedbackKernel:
         self._st = (ctypes.c_void_p * len(ptrs))(*ptrs)
         self._tilt0 = np.zeros(4)
         self._out = np.zeros(nw)
+        self._sizes = (nw, N * nz * ns, N * ns, N * 6 * ns, 6, 6, nw, nw, (N + 1) * nx, ns, 4,
+                       nv * ns)
 
     def __call__(self, w, a, gaps, jd_raw, d_prep, d, grad, xr_prep, x_ref, s0, tilt, S0):
         """The feedback from the prepared (w, a (N, nz, ns), gaps, jd_raw (N, 6, ns), d_prep,
@@ -245,6 +249,14 @@ class FeedbackKernel:
         if self.ocp.lbw is not self._lbw0 or self.ocp.ubw is not self._ubw0:
             raise RuntimeError("the OCP's bounds were replaced: the kernel holds their address")
         tilt = self._tilt0 if tilt is None else tilt
+        # C reads each array at its address for its size: refuse anything else (never a read
+        # past an array's end)
+        for name, arr, size in zip(_ARGS, (w, a, gaps, jd_raw, d_prep, d, grad, xr_prep, x_ref,
+                                           s0, tilt, S0), self._sizes):
+            if arr.size != size or arr.dtype != np.float64 or not arr.flags.c_contiguous:
+                raise ValueError(f"compiled RTI feedback: {name} must be {size} float64, "
+                                 f"C-contiguous (got {arr.size} {arr.dtype}, "
+                                 f"contiguous {arr.flags.c_contiguous})")
         status = self._fn(self._dims.ctypes.data, self._st, self.ocp.tilt_step0,
                           w.ctypes.data, a.ctypes.data, gaps.ctypes.data, jd_raw.ctypes.data,
                           d_prep.ctypes.data, d.ctypes.data, grad.ctypes.data,

@@ -257,7 +257,7 @@ class RtiSolver:
             y0 = u_prev
         w = np.clip(o.pack(guess[1], guess[0], a_prev, y0), o.lbw, o.ubw)
         x_ref = np.asarray(x_ref, float).reshape(self._N + 1, self._nx)
-        d = np.asarray(d, float).reshape(6)
+        d = np.ascontiguousarray(d, float).reshape(6)
         if self.qp_interface == "direct":
             N, ns, nz = self._N, self._ns, self._ns + self._nv
             # x_ref (N+1, nx) row-major is the (nx, N+1) input column-major; the outputs are
@@ -313,7 +313,7 @@ class RtiSolver:
         P, o = self._prepared, self.ocp
         self._prepared = None
         x0 = np.asarray(x0, float).reshape(12)
-        d = np.asarray(d, float).reshape(6)
+        d = np.ascontiguousarray(d, float).reshape(6)   # C reads it
         tilt = np.asarray(u_prev, float)[0:4] if o.tilting else None
         if self._kernel is not None:
             return self._feedback_compiled(P, x0, x_ref, d, tilt, y0)
