@@ -36,7 +36,7 @@ def _solver(name, hessian="gauss_newton", tilt_rate_limit="horizon"):
     if not feedback.available():
         pytest.skip("the compiled feedback cannot be built here (no C compiler)")
     assert rti._kernel is None                   # codegen off: the NumPy feedback
-    kernel = feedback.FeedbackKernel(rti.ocp, rti._hqp, rti._q2_w)
+    kernel = feedback.FeedbackKernel(rti.ocp, rti._hqp, rti._q2_w, rti._prep_np.results[0:4])
     rti._s0_hess = np.ascontiguousarray(rti._hc[rti._ns:, :rti._ns])
     return rti, kernel, (u_trim, x0, x_ref, d, guess)
 
@@ -63,7 +63,6 @@ def test_the_compiled_feedback_takes_numpys_step(name, hessian, tilt_rate_limit)
     rti, kernel, (u_trim, x0, x_ref, d, guess) = _solver(name, hessian, tilt_rate_limit)
     y0 = u_trim if rti.ocp.n_lag else None
     u, x, _ = rti.solve(x0, x_ref, d, u_trim, guess, y0=y0)          # a plan to prepare at
-    rti._kernel = kernel                          # (so that the preparation keeps jd_raw)
     rti.prepare(x_ref, d, u_trim, (u, x), y0=y0)
     prepared = rti._prepared
     # the step measured something else than the preparation assumed: state, reference, d,
@@ -93,7 +92,6 @@ def test_the_compiled_feedback_takes_numpys_step(name, hessian, tilt_rate_limit)
 
 def test_a_non_finite_step_is_refused_as_numpy_refuses_it():
     rti, kernel, (u_trim, x0, x_ref, d, guess) = _solver("trq_nmpc_eso")
-    rti._kernel = kernel
     rti.prepare(x_ref, d, u_trim, guess)
     bad = d.copy()
     bad[3] = np.nan
@@ -107,25 +105,32 @@ def test_the_kernel_refuses_an_ocp_it_cannot_read():
     rti, _, _ = _solver("trq_nmpc_eso")
     ocp = dataclasses.replace(rti.ocp, s_index=rti.ocp.s_index[::-1].copy())
     with pytest.raises(ValueError, match="stage-major"):
-        feedback.FeedbackKernel(ocp, rti._hqp, rti._q2_w)
+        feedback.FeedbackKernel(ocp, rti._hqp, rti._q2_w, rti._prep_np.results[0:4])
 
 
-def test_the_kernel_refuses_arrays_it_would_misread():
-    """A wrong size, dtype or layout is a ValueError that names the array, never a read past
-    an array's end."""
+def test_the_kernel_takes_any_layout_and_refuses_a_wrong_shape():
+    """The step's arrays are copied into the kernel's buffers: another memory layout gives the
+    same step, a wrong shape is a ValueError that names the array (a copy would broadcast it),
+    and so is a preparation buffer of the wrong size."""
     rti, kernel, (u_trim, x0, x_ref, d, guess) = _solver("trq_nmpc_eso")
-    rti._kernel = kernel
     rti.prepare(x_ref, d, u_trim, guess)
     P = rti._prepared
     s0 = rti.ocp.initial_stage(x0, u_trim[0:4])
-    S0 = rti._s0_hess
-    good = [P.w, P.a, P.gaps, P.jd_raw, P.d, d, P.grad, P.xr_w, x_ref, s0, u_trim[0:4], S0]
+    good = [P.w, P.d, d, P.xr_w, x_ref, s0, u_trim[0:4], rti._s0_hess]
     w, _ = kernel(*good)
     assert w is not None
-    bad_cases = {1: P.a[:, :, :-1], 5: d[:5], 8: np.asfortranarray(x_ref),
-                 9: s0.astype(np.float32), 10: u_trim[0:8:2]}
-    for i, bad in bad_cases.items():
+    strided = list(good)
+    strided[4] = np.asfortranarray(x_ref)
+    strided[6] = np.repeat(u_trim[0:4], 2)[::2]
+    w2, _ = kernel(*strided)
+    assert w2.tobytes() == w.tobytes()
+    for i, bad in {2: d[:5], 4: x_ref.ravel(), 5: s0[:-1], 7: rti._s0_hess.T}.items():
         args = list(good)
         args[i] = bad
-        with pytest.raises(ValueError, match=f": {feedback._ARGS[i]} must be "):
+        name = ("w", "d_prep", "d", "xr_prep", "x_ref", "s0", "tilt", "S0")[i]
+        with pytest.raises(ValueError, match=f": {name} must have the shape "):
             kernel(*args)
+    buffers = list(rti._prep_np.results[0:4])
+    buffers[1] = buffers[1][:-1]
+    with pytest.raises(ValueError, match="the preparation's gaps must be"):
+        feedback.FeedbackKernel(rti.ocp, rti._hqp, rti._q2_w, buffers)

@@ -48,15 +48,15 @@ static double clip(double x, double lo, double hi)
 /* dims: N, ns, nv, nb, nx, tilt_clamp (1: the first stage's tilts are inputs whose rate is
    bounded from the applied tilt), nw.
    st: HPIPM's qp, sol, arg, ws and partial condensing's six (hpipm.OcpQp.handles), then
-   idxbx (int, nb), q2w (nw), lbw0, ubw0 (nw: the OCP's bounds), work (3 nw + 2 (N+1) ns
-   + 4 N nv + 2 (N+1) nb + 6 doubles), x ((N+1) ns), u (N nv), pi (N ns), iter (int).
+   [10] idxbx (int, nb), [11] q2w (nw), [12] lbw0, [13] ubw0 (nw: the OCP's bounds),
+   [14] work (3 nw + 2 (N+1) ns + 4 N nv + 2 (N+1) nb + 6 doubles), [15] x ((N+1) ns),
+   [16] u (N nv), [17] pi (N ns), [18] iter (int); the preparation's [19] a (N (ns+nv) ns),
+   [20] gaps (N ns), [21] grad (nw), [22] jd (N 6 ns); the step's [23] w (nw), [24] d_prep (6),
+   [25] d (6), [26] xr_prep (nw), [27] x_ref ((N+1) nx), [28] s0 (ns), [29] tilt (4),
+   [30] S0 (nv ns); [31] w_out (nw).
    Returns HPIPM's status (0 converged), or -1 when the step or the multipliers are not finite
    (w_out then untouched). */
-int trq_rti_feedback(const int *dims, void *const *st, double tilt_step0,
-                     const double *w, const double *a, const double *gaps, const double *jd,
-                     const double *d_prep, const double *d, const double *grad,
-                     const double *xr_prep, const double *x_ref, const double *s0,
-                     const double *tilt, const double *S0, double *w_out)
+int trq_rti_feedback(const int *dims, void *const *st, double tilt_step0)
 {
     const int N = dims[0], ns = dims[1], nv = dims[2], nb = dims[3], nx = dims[4];
     const int tilt_clamp = dims[5], nw = dims[6], nz = ns + nv;
@@ -64,6 +64,10 @@ int trq_rti_feedback(const int *dims, void *const *st, double tilt_step0,
     const double *q2w = st[11], *lbw0 = st[12], *ubw0 = st[13];
     double *work = st[14], *x = st[15], *u = st[16], *pi = st[17];
     int *iter = st[18];
+    const double *a = st[19], *gaps = st[20], *grad = st[21], *jd = st[22];
+    const double *w = st[23], *d_prep = st[24], *d = st[25], *xr_prep = st[26];
+    const double *x_ref = st[27], *s0 = st[28], *tilt = st[29], *S0 = st[30];
+    double *w_out = st[31];
     double *lbw = work, *ubw = lbw + nw, *g = ubw + nw, *b = g + nw;
     double *q = b + N * ns, *r = q + (N + 1) * ns, *lbx = r + N * nv, *ubx = lbx + (N + 1) * nb;
     double *lbu = ubx + (N + 1) * nb, *ubu = lbu + N * nv, *ds0 = ubu + N * nv, *dd = ds0 + ns;
@@ -174,8 +178,6 @@ int trq_rti_feedback(const int *dims, void *const *st, double tilt_step0,
 """
 
 _LIB: ctypes.CDLL | None | bool = None       # False: tried, not available
-_ARGS = ("w", "a", "gaps", "jd_raw", "d_prep", "d", "grad", "xr_prep", "x_ref", "s0", "tilt",
-         "S0")
 
 
 def _load() -> ctypes.CDLL | None:
@@ -189,8 +191,7 @@ def _load() -> ctypes.CDLL | None:
                     lib = ctypes.CDLL(str(path))
                     f = lib.trq_rti_feedback
                     f.restype = ctypes.c_int
-                    f.argtypes = ([ctypes.c_void_p] * 2 + [ctypes.c_double]
-                                  + [ctypes.c_void_p] * 13)
+                    f.argtypes = [ctypes.c_void_p] * 2 + [ctypes.c_double]
                     _LIB = lib
                 except OSError:
                     pass
@@ -204,10 +205,14 @@ def available() -> bool:
 
 class FeedbackKernel:
     """The feedback of one RtiSolver's QP: its OCP's layout and bounds, its HPIPM workspace
-    (`qp`: hpipm.OcpQp, whose x, u, pi, status and iterations it fills) and the gradient's
-    reference weights q2w (nw). Raises RuntimeError when the compiled kernel is unavailable."""
+    (`qp`: hpipm.OcpQp, whose x, u, pi, status and iterations it fills), the gradient's
+    reference weights q2w (nw) and the preparation's output buffers (a (N (ns+nv) ns), gaps
+    (N ns), grad (nw), jd (N 6 ns), overwritten in place by each preparation: the kernel reads
+    them where they are). Every address is fixed at construction: a call copies the step's
+    few small arrays into the kernel's own buffers and hands C one table. Raises RuntimeError
+    when the compiled kernel is unavailable."""
 
-    def __init__(self, ocp, qp, q2w: np.ndarray):
+    def __init__(self, ocp, qp, q2w: np.ndarray, prepared):
         lib = _load()
         if lib is None:
             raise RuntimeError("the compiled RTI feedback is not available (no C compiler, or "
@@ -218,8 +223,15 @@ class FeedbackKernel:
         if nw != N * nz + ns or not np.array_equal(ocp.s_index, base + np.arange(ns)) \
                 or not np.array_equal(ocp.v_index, base[:N] + ns + np.arange(nv)):
             raise ValueError("the OCP's decision vector is not stage-major [s_0, v_0, ..., s_N]")
+        sizes = {"a": N * nz * ns, "gaps": N * ns, "grad": nw, "jd": N * 6 * ns}
+        prepared = dict(zip(sizes, prepared))
+        for name, size in sizes.items():
+            buf = prepared[name]
+            if buf.size != size or buf.dtype != np.float64 or not buf.flags.c_contiguous:
+                raise ValueError(f"compiled RTI feedback: the preparation's {name} must be "
+                                 f"{size} float64, C-contiguous (got {buf.size} {buf.dtype})")
         self._fn = lib.trq_rti_feedback
-        self.ocp, self.qp, self.N, self.ns, self.nv, self.nx, self.nw = ocp, qp, N, ns, nv, nx, nw
+        self.ocp, self.qp = ocp, qp
         tilt_clamp = int(ocp.tilting and not ocp.tilt_states)
         self._dims = np.array([N, ns, nv, qp.idxbx.size, nx, tilt_clamp, nw], np.intc)
         self._idxbx = np.ascontiguousarray(qp.idxbx, np.intc)
@@ -230,38 +242,37 @@ class FeedbackKernel:
         # ocp.lbw / ubw are updated in place (Ocp.set_throttle_scale): their addresses hold
         self._lbw0, self._ubw0 = ocp.lbw, ocp.ubw
         assert self._lbw0.flags.c_contiguous and self._ubw0.flags.c_contiguous
-        handles = [h or 0 for h in qp.handles]
-        ptrs = handles + [self._idxbx.ctypes.data, self._q2w.ctypes.data,
-                          self._lbw0.ctypes.data, self._ubw0.ctypes.data, self._work.ctypes.data,
-                          qp.x.ctypes.data, qp.u.ctypes.data, qp.pi.ctypes.data,
-                          ctypes.addressof(self._iter)]
-        self._st = (ctypes.c_void_p * len(ptrs))(*ptrs)
-        self._tilt0 = np.zeros(4)
+        self._prepared = prepared                      # kept alive: C reads them
+        # the step's inputs, copied in by each call (any layout and dtype a copy converts)
+        self._inputs = tuple((name, np.zeros(shape)) for name, shape in (
+            ("w", nw), ("d_prep", 6), ("d", 6), ("xr_prep", nw), ("x_ref", (N + 1, nx)),
+            ("s0", ns), ("tilt", 4), ("S0", (nv, ns))))
         self._out = np.zeros(nw)
-        self._sizes = (nw, N * nz * ns, N * ns, N * 6 * ns, 6, 6, nw, nw, (N + 1) * nx, ns, 4,
-                       nv * ns)
+        handles = [h or 0 for h in qp.handles]
+        ptrs = handles + [a.ctypes.data for a in (
+            self._idxbx, self._q2w, self._lbw0, self._ubw0, self._work, qp.x, qp.u, qp.pi)]
+        ptrs += [ctypes.addressof(self._iter)]
+        ptrs += [prepared[name].ctypes.data for name in sizes]
+        ptrs += [buf.ctypes.data for _, buf in self._inputs] + [self._out.ctypes.data]
+        self._st = (ctypes.c_void_p * len(ptrs))(*ptrs)
+        self._dims_ptr = self._dims.ctypes.data
 
-    def __call__(self, w, a, gaps, jd_raw, d_prep, d, grad, xr_prep, x_ref, s0, tilt, S0):
-        """The feedback from the prepared (w, a (N, nz, ns), gaps, jd_raw (N, 6, ns), d_prep,
-        grad, xr_prep (nw)) and the step's d (6), x_ref (N+1, nx), s0 (ns), applied tilt (4,
-        or None) and S_0 (nv, ns). All float64 C-contiguous. Returns (w+ (a new array), HPIPM's
-        status), or (None, -1) for a non-finite step."""
+    def __call__(self, w, d_prep, d, xr_prep, x_ref, s0, tilt, S0):
+        """The feedback on the preparation in the bound buffers, from its w (nw), d_prep (6)
+        and xr_prep (nw, the reference at the states' positions) and the step's d (6), x_ref
+        (N+1, nx), s0 (ns), applied tilt (4, or None) and S_0 (nv, ns). Returns (w+ (a new
+        array), HPIPM's status), or (None, -1) for a non-finite step. An array of another size
+        is a ValueError that names it."""
         if self.ocp.lbw is not self._lbw0 or self.ocp.ubw is not self._ubw0:
             raise RuntimeError("the OCP's bounds were replaced: the kernel holds their address")
-        tilt = self._tilt0 if tilt is None else tilt
-        # C reads each array at its address for its size: refuse anything else (never a read
-        # past an array's end)
-        for name, arr, size in zip(_ARGS, (w, a, gaps, jd_raw, d_prep, d, grad, xr_prep, x_ref,
-                                           s0, tilt, S0), self._sizes):
-            if arr.size != size or arr.dtype != np.float64 or not arr.flags.c_contiguous:
-                raise ValueError(f"compiled RTI feedback: {name} must be {size} float64, "
-                                 f"C-contiguous (got {arr.size} {arr.dtype}, "
-                                 f"contiguous {arr.flags.c_contiguous})")
-        status = self._fn(self._dims.ctypes.data, self._st, self.ocp.tilt_step0,
-                          w.ctypes.data, a.ctypes.data, gaps.ctypes.data, jd_raw.ctypes.data,
-                          d_prep.ctypes.data, d.ctypes.data, grad.ctypes.data,
-                          xr_prep.ctypes.data, x_ref.ctypes.data, s0.ctypes.data,
-                          tilt.ctypes.data, S0.ctypes.data, self._out.ctypes.data)
+        for (name, buf), arr in zip(self._inputs, (w, d_prep, d, xr_prep, x_ref, s0, tilt, S0)):
+            if arr is None:                            # no tilt (the quadcopter): unused
+                continue
+            if arr.shape != buf.shape:                 # (a copy would broadcast)
+                raise ValueError(f"compiled RTI feedback: {name} must have the shape "
+                                 f"{buf.shape} (got {arr.shape})")
+            buf[...] = arr
+        status = self._fn(self._dims_ptr, self._st, self.ocp.tilt_step0)
         self.qp.iterations = self._iter.value
         if status < 0:
             return None, status

@@ -69,8 +69,7 @@ class _Prepared:
     h: ca.DM | np.ndarray | None   # conic: Hessian (sparse); direct: stage blocks (exact) or None
     gaps: np.ndarray         # F(s_k, v_k) - s_{k+1}, stage-major (N ns)
     grad: np.ndarray         # cost gradient (nw)
-    jd: np.ndarray           # (N, ns, 6) dF/dd per stage (direct: a view of jd_raw)
-    jd_raw: np.ndarray | None  # direct: the (N, 6, ns) array jd views (the compiled feedback's)
+    jd: np.ndarray           # (N, ns, 6) dF/dd per stage
     d: np.ndarray            # d and the reference the preparation used
     xr_w: np.ndarray         # x_ref placed at the state positions of w (nw)
 
@@ -230,7 +229,8 @@ class RtiSolver:
         # the feedback in one compiled call where it can be built (else the NumPy one below)
         self._kernel = None
         if direct and enabled and self._hqp.uses_shim and feedback.available():
-            self._kernel = feedback.FeedbackKernel(o, self._hqp, self._q2_w)
+            self._kernel = feedback.FeedbackKernel(o, self._hqp, self._q2_w,
+                                                   self._prep_np.results[0:4])
             self._s0_hess = np.ascontiguousarray(self._hc[ns:, :ns])
         self._prepared: _Prepared | None = None
         self.last_prepare_s = 0.0
@@ -257,7 +257,7 @@ class RtiSolver:
             y0 = u_prev
         w = np.clip(o.pack(guess[1], guess[0], a_prev, y0), o.lbw, o.ubw)
         x_ref = np.asarray(x_ref, float).reshape(self._N + 1, self._nx)
-        d = np.ascontiguousarray(d, float).reshape(6)
+        d = np.asarray(d, float).reshape(6)
         if self.qp_interface == "direct":
             N, ns, nz = self._N, self._ns, self._ns + self._nv
             # x_ref (N+1, nx) row-major is the (nx, N+1) input column-major; the outputs are
@@ -274,10 +274,9 @@ class RtiSolver:
             a, h = out[0], (out[4] if self.hessian == "exact" else self._h_const)
         xr_w = np.zeros(w.size)
         xr_w[self._x_pos] = x_ref
-        jd_raw = np.asarray(out[3]).reshape(self._N, 6, self._ns)
         self._prepared = _Prepared(
             w, a, h, np.asarray(out[1]).ravel(), np.asarray(out[2]).ravel(),
-            jd_raw.transpose(0, 2, 1), jd_raw if self._kernel is not None else None, d, xr_w)
+            np.asarray(out[3]).reshape(self._N, 6, self._ns).transpose(0, 2, 1), d, xr_w)
         self.last_prepare_s = time.perf_counter() - t0
 
     def discard(self) -> None:
@@ -313,7 +312,7 @@ class RtiSolver:
         P, o = self._prepared, self.ocp
         self._prepared = None
         x0 = np.asarray(x0, float).reshape(12)
-        d = np.ascontiguousarray(d, float).reshape(6)   # C reads it
+        d = np.asarray(d, float).reshape(6)
         tilt = np.asarray(u_prev, float)[0:4] if o.tilting else None
         if self._kernel is not None:
             return self._feedback_compiled(P, x0, x_ref, d, tilt, y0)
@@ -348,14 +347,13 @@ class RtiSolver:
         ns = self._ns
         if P.h is not None:                               # exact Hessian: per-stage blocks
             self._hqp.set_hessian(P.h, self._hcN)
-            s0_hess = np.ascontiguousarray(P.h[0][ns:, :ns])
+            s0_hess = P.h[0][ns:, :ns]
         else:
             s0_hess = self._s0_hess
-        w, status = self._kernel(
-            P.w, P.a, P.gaps, P.jd_raw, P.d, d, P.grad, P.xr_w,
-            np.ascontiguousarray(x_ref, float).reshape(self._N + 1, self._nx),
-            np.ascontiguousarray(self.ocp.initial_stage(x0, tilt, y0), float),
-            None if tilt is None else np.ascontiguousarray(tilt), s0_hess)
+        # the preparation's constraint and cost data: in the buffers the kernel reads
+        w, status = self._kernel(P.w, P.d, d, P.xr_w,
+                                 np.reshape(x_ref, (self._N + 1, self._nx)),
+                                 self.ocp.initial_stage(x0, tilt, y0), tilt, s0_hess)
         self.qp_iterations = self._hqp.iterations
         if w is None:
             return None, "non-finite QP step"
