@@ -245,6 +245,20 @@ def test_actuator_walk_is_the_step_by_step_walk(delay):
     assert min(fitted) >= 40, fitted                     # each size serves many of them
 
 
+def _counting_reference():
+    """A Reference class that counts its grid calls (in `calls`, on the class)."""
+    from trq_offboard.reference import Reference
+
+    class Counting(Reference):
+        calls = 0
+
+        def grid(self, t_s, step_s, n):
+            Counting.calls += 1
+            return super().grid(t_s, step_s, n)
+
+    return Counting
+
+
 def test_reference_grid_is_sampled_once_for_the_same_time():
     """The preparation and the next step ask for the same time: one grid for both, the same
     states as a fresh one; another time or another reference object samples again."""
@@ -253,12 +267,7 @@ def test_reference_grid_is_sampled_once_for_the_same_time():
     cfg = dataclasses.replace(load_controller(CTRL), effectiveness=None)
     ctl = Controller(cfg, solver=_HoverSolver(np.zeros(8), cfg.horizon_steps))
 
-    class Counting(Reference):
-        calls = 0
-
-        def grid(self, t_s, step_s, n):
-            Counting.calls += 1
-            return super().grid(t_s, step_s, n)
+    Counting = _counting_reference()
 
     ref = Counting(cfg.reference, [0.0, 0.0, 0.0], 0.0)
     fresh = Reference(cfg.reference, [0.0, 0.0, 0.0], 0.0)
@@ -296,8 +305,6 @@ def test_the_preparation_samples_the_reference_the_next_step_flies(delay):
     the preparation asks for the very time the next step asks for (adding the period to the
     last float would miss it by a rounding, most periods), so one grid a period serves both,
     and the prepared reference is the next step's."""
-    from trq_offboard.reference import Reference
-
     cfg = dataclasses.replace(load_controller(CTRL), effectiveness=None, applied_delay_s=delay,
                               delay_compensation="predict")
     probe = Controller(cfg, solver=_HoverSolver(np.zeros(8), cfg.horizon_steps))
@@ -305,12 +312,7 @@ def test_the_preparation_samples_the_reference_the_next_step_flies(delay):
     ctl = Controller(cfg, solver=solver)
     assert ctl.delay_s == pytest.approx(delay)
 
-    class Counting(Reference):
-        calls = 0
-
-        def grid(self, t_s, step_s, n):
-            Counting.calls += 1
-            return super().grid(t_s, step_s, n)
+    Counting = _counting_reference()
 
     ref = Counting(cfg.reference, [0.0, 0.0, 0.0], 0.0)
     period_us = round(cfg.control_dt_s * 1e6)
