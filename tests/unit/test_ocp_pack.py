@@ -61,6 +61,7 @@ def test_pack_and_unpack_are_their_index_specification(name, tilt_rate_limit):
     nz = o.ns + o.nv
     assert o.lbw.size == N * nz + o.ns                 # stage-major: the views' premise
     np.testing.assert_array_equal(o.s_index, np.arange(N + 1)[:, None] * nz + np.arange(o.ns))
+    assert o.stage_major()
     rng = np.random.default_rng(11)
     for _ in range(20):
         x_plan = rng.normal(size=(N + 1, 12))

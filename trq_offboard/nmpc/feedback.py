@@ -219,9 +219,7 @@ class FeedbackKernel:
                                "HPIPM not loaded)")
         N, ns, nv, nx = ocp.n_steps, ocp.ns, ocp.nv, ocp.nx
         nz, nw = ns + nv, ocp.lbw.size
-        base = np.arange(N + 1)[:, None] * nz
-        if nw != N * nz + ns or not np.array_equal(ocp.s_index, base + np.arange(ns)) \
-                or not np.array_equal(ocp.v_index, base[:N] + ns + np.arange(nv)):
+        if not ocp.stage_major():
             raise ValueError("the OCP's decision vector is not stage-major [s_0, v_0, ..., s_N]")
         sizes = {"a": N * nz * ns, "gaps": N * ns, "grad": nw, "jd": N * 6 * ns}
         prepared = dict(zip(sizes, prepared))

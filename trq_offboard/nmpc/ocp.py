@@ -268,6 +268,15 @@ class Ocp:
             ubw[i] = np.maximum(np.minimum(ubw[i], a + self.tilt_step0), lbw[i])
         return lbw, ubw
 
+    def stage_major(self) -> bool:
+        """w is laid out stage by stage, [s_0, v_0, s_1, ..., s_N], as `build` lays it out and
+        s_index and v_index say: the premise of `stages` (and of the compiled feedback)."""
+        N, ns, nv = self.n_steps, self.ns, self.nv
+        base = np.arange(N + 1)[:, None] * (ns + nv)
+        return (self.lbw.size == N * (ns + nv) + ns
+                and np.array_equal(self.s_index, base + np.arange(ns))
+                and np.array_equal(self.v_index, base[:N] + ns + np.arange(nv)))
+
     def stages(self, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Views of w's stages: (N, ns + nv) rows [s_k, v_k] and s_N. `build` lays w out stage
         by stage, [s_0, v_0, s_1, ..., s_N] (s_index and v_index say the same), so plain
