@@ -6,19 +6,18 @@ time it is simply an event-driven controller. A repeated stamp (the vehicle rese
 gets the same target again; an older stamp is stale and ignored: no command is ever computed from
 an old state.
 
-The controller's step and preparation run on a worker thread by default, off the event loop,
-as one job a period: the worker steps, hands the command to the event loop (which sends it at
-once) and goes straight on to the preparation of the next step, so a period costs one hand-off
-each way instead of two (`executor`: a concurrent.futures.Executor that runs one job at a time,
-so that the next step waits for the preparation; None: the flight's own one-thread executor).
-`direct=True` calls them from the flight loop instead, which saves the hand-offs and event-loop
-turns when the machine has a core to spare for the controller, and yields the core
-(os.sched_yield) once the answer is sent, to whoever it woke, before the log and the
-preparation (`yield_core=False`: not, where the answer woke nobody, as in the in-process
-harness, whose vehicle runs in the same thread). Measured
-(docs/decisions/2026-12-02-flight-loop-direct-calls.md): one lockstep flight alone is faster
-direct, two flights in parallel on two busy cores (the scenario runner's default) are slower, so
-the thread stays the default.
+The controller's step and preparation are called from the flight loop by default (`direct`): no
+thread hand-off and no event-loop turn a period. Once the answer is sent the loop yields its core
+(os.sched_yield) to whoever the answer woke, before the log and the preparation
+(`yield_core=False`: not, where the answer woke nobody, as in the in-process harness, whose
+vehicle runs in the same thread). `direct=False` runs them on a worker thread instead, as one job
+a period: the worker steps, hands the command to the event loop (which sends it at once) and goes
+straight on to the preparation of the next step (`executor`: a concurrent.futures.Executor that
+runs one job at a time, so that the next step waits for the preparation; None: the flight's own
+one-thread executor). Measured (docs/decisions/2026-12-04-direct-calls-default.md): direct costs
+less CPU a period and flies the demo's parallel flights as fast on a quiet machine; the worker
+thread helped two lockstep flights on two busy cores once
+(docs/decisions/2026-12-02-flight-loop-direct-calls.md).
 
 Every period is timed by part with injected CPU clocks: `cpu_ns` (default time.thread_time_ns:
 the calling thread's) for the wire (the telemetry's decode into a state, the target's encode and
@@ -132,7 +131,7 @@ class OffboardFlight:
                  name: str, tilt_limit_rad: float, record: Callable[[StepRecord], None] | None = None,
                  connect_timeout_s: float = 30.0, telemetry_timeout_s: float = 2.0,
                  telemetry_lost_s: float = 10.0, ack_timeout_s: float = 1.0,
-                 executor=None, direct: bool = False, yield_core: bool = True,
+                 executor=None, direct: bool = True, yield_core: bool = True,
                  cpu_ns: Callable[[], int] = time.thread_time_ns,
                  process_cpu_ns: Callable[[], int] = time.process_time_ns) -> None:
         self.link = link
@@ -141,7 +140,7 @@ class OffboardFlight:
         self._prepare_ns = 0            # the last preparation's CPU (set by the worker)
         self._prepared_ns = 0           # the one before this step (handed over with it)
         self._prepare_error: BaseException | None = None
-        self.direct = direct            # or called directly from the flight loop
+        self.direct = direct            # called from the flight loop, or on the worker
         self.yield_core = yield_core and _sched_yield is not None   # direct: after the answer
         self.cpu_ns = cpu_ns                    # the loop thread's parts (wire, log)
         self.process_cpu_ns = process_cpu_ns    # the whole period: every thread of the process

@@ -462,7 +462,7 @@ def test_worker_answers_before_its_preparation_and_steps_after_it():
 
     async def scenario():
         ctl = PreparingController()
-        flight, link = make_preparing_flight(ctl, record=records.append)
+        flight, link = make_preparing_flight(ctl, record=records.append, direct=False)
         task = asyncio.create_task(flight.run())
         await take_off(flight, link)
         ctl.go.clear()                                  # hold the next preparation
@@ -491,7 +491,7 @@ def test_worker_answers_before_its_preparation_and_steps_after_it():
 def test_a_failed_preparation_on_the_worker_ends_the_flight():
     async def scenario():
         ctl = PreparingController(fail_at=1)
-        flight, link = make_preparing_flight(ctl)
+        flight, link = make_preparing_flight(ctl, direct=False)
         task = asyncio.create_task(flight.run())
         await take_off(flight, link)
         flight.on_message(odometry(10_000, down_m=-0.5))
@@ -504,3 +504,50 @@ def test_a_failed_preparation_on_the_worker_ends_the_flight():
 
     link = asyncio.run(scenario())
     assert not link.targets(20_000)        # no command after the failure
+
+
+@pytest.mark.parametrize("fail_at", [None, 2])
+def test_direct_calls_answer_then_prepare_in_the_loop(fail_at):
+    """The default, called from the flight loop: each step's answer is sent before its
+    preparation runs, the next step after it, each period's record gets its own preparation's
+    CPU, and a failed preparation ends the flight before any step from it."""
+    import threading
+
+    records: list = []
+    loop_thread = threading.get_ident()
+    threads: set = set()
+
+    async def scenario():
+        ctl = PreparingController(fail_at=fail_at)
+        sent_before_prepare = []
+        prepare = ctl.prepare
+
+        def watched(reference):
+            threads.add(threading.get_ident())
+            sent_before_prepare.append(bool(link.targets(10_000 * (ctl.prepares + 1))))
+            prepare(reference)
+        ctl.prepare = watched
+        flight, link = make_preparing_flight(ctl, record=records.append, yield_core=False)
+        task = asyncio.create_task(flight.run())
+        await take_off(flight, link)
+        for k in (1, 2, 3):
+            flight.on_message(odometry(10_000 * k, down_m=-0.5))
+            if fail_at is not None and k > fail_at:
+                with pytest.raises(ArithmeticError, match="preparation failed"):
+                    await asyncio.wait_for(task, WAIT_S)
+                assert not link.targets(10_000 * k)      # nothing from the failed preparation
+                return ctl, sent_before_prepare
+            await until(lambda: link.targets(10_000 * k), f"the target of stamp {10_000 * k}")
+        await settle()
+        await cancelled(task)
+        return ctl, sent_before_prepare
+
+    ctl, sent_before_prepare = asyncio.run(scenario())
+    assert threads == {loop_thread}                       # no worker thread
+    assert all(sent_before_prepare) and sent_before_prepare
+    if fail_at is None:
+        assert ctl.events[:6] == ["step 0.00", "prepare", "step 0.01", "prepare", "step 0.02",
+                                  "prepare"]
+        assert [r.cpu.prepare_ns for r in records[:3]] == [7_000, 14_000, 21_000]
+    else:
+        assert ctl.events == ["step 0.00", "prepare", "step 0.01", "prepare"]
