@@ -30,8 +30,8 @@ simulated seconds after a crash, or at `timeout_s` of simulated time. It writes 
 (`trq_wire.logfile.CsvLog`, columns `sil_vehicle.sitl.LOG_COLUMNS`) and `controller.csv`
 (`trq_offboard.log.ControllerLog`) in `out_dir`, so `trq_lab.metrics` computes the same metrics
 as for a scenario run. The controller's solve goes through `run_in_executor`, on an executor
-that runs it inline by default (one thread per flight; `inline_solve=False`: a worker thread,
-as in the daemon).
+that runs it inline by default (one thread per flight, as the daemon calls it from its flight
+loop; `inline_solve=False`: a worker thread, as the daemon's --worker-thread).
 
 The same loop serves the tests and the benchmark (`trq_lab.bench.nmpc`):
 
@@ -623,7 +623,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--only", action="append", default=None,
                     help="fly only this controller (repeatable)")
     ap.add_argument("--thread", action="store_true",
-                    help="solve in a worker thread (as the daemon) instead of inline")
+                    help="solve in a worker thread (as the daemon's --worker-thread) instead "
+                         "of inline")
     args = ap.parse_args(argv)
     try:
         sc = run_scenario.load_scenario(trq_params.resolve("scenarios", args.scenario))

@@ -102,3 +102,13 @@ def test_scenario_refuses_controller_args_it_sets_itself(tmp_path, capsys, extra
     err = capsys.readouterr().err
     assert named in err and "sets itself" in err
     assert not (tmp_path / "out").exists()
+
+
+def test_a_share_under_the_minimum_quota_is_refused_before_any_flight(monkeypatch, capsys):
+    flown = []
+    monkeypatch.setattr(cpu_budget, "fly", lambda *a, **k: flown.append(a))
+    with pytest.raises(SystemExit) as exc:
+        cpu_budget.main(["--shares", "1,1/3,1/5", "--period-us", "4000"])
+    assert exc.value.code == 2 and not flown
+    err = capsys.readouterr().err
+    assert "--shares: 0.2 of --period-us 4000 is 800 us" in err and "at least 5000" in err

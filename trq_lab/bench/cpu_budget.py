@@ -16,8 +16,8 @@ controller's own CPU per control period (every thread of its process, from its c
 and how often and how long the kernel held the controller back; and the tracking as a ratio of
 the anchor's, so that what degrades first is read off one table.
 
-`--worker-thread` flies the controller with trq-offboard's `--worker-thread` (its step and
-preparation on a worker thread instead of called from the flight loop, the daemon's default).
+`--worker-thread` flies the controller with trq-offboard's `--worker-thread`: its step and
+preparation on a worker thread, instead of called from the flight loop as by default.
 The controller loads the HPIPM that `$TRQ_HPIPM_LIBRARY` names (trq-hpipm-fetch), else CasADi's
 bundled one; the header says which.
 """
@@ -47,14 +47,17 @@ class NoQuota(RuntimeError):
     """This machine gives the tool no way to set a CPU quota (not Linux, not root, no cgroup)."""
 
 
+MIN_QUOTA_US = 1000          # CFS bandwidth control refuses a smaller quota
+
+
 class CpuQuota:
     """A CPU cgroup with `share` of one CPU in every `period_us`, entered by a command prefix."""
 
     def __init__(self, name: str, share: float, period_us: int) -> None:
         quota_us = round(share * period_us)
-        if quota_us < 1000:
+        if quota_us < MIN_QUOTA_US:
             raise ValueError(f"share {share:g} of {period_us} us is {quota_us} us: the kernel's "
-                             "minimum quota is 1000 us (raise --period-us)")
+                             f"minimum quota is {MIN_QUOTA_US} us (raise --period-us)")
         if (CGROUP_V1 / "cpu.cfs_quota_us").exists():
             self.dir = CGROUP_V1 / name
             self._make()
@@ -213,6 +216,12 @@ def main(argv: list[str] | None = None) -> int:
         ap.error(f"--shares: expected numbers in (0, 1], got {args.shares!r}")
     if not 1000 <= args.period_us <= 1_000_000:
         ap.error(f"--period-us: expected 1000 .. 1000000, got {args.period_us}")
+    short = [s for s in shares if s < 1.0 and round(s * args.period_us) < MIN_QUOTA_US]
+    if short:                # refused before any flight, not after the shares before it
+        ap.error(f"--shares: {min(short):g} of --period-us {args.period_us} is "
+                 f"{round(min(short) * args.period_us)} us, under the kernel's minimum quota "
+                 f"of {MIN_QUOTA_US} us: raise --period-us to at least "
+                 f"{math.ceil(MIN_QUOTA_US / min(short))}")
     if (os.cpu_count() or 1) < 2:
         print("trq-bench-cpu-budget: needs two cores (vehicle and controller on their own)",
               file=sys.stderr)
