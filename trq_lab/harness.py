@@ -536,7 +536,7 @@ def fly_inprocess(controller, sim, fault_events=(), seed: int | None = None, *,
         clog = ControllerLog(out_dir / "controller.csv",
                              {"controller": cfg.name, "controller_file": cfg.file,
                               "vehicle_file": cfg.vehicle.file, "connect": "in-process",
-                              "frames": "world NED, body FRD"})
+                              "frames": "world NED, body FRD", "solver": ctl.solver_line()})
     samples: list[StepSample] | None = [] if trace else None
     truth: list | None = [] if trace else None
     meter = (_Meter(timer, samples, on_step, inline_solve)

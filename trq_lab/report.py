@@ -47,25 +47,28 @@ PERIOD_PARTS = (("observer", "observer"), ("effectiveness", "effectiveness"),
                 ("period", "whole period"))
 
 
-def period_rows(runs) -> list[tuple[str, dict[str, float]]]:
-    """(controller, {part: mean CPU ms per control period}) of each run whose controller.csv has
-    the controller's CPU columns (trq_offboard/log.py)."""
+def period_rows(runs) -> list[tuple[str, dict[str, float], str]]:
+    """(controller, {part: mean CPU ms per control period}, what solved its NMPC) of each run
+    whose controller.csv has the controller's CPU columns (trq_offboard/log.py); the solver as
+    the log's header says it ("-" in a log older than that line)."""
     rows = []
     for r in runs:
         try:
-            _, steps = metrics_mod.read_csv(Path(r.out) / "controller.csv")
+            meta, steps = metrics_mod.read_csv(Path(r.out) / "controller.csv")
         except (OSError, ValueError):
             continue
         if "cpu_period_ms" not in steps or len(steps["cpu_period_ms"]) == 0:
             continue
         rows.append((r.controller, {k: float(np.nanmean(steps[f"cpu_{k}_ms"]))
                                     if np.isfinite(steps[f"cpu_{k}_ms"]).any() else math.nan
-                                    for k, _ in PERIOD_PARTS}))
+                                    for k, _ in PERIOD_PARTS}, meta.get("solver", "-")))
     return rows
 
 
-def period_text(rows: list[tuple[str, dict[str, float]]]) -> list[str]:
-    """The controller's CPU per control period by part (mean ms): a table of the report."""
+def period_text(rows: list[tuple[str, dict[str, float], str]]) -> list[str]:
+    """The controller's CPU per control period by part (mean ms), and what solved each
+    controller's NMPC (the library's kernels decide both the time and the last bits): a section
+    of the report."""
     if not rows:
         return []
     head = "| controller | " + " | ".join(h for _, h in PERIOD_PARTS) + " |"
@@ -76,9 +79,11 @@ def period_text(rows: list[tuple[str, dict[str, float]]]) -> list[str]:
              "the parts, the event loop, the transport's frame parse (and, with "
              "`--worker-thread`, the hand-offs to that thread).", "",
              head, "|" + "---|" * (len(PERIOD_PARTS) + 1)]
-    for name, parts in rows:
+    for name, parts, _ in rows:
         lines.append(f"| {name} | " + " | ".join(_fmt(parts[k], "{:.3f}") for k, _ in
                                                    PERIOD_PARTS) + " |")
+    lines += ["", "What solved the NMPC (controller.csv's `solver` line):", ""]
+    lines += [f"- `{name}`: {solver}" for name, _, solver in rows]
     return lines + [""]
 
 
@@ -105,7 +110,7 @@ def envelope_text(envelopes: list[dict]) -> list[str]:
 
 def markdown(scenario, results: list[dict], failures: list[str], figures: list[Path],
              envelopes: list[dict] | None = None,
-             periods: list[tuple[str, dict[str, float]]] | None = None) -> str:
+             periods: list[tuple[str, dict[str, float], str]] | None = None) -> str:
     lines = [f"# Scenario `{scenario.name}`", "", scenario.description, "",
              f"Seed {scenario.seed}; wind {scenario.wind_speed_m_s:g} m/s from "
              f"{scenario.wind_from_deg:g} deg{' with gusts' if scenario.gusts else ''}; faults: "

@@ -219,6 +219,15 @@ class Controller:
     def from_yaml(cls, path: Path | str) -> "Controller":
         return cls(load_controller(path))
 
+    def solver_line(self) -> str:
+        """What solves this controller's NMPC, for the log's header: the solver's own account
+        (RtiSolver.describe: the QP path and the libhpipm), else its kind and Hessian."""
+        describe = getattr(self.solver, "describe", None)
+        if describe is not None:
+            return describe()
+        sc = self.cfg.solver
+        return sc.kind if sc.kind == "ipopt" else f"{sc.kind} {sc.hessian}, {sc.qp_solver}"
+
     # --- lifecycle ------------------------------------------------------------------------------
     def reset(self, t_s: float, state: StateEstimate,
               applied: ActuatorCommand | None = None) -> None:

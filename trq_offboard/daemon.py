@@ -82,6 +82,13 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _solver_header(controller) -> dict:
+    """The log header's solver line, where the controller can say it (a measurement device
+    such as the period floor's replay need not)."""
+    line = getattr(controller, "solver_line", None)
+    return {"solver": line()} if line is not None else {}
+
+
 def main(argv: list[str] | None = None,
          make_controller: Callable[[ControllerConfig], object] | None = None) -> int:
     """The daemon (`argv`: its options, default sys.argv's). `make_controller(cfg)` builds the
@@ -123,7 +130,8 @@ def main(argv: list[str] | None = None,
         clog = ControllerLog(log_dir / "controller.csv",
                              {"controller": cfg.name, "controller_file": cfg.file,
                               "vehicle_file": cfg.vehicle.file, "connect": args.connect,
-                              "frames": "world NED, body FRD"})
+                              "frames": "world NED, body FRD",
+                              **_solver_header(controller)})
         timeline = VehicleTimeline()
         tlog = Tlog(log_dir / "offboard.tlog", clock=timeline.now_us)
 

@@ -194,6 +194,11 @@ def test_worker_thread_flies_the_same_flight_bit_for_bit(lockstep_flights):
     for c in same:
         floats = a[c].dtype.kind == "f"
         assert np.array_equal(a[c], b[c], equal_nan=floats), c
+    # the header says what solved the NMPC, the same in both
+    meta_a, _ = metrics.read_csv(direct.out / "controller" / "controller.csv")
+    meta_b, _ = metrics.read_csv(worker.out / "controller" / "controller.csv")
+    assert meta_a["solver"].startswith("rti gauss_newton, hpipm direct "), meta_a
+    assert "libhpipm " in meta_a["solver"] and meta_a["solver"] == meta_b["solver"]
 
 
 # --- (2) the command line ----------------------------------------------------------------------

@@ -59,6 +59,9 @@ def test_smoke_report_and_figures(smoke):
     report = (out / "report.md").read_text()
     assert "# Scenario `smoke`" in report
     assert "| controller | vehicle | crashed |" in report and "| trq_nmpc_eso | trq |" in report
+    # the period's parts and what solved the NMPC, from the controller's log
+    assert "## The controller's period" in report
+    assert "- `trq_nmpc_eso`: rti gauss_newton, hpipm direct " in report and "libhpipm " in report
     for name in FIGURES:
         assert f"({name})" in report
         path = out / name

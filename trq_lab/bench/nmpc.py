@@ -101,7 +101,7 @@ def fly(mode: str, seconds: float | None, controller: str = "trq_nmpc_eso",
     t0 = timer.wall_s()
     ctl = Controller(cfg)
     if qp_args:               # the direct HPIPM QP rebuilt with these arguments
-        _rebuild_qp(ctl.solver, qp_args)
+        ctl.solver.rebuild_qp(**qp_args)
     build_cached = timer.wall_s() - t0
     compiled_cached = cache.COUNTS["compiled"] - compiled_cold
     recorder = None
@@ -166,36 +166,8 @@ def fly(mode: str, seconds: float | None, controller: str = "trq_nmpc_eso",
         build_cold_s=build_cold, build_cached_s=build_cached,
         compilations_cold=compiled_cold, compilations_cached=compiled_cached,
         build_mode=getattr(ctl.solver, "build_mode", "-"),
-        qp=_qp_line(ctl.solver),
+        qp=ctl.solver_line(),
         peak_rss_mb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0)
-
-
-def _rebuild_qp(solver, qp_args: dict) -> None:
-    """The RTI's direct HPIPM QP built again with further OcpQp arguments (partial condensing:
-    condensed_stages), the same mode, options and Hessian."""
-    from trq_offboard.nmpc import hpipm
-
-    old = solver._hqp
-    qp = hpipm.OcpQp(old.ns, old.nv, old.N, old.idxbx, mode=solver.hpipm_mode,
-                     iter_max=solver.cfg.solver.qp_max_iterations,
-                     options=solver.hpipm_options, shim=old.uses_shim, **qp_args)
-    if solver.hessian != "exact":
-        qp.set_hessian(solver._hc, solver._hcN)
-    solver._hqp = qp
-
-
-def _qp_line(solver) -> str:
-    """Which QP path the mode's solver took (e.g. "hpipm direct speed_abs, shim")."""
-    iface = getattr(solver, "qp_interface", None)
-    if iface is None:
-        return "-"
-    if iface != "direct":
-        return f"{solver.cfg.solver.qp_solver} {iface}"
-    shim = "shim" if solver._hqp.uses_shim else "ctypes loop"
-    opts = "".join(f" {k} {v:g}" for k, v in solver.hpipm_options.items())
-    pc = (f", condensed to {solver._hqp.condensed_stages} blocks"
-          if solver._hqp.condensed_stages else "")
-    return f"hpipm direct {solver.hpipm_mode}{opts}, {shim}{pc}"
 
 
 def run_mode(mode: str, seconds: float | None, controller: str = "trq_nmpc_eso",
@@ -468,7 +440,7 @@ def main(argv=None) -> int:
             runs[m].append(r)
             print(f"  {m}{f' (run {k + 1})' if args.repeat > 1 else ''}: {r['steps']} steps, "
                   f"crashed {r['crashed']}, build {r['build_mode']}, compilations cold/cached "
-                  f"{r['compilations_cold']}/{r['compilations_cached']}, QP {r['qp']}, solve "
+                  f"{r['compilations_cold']}/{r['compilations_cached']}, solver {r['qp']}, solve "
                   f"p50/p99 {r['median_ms']:.2f}/{r['p99_ms']:.2f} ms, controller period "
                   f"p50 {r['period_median_ms']:.2f} ms", flush=True)
     results = [combine(runs[m]) for m in modes]

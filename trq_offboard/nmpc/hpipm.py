@@ -186,6 +186,12 @@ def _load_other(path: Path) -> ctypes.CDLL:
     return ctypes.CDLL(str(path), mode=_LOCAL)
 
 
+def loaded_library() -> Path | None:
+    """The libhpipm the direct binding loaded in this process (None before its first use or
+    when it could not load one)."""
+    return _LIB_PATH if _LIB is not None else None
+
+
 def other_loaded() -> Path | None:
     """The libhpipm of another build ($TRQ_HPIPM_LIBRARY) in use in this process, or None."""
     return _LIB_PATH if _LIB is not None and _LIB_PATH != bundled_path() else None
