@@ -489,7 +489,7 @@ def fly_inprocess(controller, sim, fault_events=(), seed: int | None = None, *,
     from sil_vehicle.mavlink.codec import Codec
     from sil_vehicle.sitl import LOG_COLUMNS, Sitl
     from trq_offboard.config import ControllerConfig, load_controller
-    from trq_offboard.log import ControllerLog
+    from trq_offboard.log import ControllerLog, solver_header
     from trq_offboard.loop import OffboardFlight
     from trq_offboard.reference import Reference
     from trq_wire.actuators import tilt_half_range
@@ -536,7 +536,7 @@ def fly_inprocess(controller, sim, fault_events=(), seed: int | None = None, *,
         clog = ControllerLog(out_dir / "controller.csv",
                              {"controller": cfg.name, "controller_file": cfg.file,
                               "vehicle_file": cfg.vehicle.file, "connect": "in-process",
-                              "frames": "world NED, body FRD", "solver": ctl.solver_line()})
+                              "frames": "world NED, body FRD", **solver_header(ctl)})
     samples: list[StepSample] | None = [] if trace else None
     truth: list | None = [] if trace else None
     meter = (_Meter(timer, samples, on_step, inline_solve)

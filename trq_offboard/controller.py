@@ -226,7 +226,10 @@ class Controller:
         if describe is not None:
             return describe()
         sc = self.cfg.solver
-        return sc.kind if sc.kind == "ipopt" else f"{sc.kind} {sc.hessian}, {sc.qp_solver}"
+        if sc.kind == "ipopt":
+            return "ipopt"
+        return f"{sc.kind} {sc.hessian}, {sc.qp_solver} conic" + (
+            ", libhpipm CasADi's" if sc.qp_solver == "hpipm" else "")
 
     # --- lifecycle ------------------------------------------------------------------------------
     def reset(self, t_s: float, state: StateEstimate,

@@ -29,7 +29,7 @@ from trq_offboard.config import ConfigError, ControllerConfig, load_controller
 from trq_offboard.link.stream import MavlinkStream
 from trq_offboard.link.udp import MavlinkUdp
 from trq_offboard.link.wire import HOME_GROUND_DOWN_M
-from trq_offboard.log import ControllerLog
+from trq_offboard.log import ControllerLog, solver_header
 from trq_offboard.loop import FlightError, OffboardFlight
 from trq_wire.actuators import tilt_half_range
 from trq_wire.connection import FORMS, Connection
@@ -82,13 +82,6 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def _solver_header(controller) -> dict:
-    """The log header's solver line, where the controller can say it (a measurement device
-    such as the period floor's replay need not)."""
-    line = getattr(controller, "solver_line", None)
-    return {"solver": line()} if line is not None else {}
-
-
 def main(argv: list[str] | None = None,
          make_controller: Callable[[ControllerConfig], object] | None = None) -> int:
     """The daemon (`argv`: its options, default sys.argv's). `make_controller(cfg)` builds the
@@ -131,7 +124,7 @@ def main(argv: list[str] | None = None,
                              {"controller": cfg.name, "controller_file": cfg.file,
                               "vehicle_file": cfg.vehicle.file, "connect": args.connect,
                               "frames": "world NED, body FRD",
-                              **_solver_header(controller)})
+                              **solver_header(controller)})
         timeline = VehicleTimeline()
         tlog = Tlog(log_dir / "offboard.tlog", clock=timeline.now_us)
 

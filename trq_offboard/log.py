@@ -43,6 +43,13 @@ def _ms(ns: int) -> float:
     return ns * 1e-6 if ns >= 0 else math.nan
 
 
+def solver_header(controller) -> dict:
+    """The header's `solver` line (what solved the NMPC, Controller.solver_line), where the
+    controller can say it: a measurement device such as the period floor's replay need not."""
+    line = getattr(controller, "solver_line", None)
+    return {"solver": line()} if line is not None else {}
+
+
 class ControllerLog:
     def __init__(self, path: Path, meta: dict[str, object], flush_every: int = 50,
                  batch: int = 50) -> None:

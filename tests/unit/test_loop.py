@@ -527,7 +527,7 @@ def test_direct_calls_answer_then_prepare_in_the_loop(fail_at):
             sent_before_prepare.append(bool(link.targets(10_000 * (ctl.prepares + 1))))
             prepare(reference)
         ctl.prepare = watched
-        flight, link = make_preparing_flight(ctl, record=records.append, yield_core=False)
+        flight, link = make_preparing_flight(ctl, record=records.append)
         task = asyncio.create_task(flight.run())
         await take_off(flight, link)
         for k in (1, 2, 3):

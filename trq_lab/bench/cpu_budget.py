@@ -218,10 +218,12 @@ def main(argv: list[str] | None = None) -> int:
         ap.error(f"--period-us: expected 1000 .. 1000000, got {args.period_us}")
     short = [s for s in shares if s < 1.0 and round(s * args.period_us) < MIN_QUOTA_US]
     if short:                # refused before any flight, not after the shares before it
+        need = math.ceil(MIN_QUOTA_US / min(short))
         ap.error(f"--shares: {min(short):g} of --period-us {args.period_us} is "
                  f"{round(min(short) * args.period_us)} us, under the kernel's minimum quota "
-                 f"of {MIN_QUOTA_US} us: raise --period-us to at least "
-                 f"{math.ceil(MIN_QUOTA_US / min(short))}")
+                 f"of {MIN_QUOTA_US} us: "
+                 + (f"raise --period-us to at least {need}" if need <= 1_000_000 else
+                    "too small a share for any quota period this tool takes"))
     if (os.cpu_count() or 1) < 2:
         print("trq-bench-cpu-budget: needs two cores (vehicle and controller on their own)",
               file=sys.stderr)
@@ -236,7 +238,8 @@ def main(argv: list[str] | None = None) -> int:
 
     print(machine_line())
     print(f"{args.scenario} in real time, {args.controller}"
-          f"{' (--worker-thread)' if args.worker_thread else ''}, quota period {args.period_us} us; HPIPM: "
+          f"{' (--worker-thread)' if args.worker_thread else ''}, quota period "
+          f"{args.period_us} us; HPIPM: "
           + (f"${LIBRARY_ENV}={os.environ[LIBRARY_ENV]}" if os.environ.get(LIBRARY_ENV)
              else "CasADi's bundled library"))
     rows = []

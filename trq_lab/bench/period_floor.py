@@ -15,9 +15,9 @@ one (a replay that left the recording stops with ReplayDiverged); its `prepare` 
 hand over the recorded preparation time. So the daemon around it (asyncio, the telemetry's
 receive and decode, the target's encode and send, the step's direct calls or the worker
 thread's hand-offs, the reference's sample, the accounting, the ground-station diagnosis,
-controller.csv and the .tlog) does the same work as in the recorded flight: the log writes the same bytes but for
-the loop's own measurements (cpu_wire_ms, cpu_log_ms, cpu_period_ms), and the vehicle flies
-the same flight, identically in lockstep (controller.csv carries the commands at full precision:
+controller.csv and the .tlog) does the same work as in the recorded flight: the log writes the
+same bytes but for the loop's own measurements (cpu_wire_ms, cpu_log_ms, cpu_period_ms), and
+the vehicle flies the same flight, identically in lockstep (controller.csv carries the commands at full precision:
 trq_wire.logfile writes floats with repr). What the replay's process costs per control period
 is the floor: what the daemon costs when the controller's math costs nothing. It is a lower bound
 of that machinery's share in the real daemon, where the math's allocations and its use of the
@@ -486,7 +486,8 @@ def main(argv: list[str] | None = None) -> int:
 
     print(machine_line(), flush=True)
     print(f"controller: {args.controller}; flights {args.short_s:g} s and {args.long_s:g} s of "
-          f"vehicle time in lockstep{', worker thread' if args.worker_thread else ', direct calls'}; "
+          f"vehicle time in lockstep, "
+          f"{'worker thread' if args.worker_thread else 'direct calls'}; "
           f"{args.repeat} run(s)", flush=True)
     runs, anchors = [], []
     for k in range(args.repeat):

@@ -259,7 +259,9 @@ class RtiSolver:
         (one compiled call or NumPy) and which libhpipm (a flight is replayed bit for bit only
         on the same library: BLASFEO's kernels round differently)."""
         if self.qp_interface != "direct":
-            return f"rti {self.hessian}, {self.cfg.solver.qp_solver} {self.qp_interface}"
+            qp = self.cfg.solver.qp_solver
+            return f"rti {self.hessian}, {qp} {self.qp_interface}" + (
+                ", libhpipm CasADi's" if qp == "hpipm" else "")
         opts = "".join(f" {k} {v:g}" for k, v in self.hpipm_options.items())
         loop = "shim" if self._hqp.uses_shim else "ctypes loop"
         pc = (f", condensed to {self._hqp.condensed_stages} blocks"
