@@ -221,15 +221,10 @@ class Controller:
 
     def solver_line(self) -> str:
         """What solves this controller's NMPC, for the log's header: the solver's own account
-        (RtiSolver.describe: the QP path and the libhpipm), else its kind and Hessian."""
+        (its describe(): the QP path and the libhpipm), else, for an injected solver that has
+        none, its class."""
         describe = getattr(self.solver, "describe", None)
-        if describe is not None:
-            return describe()
-        sc = self.cfg.solver
-        if sc.kind == "ipopt":
-            return "ipopt"
-        return f"{sc.kind} {sc.hessian}, {sc.qp_solver} conic" + (
-            ", libhpipm CasADi's" if sc.qp_solver == "hpipm" else "")
+        return describe() if describe is not None else type(self.solver).__name__
 
     # --- lifecycle ------------------------------------------------------------------------------
     def reset(self, t_s: float, state: StateEstimate,

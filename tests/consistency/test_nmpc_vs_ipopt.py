@@ -35,6 +35,10 @@ def test_sqp_converges_to_ipopt(name, hessian):
     u, x, info = fast.solve(x0, x_ref, d, u_trim, guess)
     assert info.status is SolveStatus.OK and info.message == "converged"
     assert info.cost == pytest.approx(info_r.cost, rel=1e-7)
+    # what each says solved it (controller.csv's solver line)
+    assert ref.describe() == "ipopt"
+    assert fast.describe() == f"sqp {hessian}, {cfg.solver.qp_solver} conic" + (
+        ", libhpipm CasADi's" if cfg.solver.qp_solver == "hpipm" else "")
     np.testing.assert_allclose(u, u_r, atol=1e-4)        # rad and %
     np.testing.assert_allclose(x, x_r, atol=1e-5)
     # constraints of the plan: tilt rate and limits

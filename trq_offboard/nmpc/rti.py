@@ -48,7 +48,7 @@ from trq_offboard.model.dynamics import NumpyFunction
 from trq_offboard.nmpc import feedback, hpipm
 from trq_offboard.nmpc.cache import compiled_many
 from trq_offboard.nmpc.ocp import Ocp, Stage
-from trq_offboard.nmpc.solver import plan_of
+from trq_offboard.nmpc.solver import conic_line, plan_of
 from trq_offboard.records import SolveInfo, SolveStatus
 
 __all__ = ["RtiSolver", "HPIPM_AUTO"]
@@ -259,9 +259,7 @@ class RtiSolver:
         (one compiled call or NumPy) and which libhpipm (a flight is replayed bit for bit only
         on the same library: BLASFEO's kernels round differently)."""
         if self.qp_interface != "direct":
-            qp = self.cfg.solver.qp_solver
-            return f"rti {self.hessian}, {qp} {self.qp_interface}" + (
-                ", libhpipm CasADi's" if qp == "hpipm" else "")
+            return conic_line("rti", self.hessian, self.cfg.solver.qp_solver)
         opts = "".join(f" {k} {v:g}" for k, v in self.hpipm_options.items())
         loop = "shim" if self._hqp.uses_shim else "ctypes loop"
         pc = (f", condensed to {self._hqp.condensed_stages} blocks"

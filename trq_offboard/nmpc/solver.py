@@ -28,7 +28,8 @@ from trq_offboard.nmpc import hpipm
 from trq_offboard.nmpc.ocp import Ocp
 from trq_offboard.records import SolveInfo, SolveStatus
 
-__all__ = ["Solver", "SqpSolver", "IpoptSolver", "make_solver", "Plan", "Guess", "plan_of"]
+__all__ = ["Solver", "SqpSolver", "IpoptSolver", "make_solver", "Plan", "Guess", "plan_of",
+           "conic_line"]
 
 Plan = tuple[np.ndarray, np.ndarray]      # (u (N, nu) physical, x (N+1, 12))
 # a plan, or a function making one: called only if the solver needs it (a real-time iteration
@@ -80,6 +81,13 @@ class _Base:
                                float("nan"), msg)
 
 
+def conic_line(kind: str, hessian: str, qp_solver: str) -> str:
+    """describe() of a solver whose QP goes through casadi.conic (whose hpipm plugin is always
+    the libhpipm CasADi ships)."""
+    return f"{kind} {hessian}, {qp_solver} conic" + (
+        ", libhpipm CasADi's" if qp_solver == "hpipm" else "")
+
+
 class SqpSolver(_Base):
     """Full-step SQP with HPIPM (or another casadi conic plugin) and a fixed iteration budget."""
 
@@ -123,6 +131,10 @@ class SqpSolver(_Base):
         self._qp = ca.conic("qp", sc.qp_solver, {"h": h_sp, "a": a_sp}, qp_opts)
         self._lam = np.zeros(g.shape[0])
         self._fg = ca.Function("fg", [w, p], [f, g])
+
+    def describe(self) -> str:
+        """What solves the NMPC, for logs and benchmarks."""
+        return conic_line("sqp", self.hessian, self.cfg.solver.qp_solver)
 
     def solve(self, x0, x_ref, d, u_prev, guess, y0=None):
         t0 = time.perf_counter()
@@ -174,6 +186,10 @@ class IpoptSolver(_Base):
             "expand": True, "print_time": False, "error_on_fail": False,
             "ipopt.print_level": 0, "ipopt.sb": "yes", "ipopt.tol": tol,
             "ipopt.max_iter": cfg.solver.ipopt_max_iterations})
+
+    def describe(self) -> str:
+        """What solves the NMPC, for logs and benchmarks."""
+        return "ipopt"
 
     def solve(self, x0, x_ref, d, u_prev, guess, y0=None):
         t0 = time.perf_counter()
