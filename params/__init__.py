@@ -5,6 +5,10 @@ In a checkout this is the `params/` folder; in an installed wheel it is the pack
 (`trq_params.loader`, against the schemas of `trq_params.schema`). What goes in: a kind of file and
 a name, or a path. What comes out: the path of the file.
 
+    loader    the one YAML reader: `extends:` chains, strict validation, errors naming the file,
+              the key, the value and what was expected
+    schema    the typed schema of every kind of file, one model per kind
+
     builtin("controller", "trq_nmpc_eso")   -> .../controller/trq_nmpc_eso.yaml
     resolve("vehicle", "quad")              -> the built-in quad.yaml
     resolve("vehicle", "my/airframe.yaml")  -> that path, as given (a user's own file)

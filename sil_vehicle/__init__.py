@@ -2,15 +2,21 @@
 interface that behaves like a PX4 SITL autopilot. See PROTOCOL.md for the wire contract.
 
 Layers (each importing only the ones above it):
-    config              frozen parameter records from params/*.yaml (trq_params.loader)
     frames              every frame and unit conversion
-    dynamics/           pure physics (rotors, actuators, environment, rigid body)
-    faults, vehicle     the plant, one physics tick at a time (no I/O, injected RNG)
-    clock               lockstep and real-time pacing
-    mavlink/            codec (bytes <-> messages), parameters, commands, telemetry
-    daemon              the only loop: wires clock, vehicle and links
+    impair              a seeded bad link (loss, delay, jitter, duplication, reordering)
+    config              frozen parameter records from params/*.yaml (trq_params.loader)
+    dynamics/           pure physics (rotors, actuators, environment, rigid body; tick.c)
+    faults              actuator faults as data (effectiveness, time-varying, off, stuck)
+    faultscript         timed fault and wind events from a fault script (params/faults/)
+    vehicle             the plant, one physics tick at a time (no I/O, injected RNG)
+    compiled            the tick in C (dynamics/tick.c), built once and loaded; bit-identical
+    failsafe            the autopilot's own hold-and-land controller when the offboard link is lost
+    mavlink/            codec (bytes <-> messages, field scalings) and the parameter protocol
+    sitl                the autopilot without sockets: telemetry due, commands, parameters,
+                        actuator targets, failsafe; driven by messages, answers with messages
+    clock               real-time pacing (lockstep needs none)
+    daemon              the only loop: wires clock, `Sitl` and links (UDP, serial, TCP), logs
 
 What the controller must compute identically (signing, actuator scaling, the log files, the
-compiled-code cache) is trq_wire's, imported here and by trq_offboard; `log` and
-`mavlink.signing` only re-export it for older callers.
+compiled-code cache) is trq_wire's, imported here and by trq_offboard.
 """

@@ -1,5 +1,5 @@
 """The cache of generated and compiled code, shared by the vehicle's compiled physics tick and
-the controller's compiled CasADi functions (STYLE principle 10: cached, never committed).
+the controller's compiled CasADi functions (generated code is cached on each machine, never committed).
 
 Folder: $TRQ_CACHE_DIR, else ~/.cache/trq-ftc. Compiler: the first of $CC, gcc, cc, clang found
 on PATH. A library is built under a temporary name in the cache folder and renamed into place,
