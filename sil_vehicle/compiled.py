@@ -101,7 +101,7 @@ def load_core() -> CompiledCore | None:
     cc = find_compiler()
     if cc is None:
         warnings.warn("no C compiler found (tried $CC, gcc, cc, clang): the vehicle's physics "
-                      "runs in Python (same results, about 5x slower a tick)", RuntimeWarning,
+                      "runs in Python (the same results, slower: docs/simulator.md)", RuntimeWarning,
                       stacklevel=2)
         return None
     try:

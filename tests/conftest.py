@@ -60,26 +60,6 @@ def free_port():
 
 
 @pytest.fixture(scope="session")
-def root() -> Path:
-    return ROOT
-
-
-@pytest.fixture(scope="session")
-def sim_default_path() -> Path:
-    return SIM_DEFAULT
-
-
-@pytest.fixture(scope="session")
-def trq_path() -> Path:
-    return TRQ_YAML
-
-
-@pytest.fixture(scope="session")
-def quad_path() -> Path:
-    return QUAD_YAML
-
-
-@pytest.fixture(scope="session")
 def sim():
     """The default simulation settings (trq, lockstep, 1 kHz physics); frozen, so shared."""
     from sil_vehicle.config import load_sim

@@ -15,7 +15,7 @@ import yaml
 
 from sil_vehicle.config import (STREAMS, ConfigError, VehicleParams, load_sim, load_vehicle)
 
-from conftest import SIM_DEFAULT, TRQ_YAML
+from conftest import QUAD_YAML, SIM_DEFAULT, TRQ_YAML
 
 
 # --- the real files -------------------------------------------------------------------------
@@ -79,8 +79,8 @@ def test_default_sim(sim):
         sim.link("nope")
 
 
-def test_sim_vehicle_override(quad_path):
-    sim = load_sim(SIM_DEFAULT, quad_path)
+def test_sim_vehicle_override():
+    sim = load_sim(SIM_DEFAULT, QUAD_YAML)
     assert sim.vehicle.name == "quad" and sim.vehicle.tilt_locked
 
 

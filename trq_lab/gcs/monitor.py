@@ -193,22 +193,17 @@ class Monitor:
                          + (f"   LINK LOST: no heartbeat for {silent:.1f} s" if silent > 3.0
                             else ""))
         pos = last.get("LOCAL_POSITION_NED")
-        if pos is None:
-            lines.append("position    (no LOCAL_POSITION_NED yet)")
-        else:
-            lines.append(f"position    NED m    n {pos.x:+8.3f}  e {pos.y:+8.3f}  d {pos.z:+8.3f}"
-                         f"   (altitude {-pos.z:.2f} m)")
-            lines.append(f"velocity    NED m/s  n {pos.vx:+8.3f}  e {pos.vy:+8.3f}  "
-                         f"d {pos.vz:+8.3f}")
+        lines += ["position    (no LOCAL_POSITION_NED yet)"] if pos is None else [
+            f"position    NED m    n {pos.x:+8.3f}  e {pos.y:+8.3f}  d {pos.z:+8.3f}"
+            f"   (altitude {-pos.z:.2f} m)",
+            f"velocity    NED m/s  n {pos.vx:+8.3f}  e {pos.vy:+8.3f}  d {pos.vz:+8.3f}"]
         att = last.get("ATTITUDE")
-        if att is None:
-            lines.append("attitude    (no ATTITUDE yet)")
-        else:
-            lines.append(f"attitude    deg      roll {math.degrees(att.roll):+7.2f}  pitch "
-                         f"{math.degrees(att.pitch):+7.2f}  yaw {math.degrees(att.yaw):+7.2f}")
-            lines.append(f"rates       deg/s    p {math.degrees(att.rollspeed):+7.1f}  q "
-                         f"{math.degrees(att.pitchspeed):+7.1f}  r "
-                         f"{math.degrees(att.yawspeed):+7.1f}")
+        deg = math.degrees
+        lines += ["attitude    (no ATTITUDE yet)"] if att is None else [
+            f"attitude    deg      roll {deg(att.roll):+7.2f}  pitch {deg(att.pitch):+7.2f}  "
+            f"yaw {deg(att.yaw):+7.2f}",
+            f"rates       deg/s    p {deg(att.rollspeed):+7.1f}  q {deg(att.pitchspeed):+7.1f}  "
+            f"r {deg(att.yawspeed):+7.1f}"]
         raw = last.get("SERVO_OUTPUT_RAW")
         if raw is None:
             lines.append("outputs     (no SERVO_OUTPUT_RAW yet)")
