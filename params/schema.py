@@ -6,6 +6,7 @@ One model per kind of file, read by `trq_params.loader.load(path, Model)`:
     SimFile          params/sim/*.yaml       (sil_vehicle)
     ControllerFile   params/controller/*.yaml, the controllers (trq_offboard)
     EsoFile          params/controller/eso*.yaml, the observer's gains (trq_offboard)
+    CampaignFile     params/campaigns/*.yaml (trq_lab.campaign)
 
 The models are strict and frozen and forbid unknown keys. Values keep the units of the file
 (degrees stay degrees): the daemons' config modules convert them and compute derived quantities
@@ -19,10 +20,11 @@ from __future__ import annotations
 from typing import Annotated, Any, Optional
 
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, model_validator
+from trq_params import exists
 from trq_params.loader import Choice, Flag, Int, Invalid, Items, Num, PathStr, Text, Vec, expect
 
-__all__ = ["Strict", "VehicleFile", "SimFile", "ControllerFile", "EsoFile", "STREAMS",
-           "HPIPM_OPTIONS", "parse_endpoint"]
+__all__ = ["Strict", "VehicleFile", "SimFile", "ControllerFile", "EsoFile", "CampaignFile",
+           "STREAMS", "HPIPM_OPTIONS", "parse_endpoint"]
 
 
 class Strict(BaseModel):
@@ -438,4 +440,87 @@ class ControllerFile(Strict):
                           f"at most substeps x control_rate_hz = {eff.substeps} x "
                           f"{self.control_rate_hz} = {eff.substeps * self.control_rate_hz:g} "
                           "rad/s (explicit Euler substeps; raise substeps for a faster observer)")
+        return self
+
+
+# --------------------------------------------------------------------------------------------
+# campaign (trq_lab.campaign: the axes' keys are checked by trq_lab.campaign.spec)
+# --------------------------------------------------------------------------------------------
+
+AXES = ("fault", "wind", "trajectory", "link", "plant")
+CONTROLLER_MODELS = ("nominal", "plant")
+
+
+class CampaignGrid(Strict):
+    """Every combination of the axes' values (each axis checked by trq_lab.campaign.spec)."""
+    fault: Any = None
+    wind: Any = None
+    trajectory: Any = None
+    link: Any = None
+    plant: Any = None
+
+
+class CampaignSample(CampaignGrid):
+    """n seeded random draws of the axes' distributions."""
+    n: Int(1, 10_000_000)
+    seed: Int(0, 2**31 - 1)
+
+
+class CampaignPaired(Strict):
+    """`controller` does better than `worse` (a lower RMSE after the fault, or it flies where
+    the other crashes) on at least `share` of the flights both flew on the same plant."""
+    worse: Text
+    share: Num(0.0, 1.0)
+
+
+class CampaignTargets(Strict):
+    """A campaign's targets: among the flights of `controller` whose faulted trim keeps at least
+    `min_margin_pct` of throttle margin on every motor, at least `share` stay within
+    `rmse_after_fault_m`; and the paired comparisons."""
+    controller: Text
+    min_margin_pct: Num(0.0, 100.0)
+    rmse_after_fault_m: Num(1e-5, 100.0)
+    share: Num(0.0, 1.0)
+    better: list[CampaignPaired] = []
+
+
+class CampaignFile(Strict):
+    """A campaign file (params/campaigns/*.yaml); the axes are checked key by key afterwards."""
+    name: Text
+    description: Text
+    seed: Int(0, 2**31 - 1)
+    controllers: list[Text]
+    success_rmse_m: Num(0.001, 100.0)
+    recovery_threshold_m: Num(0.001, 100.0)
+    timeout_s: Num(1.0, 36000.0)
+    repeats: Int(1, 1000) = 1
+    controller_model: Any = "nominal"
+    targets: CampaignTargets | None = None
+    grid: CampaignGrid | None = None
+    sample: CampaignSample | None = None
+
+    @model_validator(mode="after")
+    def _flights(self) -> "CampaignFile":
+        if not self.controllers or len(set(self.controllers)) != len(self.controllers):
+            raise Invalid("controllers", self.controllers,
+                          "a non-empty list of distinct controller names")
+        for i, c in enumerate(self.controllers):
+            if not exists("controller", c):
+                raise Invalid(f"controllers[{i}]", c, "a built-in controller name or a "
+                              "controller YAML path")
+        if self.grid is None and self.sample is None:
+            raise Invalid("grid", None, "a grid (or a sample): a campaign needs flights")
+        models = self.controller_model
+        if not (models in CONTROLLER_MODELS or (
+                isinstance(models, list) and models and len(set(models)) == len(models)
+                and all(m in CONTROLLER_MODELS for m in models))):
+            raise Invalid("controller_model", models, "one of " + "|".join(CONTROLLER_MODELS)
+                          + " or a list of distinct ones")
+        t = self.targets
+        if t is not None:
+            for key, name in [("targets.controller", t.controller)] + [
+                    (f"targets.better[{i}].worse", b.worse) for i, b in enumerate(t.better)]:
+                if name not in self.controllers:
+                    raise Invalid(key, name, "one of the campaign's controllers ("
+                                  + ", ".join(self.controllers) + ")")
         return self

@@ -46,6 +46,7 @@ from sil_vehicle.faultscript import load_script
 from trq_lab import metrics as metrics_mod
 from trq_lab import procs
 from trq_lab.overlays import write_controller_overlay
+from trq_lab.reporting import scenario as report
 
 # what a command waits in real time, about one NMPC step (docs/decisions/
 # 2026-12-02-shorter-applied-delay.md: what else was tried)
@@ -333,7 +334,8 @@ def _last_time(path: Path) -> float:
             size = f.tell()
             f.seek(max(0, size - 4096))
             tail = f.read().decode(errors="replace").strip().splitlines()
-        return float(tail[-1].split(",")[0]) if tail and not tail[-1].startswith(("#", "t_s")) else 0.0
+        done = tail and not tail[-1].startswith(("#", "t_s"))
+        return float(tail[-1].split(",")[0]) if done else 0.0
     except (OSError, ValueError, IndexError):
         return 0.0
 
@@ -550,7 +552,6 @@ def main(argv: list[str] | None = None) -> int:
     results, failures = evaluate(scenario, runs)
     doc = {"scenario": scenario.name, "runs": results}
     (args.out / "metrics.json").write_text(json.dumps(doc, indent=2) + "\n")
-    from trq_lab import report
     figures = [] if args.no_figures else report.figures(scenario, runs, args.out)
     envelopes = envelope_of(scenario, runs)
     doc["envelope"] = envelopes

@@ -14,7 +14,8 @@ second one row per scenario found under the results directory (other than those 
 their own), the third one row per campaign found there: the ``metrics.json`` that ``trq-campaign``
 writes (``{"campaign": ..., "flights": ..., "controllers": {NAME: {"success_rate": ...,
 "rmse_median_m": ...}}, "plants": ..., "failures": [...]}``; a campaign's is told from a
-scenario's by its "campaign" key). Whether a scenario's targets were met is taken from ``metrics.json``'s
+scenario's by its "campaign" key). Whether a scenario's targets were met is taken from
+``metrics.json``'s
 ``"failures"`` list when it has one, else from the "Missed" section of the ``report.md`` beside
 it ("none set" when that report has no Targets section); without either, "not recorded". Text
 outside the markers is never touched.
@@ -33,6 +34,8 @@ import os
 import re
 import sys
 from pathlib import Path
+
+from trq_lab.reporting.fmt import fmt
 
 __all__ = ["ResultsError", "campaigns_table", "main", "render_block", "scenario_table",
            "scenarios_table", "update_text"]
@@ -72,16 +75,6 @@ _MARK = re.compile(r"<!-- results:([A-Za-z0-9_.-]+) (begin|end) -->")
 
 class ResultsError(Exception):
     """A missing or unreadable result file, or a missing or unbalanced marker."""
-
-
-def _cell(value: object, fmt: str) -> str:
-    if value is None:
-        return "-"
-    if isinstance(value, bool):
-        return str(value)
-    if isinstance(value, (int, float)):
-        return fmt.format(value)
-    return str(value)
 
 
 def load_metrics(path: Path) -> dict:
@@ -149,7 +142,7 @@ def campaigns_table(paths: list[Path], base: Path | None = None) -> str:
                 continue
             rate = st.get("success_rate")
             median = ("crashed" if "rmse_median_m" in st.get("crashed_stats", ())
-                      else _cell(st.get("rmse_median_m"), "{:.4f}"))
+                      else fmt(st.get("rmse_median_m"), "{:.4f}"))
             cells.append(("-" if rate is None else f"{rate:.0%}") + " / " + median)
         cells.append(doc.get("headline") or targets_met(path, doc))
         lines.append("| " + " | ".join(cells) + " |")
@@ -202,7 +195,7 @@ def scenario_table(metrics_path: Path, base: Path | None = None) -> str:
         if "error" in run:
             lines.append(f"| {run['controller']} | " + f"{run['error']} |")
             continue
-        lines.append("| " + " | ".join(_cell(run.get(k), f) for _, k, f in COLUMNS) + " |")
+        lines.append("| " + " | ".join(fmt(run.get(k), f) for _, k, f in COLUMNS) + " |")
     lines.append("")
     lines.append(f"Targets of `{doc.get('scenario', metrics_path.parent.name)}`: "
                  f"{targets_met(metrics_path, doc)}. Source: `{_shown(metrics_path, base)}`.")
@@ -237,8 +230,8 @@ def scenarios_table(paths: list[Path], base: Path | None = None) -> str:
             elif "error" in r:
                 cells.append("no usable logs")
             else:
-                cell = (f"{_cell(r.get('rmse_pos_after_fault_m'), '{:.4f}')} / "
-                        f"{_cell(r.get('max_yaw_err_deg'), '{:.2f}')}")
+                cell = (f"{fmt(r.get('rmse_pos_after_fault_m'), '{:.4f}')} / "
+                        f"{fmt(r.get('max_yaw_err_deg'), '{:.2f}')}")
                 cells.append(cell + (" (crashed)" if r.get("crashed") else ""))
         cells.append(targets_met(path, doc))
         lines.append("| " + " | ".join(cells) + " |")
