@@ -24,7 +24,7 @@ from trq_params import exists
 from trq_params.loader import Choice, Flag, Int, Invalid, Items, Num, PathStr, Text, Vec, expect
 
 __all__ = ["Strict", "VehicleFile", "SimFile", "ControllerFile", "EsoFile", "CampaignFile",
-           "STREAMS", "HPIPM_OPTIONS", "parse_endpoint"]
+           "STREAMS", "HPIPM_OPTIONS", "parse_endpoint", "throttle_curve"]
 
 
 class Strict(BaseModel):
@@ -42,6 +42,13 @@ class Inertia(Strict):
     zz: Num(1e-6, 100.0)
 
 
+def throttle_curve(c2, c1, c0, zeta_pct):
+    """c2 zeta^2 + c1 zeta + c0 at zeta, the throttle in percent, in Horner's form: the one
+    throttle curve of the vehicle file's checks and of both daemons (sil_vehicle.config.Quadratic,
+    trq_offboard.config.Curve). Plain arithmetic: floats, NumPy arrays or CasADi expressions."""
+    return (c2 * zeta_pct + c1) * zeta_pct + c0
+
+
 class QuadraticCurve(Strict):
     """c2 zeta^2 + c1 zeta + c0, zeta the throttle in percent."""
     c2: Num(0.0, 1.0, open_lo=True)
@@ -49,7 +56,7 @@ class QuadraticCurve(Strict):
     c0: Num(-10.0, 10.0)
 
     def value(self, zeta_pct: float) -> float:
-        return (self.c2 * zeta_pct + self.c1) * zeta_pct + self.c0
+        return throttle_curve(self.c2, self.c1, self.c0, zeta_pct)
 
 
 class RotorCurves(Strict):
