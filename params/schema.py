@@ -6,6 +6,9 @@ One model per kind of file, read by `trq_params.loader.load(path, Model)`:
     SimFile          params/sim/*.yaml       (sil_vehicle)
     ControllerFile   params/controller/*.yaml, the controllers (trq_offboard)
     EsoFile          params/controller/eso*.yaml, the observer's gains (trq_offboard)
+    MotorEvent, ServoEvent, WindEvent, ClearEvent
+                     an event of params/faults/*.yaml (sil_vehicle.faultscript)
+    ScenarioFile     params/scenarios/*.yaml (trq_lab.scenario)
     CampaignFile     params/campaigns/*.yaml (trq_lab.campaign)
 
 The models are strict and frozen and forbid unknown keys. Values keep the units of the file
@@ -19,11 +22,13 @@ from __future__ import annotations
 
 from typing import Annotated, Any, Optional
 
-from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, model_validator
+from pydantic import (BaseModel, BeforeValidator, ConfigDict, Field, ValidationInfo,
+                      field_validator, model_validator)
 from trq_params import exists
 from trq_params.loader import Choice, Flag, Int, Invalid, Items, Num, PathStr, Text, Vec, expect
 
-__all__ = ["Strict", "VehicleFile", "SimFile", "ControllerFile", "EsoFile", "CampaignFile",
+__all__ = ["Strict", "VehicleFile", "SimFile", "ControllerFile", "EsoFile", "MotorEvent",
+           "ServoEvent", "WindEvent", "ClearEvent", "ScenarioFile", "CampaignFile",
            "STREAMS", "HPIPM_OPTIONS", "parse_endpoint", "throttle_curve"]
 
 
@@ -447,6 +452,148 @@ class ControllerFile(Strict):
                           f"at most substeps x control_rate_hz = {eff.substeps} x "
                           f"{self.control_rate_hz} = {eff.substeps * self.control_rate_hz:g} "
                           "rad/s (explicit Euler substeps; raise substeps for a faster observer)")
+        return self
+
+
+# --------------------------------------------------------------------------------------------
+# fault script (sil_vehicle.faultscript: one model per kind of event)
+# --------------------------------------------------------------------------------------------
+
+class _Event(Strict):
+    """An event of a fault script: when, in vehicle time."""
+    at_s: Num(0.0, 1e6)
+
+
+class TimeVarying(Strict):
+    a: Num(0.0, 1.0)
+    b: Num(0.0, 1.0)
+    w: Num(0.0, 1000.0)
+    phi: Num(-10.0, 10.0) = 0.0
+
+
+class MotorEvent(_Event):
+    motor: Int(1, 4)
+    effectiveness: Optional[Num(0.0, 1.0)] = None
+    time_varying: Optional[TimeVarying] = None
+    stopped: Optional[Flag] = None      # (not "off": a bare off would read as a key or a string)
+
+    @model_validator(mode="after")
+    def _acts(self) -> "MotorEvent":
+        if self.effectiveness is None and self.time_varying is None and self.stopped is None:
+            raise Invalid("motor", self.motor, "with effectiveness, time_varying or stopped")
+        return self
+
+
+class ServoEvent(_Event):
+    servo: Int(1, 4)
+    stuck_deg: Any          # null frees the servo; the angle's range is the vehicle's tilt range
+
+    @field_validator("stuck_deg", mode="before")
+    @classmethod
+    def _angle(cls, value: Any, info: ValidationInfo) -> Any:
+        lo, hi = info.context or (-90.0, 90.0)
+        if value is not None and (isinstance(value, bool) or not isinstance(value, (int, float))
+                                  or not lo <= value <= hi):
+            raise expect(f"null or an angle in [{lo:g}, {hi:g}] deg")
+        return value
+
+
+class EventWind(Strict):
+    speed_m_s: Optional[Num(0.0, 40.0)] = None
+    direction_deg: Optional[Num(-360.0, 360.0)] = None
+    gusts: Optional[Flag] = None
+    gust_sigma_m_s: Optional[Num(0.0, 20.0)] = None
+
+
+class WindEvent(_Event):
+    wind: EventWind
+
+    @model_validator(mode="after")
+    def _acts(self) -> "WindEvent":
+        if not self.wind.model_fields_set:
+            raise Invalid("wind", {}, "speed_m_s, direction_deg, gusts or gust_sigma_m_s")
+        return self
+
+
+class ClearEvent(_Event):
+    clear: Flag
+
+    @model_validator(mode="after")
+    def _true(self) -> "ClearEvent":
+        if not self.clear:
+            raise Invalid("clear", False, "true")
+        return self
+
+
+# --------------------------------------------------------------------------------------------
+# scenario (trq_lab.scenario)
+# --------------------------------------------------------------------------------------------
+
+class ScenarioWind(Strict):
+    speed_m_s: Num(0.0, 40.0)
+    direction_deg: Num(-360.0, 360.0)
+    gusts: Flag
+
+
+class ScenarioLink(Strict):
+    """The offboard link's seeded impairment (sil_vehicle's links.offboard.impair)."""
+    loss: Optional[Num(0.0, 1.0)] = None
+    delay_ms: Optional[Num(0.0, 10_000.0)] = None
+    jitter_ms: Optional[Num(0.0, 10_000.0)] = None
+    duplicate: Optional[Num(0.0, 1.0)] = None
+    reorder: Optional[Num(0.0, 1.0)] = None
+
+
+class ScenarioTargets(Strict):
+    """What one controller must achieve: each metric at most its bound, crashed as given."""
+    crashed: Optional[Flag] = None
+    rmse_pos_m: Optional[Num(0.0, 1e6)] = None
+    rmse_pos_after_fault_m: Optional[Num(0.0, 1e6)] = None
+    max_pos_err_m: Optional[Num(0.0, 1e6)] = None
+    max_yaw_err_deg: Optional[Num(0.0, 1e6)] = None
+    rmse_yaw_deg: Optional[Num(0.0, 1e6)] = None
+    recovery_s: Optional[Num(0.0, 1e6)] = None
+
+
+class ScenarioBetter(Strict):
+    better: Text
+    worse: Text
+    # the bounded ones
+    metric: Choice(*(k for k in ScenarioTargets.model_fields if k != "crashed"))
+
+
+class ScenarioFile(Strict):
+    """A scenario file (params/scenarios/*.yaml): wind, faults, reference, controllers, targets."""
+    name: Text
+    description: Text
+    seed: Int(0, 2**31)
+    wind: ScenarioWind
+    faults: Optional[Text]                  # a built-in fault script name, a path, or null
+    reference: dict[str, Any]               # checked by the controller's loader when flown
+    controllers: list[Text]
+    offboard_link: Optional[ScenarioLink] = None
+    recovery_threshold_m: Num(0.001, 100.0)
+    timeout_s: Num(1.0, 36000.0)
+    targets: dict[str, ScenarioTargets] = {}
+    better: list[ScenarioBetter] = []
+
+    @model_validator(mode="after")
+    def _names(self) -> "ScenarioFile":
+        if not self.controllers:
+            raise Invalid("controllers", [], "a non-empty list of controller names")
+        for i, c in enumerate(self.controllers):
+            if not exists("controller", c):
+                raise Invalid(f"controllers[{i}]", c, "a built-in controller name or a "
+                              "controller YAML path")
+        for c in self.targets:
+            if c not in self.controllers:
+                raise Invalid(f"targets.{c}", self.targets[c].model_dump(exclude_none=True),
+                              "targets of one of the controllers " + ", ".join(self.controllers))
+        for i, b in enumerate(self.better):
+            for key in ("better", "worse"):
+                if getattr(b, key) not in self.controllers:
+                    raise Invalid(f"better[{i}].{key}", getattr(b, key),
+                                  "one of " + "|".join(self.controllers))
         return self
 
 
