@@ -145,6 +145,17 @@ def run_campaign(campaign: Campaign, out: Path, *, workers: int | None = None,
     return info
 
 
+# the command's on/off options and what each does
+SWITCHES = {
+    "--retry-failed": "fly again the flights recorded with an error",
+    "--keep-logs": "keep each flight's flight.csv and controller.csv in DIR/logs/<id>/ (the "
+                   "workers must see DIR)",
+    "--report-only": "fly nothing: rewrite flights.csv and report.md from DIR/flights",
+    "--dry-run": "list the flights and exit",
+    "--no-figures": "skip the heat-map PNGs",
+}
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(
         prog="trq-campaign", description="Fault campaigns at scale: a grid and/or a seeded "
@@ -159,15 +170,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="an existing Dask scheduler, tcp://HOST:8786 (then --workers is ignored)")
     ap.add_argument("--max-flights", type=int, default=None,
                     help="fly at most this many of the flights not yet done, then stop")
-    ap.add_argument("--retry-failed", action="store_true",
-                    help="fly again the flights recorded with an error")
-    ap.add_argument("--keep-logs", action="store_true",
-                    help="keep each flight's flight.csv and controller.csv in DIR/logs/<id>/ "
-                         "(the workers must see DIR)")
-    ap.add_argument("--report-only", action="store_true",
-                    help="fly nothing: rewrite flights.csv and report.md from DIR/flights")
-    ap.add_argument("--dry-run", action="store_true", help="list the flights and exit")
-    ap.add_argument("--no-figures", action="store_true", help="skip the heat-map PNGs")
+    for flag, text in SWITCHES.items():
+        ap.add_argument(flag, action="store_true", help=text)
     args = ap.parse_args(argv)
     if args.workers is not None and args.workers < 1:
         ap.error("--workers: expected at least 1")

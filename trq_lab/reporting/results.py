@@ -35,7 +35,7 @@ import re
 import sys
 from pathlib import Path
 
-from trq_lab.reporting.fmt import fmt
+from trq_lab.reporting.fmt import columns, fmt, table_head, table_row
 
 __all__ = ["ResultsError", "campaigns_table", "main", "render_block", "scenario_table",
            "scenarios_table", "update_text"]
@@ -53,20 +53,10 @@ FAULTS = {
 # The controllers' column order (others follow in the order metrics.json lists them).
 CONTROLLERS = ("trq_nmpc_eso", "trq_nmpc_eso_paper", "trq_nmpc", "quad_nmpc")
 
-# (header, key, format) of the full table.
-COLUMNS = (
-    ("controller", "controller", "{}"),
-    ("vehicle", "vehicle", "{}"),
-    ("crashed", "crashed", "{}"),
-    ("flight s", "flight_s", "{:.1f}"),
-    ("pos RMSE m", "rmse_pos_m", "{:.3f}"),
-    ("max pos err m", "max_pos_err_m", "{:.3f}"),
-    ("pos RMSE after fault m", "rmse_pos_after_fault_m", "{:.4f}"),
-    ("max yaw err deg", "max_yaw_err_deg", "{:.2f}"),
-    ("recovery s", "recovery_s", "{:.2f}"),
-    ("solve p50 ms", "solve_ms_p50", "{:.1f}"),
-    ("solve p99 ms", "solve_ms_p99", "{:.1f}"),
-)
+# the full table's columns: the reports' metric columns, the RMSE after the fault to 0.1 mm
+COLUMNS = columns(("controller", "vehicle", "crashed", "flight_s", "rmse_pos_m", "max_pos_err_m",
+                   "rmse_pos_after_fault_m", "max_yaw_err_deg", "recovery_s", "solve_ms_p50",
+                   "solve_ms_p99"), {"rmse_pos_after_fault_m": "{:.4f}"})
 
 SCENARIOS_BLOCK = "scenarios"
 CAMPAIGNS_BLOCK = "campaigns"
@@ -189,13 +179,12 @@ def _shown(path: Path, base: Path | None) -> str:
 def scenario_table(metrics_path: Path, base: Path | None = None) -> str:
     """The full table of one scenario, with its source and whether its targets were met."""
     doc = load_metrics(metrics_path)
-    lines = ["| " + " | ".join(h for h, _, _ in COLUMNS) + " |",
-             "|" + "---|" * len(COLUMNS)]
+    lines = table_head(COLUMNS)
     for run in _ordered(doc["runs"]):
         if "error" in run:
             lines.append(f"| {run['controller']} | " + f"{run['error']} |")
             continue
-        lines.append("| " + " | ".join(fmt(run.get(k), f) for _, k, f in COLUMNS) + " |")
+        lines.append(table_row(run, COLUMNS))
     lines.append("")
     lines.append(f"Targets of `{doc.get('scenario', metrics_path.parent.name)}`: "
                  f"{targets_met(metrics_path, doc)}. Source: `{_shown(metrics_path, base)}`.")

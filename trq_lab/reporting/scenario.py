@@ -18,26 +18,12 @@ from sil_vehicle.config import load_vehicle
 from sil_vehicle.faultscript import load_script
 
 from trq_lab import metrics as metrics_mod
-from trq_lab.reporting.fmt import fmt
+from trq_lab.reporting.fmt import METRIC_COLUMNS, fmt, table_head, table_row
 from trq_lab.reporting.plot import plt
 
-COLUMNS = [("controller", "controller", "{}"), ("vehicle", "vehicle", "{}"),
-           ("crashed", "crashed", "{}"), ("flight_s", "flight s", "{:.1f}"),
-           ("rmse_pos_m", "pos RMSE m", "{:.3f}"), ("max_pos_err_m", "max pos err m", "{:.3f}"),
-           ("rmse_pos_after_fault_m", "pos RMSE after fault m", "{:.3f}"),
-           ("rmse_vert_after_fault_m", "of it vertical m", "{:.3f}"),
-           ("max_sink_after_fault_m", "max sink after fault m", "{:.3f}"),
-           ("rmse_yaw_deg", "yaw RMSE deg", "{:.2f}"),
-           ("max_yaw_err_deg", "max yaw err deg", "{:.2f}"),
-           ("recovery_s", "recovery s", "{:.2f}"), ("solve_ms_p50", "solve p50 ms", "{:.1f}"),
-           ("solve_ms_p99", "solve p99 ms", "{:.1f}")]
-
-
 def table(results: list[dict]) -> str:
-    head = "| " + " | ".join(h for _, h, _ in COLUMNS) + " |"
-    rule = "|" + "---|" * len(COLUMNS)
-    rows = ["| " + " | ".join(fmt(r.get(k), f) for k, _, f in COLUMNS) + " |" for r in results]
-    return "\n".join([head, rule] + rows)
+    """The metrics table of a scenario's flights (every column of METRIC_COLUMNS)."""
+    return "\n".join(table_head(METRIC_COLUMNS) + [table_row(r, METRIC_COLUMNS) for r in results])
 
 
 PERIOD_PARTS = (("observer", "observer"), ("effectiveness", "effectiveness"),
