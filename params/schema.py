@@ -25,7 +25,8 @@ from typing import Annotated, Any, Optional
 from pydantic import (BaseModel, BeforeValidator, ConfigDict, Field, ValidationInfo,
                       field_validator, model_validator)
 from trq_params import exists
-from trq_params.loader import Choice, Flag, Int, Invalid, Items, Num, PathStr, Text, Vec, expect
+from trq_params.loader import (Choice, Flag, Int, Invalid, Items, Num, PathStr, Range, Text, Vec,
+                               expect)
 
 __all__ = ["Strict", "VehicleFile", "SimFile", "ControllerFile", "EsoFile", "MotorEvent",
            "ServoEvent", "WindEvent", "ClearEvent", "ScenarioFile", "CampaignFile",
@@ -486,7 +487,9 @@ class MotorEvent(_Event):
 
 class ServoEvent(_Event):
     servo: Int(1, 4)
-    stuck_deg: Any          # null frees the servo; the angle's range is the vehicle's tilt range
+    # null frees the servo; the angle's range is the vehicle's tilt range (the validation's
+    # context), the Range below when none is given
+    stuck_deg: Annotated[Any, Range(-90.0, 90.0)]
 
     @field_validator("stuck_deg", mode="before")
     @classmethod
@@ -603,6 +606,30 @@ class ScenarioFile(Strict):
 
 AXES = ("fault", "wind", "trajectory", "link", "plant")
 CONTROLLER_MODELS = ("nominal", "plant")
+
+
+class Plant(Strict):
+    """A campaign's simulated airframe against its file (trq_lab.overlays.PLANT_PARAMS says what
+    each key changes): factors, and an offset for idle; the defaults are the file itself, the
+    ranges keep a plant physical (the vehicle schema then checks the airframe that results)."""
+    mass_scale: Num(0.5, 2.0) = 1.0
+    inertia_scale: Num(0.2, 5.0) = 1.0
+    arm_length_scale: Num(0.5, 2.0) = 1.0
+    thrust_scale: Num(0.5, 2.0) = 1.0
+    torque_scale: Num(0.2, 5.0) = 1.0
+    motor_lag_scale: Num(0.0, 10.0) = 1.0
+    motor_rate_scale: Num(0.1, 10.0) = 1.0
+    servo_lag_scale: Num(0.0, 10.0) = 1.0
+    servo_rate_scale: Num(0.1, 10.0) = 1.0
+    drag_scale: Num(0.0, 10.0) = 1.0
+    idle_offset_pct: Num(-20.0, 20.0) = 0.0
+
+
+# the models whose keys (dotted, `leaf_types`) each axis sets: a fault is a motor or a servo
+# event, a wind a wind event's, a trajectory a controller's reference, a link the offboard link's
+# impairment, a plant the simulated airframe's factors
+AXIS_MODELS = {"fault": (MotorEvent, ServoEvent), "wind": (EventWind,),
+               "trajectory": (ReferenceFile,), "link": (Impair,), "plant": (Plant,)}
 
 
 class CampaignGrid(Strict):

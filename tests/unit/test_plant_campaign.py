@@ -197,8 +197,8 @@ def test_fault_factors_of_each_kind_of_fault():
     assert fault_factors(None) == ((1.0,) * 4, ())
     assert fault_factors({"motor": 2, "effectiveness": 0.6, "at_s": 1.0}) == \
         ((1.0, 0.6, 1.0, 1.0), ())
-    assert fault_factors({"motor": 1, "effectiveness": 0.8, "tv_b": 0.2,
-                                    "at_s": 1.0})[0][0] == pytest.approx(0.6)   # the worst
+    assert fault_factors({"motor": 1, "time_varying.a": 0.8, "time_varying.b": 0.2,
+                          "time_varying.w": 1.0, "at_s": 1.0})[0][0] == pytest.approx(0.6)
     assert fault_factors({"motor": 4, "stopped": True, "at_s": 1.0})[0][3] == 0.0
     assert fault_factors({"servo": 3, "stuck_deg": 10.0, "at_s": 1.0}) == \
         ((1.0,) * 4, ((2, math.radians(10.0)),))

@@ -51,9 +51,13 @@ An axis of `grid` may also be a list of such mappings (their union); `none` in t
 a flight without a fault. Axes left out: no fault, no wind, the controller file's reference, a
 clean link, the airframe file as it is. In `sample` a number may also be {normal: [mean, sd]}
 (truncated to the key's range).
-Fault keys: at_s and either motor (1..4) with effectiveness (a), optional time-varying terms
-tv_b, tv_w_rad_s, tv_phi_rad (e = a - b sin(w t + phi)), or stopped: true; or servo (1..4) with
-stuck_deg. Wind keys: speed_m_s, direction_deg (from, clockwise from north), gusts,
+An axis's keys are the dotted paths of the schema it sets (trq_params.schema.AXIS_MODELS: the
+same names, types and ranges): a fault is a fault script's motor or servo event, a wind a wind
+event's wind, a trajectory a controller's reference, a link the offboard link's impairment, a
+plant trq_params.schema.Plant.
+Fault keys: at_s and either motor (1..4) with effectiveness, or time_varying.a, time_varying.b,
+time_varying.w, time_varying.phi (e = a - b sin(w t + phi)), or stopped: true; or servo (1..4)
+with stuck_deg. Wind keys: speed_m_s, direction_deg (from, clockwise from north), gusts,
 gust_sigma_m_s. Link keys (the offboard link's seeded impairment, as a scenario's
 offboard_link; the controller is told its round trip as applied_delay_s, as by the scenario
 runner): loss, delay_ms, jitter_ms, duplicate, reorder. Plant keys (the SIMULATED airframe

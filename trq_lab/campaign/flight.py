@@ -27,6 +27,16 @@ from trq_lab.analysis import envelope
 from trq_lab.campaign.spec import fault_event
 from trq_lab.overlays import write_controller_overlay, write_vehicle_overlay
 
+def worst_effectiveness(fault: dict) -> float:
+    """A motor fault's lowest effectiveness: a - b of a time-varying one, 0 for a stopped motor
+    (not clipped)."""
+    if fault.get("stopped"):
+        return 0.0
+    if "time_varying.a" in fault:
+        return fault["time_varying.a"] - fault.get("time_varying.b", 0.0)
+    return fault["effectiveness"]
+
+
 def severity(fault: dict | None) -> tuple[str, float]:
     """(kind, severity): motor -> the worst loss of effectiveness 1 - min(a - b, ...) (1 for a
     stopped motor), servo -> |stuck angle| in deg, none -> 0."""
@@ -35,7 +45,7 @@ def severity(fault: dict | None) -> tuple[str, float]:
     if "motor" in fault:
         if fault.get("stopped"):
             return "motor", 1.0
-        worst = max(0.0, fault["effectiveness"] - fault.get("tv_b", 0.0))
+        worst = max(0.0, worst_effectiveness(fault))
         return "motor", round(1.0 - min(1.0, worst), 6)
     return "servo", abs(float(fault["stuck_deg"]))
 
@@ -53,8 +63,7 @@ def fault_factors(fault: dict | None) -> tuple[tuple[float, ...], tuple[tuple[in
     factors = [1.0] * 4
     stuck: list[tuple[int, float]] = []
     if fault is not None and "motor" in fault:
-        worst = 0.0 if fault.get("stopped") else fault["effectiveness"] - fault.get("tv_b", 0.0)
-        factors[fault["motor"] - 1] = min(1.0, max(0.0, worst))
+        factors[fault["motor"] - 1] = min(1.0, max(0.0, worst_effectiveness(fault)))
     elif fault is not None:
         stuck.append((fault["servo"] - 1, math.radians(fault["stuck_deg"])))
     return tuple(factors), tuple(stuck)

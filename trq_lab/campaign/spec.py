@@ -11,9 +11,10 @@ import hashlib
 import itertools
 import json
 import math
+import typing
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any, NamedTuple, Optional
 
 import numpy as np
 import trq_params
@@ -21,44 +22,48 @@ from pydantic import create_model
 from sil_vehicle.faultscript import parse_event
 from trq_offboard.config import load_controller
 from trq_params import ConfigError, schema
-from trq_params.loader import Choice, Flag, Int, Num, Vec, chain, read_yaml, validate
-from trq_params.schema import AXES, CampaignFile, CampaignGrid, Strict
+from trq_params.loader import Num, Vec, chain, leaf_types, range_of, read_yaml, validate
+from trq_params.schema import AXES, AXIS_MODELS, CampaignFile, CampaignGrid, Plant, Strict
 
 from trq_lab.harness import SIM_DEFAULT
 from trq_lab.overlays import controller_file, perturbed_vehicle, vehicle_data
 
 PARAMS = trq_params.DIR
-REFERENCE_KINDS = ("hover", "step", "circle", "helix", "figure8")
+class AxisKey(NamedTuple):
+    """One key of an axis: the schema's field type (its checks and its wording) and what a draw
+    needs of it: its kind (int, float, bool, vec or text) and its range (numbers and vectors)."""
+    type: Any
+    kind: str
+    lo: float = -math.inf
+    hi: float = math.inf
 
-# key: (kind, lo, hi); kind: int | float | bool | vec3 | kind
-FAULT_KEYS = {"motor": ("int", 1, 4), "servo": ("int", 1, 4), "at_s": ("float", 0.0, 1e6),
-              "effectiveness": ("float", 0.0, 1.0), "tv_b": ("float", 0.0, 1.0),
-              "tv_w_rad_s": ("float", 0.0, 1000.0), "tv_phi_rad": ("float", -10.0, 10.0),
-              "stopped": ("bool", None, None), "stuck_deg": ("float", -90.0, 90.0)}
-WIND_KEYS = {"speed_m_s": ("float", 0.0, 40.0), "direction_deg": ("float", -360.0, 360.0),
-             "gusts": ("bool", None, None), "gust_sigma_m_s": ("float", 0.0, 20.0)}
-TRAJECTORY_KEYS = {"kind": ("kind", None, None), "altitude_m": ("float", None, None),
-                   "climb_speed_m_s": ("float", None, None), "hold_s": ("float", None, None),
-                   "duration_s": ("float", None, None), "ramp_s": ("float", None, None),
-                   "radius_m": ("float", None, None), "period_s": ("float", None, None),
-                   "helix_climb_m": ("float", None, None), "step_ned_m": ("vec3", None, None),
-                   "land": ("bool", None, None)}
-# the offboard link's impairment (sil_vehicle.impair.ImpairParams, as a scenario's offboard_link)
-LINK_KEYS = {"loss": ("float", 0.0, 1.0), "delay_ms": ("float", 0.0, 10_000.0),
-             "jitter_ms": ("float", 0.0, 10_000.0), "duplicate": ("float", 0.0, 1.0),
-             "reorder": ("float", 0.0, 1.0)}
-# the simulated airframe's parameters (trq_lab.overlays.PLANT_PARAMS says what each changes):
-# factors, and an offset for idle; the ranges keep a plant physical, the vehicle schema then
-# checks the airframe that results (a thrust curve that still lifts the weight, ...)
-PLANT_KEYS = {"mass_scale": ("float", 0.5, 2.0), "inertia_scale": ("float", 0.2, 5.0),
-              "arm_length_scale": ("float", 0.5, 2.0), "thrust_scale": ("float", 0.5, 2.0),
-              "torque_scale": ("float", 0.2, 5.0), "motor_lag_scale": ("float", 0.0, 10.0),
-              "motor_rate_scale": ("float", 0.1, 10.0), "servo_lag_scale": ("float", 0.0, 10.0),
-              "servo_rate_scale": ("float", 0.1, 10.0), "drag_scale": ("float", 0.0, 10.0),
-              "idle_offset_pct": ("float", -20.0, 20.0)}
-PLANT_NEUTRAL = {k: (0.0 if k.endswith("_offset_pct") else 1.0) for k in PLANT_KEYS}
-AXIS_KEYS = {"fault": FAULT_KEYS, "wind": WIND_KEYS, "trajectory": TRAJECTORY_KEYS,
-             "link": LINK_KEYS, "plant": PLANT_KEYS}
+
+def _axis_key(tp: Any) -> AxisKey:
+    base = typing.get_args(tp)[0] if typing.get_origin(tp) is Annotated else tp
+    bounds = range_of(tp)
+    if base is bool:
+        return AxisKey(tp, "bool")
+    if bounds is None:
+        return AxisKey(tp, "text")
+    kind = {int: "int", float: "float"}.get(base, "vec" if base is not Any else "float")
+    # a field checked by its model (a servo's angle against the vehicle's tilt range): its Range
+    checked = tp if base is not Any else Num(bounds.lo, bounds.hi)
+    return AxisKey(checked, kind, bounds.lo, bounds.hi)
+
+
+def _axis_keys(models) -> dict[str, AxisKey]:
+    """The keys of an axis, derived from its schema models (AXIS_MODELS): their dotted paths."""
+    out: dict[str, AxisKey] = {}
+    for model in models:
+        for key, tp in leaf_types(model).items():
+            out.setdefault(key, _axis_key(tp))
+    return out
+
+
+AXIS_KEYS = {axis: _axis_keys(models) for axis, models in AXIS_MODELS.items()}
+FAULT_KEYS, WIND_KEYS, TRAJECTORY_KEYS, LINK_KEYS, PLANT_KEYS = (AXIS_KEYS[a] for a in AXES)
+MOTOR_KEYS, SERVO_KEYS = (set(leaf_types(m)) - {"at_s"} for m in AXIS_MODELS["fault"])
+PLANT_NEUTRAL = Plant().model_dump()
 WIND_DEFAULT = {"speed_m_s": 0.0, "direction_deg": 0.0, "gusts": False}
 SAMPLE_DIGITS = 4            # sampled numbers are rounded: readable tables, stable ids
 
@@ -78,30 +83,17 @@ class Campaign:
     has_plant: bool = False            # a plant axis: every spec has "plant"
 
 
-def _field(kind: str, lo, hi):
-    """The loader's field type of one axis key (its checks and its wording)."""
-    if kind == "int":
-        return Int(lo, hi)
-    if kind == "float":
-        return Num(-math.inf if lo is None else lo, math.inf if hi is None else hi)
-    if kind == "bool":
-        return Flag
-    if kind == "vec3":
-        return Vec(3)
-    return Choice(*REFERENCE_KINDS)
-
-
 def _axis_models(axis: str):
     """The models of one axis: one value per key, and a list of values per key."""
     keys = AXIS_KEYS[axis]
     point = create_model(f"{axis}_point", __base__=Strict,
-                         **{k: (_field(*spec) | None, None) for k, spec in keys.items()})
+                         **{k: (Optional[spec.type], None) for k, spec in keys.items()})
     lists = create_model(f"{axis}_lists", __base__=Strict,
-                         **{k: (list[_field(*spec)] | None, None) for k, spec in keys.items()})
+                         **{k: (Optional[list[spec.type]], None) for k, spec in keys.items()})
     return point, lists
 
 
-AXIS_MODELS = {axis: _axis_models(axis) for axis in AXES}
+_VALUE_MODELS = {axis: _axis_models(axis) for axis in AXES}
 
 
 @functools.cache
@@ -115,18 +107,17 @@ def _normal_model():
 def _uniform_model(lo, hi):
     """{uniform: [lo, hi]}: a continuous draw within the key's range."""
     return create_model("uniform", __base__=Strict,
-                        uniform=(Vec(2, -math.inf if lo is None else lo,
-                                     math.inf if hi is None else hi), ...))
+                        uniform=(Vec(2, lo, hi), ...))
 
 
 def _axis_values(raw_axis: Any, file, where: str, axis: str,
                  sampling: bool) -> dict[str, list | dict]:
     """Each key of one axis mapping -> its list of values (grid) or its distribution (sample):
     a list (choice), {"uniform": [lo, hi]} or {"normal": [mean, sd]}. Scalars become one-element
-    lists. Checked with
-    the loader's field types: errors name the file and the dotted key (`grid.fault.motor[1]`)."""
+    lists. Checked with the schema's field types: errors name the file and the dotted key
+    (`grid.fault.motor[1]`)."""
     keys = AXIS_KEYS[axis]
-    point, lists = AXIS_MODELS[axis]
+    point, lists = _VALUE_MODELS[axis]
     if not isinstance(raw_axis, dict):
         raise ConfigError(f"{file}: key '{where}': got {raw_axis!r}, expected a mapping")
     unknown = sorted((k for k in raw_axis if k not in keys), key=str)
@@ -135,7 +126,7 @@ def _axis_values(raw_axis: Any, file, where: str, axis: str,
                           f"{raw_axis[unknown[0]]!r}): expected one of {', '.join(keys)}")
     out: dict[str, list | dict] = {}
     for key in sorted(raw_axis, key=str):
-        kind, lo, hi = keys[key]
+        _, kind, lo, hi = keys[key]
         raw = raw_axis[key]
         if sampling and isinstance(raw, dict):
             if kind not in ("float", "int"):
@@ -143,11 +134,10 @@ def _axis_values(raw_axis: Any, file, where: str, axis: str,
                                   "or a list of values to choose from")
             if "normal" in raw:
                 mean, sd = validate(_normal_model(), raw, file, prefix=f"{where}.{key}").normal
-                lo_, hi_ = (-math.inf if lo is None else lo), (math.inf if hi is None else hi)
-                if not (sd > 0.0 and lo_ <= mean <= hi_):
+                if not (sd > 0.0 and lo <= mean <= hi):
                     raise ConfigError(f"{file}: key '{where}.{key}.normal': got "
                                       f"{[mean, sd]}, expected [mean, sd] with sd > 0 and the "
-                                      f"mean in [{lo_:g}, {hi_:g}]")
+                                      f"mean in [{lo:g}, {hi:g}]")
                 out[key] = {"normal": [mean, sd]}
                 continue
             bounds = validate(_uniform_model(lo, hi), raw, file,
@@ -157,7 +147,7 @@ def _axis_values(raw_axis: Any, file, where: str, axis: str,
                                   "expected [lo, hi] with lo <= hi")
             out[key] = {"uniform": list(bounds)}
             continue
-        is_list = isinstance(raw, list) and not (kind == "vec3" and raw and
+        is_list = isinstance(raw, list) and not (kind == "vec" and raw and
                                                  not isinstance(raw[0], list))
         if is_list and not raw:
             raise ConfigError(f"{file}: key '{where}.{key}': got [], expected a value or a "
@@ -195,9 +185,23 @@ def _grid_axis(grid: dict, file, axis: str) -> list[dict | None]:
     return points
 
 
+def nested(point: dict) -> dict:
+    """A flat mapping of dotted keys (an axis point: `time_varying.b`) as the nested mapping the
+    schema reads ({"time_varying": {"b": ...}})."""
+    out: dict[str, Any] = {}
+    for key, value in point.items():
+        *parents, leaf = key.split(".")
+        node = out
+        for p in parents:
+            node = node.setdefault(p, {})
+        node[leaf] = value
+    return out
+
+
 def fault_event(fault: dict | None, file, where: str, tilt_range_deg=(-90.0, 90.0)):
-    """The sil_vehicle fault-script Event of a campaign fault (validated by the fault script's
-    own parser), or None."""
+    """The sil_vehicle fault-script Event of a campaign fault (its keys the dotted paths of the
+    fault script's MotorEvent or ServoEvent, validated by the fault script's own parser), or
+    None. One kind of action per fault: an effectiveness, a time-varying one, or stopped."""
     if fault is None:
         return None
     f = dict(fault)
@@ -208,37 +212,27 @@ def fault_event(fault: dict | None, file, where: str, tilt_range_deg=(-90.0, 90.
 
     if "at_s" not in f:
         raise ConfigError(f"{file}: missing key '{prefix}at_s' (the fault onset)")
-    event: dict[str, Any] = {"at_s": f["at_s"]}
     if ("motor" in f) == ("servo" in f):
         raise ConfigError(f"{file}: key '{where}': a fault needs one of motor or servo "
                           f"(got {sorted(f)})")
-    if "motor" in f:
-        event["motor"] = f["motor"]
-        for key in ("stuck_deg",):
-            if key in f:
-                raise fail(key, "no servo key in a motor fault")
-        tv = [k for k in ("tv_b", "tv_w_rad_s", "tv_phi_rad") if k in f]
-        if "stopped" in f:
-            if "effectiveness" in f or tv:
-                raise fail("stopped", "either stopped or effectiveness, not both")
-            event["stopped"] = f["stopped"]
-        elif "effectiveness" not in f:
-            raise ConfigError(f"{file}: missing key '{prefix}effectiveness' (or stopped)")
-        elif tv:
-            event["time_varying"] = {"a": f["effectiveness"], "b": f.get("tv_b", 0.0),
-                                     "w": f.get("tv_w_rad_s", 0.0),
-                                     "phi": f.get("tv_phi_rad", 0.0)}
-        else:
-            event["effectiveness"] = f["effectiveness"]
-    else:
-        event["servo"] = f["servo"]
-        for key in ("effectiveness", "tv_b", "tv_w_rad_s", "tv_phi_rad", "stopped"):
-            if key in f:
-                raise fail(key, "no motor key in a servo fault")
-        if "stuck_deg" not in f:
-            raise ConfigError(f"{file}: missing key '{prefix}stuck_deg'")
-        event["stuck_deg"] = f["stuck_deg"]
-    return parse_event(event, tilt_range_deg, file=str(file), key=where)
+    kind, own, other = (("motor", MOTOR_KEYS, "servo") if "motor" in f
+                        else ("servo", SERVO_KEYS, "motor"))
+    for key in sorted(f):
+        if key != "at_s" and key not in own:
+            raise fail(key, f"no {other} key in a {kind} fault")
+    if kind == "motor":
+        acts = [a for a in ("effectiveness", "time_varying", "stopped")
+                if any(k.split(".")[0] == a for k in f)]
+        if not acts:
+            raise ConfigError(f"{file}: missing key '{prefix}effectiveness' (or time_varying.*, "
+                              "or stopped)")
+        if len(acts) > 1:
+            raise fail(acts[1] if acts[1] in f else next(k for k in sorted(f)
+                                                         if k.startswith(acts[1] + ".")),
+                       f"one of effectiveness, time_varying or stopped, not {' and '.join(acts)}")
+    elif "stuck_deg" not in f:
+        raise ConfigError(f"{file}: missing key '{prefix}stuck_deg'")
+    return parse_event(nested(f), tilt_range_deg, file=str(file), key=where)
 
 
 def _sample_axis(values: dict | None, axis: str, rng) -> dict | None:
@@ -249,10 +243,8 @@ def _sample_axis(values: dict | None, axis: str, rng) -> dict | None:
     for key in sorted(values):
         v = values[key]
         if isinstance(v, dict) and "normal" in v:
-            kind, lo, hi = AXIS_KEYS[axis][key]
+            _, kind, lo, hi = AXIS_KEYS[axis][key]
             mean, sd = v["normal"]
-            lo = -math.inf if lo is None else lo
-            hi = math.inf if hi is None else hi
             for _ in range(10_000):
                 x = float(rng.normal(mean, sd))
                 if lo <= x <= hi:
@@ -263,7 +255,7 @@ def _sample_axis(values: dict | None, axis: str, rng) -> dict | None:
         elif isinstance(v, dict):
             lo, hi = v["uniform"]
             x = float(rng.uniform(lo, hi))
-            kind = AXIS_KEYS[axis][key][0]
+            kind = AXIS_KEYS[axis][key].kind
             point[key] = int(round(x)) if kind == "int" else round(x, SAMPLE_DIGITS)
         else:
             point[key] = v[int(rng.integers(len(v)))]
