@@ -14,18 +14,11 @@ from trq_lab.campaign.flight import severity
 from trq_lab.campaign.spec import AXIS_KEYS, PLANT_NEUTRAL, load_campaign
 from trq_lab.overlays import PLANT_PARAMS
 
-TV = """\
-name: tv
-description: a time-varying fault
-seed: 1
-controllers: [trq_nmpc_eso]
-success_rmse_m: 0.1
-recovery_threshold_m: 0.1
-timeout_s: 10
-grid:
-  fault: {motor: 1, time_varying.a: 0.8, time_varying.b: [0.1, 0.2], time_varying.w: 1.0,
-          at_s: 1.0}
-"""
+# a smoke campaign of one controller over a time-varying fault
+TV = (PARAMS / "campaigns" / "smoke.yaml").read_text().split("grid:")[0].replace(
+    "[trq_nmpc_eso, quad_nmpc]", "[trq_nmpc_eso]") + (
+    "grid:\n  fault: {motor: 1, time_varying.a: 0.8, time_varying.b: [0.1, 0.2],\n"
+    "          time_varying.w: 1.0, at_s: 1.0}\n")
 
 
 def test_the_axes_keys_are_the_schemas_paths():
