@@ -34,7 +34,7 @@ from trq_lab.reporting.campaign import wind_label, write_report
 
 PROGRESS_EVERY_S = 2.0       # a terminal's bar is redrawn at most this often
 PROGRESS_LOG_EVERY_S = 30.0  # a log's (not a terminal) progress line is written at most this often
-PROGRESS_FORMAT = ("  {bar:30} {n_fmt}/{total_fmt} flights{postfix}, {rate_fmt}, "
+PROGRESS_FORMAT = ("  {bar:30} {n_fmt}/{total_fmt} flights{postfix}, {rate_noinv_fmt}, "
                    "elapsed {elapsed}, ETA {remaining}")
 
 
