@@ -55,19 +55,6 @@ def tilt_deg(pwm: int, half_range_deg: float) -> float:
     return (pwm - 1500) / 500.0 * half_range_deg
 
 
-
-def _position_lines(pos) -> list[str]:
-    return [f"position    NED m    n {pos.x:+8.3f}  e {pos.y:+8.3f}  d {pos.z:+8.3f}"
-            f"   (altitude {-pos.z:.2f} m)",
-            f"velocity    NED m/s  n {pos.vx:+8.3f}  e {pos.vy:+8.3f}  d {pos.vz:+8.3f}"]
-
-
-def _attitude_lines(att) -> list[str]:
-    return [f"attitude    deg      roll {math.degrees(att.roll):+7.2f}  pitch "
-            f"{math.degrees(att.pitch):+7.2f}  yaw {math.degrees(att.yaw):+7.2f}",
-            f"rates       deg/s    p {math.degrees(att.rollspeed):+7.1f}  q "
-            f"{math.degrees(att.pitchspeed):+7.1f}  r {math.degrees(att.yawspeed):+7.1f}"]
-
 class Monitor:
     """What the vehicle has said, kept up to date by `on_message`; `render()` draws it."""
 
@@ -187,14 +174,6 @@ class Monitor:
             lines.append("component   (no offboard controller heard)")
         return lines
 
-    def _output_lines(self, raw) -> list[str]:
-        pwm = [getattr(raw, f"servo{i}_raw") for i in range(1, 9)]
-        head = "".join(f"{f'M{i}':>8}" for i in range(1, 5)) + \
-            "".join(f"{f'S{i}':>8}" for i in range(1, 5))
-        motors = "".join(f"{throttle_pct(v):7.1f}%" for v in pwm[:4])
-        servos = "".join(f"{tilt_deg(v, self.half_range_deg):+6.1f}dg" for v in pwm[4:])
-        return [f"outputs   {head}", f"  (% / deg){motors}{servos}"]
-
     def render(self) -> str:
         c = self.client
         last = c.last
@@ -213,11 +192,34 @@ class Monitor:
                          f"(system_status {status})"
                          + (f"   LINK LOST: no heartbeat for {silent:.1f} s" if silent > 3.0
                             else ""))
-        for name, label, show in (("LOCAL_POSITION_NED", "position", _position_lines),
-                                  ("ATTITUDE", "attitude", _attitude_lines),
-                                  ("SERVO_OUTPUT_RAW", "outputs", self._output_lines)):
-            msg = last.get(name)
-            lines += [f"{label:<12}(no {name} yet)"] if msg is None else show(msg)
+        pos = last.get("LOCAL_POSITION_NED")
+        if pos is None:
+            lines.append("position    (no LOCAL_POSITION_NED yet)")
+        else:
+            lines.append(f"position    NED m    n {pos.x:+8.3f}  e {pos.y:+8.3f}  d {pos.z:+8.3f}"
+                         f"   (altitude {-pos.z:.2f} m)")
+            lines.append(f"velocity    NED m/s  n {pos.vx:+8.3f}  e {pos.vy:+8.3f}  "
+                         f"d {pos.vz:+8.3f}")
+        att = last.get("ATTITUDE")
+        if att is None:
+            lines.append("attitude    (no ATTITUDE yet)")
+        else:
+            lines.append(f"attitude    deg      roll {math.degrees(att.roll):+7.2f}  pitch "
+                         f"{math.degrees(att.pitch):+7.2f}  yaw {math.degrees(att.yaw):+7.2f}")
+            lines.append(f"rates       deg/s    p {math.degrees(att.rollspeed):+7.1f}  q "
+                         f"{math.degrees(att.pitchspeed):+7.1f}  r "
+                         f"{math.degrees(att.yawspeed):+7.1f}")
+        raw = last.get("SERVO_OUTPUT_RAW")
+        if raw is None:
+            lines.append("outputs     (no SERVO_OUTPUT_RAW yet)")
+        else:
+            pwm = [getattr(raw, f"servo{i}_raw") for i in range(1, 9)]
+            head = "".join(f"{f'M{i}':>8}" for i in range(1, 5)) + \
+                "".join(f"{f'S{i}':>8}" for i in range(1, 5))
+            motors = "".join(f"{throttle_pct(v):7.1f}%" for v in pwm[:4])
+            servos = "".join(f"{tilt_deg(v, self.half_range_deg):+6.1f}dg" for v in pwm[4:])
+            lines.append(f"outputs   {head}")
+            lines.append(f"  (% / deg){motors}{servos}")
         faults = self.faults()
         known = self.params_complete()
         lines.append("faults      " + ("; ".join(faults) if faults else
