@@ -29,6 +29,8 @@ from trq_lab.harness import SIM_DEFAULT
 from trq_lab.overlays import controller_file, perturbed_vehicle, vehicle_data
 
 PARAMS = trq_params.DIR
+
+
 class AxisKey(NamedTuple):
     """One key of an axis: the schema's field type (its checks and its wording) and what a draw
     needs of it: its kind (int, float, bool, vec or text) and its range (numbers and vectors)."""
@@ -39,6 +41,7 @@ class AxisKey(NamedTuple):
 
 
 def _axis_key(tp: Any) -> AxisKey:
+    """An axis key of a schema field type: its kind from the type, its range from its Range."""
     base = typing.get_args(tp)[0] if typing.get_origin(tp) is Annotated else tp
     bounds = range_of(tp)
     if base is bool:
@@ -66,6 +69,7 @@ MOTOR_KEYS, SERVO_KEYS = (set(leaf_types(m)) - {"at_s"} for m in AXIS_MODELS["fa
 PLANT_NEUTRAL = Plant().model_dump()
 WIND_DEFAULT = {"speed_m_s": 0.0, "direction_deg": 0.0, "gusts": False}
 SAMPLE_DIGITS = 4            # sampled numbers are rounded: readable tables, stable ids
+
 
 @dataclass(frozen=True)
 class Campaign:
@@ -227,9 +231,9 @@ def fault_event(fault: dict | None, file, where: str, tilt_range_deg=(-90.0, 90.
             raise ConfigError(f"{file}: missing key '{prefix}effectiveness' (or time_varying.*, "
                               "or stopped)")
         if len(acts) > 1:
-            raise fail(acts[1] if acts[1] in f else next(k for k in sorted(f)
-                                                         if k.startswith(acts[1] + ".")),
-                       f"one of effectiveness, time_varying or stopped, not {' and '.join(acts)}")
+            second = next(k for k in sorted(f) if k.split(".")[0] == acts[1])
+            raise fail(second, "one of effectiveness, time_varying or stopped, not "
+                       + " and ".join(acts))
     elif "stuck_deg" not in f:
         raise ConfigError(f"{file}: missing key '{prefix}stuck_deg'")
     return parse_event(nested(f), tilt_range_deg, file=str(file), key=where)
