@@ -34,6 +34,7 @@ import math
 import re
 import types
 import typing
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Any, Callable, Mapping, TypeVar
 
@@ -44,8 +45,8 @@ from pydantic_core import PydanticCustomError
 from trq_params import ConfigError
 
 __all__ = ["ConfigError", "Invalid", "load", "validate", "read", "read_yaml", "chain",
-           "path_keys", "PathStr", "Num", "Int", "Flag", "Text", "Choice", "Vec", "Items", "expect",
-           "merge", "dump", "BUILTIN"]
+           "path_keys", "leaf_types", "PathStr", "Num", "Int", "Flag", "Text", "Choice", "Vec",
+           "Items", "Range", "range_of", "expect", "merge", "dump", "BUILTIN"]
 
 BUILTIN = "builtin:"
 
@@ -261,6 +262,30 @@ class _PathMark:
 _PATH = _PathMark()
 
 
+def _field_type(field: Any) -> Any:
+    """A field's type as written (pydantic keeps a top-level Annotated's metadata apart), with
+    Optional[...] removed."""
+    tp = Annotated[(field.annotation, *field.metadata)] if field.metadata else field.annotation
+    if typing.get_origin(tp) in (typing.Union, types.UnionType):
+        args = [a for a in typing.get_args(tp) if a is not type(None)]
+        tp = args[0] if len(args) == 1 else tp
+    return tp
+
+
+def leaf_types(model: type[BaseModel], prefix: str = "") -> dict[str, Any]:
+    """The dotted keys of the fields of `model` and of its nested models (not inside lists),
+    each with its field type (Optional removed): what a flat mapping of its values may hold."""
+    out: dict[str, Any] = {}
+    for name, field in model.model_fields.items():
+        key = f"{prefix}{field.alias or name}"
+        tp = _field_type(field)
+        if isinstance(tp, type) and issubclass(tp, BaseModel):
+            out.update(leaf_types(tp, key + "."))
+        else:
+            out[key] = tp
+    return out
+
+
 def path_keys(model: type[BaseModel], prefix: str = "") -> tuple[str, ...]:
     """The dotted keys of the fields typed `PathStr` in `model` and its nested models (not
     inside lists)."""
@@ -299,6 +324,20 @@ def _is_number(value: Any) -> bool:
         and math.isfinite(value)
 
 
+@dataclass(frozen=True)
+class Range:
+    """The bounds of a Num, Int or Vec field, kept on its type: what a campaign may draw within
+    (`typing.get_args(tp)[1:]` holds it)."""
+    lo: float
+    hi: float
+
+
+def range_of(tp: Any) -> Range | None:
+    """The Range a field type carries, if any."""
+    return next((m for m in typing.get_args(tp)[1:] if isinstance(m, Range)), None) \
+        if typing.get_origin(tp) is Annotated else None
+
+
 def Num(lo: float = -math.inf, hi: float = math.inf, *, open_lo: bool = False) -> Any:
     """A finite number in [lo, hi] (or (lo, hi]); an integer in the file becomes a float."""
     want = f"a number in {'(' if open_lo else '['}{lo:g}, {hi:g}]"
@@ -307,7 +346,7 @@ def Num(lo: float = -math.inf, hi: float = math.inf, *, open_lo: bool = False) -
         if not _is_number(value) or not lo <= value <= hi or (open_lo and value == lo):
             raise expect(want)
         return float(value)
-    return Annotated[float, _checked(check)]
+    return Annotated[float, _checked(check), Range(lo, hi)]
 
 
 def Int(lo: int, hi: int) -> Any:
@@ -316,7 +355,7 @@ def Int(lo: int, hi: int) -> Any:
         if isinstance(value, bool) or not isinstance(value, int) or not lo <= value <= hi:
             raise expect(f"an integer in [{lo}, {hi}]")
         return value
-    return Annotated[int, _checked(check)]
+    return Annotated[int, _checked(check), Range(lo, hi)]
 
 
 def _flag(value: Any) -> bool:
@@ -358,7 +397,7 @@ def Vec(n: int, lo: float = -math.inf, hi: float = math.inf) -> Any:
                 _is_number(v) and lo <= v <= hi for v in value):
             raise expect(want)
         return tuple(float(v) for v in value)
-    return Annotated[tuple[float, ...], _checked(check)]
+    return Annotated[tuple[float, ...], _checked(check), Range(lo, hi)]
 
 
 def Items(n: int) -> BeforeValidator:

@@ -6,6 +6,10 @@ One model per kind of file, read by `trq_params.loader.load(path, Model)`:
     SimFile          params/sim/*.yaml       (sil_vehicle)
     ControllerFile   params/controller/*.yaml, the controllers (trq_offboard)
     EsoFile          params/controller/eso*.yaml, the observer's gains (trq_offboard)
+    MotorEvent, ServoEvent, WindEvent, ClearEvent
+                     an event of params/faults/*.yaml (sil_vehicle.faultscript)
+    ScenarioFile     params/scenarios/*.yaml (trq_lab.scenario)
+    CampaignFile     params/campaigns/*.yaml (trq_lab.campaign)
 
 The models are strict and frozen and forbid unknown keys. Values keep the units of the file
 (degrees stay degrees): the daemons' config modules convert them and compute derived quantities
@@ -18,11 +22,15 @@ from __future__ import annotations
 
 from typing import Annotated, Any, Optional
 
-from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, model_validator
-from trq_params.loader import Choice, Flag, Int, Invalid, Items, Num, PathStr, Text, Vec, expect
+from pydantic import (BaseModel, BeforeValidator, ConfigDict, Field, ValidationInfo,
+                      field_validator, model_validator)
+from trq_params import exists
+from trq_params.loader import (Choice, Flag, Int, Invalid, Items, Num, PathStr, Range, Text, Vec,
+                               expect)
 
-__all__ = ["Strict", "VehicleFile", "SimFile", "ControllerFile", "EsoFile", "STREAMS",
-           "HPIPM_OPTIONS", "parse_endpoint"]
+__all__ = ["Strict", "VehicleFile", "SimFile", "ControllerFile", "EsoFile", "MotorEvent",
+           "ServoEvent", "WindEvent", "ClearEvent", "ScenarioFile", "CampaignFile",
+           "STREAMS", "HPIPM_OPTIONS", "parse_endpoint", "throttle_curve"]
 
 
 class Strict(BaseModel):
@@ -40,6 +48,13 @@ class Inertia(Strict):
     zz: Num(1e-6, 100.0)
 
 
+def throttle_curve(c2, c1, c0, zeta_pct):
+    """c2 zeta^2 + c1 zeta + c0 at zeta, the throttle in percent, in Horner's form: the one
+    throttle curve of the vehicle file's checks and of both daemons (sil_vehicle.config.Quadratic,
+    trq_offboard.config.Curve). Plain arithmetic: floats, NumPy arrays or CasADi expressions."""
+    return (c2 * zeta_pct + c1) * zeta_pct + c0
+
+
 class QuadraticCurve(Strict):
     """c2 zeta^2 + c1 zeta + c0, zeta the throttle in percent."""
     c2: Num(0.0, 1.0, open_lo=True)
@@ -47,7 +62,7 @@ class QuadraticCurve(Strict):
     c0: Num(-10.0, 10.0)
 
     def value(self, zeta_pct: float) -> float:
-        return (self.c2 * zeta_pct + self.c1) * zeta_pct + self.c0
+        return throttle_curve(self.c2, self.c1, self.c0, zeta_pct)
 
 
 class RotorCurves(Strict):
@@ -438,4 +453,255 @@ class ControllerFile(Strict):
                           f"at most substeps x control_rate_hz = {eff.substeps} x "
                           f"{self.control_rate_hz} = {eff.substeps * self.control_rate_hz:g} "
                           "rad/s (explicit Euler substeps; raise substeps for a faster observer)")
+        return self
+
+
+# --------------------------------------------------------------------------------------------
+# fault script (sil_vehicle.faultscript: one model per kind of event)
+# --------------------------------------------------------------------------------------------
+
+class _Event(Strict):
+    """An event of a fault script: when, in vehicle time."""
+    at_s: Num(0.0, 1e6)
+
+
+class TimeVarying(Strict):
+    a: Num(0.0, 1.0)
+    b: Num(0.0, 1.0)
+    w: Num(0.0, 1000.0)
+    phi: Num(-10.0, 10.0) = 0.0
+
+
+class MotorEvent(_Event):
+    motor: Int(1, 4)
+    effectiveness: Optional[Num(0.0, 1.0)] = None
+    time_varying: Optional[TimeVarying] = None
+    stopped: Optional[Flag] = None      # (not "off": a bare off would read as a key or a string)
+
+    @model_validator(mode="after")
+    def _acts(self) -> "MotorEvent":
+        if self.effectiveness is None and self.time_varying is None and self.stopped is None:
+            raise Invalid("motor", self.motor, "with effectiveness, time_varying or stopped")
+        return self
+
+
+class ServoEvent(_Event):
+    servo: Int(1, 4)
+    # null frees the servo; the angle's range is the vehicle's tilt range (the validation's
+    # context), the Range below when none is given
+    stuck_deg: Annotated[Any, Range(-90.0, 90.0)]
+
+    @field_validator("stuck_deg", mode="before")
+    @classmethod
+    def _angle(cls, value: Any, info: ValidationInfo) -> Any:
+        lo, hi = info.context or (-90.0, 90.0)
+        if value is not None and (isinstance(value, bool) or not isinstance(value, (int, float))
+                                  or not lo <= value <= hi):
+            raise expect(f"null or an angle in [{lo:g}, {hi:g}] deg")
+        return value
+
+
+class EventWind(Strict):
+    speed_m_s: Optional[Num(0.0, 40.0)] = None
+    direction_deg: Optional[Num(-360.0, 360.0)] = None
+    gusts: Optional[Flag] = None
+    gust_sigma_m_s: Optional[Num(0.0, 20.0)] = None
+
+
+class WindEvent(_Event):
+    wind: EventWind
+
+    @model_validator(mode="after")
+    def _acts(self) -> "WindEvent":
+        if not self.wind.model_fields_set:
+            raise Invalid("wind", {}, "speed_m_s, direction_deg, gusts or gust_sigma_m_s")
+        return self
+
+
+class ClearEvent(_Event):
+    clear: Flag
+
+    @model_validator(mode="after")
+    def _true(self) -> "ClearEvent":
+        if not self.clear:
+            raise Invalid("clear", False, "true")
+        return self
+
+
+# --------------------------------------------------------------------------------------------
+# scenario (trq_lab.scenario)
+# --------------------------------------------------------------------------------------------
+
+class ScenarioWind(Strict):
+    speed_m_s: Num(0.0, 40.0)
+    direction_deg: Num(-360.0, 360.0)
+    gusts: Flag
+
+
+class ScenarioLink(Strict):
+    """The offboard link's seeded impairment (sil_vehicle's links.offboard.impair)."""
+    loss: Optional[Num(0.0, 1.0)] = None
+    delay_ms: Optional[Num(0.0, 10_000.0)] = None
+    jitter_ms: Optional[Num(0.0, 10_000.0)] = None
+    duplicate: Optional[Num(0.0, 1.0)] = None
+    reorder: Optional[Num(0.0, 1.0)] = None
+
+
+class ScenarioTargets(Strict):
+    """What one controller must achieve: each metric at most its bound, crashed as given."""
+    crashed: Optional[Flag] = None
+    rmse_pos_m: Optional[Num(0.0, 1e6)] = None
+    rmse_pos_after_fault_m: Optional[Num(0.0, 1e6)] = None
+    max_pos_err_m: Optional[Num(0.0, 1e6)] = None
+    max_yaw_err_deg: Optional[Num(0.0, 1e6)] = None
+    rmse_yaw_deg: Optional[Num(0.0, 1e6)] = None
+    recovery_s: Optional[Num(0.0, 1e6)] = None
+
+
+class ScenarioBetter(Strict):
+    better: Text
+    worse: Text
+    # the bounded ones
+    metric: Choice(*(k for k in ScenarioTargets.model_fields if k != "crashed"))
+
+
+class ScenarioFile(Strict):
+    """A scenario file (params/scenarios/*.yaml): wind, faults, reference, controllers, targets."""
+    name: Text
+    description: Text
+    seed: Int(0, 2**31)
+    wind: ScenarioWind
+    faults: Optional[Text]                  # a built-in fault script name, a path, or null
+    reference: dict[str, Any]               # checked by the controller's loader when flown
+    controllers: list[Text]
+    offboard_link: Optional[ScenarioLink] = None
+    recovery_threshold_m: Num(0.001, 100.0)
+    timeout_s: Num(1.0, 36000.0)
+    targets: dict[str, ScenarioTargets] = {}
+    better: list[ScenarioBetter] = []
+
+    @model_validator(mode="after")
+    def _names(self) -> "ScenarioFile":
+        if not self.controllers:
+            raise Invalid("controllers", [], "a non-empty list of controller names")
+        for i, c in enumerate(self.controllers):
+            if not exists("controller", c):
+                raise Invalid(f"controllers[{i}]", c, "a built-in controller name or a "
+                              "controller YAML path")
+        for c in self.targets:
+            if c not in self.controllers:
+                raise Invalid(f"targets.{c}", self.targets[c].model_dump(exclude_none=True),
+                              "targets of one of the controllers " + ", ".join(self.controllers))
+        for i, b in enumerate(self.better):
+            for key in ("better", "worse"):
+                if getattr(b, key) not in self.controllers:
+                    raise Invalid(f"better[{i}].{key}", getattr(b, key),
+                                  "one of " + "|".join(self.controllers))
+        return self
+
+
+# --------------------------------------------------------------------------------------------
+# campaign (trq_lab.campaign: the axes' keys are checked by trq_lab.campaign.spec)
+# --------------------------------------------------------------------------------------------
+
+AXES = ("fault", "wind", "trajectory", "link", "plant")
+CONTROLLER_MODELS = ("nominal", "plant")
+
+
+class Plant(Strict):
+    """A campaign's simulated airframe against its file (trq_lab.overlays.PLANT_PARAMS says what
+    each key changes): factors, and an offset for idle; the defaults are the file itself, the
+    ranges keep a plant physical (the vehicle schema then checks the airframe that results)."""
+    mass_scale: Num(0.5, 2.0) = 1.0
+    inertia_scale: Num(0.2, 5.0) = 1.0
+    arm_length_scale: Num(0.5, 2.0) = 1.0
+    thrust_scale: Num(0.5, 2.0) = 1.0
+    torque_scale: Num(0.2, 5.0) = 1.0
+    motor_lag_scale: Num(0.0, 10.0) = 1.0
+    motor_rate_scale: Num(0.1, 10.0) = 1.0
+    servo_lag_scale: Num(0.0, 10.0) = 1.0
+    servo_rate_scale: Num(0.1, 10.0) = 1.0
+    drag_scale: Num(0.0, 10.0) = 1.0
+    idle_offset_pct: Num(-20.0, 20.0) = 0.0
+
+
+# the models whose keys (dotted, `leaf_types`) each axis sets: a fault is a motor or a servo
+# event, a wind a wind event's, a trajectory a controller's reference, a link the offboard link's
+# impairment, a plant the simulated airframe's factors
+AXIS_MODELS = {"fault": (MotorEvent, ServoEvent), "wind": (EventWind,),
+               "trajectory": (ReferenceFile,), "link": (Impair,), "plant": (Plant,)}
+
+
+class CampaignGrid(Strict):
+    """Every combination of the axes' values (each axis checked by trq_lab.campaign.spec)."""
+    fault: Any = None
+    wind: Any = None
+    trajectory: Any = None
+    link: Any = None
+    plant: Any = None
+
+
+class CampaignSample(CampaignGrid):
+    """n seeded random draws of the axes' distributions."""
+    n: Int(1, 10_000_000)
+    seed: Int(0, 2**31 - 1)
+
+
+class CampaignPaired(Strict):
+    """`controller` does better than `worse` (a lower RMSE after the fault, or it flies where
+    the other crashes) on at least `share` of the flights both flew on the same plant."""
+    worse: Text
+    share: Num(0.0, 1.0)
+
+
+class CampaignTargets(Strict):
+    """A campaign's targets: among the flights of `controller` whose faulted trim keeps at least
+    `min_margin_pct` of throttle margin on every motor, at least `share` stay within
+    `rmse_after_fault_m`; and the paired comparisons."""
+    controller: Text
+    min_margin_pct: Num(0.0, 100.0)
+    rmse_after_fault_m: Num(1e-5, 100.0)
+    share: Num(0.0, 1.0)
+    better: list[CampaignPaired] = []
+
+
+class CampaignFile(Strict):
+    """A campaign file (params/campaigns/*.yaml); the axes are checked key by key afterwards."""
+    name: Text
+    description: Text
+    seed: Int(0, 2**31 - 1)
+    controllers: list[Text]
+    success_rmse_m: Num(0.001, 100.0)
+    recovery_threshold_m: Num(0.001, 100.0)
+    timeout_s: Num(1.0, 36000.0)
+    repeats: Int(1, 1000) = 1
+    controller_model: Any = "nominal"
+    targets: CampaignTargets | None = None
+    grid: CampaignGrid | None = None
+    sample: CampaignSample | None = None
+
+    @model_validator(mode="after")
+    def _flights(self) -> "CampaignFile":
+        if not self.controllers or len(set(self.controllers)) != len(self.controllers):
+            raise Invalid("controllers", self.controllers,
+                          "a non-empty list of distinct controller names")
+        for i, c in enumerate(self.controllers):
+            if not exists("controller", c):
+                raise Invalid(f"controllers[{i}]", c, "a built-in controller name or a "
+                              "controller YAML path")
+        if self.grid is None and self.sample is None:
+            raise Invalid("grid", None, "a grid (or a sample): a campaign needs flights")
+        models = self.controller_model
+        if not (models in CONTROLLER_MODELS or (
+                isinstance(models, list) and models and len(set(models)) == len(models)
+                and all(m in CONTROLLER_MODELS for m in models))):
+            raise Invalid("controller_model", models, "one of " + "|".join(CONTROLLER_MODELS)
+                          + " or a list of distinct ones")
+        t = self.targets
+        if t is not None:
+            for key, name in [("targets.controller", t.controller)] + [
+                    (f"targets.better[{i}].worse", b.worse) for i, b in enumerate(t.better)]:
+                if name not in self.controllers:
+                    raise Invalid(key, name, "one of the campaign's controllers ("
+                                  + ", ".join(self.controllers) + ")")
         return self

@@ -17,7 +17,7 @@ from pathlib import Path
 from pydantic_core import PydanticCustomError
 from trq_params import loader, schema
 from trq_params.loader import ConfigError
-from trq_params.schema import STREAMS
+from trq_params.schema import STREAMS, throttle_curve
 
 from sil_vehicle.impair import ImpairParams
 
@@ -35,7 +35,7 @@ class Quadratic:
     c0: float
 
     def __call__(self, zeta_pct: float) -> float:
-        value = (self.c2 * zeta_pct + self.c1) * zeta_pct + self.c0
+        value = throttle_curve(self.c2, self.c1, self.c0, zeta_pct)
         return value if value > 0.0 else 0.0
 
     def inverse(self, value: float) -> float:

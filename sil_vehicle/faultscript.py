@@ -11,20 +11,19 @@
 Each event becomes MAVLink actions: parameter sets (`SIM_*`, PROTOCOL.md) or
 MAV_CMD_INJECT_FAILURE commands, so a script means the same thing whether the vehicle plays it
 itself (deterministic, `--faults FILE`) or `trq-inject-fault` sends it over the wire.
-Each event is validated by `trq_params.loader` against its kind's schema (below: the first of
-motor, servo, wind, clear it holds decides): errors name the file, the event index, the key, the
-value and what was expected.
+Each event is validated by `trq_params.loader` against its kind's schema (`trq_params.schema`:
+MotorEvent, ServoEvent, WindEvent, ClearEvent; the first of motor, servo, wind, clear it holds
+decides): errors name the file, the event index, the key, the value and what was expected.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Optional
+from typing import Any
 
-from pydantic import ValidationInfo, field_validator, model_validator
-from trq_params.loader import ConfigError, Flag, Int, Invalid, Num, expect, read_yaml, validate
-from trq_params.schema import Strict
+from trq_params.loader import ConfigError, read_yaml, validate
+from trq_params.schema import ClearEvent, MotorEvent, ServoEvent, WindEvent
 
 MOTOR = 101          # FAILURE_UNIT_SYSTEM_MOTOR
 SERVO = 102          # FAILURE_UNIT_SYSTEM_SERVO
@@ -53,71 +52,6 @@ class Event:
     at_us: int
     actions: tuple[Action, ...]
     text: str            # what the event does, for logs and reports
-
-
-class _Event(Strict):
-    at_s: Num(0.0, 1e6)
-
-
-class _TimeVarying(Strict):
-    a: Num(0.0, 1.0)
-    b: Num(0.0, 1.0)
-    w: Num(0.0, 1000.0)
-    phi: Num(-10.0, 10.0) = 0.0
-
-
-class MotorEvent(_Event):
-    motor: Int(1, 4)
-    effectiveness: Optional[Num(0.0, 1.0)] = None
-    time_varying: Optional[_TimeVarying] = None
-    stopped: Optional[Flag] = None      # (not "off": a bare off would read as a key or a string)
-
-    @model_validator(mode="after")
-    def _acts(self) -> "MotorEvent":
-        if self.effectiveness is None and self.time_varying is None and self.stopped is None:
-            raise Invalid("motor", self.motor, "with effectiveness, time_varying or stopped")
-        return self
-
-
-class ServoEvent(_Event):
-    servo: Int(1, 4)
-    stuck_deg: Any          # null frees the servo; the angle's range is the vehicle's tilt range
-
-    @field_validator("stuck_deg", mode="before")
-    @classmethod
-    def _angle(cls, value: Any, info: ValidationInfo) -> Any:
-        lo, hi = info.context or (-90.0, 90.0)
-        if value is not None and (isinstance(value, bool) or not isinstance(value, (int, float))
-                                  or not lo <= value <= hi):
-            raise expect(f"null or an angle in [{lo:g}, {hi:g}] deg")
-        return value
-
-
-class _Wind(Strict):
-    speed_m_s: Optional[Num(0.0, 40.0)] = None
-    direction_deg: Optional[Num(-360.0, 360.0)] = None
-    gusts: Optional[Flag] = None
-    gust_sigma_m_s: Optional[Num(0.0, 20.0)] = None
-
-
-class WindEvent(_Event):
-    wind: _Wind
-
-    @model_validator(mode="after")
-    def _acts(self) -> "WindEvent":
-        if not self.wind.model_fields_set:
-            raise Invalid("wind", {}, "speed_m_s, direction_deg, gusts or gust_sigma_m_s")
-        return self
-
-
-class ClearEvent(_Event):
-    clear: Flag
-
-    @model_validator(mode="after")
-    def _true(self) -> "ClearEvent":
-        if not self.clear:
-            raise Invalid("clear", False, "true")
-        return self
 
 
 # an event's kind is the first of these keys it has

@@ -14,14 +14,24 @@ flight here is one that the daemons fly the same way on their own.
     overlays        the controller overlay every flight flies (a reference over a controller file),
                     and a perturbed airframe (a campaign's plant)
     metrics         a flight's metrics from its two logs (pure functions of arrays)
-    report          a scenario's report.md and figures
-    results         the README's results tables, generated from result files (trq-results)
-    campaign        grids and seeded samples of flights on Dask, resumable (trq-campaign)
-    plants          a campaign's report over its plants: the faulted trim against the flights
+    procs           the daemons as child processes: waiting until one listens, stopping one
+    ptypair         a pair of pseudo-terminals joined back to back (a serial cable, for tests)
     stress          hostile and malformed traffic against both daemons (trq-stress)
+    campaign/       grids and seeded samples of flights on Dask, resumable (trq-campaign): spec
+                    (the campaign file and its flights), flight (one flight on a worker), store
+                    (the records and flights.csv), cli (the command, Dask and the progress bar)
+    reporting/      every report: fmt (the one cell formatter), scenario (a scenario's report.md
+                    and figures), campaign (a campaign's report), plant_campaign (a campaign's
+                    flights against its plants' faulted trim), results (the README's results
+                    tables from result files, trq-results)
     analysis/       envelope (trim and margins, trq-envelope), latency_bound (the best any
                     controller could fly after a fault, given its reaction time, trq-latency-bound)
     gcs/            client (a small blocking MAVLink client), inject (trq-inject-fault), monitor
                     (trq-monitor): what a ground station does, from the command line
-    bench/          nmpc (trq-bench-nmpc), sim (trq-bench-sim), hover_check (trq-hover-check)
+    bench/          nmpc (trq-bench-nmpc: the solver modes on the paper's fault flight),
+                    acados_anchor (acados' RTI on the same problem, trq-bench-nmpc --anchor),
+                    period (the whole control period over both daemons, trq-bench-nmpc
+                    --daemons), period_floor (the daemon's machinery alone, trq-bench-floor),
+                    cpu_budget (real time on a fraction of a core, trq-bench-cpu-budget), sim
+                    (trq-bench-sim), wire (trq-bench-wire), hover_check (trq-hover-check)
 """

@@ -657,7 +657,7 @@ def main(argv: list[str] | None = None) -> int:
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "metrics.json").write_text(json.dumps({"scenario": sc.name, "runs": runs},
                                                       indent=2) + "\n")
-    from trq_lab import report
+    from trq_lab.reporting import scenario as report
     print(report.table(runs))
     return 0 if all(r["status"] == "done" for r in runs) else 1
 

@@ -32,20 +32,19 @@ import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Optional
 
 import trq_params
-from pydantic import model_validator
 from trq_params import ConfigError
-from trq_params.loader import Choice, Flag, Int, Invalid, Num, Text, read_yaml, validate
 from trq_params.loader import dump as dump_yaml
-from trq_params.schema import Strict
+from trq_params.loader import read_yaml, validate
+from trq_params.schema import ScenarioFile
 
 from sil_vehicle.config import load_vehicle
 from sil_vehicle.faultscript import load_script
 from trq_lab import metrics as metrics_mod
 from trq_lab import procs
 from trq_lab.overlays import write_controller_overlay
+from trq_lab.reporting import scenario as report
 
 # what a command waits in real time, about one NMPC step (docs/decisions/
 # 2026-12-02-shorter-applied-delay.md: what else was tried)
@@ -78,73 +77,6 @@ def command_delay_s(impair: dict[str, float], realtime: bool) -> float:
     target coming up), plus in real time about one solve. The controller's applied_delay_s."""
     one_way_s = (impair.get("delay_ms", 0.0) + 0.5 * impair.get("jitter_ms", 0.0)) * 1e-3
     return 2.0 * one_way_s + (REALTIME_LATENCY_S if realtime else 0.0)
-
-
-class _Wind(Strict):
-    speed_m_s: Num(0.0, 40.0)
-    direction_deg: Num(-360.0, 360.0)
-    gusts: Flag
-
-
-class _OffboardLink(Strict):
-    """The offboard link's seeded impairment (sil_vehicle's links.offboard.impair)."""
-    loss: Optional[Num(0.0, 1.0)] = None
-    delay_ms: Optional[Num(0.0, 10_000.0)] = None
-    jitter_ms: Optional[Num(0.0, 10_000.0)] = None
-    duplicate: Optional[Num(0.0, 1.0)] = None
-    reorder: Optional[Num(0.0, 1.0)] = None
-
-
-class _Targets(Strict):
-    """What one controller must achieve: each metric at most its bound, crashed as given."""
-    crashed: Optional[Flag] = None
-    rmse_pos_m: Optional[Num(0.0, 1e6)] = None
-    rmse_pos_after_fault_m: Optional[Num(0.0, 1e6)] = None
-    max_pos_err_m: Optional[Num(0.0, 1e6)] = None
-    max_yaw_err_deg: Optional[Num(0.0, 1e6)] = None
-    rmse_yaw_deg: Optional[Num(0.0, 1e6)] = None
-    recovery_s: Optional[Num(0.0, 1e6)] = None
-
-
-class _Better(Strict):
-    better: Text
-    worse: Text
-    metric: Choice(*(k for k in _Targets.model_fields if k != "crashed"))   # the bounded ones
-
-
-class ScenarioFile(Strict):
-    """A scenario file (params/scenarios/*.yaml): wind, faults, reference, controllers, targets."""
-    name: Text
-    description: Text
-    seed: Int(0, 2**31)
-    wind: _Wind
-    faults: Optional[Text]                  # a built-in fault script name, a path, or null
-    reference: dict[str, Any]               # checked by the controller's loader when flown
-    controllers: list[Text]
-    offboard_link: Optional[_OffboardLink] = None
-    recovery_threshold_m: Num(0.001, 100.0)
-    timeout_s: Num(1.0, 36000.0)
-    targets: dict[str, _Targets] = {}
-    better: list[_Better] = []
-
-    @model_validator(mode="after")
-    def _names(self) -> "ScenarioFile":
-        if not self.controllers:
-            raise Invalid("controllers", [], "a non-empty list of controller names")
-        for i, c in enumerate(self.controllers):
-            if not trq_params.exists("controller", c):
-                raise Invalid(f"controllers[{i}]", c, "a built-in controller name or a "
-                              "controller YAML path")
-        for c in self.targets:
-            if c not in self.controllers:
-                raise Invalid(f"targets.{c}", self.targets[c].model_dump(exclude_none=True),
-                              "targets of one of the controllers " + ", ".join(self.controllers))
-        for i, b in enumerate(self.better):
-            for key in ("better", "worse"):
-                if getattr(b, key) not in self.controllers:
-                    raise Invalid(f"better[{i}].{key}", getattr(b, key),
-                                  "one of " + "|".join(self.controllers))
-        return self
 
 
 def load_scenario(path: Path) -> Scenario:
@@ -333,7 +265,8 @@ def _last_time(path: Path) -> float:
             size = f.tell()
             f.seek(max(0, size - 4096))
             tail = f.read().decode(errors="replace").strip().splitlines()
-        return float(tail[-1].split(",")[0]) if tail and not tail[-1].startswith(("#", "t_s")) else 0.0
+        done = tail and not tail[-1].startswith(("#", "t_s"))
+        return float(tail[-1].split(",")[0]) if done else 0.0
     except (OSError, ValueError, IndexError):
         return 0.0
 
@@ -550,7 +483,6 @@ def main(argv: list[str] | None = None) -> int:
     results, failures = evaluate(scenario, runs)
     doc = {"scenario": scenario.name, "runs": results}
     (args.out / "metrics.json").write_text(json.dumps(doc, indent=2) + "\n")
-    from trq_lab import report
     figures = [] if args.no_figures else report.figures(scenario, runs, args.out)
     envelopes = envelope_of(scenario, runs)
     doc["envelope"] = envelopes

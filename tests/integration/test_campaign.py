@@ -26,6 +26,11 @@ from pathlib import Path
 import pytest
 from conftest import PARAMS, ROOT, cli
 
+from trq_lab.campaign.flight import run_flight
+from trq_lab.campaign.spec import load_campaign
+from trq_lab.campaign.store import flight_inputs
+from trq_lab.reporting.campaign import summarise, wind_label
+
 pytestmark = pytest.mark.slow      # starts daemons or flies: the full run only
 
 pytest.importorskip("distributed")
@@ -58,8 +63,7 @@ def test_smoke_campaign_runs_on_two_workers(smoke):
     assert "2 worker(s)" in r.stderr
     assert "flights/hour" in r.stdout
     assert "8/8 flights, 0 failed" in r.stderr           # the progress bar's last line
-    from trq_lab import campaign
-    plan = campaign.load_campaign(SMOKE)
+    plan = load_campaign(SMOKE)
     assert len(plan.flights) == 8
     assert set(flight_files(out)) == {f["id"] for f in plan.flights}
 
@@ -181,14 +185,12 @@ def test_failed_flights_are_recorded_and_max_flights_resumes(tmp_path):
 def test_bad_campaign_names_file_and_key(tmp_path, edit, key, words):
     from trq_params import ConfigError
 
-    from trq_lab import campaign
-
     bad = tmp_path / "typo.yaml"
     text = SMOKE.read_text()
     bad.write_text(edit(text))
     assert bad.read_text() != text
     with pytest.raises(ConfigError) as err:
-        campaign.load_campaign(bad)
+        load_campaign(bad)
     msg = str(err.value)
     assert str(bad) in msg and f"'{key}'" in msg and words in msg, msg
 
@@ -203,20 +205,18 @@ def test_bad_campaign_exits_2_before_flying(tmp_path):
 
 
 def test_sampled_campaign_is_seeded(tmp_path):
-    from trq_lab import campaign
-
     text = SMOKE.read_text().split("grid:")[0] + (
         "sample:\n  n: 5\n  seed: 3\n"
         "  fault: {motor: [1, 2, 3, 4], effectiveness: {uniform: [0.3, 1.0]}, at_s: 2.0}\n"
         "  wind: {speed_m_s: {uniform: [0.0, 8.0]}, direction_deg: [0.0, 90.0], gusts: [true]}\n")
     path = tmp_path / "sample.yaml"
     path.write_text(text)
-    a, b = campaign.load_campaign(path), campaign.load_campaign(path)
+    a, b = load_campaign(path), load_campaign(path)
     assert len(a.flights) == 10 and a.flights == b.flights
     effs = {f["fault"]["effectiveness"] for f in a.flights}
     assert len(effs) == 5 and all(0.3 <= e <= 1.0 for e in effs)
     path.write_text(text.replace("seed: 3", "seed: 4"))
-    assert campaign.load_campaign(path).flights != a.flights
+    assert load_campaign(path).flights != a.flights
 
 
 def test_link_axis_impairs_the_offboard_link(tmp_path):
@@ -226,26 +226,24 @@ def test_link_axis_impairs_the_offboard_link(tmp_path):
     round trip; a bad key is refused with its name."""
     from trq_params import ConfigError
 
-    from trq_lab import campaign
-
     base = SMOKE.read_text().replace("effectiveness: [1.0, 0.6]", "effectiveness: 0.6").replace(
         "speed_m_s: [0.0, 4.0]", "speed_m_s: 0.0").replace(
         "[trq_nmpc_eso, quad_nmpc]", "[trq_nmpc_eso]")
     plain, linked = tmp_path / "plain.yaml", tmp_path / "linked.yaml"
     plain.write_text(base)
     linked.write_text(base + "  link: [{}, {loss: 0.1, delay_ms: 20.0}]\n")
-    a, b = campaign.load_campaign(plain), campaign.load_campaign(linked)
+    a, b = load_campaign(plain), load_campaign(linked)
     assert len(a.flights) == 1 and len(b.flights) == 2
     clean, lossy = b.flights
     assert clean == a.flights[0] and "link" not in clean
     assert lossy["link"] == {"delay_ms": 20.0, "loss": 0.1} and lossy["id"] != clean["id"]
-    row = campaign.flight_inputs(lossy)
+    row = flight_inputs(lossy)
     assert (row["link_loss"], row["link_delay_ms"], row["link_jitter_ms"]) == (0.1, 20.0, 0.0)
-    assert campaign._wind_label(row) == "0 m/s, link 10 % lost 20 ms"
+    assert wind_label(row) == "0 m/s, link 10 % lost 20 ms"
 
     lossy = dict(lossy, seed=clean["seed"])          # the same seed: only the link differs
     logs = tmp_path / "logs"
-    recs = [campaign.run_flight(spec, str(logs)) for spec in (clean, lossy)]
+    recs = [run_flight(spec, str(logs)) for spec in (clean, lossy)]
     assert [r["error"] for r in recs] == [None, None]
     assert all(r["metrics"] is not None for r in recs)
     truth = [(logs / spec["id"] / "flight.csv").read_text() for spec in (clean, lossy)]
@@ -254,7 +252,7 @@ def test_link_axis_impairs_the_offboard_link(tmp_path):
 
     linked.write_text(base + "  link: {loss: 0.1, delay: 20.0}\n")
     with pytest.raises(ConfigError, match=r"grid\.link\.delay"):
-        campaign.load_campaign(linked)
+        load_campaign(linked)
 
 
 # --- the in-process flight against the daemons over UDP ---------------------------------------
@@ -347,30 +345,26 @@ def test_inprocess_flight_reproduces_the_udp_flight(tmp_path, daemons):
 def test_every_shipped_campaign_loads(path):
     """The campaign files in params/campaigns/ load (strict keys, controllers that build) and
     expand to flights with distinct ids."""
-    from trq_lab import campaign
 
-    plan = campaign.load_campaign(path)
+    plan = load_campaign(path)
     ids = [f["id"] for f in plan.flights]
     assert ids and len(ids) == len(set(ids)) and plan.name == path.stem
 
 
 def test_link_delay_sweep_sweeps_the_one_way_delay():
-    from trq_lab import campaign
-
-    plan = campaign.load_campaign(PARAMS / "campaigns" / "link_delay_sweep.yaml")
-    delays = sorted(campaign.flight_inputs(f)["link_delay_ms"] for f in plan.flights)
+    plan = load_campaign(PARAMS / "campaigns" / "link_delay_sweep.yaml")
+    delays = sorted(flight_inputs(f)["link_delay_ms"] for f in plan.flights)
     assert delays == [0.0, 5.0, 10.0, 15.0, 20.0]
-    assert {campaign.flight_inputs(f)["link_loss"] for f in plan.flights} == {0.0}
+    assert {flight_inputs(f)["link_loss"] for f in plan.flights} == {0.0}
 
 
 def test_summary_median_of_an_even_count_is_the_mean_of_the_middle_two():
     """Six flights of one cell: the median RMSE is the mean of the 3rd and 4th, not the 4th."""
-    from trq_lab import campaign
     rmse = [0.043, 0.062, 0.065, 0.068, 0.040, 0.048]
     rows = [dict(controller="c", fault_kind="motor", severity=0.5, wind_speed_m_s=8.0,
                  wind_direction_deg=0.0, wind_gusts=False, success=True, crashed=False,
                  status="ok", rmse_pos_after_fault_m=v) for v in rmse]
-    _, _, stats = campaign.summarise(None, rows)
+    _, _, stats = summarise(None, rows)
     (cell,) = stats.values()
     assert cell["rmse_median"] == pytest.approx((0.048 + 0.062) / 2)
     assert cell["rmse_max"] == 0.068

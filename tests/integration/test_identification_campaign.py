@@ -20,6 +20,9 @@ import subprocess
 import pytest
 from conftest import PARAMS, ROOT, cli
 
+from trq_lab.campaign.flight import run_flight
+from trq_lab.campaign.spec import load_campaign
+
 pytestmark = pytest.mark.slow      # flies: the full run only
 
 pytest.importorskip("distributed")
@@ -95,18 +98,16 @@ def test_the_report_separates_the_envelope_from_the_controller(flown):
     assert doc["target_paired"]["trq_nmpc"]["pairs"] == 3
     # what the report says of each target agrees with metrics.json
     assert ("**Missed:**" in text) == bool(doc["failures"])
-    from trq_lab import results
+    from trq_lab.reporting import results
     row = results.campaigns_table([out / "metrics.json"])
     assert "`identification_smoke`" in row and "9 (3 plants)" in row
 
 
 def test_a_flight_flies_again_alone_from_its_record(flown):
-    from trq_lab import campaign
-
     _, out = flown
     recs = _records(out)
     rec = next(r for r in recs.values() if r["spec"]["controller"] == "trq_nmpc_eso")
-    again = campaign.run_flight(rec["spec"])
+    again = run_flight(rec["spec"])
     assert again["error"] is None and again["status"] == rec["status"]
     assert again["envelope"] == rec["envelope"]
     timing = ("solve_ms_p50", "solve_ms_p99")
@@ -132,16 +133,16 @@ grid:
 
 
 def test_the_plant_reaches_the_vehicle_and_the_model_only_when_asked(tmp_path):
-    from trq_lab import campaign, metrics
+    from trq_lab import metrics
 
     path = tmp_path / "hover_plants.yaml"
     path.write_text(HOVER)
-    plan = campaign.load_campaign(path)
+    plan = load_campaign(path)
     assert len(plan.flights) == 4
     logs = tmp_path / "logs"
     truth, model_file, vehicle_file, recs = {}, {}, {}, {}
     for spec in plan.flights:
-        rec = campaign.run_flight(spec, str(logs))
+        rec = run_flight(spec, str(logs))
         assert rec["error"] is None and rec["status"] == "done", rec
         key = (json.dumps(spec["plant"]), spec.get("controller_model", "nominal"))
         meta, _ = metrics.read_csv(logs / spec["id"] / "flight.csv")

@@ -65,7 +65,7 @@ def test_no_sys_path_manipulation():
 
 def test_the_readme_tables_are_the_result_files():
     """The README's generated blocks match docs/results/ (`trq-results --check`)."""
-    from trq_lab import results
+    from trq_lab.reporting import results
 
     assert results.main(["--check", "--readme", str(ROOT / "README.md"),
                          "--results", str(ROOT / "docs" / "results")]) == 0

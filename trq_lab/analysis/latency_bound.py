@@ -241,18 +241,22 @@ def bound(onset: Onset, vehicle_file: Path, latency_s: float, horizon_s: float,
             "states": Xs, "frozen": frozen}
 
 
+# the command's numeric options: (default, what it sets)
+NUMBER_OPTIONS = {
+    "--max-yaw-err-deg": (5.0, "the yaw error the optimal flight may not exceed (without it a "
+                               "spinning vehicle is the best answer to a motor loss)"),
+    "--step-ms": (10.0, "the optimiser's RK4 step, a divisor of 10 ms"),
+    "--horizon-s": (4.0, "window after the onset the optimiser flies"),
+}
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="trq-latency-bound", description=__doc__.splitlines()[0])
     ap.add_argument("log_dir", type=Path, help="a flight's directory (flight.csv, controller.csv)")
     ap.add_argument("--latency-ms", default="0,10,20,30,40,50",
                     help="comma-separated reaction latencies (default %(default)s)")
-    ap.add_argument("--max-yaw-err-deg", type=float, default=5.0,
-                    help="the yaw error the optimal flight may not exceed (default %(default)s; "
-                         "without it a spinning vehicle is the best answer to a motor loss)")
-    ap.add_argument("--step-ms", type=float, default=10.0,
-                    help="the optimiser's RK4 step, a divisor of 10 ms (default %(default)s)")
-    ap.add_argument("--horizon-s", type=float, default=4.0,
-                    help="window after the onset the optimiser flies (default %(default)s)")
+    for flag, (default, text) in NUMBER_OPTIONS.items():
+        ap.add_argument(flag, type=float, default=default, help=f"{text} (default %(default)s)")
     args = ap.parse_args(argv)
     try:
         lat = [float(s) * 1e-3 for s in args.latency_ms.split(",") if s.strip()]

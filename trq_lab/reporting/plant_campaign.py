@@ -27,6 +27,9 @@ from pathlib import Path
 
 import numpy as np
 
+from trq_lab.reporting.fmt import fmt
+from trq_lab.reporting.plot import LogNorm, plt
+
 NO_TRIM = "no trim"
 
 
@@ -87,12 +90,9 @@ def _pct(values: list[float], q: float) -> float | None:
     return float(np.percentile(values, q, method="nearest")) if values else None
 
 
-def _fmt(v, spec="{:.4f}") -> str:
-    if v is None or (isinstance(v, float) and math.isnan(v)):
-        return "-"
-    if isinstance(v, float) and math.isinf(v):
-        return "crashed"
-    return spec.format(v)
+def _cell(v, spec="{:.4f}") -> str:
+    """The shared formatter with this report's defaults: a crashed flight's +inf says so."""
+    return fmt(v, spec, inf="crashed")
 
 
 def _label(key: str) -> str:
@@ -183,8 +183,8 @@ def report(campaign, rows: list[dict], out: Path, figures: bool = True
         lines.append(f"| {c} | {len(rs)} | {st['success_rate']:.0%} | {st['crashed']} | "
                      + " | ".join(str(n_cls[k]) for k in cls) + " | "
                      + ("-" if not ok else f"{st['success_with_margin']:.0%} ({len(ok)})")
-                     + f" | {_fmt(st['rmse_p10_m'])} | {_fmt(st['rmse_median_m'])} | "
-                     f"{_fmt(st['rmse_p90_m'])} | {_fmt(st['rmse_max_finite_m'])} |")
+                     + f" | {_cell(st['rmse_p10_m'])} | {_cell(st['rmse_median_m'])} | "
+                     f"{_cell(st['rmse_p90_m'])} | {_cell(st['rmse_max_finite_m'])} |")
     lines += ["", "RMSE percentiles count a crash as worse than any RMSE (`crashed` where it "
               "reaches them); `max` is the largest RMSE of a flight that did not crash.", ""]
     # per class: how each controller fares on the plants of each envelope class
@@ -196,7 +196,7 @@ def report(campaign, rows: list[dict], out: Path, figures: bool = True
             rs = [r for r in rows if r["controller"] == c and env_class(r, margin_pct) == k
                   and score(r) is not None]
             cells.append("-" if not rs else
-                         f"{_fmt(statistics.median([score(r) for r in rs]))}, "
+                         f"{_cell(statistics.median([score(r) for r in rs]))}, "
                          f"{sum(r['success'] for r in rs)}/{len(rs)}")
         lines.append(f"| {c} | " + " | ".join(cells) + " |")
     lines.append("")
@@ -224,7 +224,7 @@ def report(campaign, rows: list[dict], out: Path, figures: bool = True
                   "| parameter | " + " | ".join(ctrls) + " |", "|---|" + "---|" * len(ctrls)]
         for k in keys + ["trim margin"]:
             lines.append(f"| {_label(k)} | " + " | ".join(
-                _fmt(rho[c][k], "{:+.2f}") for c in ctrls) + " |")
+                _cell(rho[c][k], "{:+.2f}") for c in ctrls) + " |")
         ordered = sorted(keys, key=lambda k: -abs(rho[head][k])
                          if not math.isnan(rho[head][k]) else 0.0)
         top = ordered[:2]
@@ -249,7 +249,7 @@ def report(campaign, rows: list[dict], out: Path, figures: bool = True
         for o in others:
             p = pair_stats[o] = paired(rows, head, o)
             lines.append(f"| `{o}` | {p['pairs']} | {p['better']} | "
-                         f"{_fmt(p['share'], '{:.0%}')} | {_fmt(p['median_ratio'], '{:.3g}')} | "
+                         f"{_cell(p['share'], '{:.0%}')} | {_cell(p['median_ratio'], '{:.3g}')} | "
                          f"{p['a_crashed']} | {p['b_crashed']} |")
         lines += ["", f"By the envelope class of `{head}`'s plant (its airframe's trim): better "
                   "on (pairs)", "", "| against | " + " | ".join(cls) + " |",
@@ -260,7 +260,7 @@ def report(campaign, rows: list[dict], out: Path, figures: bool = True
                 sub = paired([r for r in rows if r["controller"] == o or
                               env_class(r, margin_pct) == k], head, o)
                 cells.append("-" if not sub["pairs"] else
-                             f"{_fmt(sub['share'], '{:.0%}')} ({sub['pairs']})")
+                             f"{_cell(sub['share'], '{:.0%}')} ({sub['pairs']})")
             lines.append(f"| `{o}` | " + " | ".join(cells) + " |")
         lines += ["", "The quadcopter flies its own airframe with the same draw of factors (its "
                   "servos are locked, so the servo factors change nothing there).", ""]
@@ -279,16 +279,16 @@ def report(campaign, rows: list[dict], out: Path, figures: bool = True
         lines.append(f"- Among the {len(pop)} plants whose trim keeps at least {margin_pct:g} % "
                      f"of throttle margin on every motor, `{t.controller}` stays within "
                      f"{t.rmse_after_fault_m:g} m RMSE after the fault on {len(within)}: "
-                     f"**{_fmt(share, '{:.1%}')}** (target >= {t.share:.0%}): "
+                     f"**{_cell(share, '{:.1%}')}** (target >= {t.share:.0%}): "
                      + ("met." if met else "missed." if pop else "not judged: no such plant."))
         if not met:
             failures.append(f"{t.controller} within {t.rmse_after_fault_m:g} m on "
-                            f"{_fmt(share, '{:.0%}')} of the {len(pop)} plants with >= "
+                            f"{_cell(share, '{:.0%}')} of the {len(pop)} plants with >= "
                             f"{margin_pct:g} % margin (target >= {t.share:.0%})")
         summary["target_rmse"] = {"plants": len(pop), "within": len(within), "share": share,
                                   "target": t.share, "met": met}
         headline = [f"{t.controller} within {t.rmse_after_fault_m:g} m on "
-                    f"{_fmt(share, '{:.0%}')} of {len(pop)} plants with >= {margin_pct:g} % "
+                    f"{_cell(share, '{:.0%}')} of {len(pop)} plants with >= {margin_pct:g} % "
                     f"margin: {'met' if met else 'missed'}"]
         for b in t.better:
             p = pair_stats.get(b.worse) or paired(rows, t.controller, b.worse)
@@ -296,16 +296,16 @@ def report(campaign, rows: list[dict], out: Path, figures: bool = True
             trimmed = paired([r for r in rows if r["controller"] == b.worse
                               or r.get("env_feasible")], t.controller, b.worse)
             lines.append(f"- `{t.controller}` does better than `{b.worse}` on {p['better']} of "
-                         f"{p['pairs']} paired flights: **{_fmt(p['share'], '{:.1%}')}** "
+                         f"{p['pairs']} paired flights: **{_cell(p['share'], '{:.1%}')}** "
                          f"(target >= {b.share:.0%}): {'met' if ok else 'missed'} (on the "
                          f"{trimmed['pairs']} plants with a trim: "
-                         f"{_fmt(trimmed['share'], '{:.1%}')}).")
-            headline.append(f"better than {b.worse} on {_fmt(p['share'], '{:.0%}')} of "
-                            f"{p['pairs']} plants ({_fmt(trimmed['share'], '{:.0%}')} of the "
+                         f"{_cell(trimmed['share'], '{:.1%}')}).")
+            headline.append(f"better than {b.worse} on {_cell(p['share'], '{:.0%}')} of "
+                            f"{p['pairs']} plants ({_cell(trimmed['share'], '{:.0%}')} of the "
                             f"{trimmed['pairs']} with a trim): {'met' if ok else 'missed'}")
             if not ok:
                 failures.append(f"{t.controller} better than {b.worse} on "
-                                f"{_fmt(p['share'], '{:.0%}')} of {p['pairs']} paired flights "
+                                f"{_cell(p['share'], '{:.0%}')} of {p['pairs']} paired flights "
                                 f"(target >= {b.share:.0%})")
             summary.setdefault("target_paired", {})[b.worse] = {
                 "pairs": p["pairs"], "better": p["better"], "share": p["share"],
@@ -332,7 +332,7 @@ def report(campaign, rows: list[dict], out: Path, figures: bool = True
                       "| plant | trim margin | RMSE after fault m | parameters |",
                       "|---|---|---|---|"]
             for r in ctl_miss[:20]:
-                lines.append(f"| `{r['plant_id']}` | {_margin_text(r)} | {_fmt(score(r))} | "
+                lines.append(f"| `{r['plant_id']}` | {_margin_text(r)} | {_cell(score(r))} | "
                              f"{_params_text(r, keys)} |")
             lines.append("")
         for b in t.better:
@@ -347,7 +347,7 @@ def report(campaign, rows: list[dict], out: Path, figures: bool = True
                           "parameters |", "|---|---|---|---|---|"]
                 for ra, rb in nb["not_better"][:20]:
                     lines.append(f"| `{ra['plant_id']}` | {_margin_text(ra)} | "
-                                 f"{_fmt(score(ra))} | {_fmt(score(rb))} | "
+                                 f"{_cell(score(ra))} | {_cell(score(rb))} | "
                                  f"{_params_text(ra, keys)} |")
                 lines.append("")
         summary["misses"] = {k: len(v) for k, v in by_cls.items()}
@@ -363,11 +363,6 @@ def plant_figures(campaign, rows, ctrls, keys, top, margin_pct, out: Path) -> li
     """margin.png (RMSE after the fault against the trim's smallest throttle margin, per
     controller), rmse_dist.png (the RMSE distribution per controller), params.png (the median
     RMSE over the two most telling parameters, per controller)."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    from matplotlib.colors import LogNorm
-
     made = []
     bar = campaign.success_rmse_m
     t = campaign.targets

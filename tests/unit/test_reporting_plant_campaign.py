@@ -1,7 +1,7 @@
 """The plant axis of trq-campaign (identification errors) without flying: the perturbed airframe
-(trq_lab.overlays), the axis's keys, ranges and draws (trq_lab.campaign), the envelope per
-flight (trq_lab.analysis.envelope), the report's statistics (trq_lab.plants) and the README's
-campaigns row (trq_lab.results)."""
+(trq_lab.overlays), the axis's keys, ranges and draws (trq_lab.campaign.spec), the envelope per
+flight (trq_lab.analysis.envelope), the report's statistics (trq_lab.reporting.plant_campaign)
+and the README's campaigns row (trq_lab.reporting.results)."""
 
 from __future__ import annotations
 
@@ -11,8 +11,12 @@ import math
 import pytest
 from conftest import PARAMS, QUAD_YAML, TRQ_YAML
 
-from trq_lab import campaign, plants, results
+from trq_lab.campaign.flight import fault_factors, flight_envelope, plant_id
+from trq_lab.campaign.spec import Campaign, flight_id, load_campaign
+from trq_lab.campaign.store import flight_inputs
 from trq_lab.overlays import perturbed_vehicle, vehicle_data, write_vehicle_overlay
+from trq_lab.reporting import plant_campaign as plants
+from trq_lab.reporting import results
 
 SMOKE = PARAMS / "campaigns" / "smoke.yaml"
 IDENT = PARAMS / "campaigns" / "identification_errors.yaml"
@@ -71,13 +75,13 @@ def test_a_perturbed_airframe_reaches_the_simulated_vehicle(tmp_path):
 
 # --- the plant axis in a campaign file ----------------------------------------------------------
 
-def _sampled(tmp_path, plant_yaml: str, n: int = 4, extra: str = "") -> campaign.Campaign:
+def _sampled(tmp_path, plant_yaml: str, n: int = 4, extra: str = "") -> Campaign:
     text = SMOKE.read_text().split("grid:")[0] + extra + (
         f"sample:\n  n: {n}\n  seed: 3\n  fault: {{motor: 1, effectiveness: 0.6, at_s: 1.5}}\n"
         f"  plant: {plant_yaml}\n")
     path = tmp_path / "plants.yaml"
     path.write_text(text)
-    return campaign.load_campaign(path)
+    return load_campaign(path)
 
 
 def test_sampled_plants_are_seeded_recorded_and_share_the_cell_seed(tmp_path):
@@ -93,13 +97,13 @@ def test_sampled_plants_are_seeded_recorded_and_share_the_cell_seed(tmp_path):
     assert len({f["seed"] for f in plan.flights}) == 1        # common random numbers
     assert len({f["id"] for f in plan.flights}) == 8
     for f in plan.flights:                                     # the id is the spec's hash
-        assert f["id"] == campaign.flight_id({k: v for k, v in f.items() if k != "id"})
-    row = campaign.flight_inputs(plan.flights[0])
+        assert f["id"] == flight_id({k: v for k, v in f.items() if k != "id"})
+    row = flight_inputs(plan.flights[0])
     assert row["plant_mass_scale"] == plan.flights[0]["plant"]["mass_scale"]
     assert row["plant_thrust_scale"] == 1.0 and row["plant_idle_offset_pct"] == 0.0
     assert row["controller_model"] == "nominal"
     pair = [f for f in plan.flights if f["plant"] == plan.flights[0]["plant"]]
-    assert {campaign.plant_id(f) for f in pair} == {row["plant_id"]} and len(pair) == 2
+    assert {plant_id(f) for f in pair} == {row["plant_id"]} and len(pair) == 2
 
 
 def test_a_truncated_normal_stays_in_the_keys_range(tmp_path):
@@ -120,14 +124,14 @@ def test_the_controllers_model_can_be_the_plant(tmp_path):
 def test_campaigns_without_a_plant_axis_keep_their_specs(tmp_path):
     """No plant axis: no 'plant' key, the ids and seeds as before; `plant: {}` flies the same
     cells with the same seeds (its ids differ: the spec says a plant was asked for)."""
-    plan = campaign.load_campaign(SMOKE)
+    plan = load_campaign(SMOKE)
     assert not plan.has_plant
     assert all(set(f) == {"controller", "fault", "wind", "trajectory", "repeat", "seed",
                           "timeout_s", "recovery_threshold_m", "params_digest", "id"}
                for f in plan.flights)
     path = tmp_path / "with_plant.yaml"
     path.write_text(SMOKE.read_text() + "  plant: {}\n")
-    with_plant = campaign.load_campaign(path)
+    with_plant = load_campaign(path)
     assert [f["seed"] for f in with_plant.flights] == [f["seed"] for f in plan.flights]
     for a, b in zip(plan.flights, with_plant.flights):
         assert b["plant"] == {} and {k: v for k, v in b.items() if k not in ("plant", "id")} \
@@ -135,7 +139,7 @@ def test_campaigns_without_a_plant_axis_keep_their_specs(tmp_path):
 
 
 def test_the_shipped_identification_campaigns():
-    full, smoke = campaign.load_campaign(IDENT), campaign.load_campaign(IDENT_SMOKE)
+    full, smoke = load_campaign(IDENT), load_campaign(IDENT_SMOKE)
     assert full.controllers == ("trq_nmpc_eso", "trq_nmpc", "quad_nmpc") == smoke.controllers
     assert len(full.flights) == 300 and 8 <= len(smoke.flights) <= 12
     assert [f["id"] for f in smoke.flights] == [f["id"] for f in full.flights[:9]]
@@ -176,7 +180,7 @@ def test_a_bad_plant_names_file_key_value_and_expected(tmp_path, section, key, w
     path = tmp_path / "bad_plant.yaml"
     path.write_text(BASE + section)
     with pytest.raises(ConfigError) as err:
-        campaign.load_campaign(path)
+        load_campaign(path)
     msg = str(err.value)
     assert str(path) in msg and f"'{key}'" in msg and words in msg, msg
 
@@ -190,18 +194,18 @@ def trq_vp():
 
 
 def test_fault_factors_of_each_kind_of_fault():
-    assert campaign._fault_factors(None) == ((1.0,) * 4, ())
-    assert campaign._fault_factors({"motor": 2, "effectiveness": 0.6, "at_s": 1.0}) == \
+    assert fault_factors(None) == ((1.0,) * 4, ())
+    assert fault_factors({"motor": 2, "effectiveness": 0.6, "at_s": 1.0}) == \
         ((1.0, 0.6, 1.0, 1.0), ())
-    assert campaign._fault_factors({"motor": 1, "effectiveness": 0.8, "tv_b": 0.2,
-                                    "at_s": 1.0})[0][0] == pytest.approx(0.6)   # the worst
-    assert campaign._fault_factors({"motor": 4, "stopped": True, "at_s": 1.0})[0][3] == 0.0
-    assert campaign._fault_factors({"servo": 3, "stuck_deg": 10.0, "at_s": 1.0}) == \
+    assert fault_factors({"motor": 1, "time_varying.a": 0.8, "time_varying.b": 0.2,
+                          "time_varying.w": 1.0, "at_s": 1.0})[0][0] == pytest.approx(0.6)
+    assert fault_factors({"motor": 4, "stopped": True, "at_s": 1.0})[0][3] == 0.0
+    assert fault_factors({"servo": 3, "stuck_deg": 10.0, "at_s": 1.0}) == \
         ((1.0,) * 4, ((2, math.radians(10.0)),))
 
 
 def test_flight_envelope_of_the_paper_fault(trq_vp):
-    env = campaign.flight_envelope(trq_vp, {"motor": 1, "effectiveness": 0.5, "at_s": 12.0},
+    env = flight_envelope(trq_vp, {"motor": 1, "effectiveness": 0.5, "at_s": 12.0},
                                    {"speed_m_s": 8.0, "direction_deg": 0.0, "gusts": False})
     assert env["feasible"] and env["motor_factors"] == [0.5, 1.0, 1.0, 1.0]
     up = [100.0 - z for z in env["throttle_pct"]]
@@ -220,7 +224,7 @@ def test_less_thrust_leaves_no_trim_and_more_leaves_more_margin(tmp_path):
     margin = {}
     for s in (0.9, 1.0, 1.1):
         vp = load_vehicle(write_vehicle_overlay(TRQ_YAML, {"thrust_scale": s}, tmp_path / str(s)))
-        margin[s] = campaign.flight_envelope(vp, fault, wind)["min_throttle_margin_pct"]
+        margin[s] = flight_envelope(vp, fault, wind)["min_throttle_margin_pct"]
     assert margin[0.9] is None and margin[1.1] > margin[1.0] + 3.0
 
 

@@ -14,7 +14,8 @@ second one row per scenario found under the results directory (other than those 
 their own), the third one row per campaign found there: the ``metrics.json`` that ``trq-campaign``
 writes (``{"campaign": ..., "flights": ..., "controllers": {NAME: {"success_rate": ...,
 "rmse_median_m": ...}}, "plants": ..., "failures": [...]}``; a campaign's is told from a
-scenario's by its "campaign" key). Whether a scenario's targets were met is taken from ``metrics.json``'s
+scenario's by its "campaign" key). Whether a scenario's targets were met is taken from
+``metrics.json``'s
 ``"failures"`` list when it has one, else from the "Missed" section of the ``report.md`` beside
 it ("none set" when that report has no Targets section); without either, "not recorded". Text
 outside the markers is never touched.
@@ -34,6 +35,8 @@ import re
 import sys
 from pathlib import Path
 
+from trq_lab.reporting.fmt import columns, fmt, table_head, table_row
+
 __all__ = ["ResultsError", "campaigns_table", "main", "render_block", "scenario_table",
            "scenarios_table", "update_text"]
 
@@ -50,20 +53,10 @@ FAULTS = {
 # The controllers' column order (others follow in the order metrics.json lists them).
 CONTROLLERS = ("trq_nmpc_eso", "trq_nmpc_eso_paper", "trq_nmpc", "quad_nmpc")
 
-# (header, key, format) of the full table.
-COLUMNS = (
-    ("controller", "controller", "{}"),
-    ("vehicle", "vehicle", "{}"),
-    ("crashed", "crashed", "{}"),
-    ("flight s", "flight_s", "{:.1f}"),
-    ("pos RMSE m", "rmse_pos_m", "{:.3f}"),
-    ("max pos err m", "max_pos_err_m", "{:.3f}"),
-    ("pos RMSE after fault m", "rmse_pos_after_fault_m", "{:.4f}"),
-    ("max yaw err deg", "max_yaw_err_deg", "{:.2f}"),
-    ("recovery s", "recovery_s", "{:.2f}"),
-    ("solve p50 ms", "solve_ms_p50", "{:.1f}"),
-    ("solve p99 ms", "solve_ms_p99", "{:.1f}"),
-)
+# the full table's columns: the reports' metric columns, the RMSE after the fault to 0.1 mm
+COLUMNS = columns(("controller", "vehicle", "crashed", "flight_s", "rmse_pos_m", "max_pos_err_m",
+                   "rmse_pos_after_fault_m", "max_yaw_err_deg", "recovery_s", "solve_ms_p50",
+                   "solve_ms_p99"), {"rmse_pos_after_fault_m": "{:.4f}"})
 
 SCENARIOS_BLOCK = "scenarios"
 CAMPAIGNS_BLOCK = "campaigns"
@@ -72,16 +65,6 @@ _MARK = re.compile(r"<!-- results:([A-Za-z0-9_.-]+) (begin|end) -->")
 
 class ResultsError(Exception):
     """A missing or unreadable result file, or a missing or unbalanced marker."""
-
-
-def _cell(value: object, fmt: str) -> str:
-    if value is None:
-        return "-"
-    if isinstance(value, bool):
-        return str(value)
-    if isinstance(value, (int, float)):
-        return fmt.format(value)
-    return str(value)
 
 
 def load_metrics(path: Path) -> dict:
@@ -149,7 +132,7 @@ def campaigns_table(paths: list[Path], base: Path | None = None) -> str:
                 continue
             rate = st.get("success_rate")
             median = ("crashed" if "rmse_median_m" in st.get("crashed_stats", ())
-                      else _cell(st.get("rmse_median_m"), "{:.4f}"))
+                      else fmt(st.get("rmse_median_m"), "{:.4f}"))
             cells.append(("-" if rate is None else f"{rate:.0%}") + " / " + median)
         cells.append(doc.get("headline") or targets_met(path, doc))
         lines.append("| " + " | ".join(cells) + " |")
@@ -196,13 +179,12 @@ def _shown(path: Path, base: Path | None) -> str:
 def scenario_table(metrics_path: Path, base: Path | None = None) -> str:
     """The full table of one scenario, with its source and whether its targets were met."""
     doc = load_metrics(metrics_path)
-    lines = ["| " + " | ".join(h for h, _, _ in COLUMNS) + " |",
-             "|" + "---|" * len(COLUMNS)]
+    lines = table_head(COLUMNS)
     for run in _ordered(doc["runs"]):
         if "error" in run:
             lines.append(f"| {run['controller']} | " + f"{run['error']} |")
             continue
-        lines.append("| " + " | ".join(_cell(run.get(k), f) for _, k, f in COLUMNS) + " |")
+        lines.append(table_row(run, COLUMNS))
     lines.append("")
     lines.append(f"Targets of `{doc.get('scenario', metrics_path.parent.name)}`: "
                  f"{targets_met(metrics_path, doc)}. Source: `{_shown(metrics_path, base)}`.")
@@ -237,8 +219,8 @@ def scenarios_table(paths: list[Path], base: Path | None = None) -> str:
             elif "error" in r:
                 cells.append("no usable logs")
             else:
-                cell = (f"{_cell(r.get('rmse_pos_after_fault_m'), '{:.4f}')} / "
-                        f"{_cell(r.get('max_yaw_err_deg'), '{:.2f}')}")
+                cell = (f"{fmt(r.get('rmse_pos_after_fault_m'), '{:.4f}')} / "
+                        f"{fmt(r.get('max_yaw_err_deg'), '{:.2f}')}")
                 cells.append(cell + (" (crashed)" if r.get("crashed") else ""))
         cells.append(targets_met(path, doc))
         lines.append("| " + " | ".join(cells) + " |")

@@ -1,26 +1,11 @@
-"""trq_lab/results.py: the README's marked blocks written from metrics.json files."""
+"""trq_lab/reporting/results.py: the README's marked blocks written from metrics.json files."""
 
 from __future__ import annotations
 
-import importlib.util
 import json
 from pathlib import Path
 
-_PATH = Path(__file__).resolve().parents[2] / "trq_lab" / "results.py"
-
-
-def _module():
-    try:
-        from trq_lab import results
-        return results
-    except ImportError:            # the package is not installed yet: load the file itself
-        spec = importlib.util.spec_from_file_location("trq_lab_results", _PATH)
-        mod = importlib.util.module_from_spec(spec)
-        spec.loader.exec_module(mod)
-        return mod
-
-
-results = _module()
+from trq_lab.reporting import results
 
 RUN = {"controller": "trq_nmpc_eso", "vehicle": "trq", "crashed": False, "flight_s": 40.74,
        "rmse_pos_m": 0.00207, "max_pos_err_m": 0.01875, "rmse_pos_after_fault_m": 0.00228,
@@ -114,11 +99,17 @@ def test_missing_readme_is_named(tmp_path, capsys):
 
 
 def test_imports_only_the_standard_library():
+    """trq-results runs without the simulator or the controller: its module, the formatter and
+    the packages above them import the standard library (and the formatter) only."""
     import ast
-    tree = ast.parse(_PATH.read_text())
-    names = {a.name.split(".")[0] for n in ast.walk(tree) if isinstance(n, ast.Import)
-             for a in n.names}
-    names |= {n.module.split(".")[0] for n in ast.walk(tree)
-              if isinstance(n, ast.ImportFrom) and n.module}
-    assert names <= {"__future__", "argparse", "json", "os", "re", "sys", "pathlib"}
-    assert "sys.path" not in _PATH.read_text()
+    lab = Path(results.__file__).resolve().parents[1]
+    stdlib = {"__future__", "argparse", "json", "math", "numbers", "os", "re", "sys", "pathlib"}
+    for path in (lab / "reporting" / "results.py", lab / "reporting" / "fmt.py",
+                 lab / "reporting" / "__init__.py", lab / "__init__.py"):
+        tree = ast.parse(path.read_text())
+        names = {a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
+        names |= {n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom) and n.module}
+        assert {n.split(".")[0] for n in names} - {"trq_lab"} <= stdlib, path
+        assert names & {"trq_lab", "trq_lab.reporting"} == set(), path
+        assert {n for n in names if n.startswith("trq_lab")} <= {"trq_lab.reporting.fmt"}, path
+        assert "sys.path" not in path.read_text()

@@ -14,31 +14,16 @@ import math
 from pathlib import Path
 
 import numpy as np
+from sil_vehicle.config import load_vehicle
+from sil_vehicle.faultscript import load_script
 
 from trq_lab import metrics as metrics_mod
-
-COLUMNS = [("controller", "controller", "{}"), ("vehicle", "vehicle", "{}"),
-           ("crashed", "crashed", "{}"), ("flight_s", "flight s", "{:.1f}"),
-           ("rmse_pos_m", "pos RMSE m", "{:.3f}"), ("max_pos_err_m", "max pos err m", "{:.3f}"),
-           ("rmse_pos_after_fault_m", "pos RMSE after fault m", "{:.3f}"),
-           ("rmse_vert_after_fault_m", "of it vertical m", "{:.3f}"),
-           ("max_sink_after_fault_m", "max sink after fault m", "{:.3f}"),
-           ("rmse_yaw_deg", "yaw RMSE deg", "{:.2f}"), ("max_yaw_err_deg", "max yaw err deg", "{:.2f}"),
-           ("recovery_s", "recovery s", "{:.2f}"), ("solve_ms_p50", "solve p50 ms", "{:.1f}"),
-           ("solve_ms_p99", "solve p99 ms", "{:.1f}")]
-
-
-def _fmt(value, fmt: str) -> str:
-    if value is None or (isinstance(value, float) and not math.isfinite(value)):
-        return "-"
-    return fmt.format(value)
-
+from trq_lab.reporting.fmt import METRIC_COLUMNS, fmt, table_head, table_row
+from trq_lab.reporting.plot import plt
 
 def table(results: list[dict]) -> str:
-    head = "| " + " | ".join(h for _, h, _ in COLUMNS) + " |"
-    rule = "|" + "---|" * len(COLUMNS)
-    rows = ["| " + " | ".join(_fmt(r.get(k), f) for k, _, f in COLUMNS) + " |" for r in results]
-    return "\n".join([head, rule] + rows)
+    """The metrics table of a scenario's flights (every column of METRIC_COLUMNS)."""
+    return "\n".join(table_head(METRIC_COLUMNS) + [table_row(r, METRIC_COLUMNS) for r in results])
 
 
 PERIOD_PARTS = (("observer", "observer"), ("effectiveness", "effectiveness"),
@@ -80,7 +65,7 @@ def period_text(rows: list[tuple[str, dict[str, float], str]]) -> list[str]:
              "`--worker-thread`, the hand-offs to that thread).", "",
              head, "|" + "---|" * (len(PERIOD_PARTS) + 1)]
     for name, parts, _ in rows:
-        lines.append(f"| {name} | " + " | ".join(_fmt(parts[k], "{:.3f}") for k, _ in
+        lines.append(f"| {name} | " + " | ".join(fmt(parts[k], "{:.3f}") for k, _ in
                                                    PERIOD_PARTS) + " |")
     lines += ["", "What solved the NMPC (controller.csv's `solver` line):", ""]
     lines += [f"- `{name}`: {solver}" for name, _, solver in rows]
@@ -140,10 +125,6 @@ def markdown(scenario, results: list[dict], failures: list[str], figures: list[P
 
 
 def figures(scenario, runs, out: Path) -> list[Path]:
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     data = []
     for r in runs:
         try:
@@ -158,7 +139,6 @@ def figures(scenario, runs, out: Path) -> list[Path]:
         return []
     onset_s = None
     if scenario.faults:
-        from sil_vehicle.faultscript import load_script
         events = load_script(scenario.faults)
         onset_s = events[0].at_us * 1e-6 if events else None
     made = []
@@ -198,7 +178,8 @@ def figures(scenario, runs, out: Path) -> list[Path]:
         ref = np.column_stack([steps[f"ref_pos_{a}_m"][keep] for a in "ned"])
         ref[:, 2] = np.minimum(ref[:, 2], metrics_mod.GROUND_DOWN_M)   # as the metrics do
         axes[0].plot(t, np.linalg.norm(pos - ref, axis=1), lw=1, label=name)
-        yaw_err = metrics_mod.wrap_deg(np.degrees(truth["yaw_rad"][rows] - steps["ref_yaw_rad"][keep]))
+        yaw_err = metrics_mod.wrap_deg(
+            np.degrees(truth["yaw_rad"][rows] - steps["ref_yaw_rad"][keep]))
         axes[1].plot(t, yaw_err, lw=1, label=name)
         tilt = np.degrees(np.hypot(truth["roll_rad"][rows], truth["pitch_rad"][rows]))
         axes[2].plot(t, tilt, lw=1, label=name)
@@ -219,12 +200,12 @@ def figures(scenario, runs, out: Path) -> list[Path]:
     made.append(path)
 
     # --- observer (Fig. 5) ---
-    observed = [(n, tr, st) for n, tr, st in data
-                if np.isfinite(st["d_acc_n_m_s2"]).any() and np.nanmax(np.abs(st["d_acc_n_m_s2"])) > 0]
+    observed = [(n, tr, st) for n, tr, st in data if np.isfinite(st["d_acc_n_m_s2"]).any()
+                and np.nanmax(np.abs(st["d_acc_n_m_s2"])) > 0]
     if observed:
-        from sil_vehicle.config import load_vehicle
         name, truth, steps = observed[0]
-        meta, _ = metrics_mod.read_csv(next(r.out for r in runs if r.controller == name) / "flight.csv")
+        meta, _ = metrics_mod.read_csv(
+            next(r.out for r in runs if r.controller == name) / "flight.csv")
         vp = load_vehicle(meta["vehicle_file"])
         index = {int(t): i for i, t in enumerate(truth["t_us"].astype(np.int64))}
         stamps = steps["stamp_us"].astype(np.int64)
@@ -236,7 +217,8 @@ def figures(scenario, runs, out: Path) -> list[Path]:
         est = np.column_stack([steps[c][keep] for c in
                                ("d_acc_n_m_s2", "d_acc_e_m_s2", "d_acc_d_m_s2",
                                 "d_ang_p_rad_s2", "d_ang_q_rad_s2", "d_ang_r_rad_s2")])
-        labels = ["north m/s²", "east m/s²", "down m/s²", "roll rad/s²", "pitch rad/s²", "yaw rad/s²"]
+        labels = ["north m/s²", "east m/s²", "down m/s²", "roll rad/s²", "pitch rad/s²",
+                  "yaw rad/s²"]
         fig, axes = plt.subplots(3, 2, figsize=(11, 8), sharex=True)
         for j in range(6):
             a = axes[j % 3, j // 3]

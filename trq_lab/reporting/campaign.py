@@ -1,0 +1,283 @@
+"""A campaign's report: success rate and position RMSE per controller against fault severity
+and wind (tables and heat maps), where each controller stops coping, and the summary that
+trq-results reads (metrics.json).
+
+In: a campaign (`trq_lab.campaign.spec.Campaign`) and the rows of its flights
+(`trq_lab.campaign.store.rows_of`). Out: report.md, success.png, rmse.png and metrics.json in the
+output directory; with a plant axis, the plant-campaign report's sections and figures too.
+"""
+
+from __future__ import annotations
+
+import statistics
+from pathlib import Path
+
+import numpy as np
+
+from trq_lab.campaign.spec import LINK_KEYS, Campaign
+from trq_lab.campaign.store import write_json
+from trq_lab.reporting import plant_campaign
+from trq_lab.reporting.fmt import fmt
+from trq_lab.reporting.plot import LogNorm, plt
+
+def _bins(values: list[float], max_distinct: int = 12, n_bins: int = 8):
+    """A function value -> (sort key, label): distinct values if few, equal-width bins if many."""
+    distinct = sorted(set(values))
+    if len(distinct) <= max_distinct:
+        return lambda v: (v, f"{v:g}")
+    lo, hi = distinct[0], distinct[-1]
+    width = (hi - lo) / n_bins or 1.0
+
+    def f(v):
+        k = min(int((v - lo) / width), n_bins - 1)
+        a, b = lo + k * width, lo + (k + 1) * width
+        return (a, f"{a:.3g}-{b:.3g}")
+    return f
+
+
+def _link_label(r: dict) -> str:
+    """'' for a clean link, else what is impaired (loss %, delay and jitter ms, ...)."""
+    parts = []
+    if r.get("link_loss"):
+        parts.append(f"{100 * r['link_loss']:g} % lost")
+    if r.get("link_delay_ms"):
+        parts.append(f"{r['link_delay_ms']:g} ms")
+    if r.get("link_jitter_ms"):
+        parts.append(f"+-{r['link_jitter_ms']:g} ms jitter")
+    if r.get("link_duplicate"):
+        parts.append(f"{100 * r['link_duplicate']:g} % dup")
+    if r.get("link_reorder"):
+        parts.append(f"{100 * r['link_reorder']:g} % reordered")
+    return ", link " + " ".join(parts) if parts else ""
+
+
+def wind_label(r: dict) -> str:
+    s = f"{r['wind_speed_m_s']:g} m/s"
+    if r["wind_speed_m_s"]:
+        s += f" from {r['wind_direction_deg']:g}"
+    if r["wind_gusts"]:
+        s += " gusts"
+    return s + _link_label(r)
+
+
+def cells(rows: list[dict]):
+    """Group the rows by (controller, wind key, severity key): the heat-map cells."""
+    sev_of = {kind: _bins([r["severity"] for r in rows if r["fault_kind"] == kind])
+              for kind in {r["fault_kind"] for r in rows}}
+    def conditions(r):                 # the wind and the link a flight met
+        return (r["wind_speed_m_s"], r["wind_direction_deg"], r["wind_gusts"],
+                *(r.get(f"link_{k}", 0.0) for k in LINK_KEYS))
+    wind_distinct = {conditions(r) for r in rows}
+    speed_bin = _bins([r["wind_speed_m_s"] for r in rows])
+    out: dict[tuple, list[dict]] = {}
+    for r in rows:
+        if len(wind_distinct) <= 12:
+            wkey = (conditions(r), wind_label(r))
+        else:
+            k, label = speed_bin(r["wind_speed_m_s"])
+            wkey = ((k, *conditions(r)[3:]), f"{label} m/s{_link_label(r)}")
+        skey, slabel = sev_of[r["fault_kind"]](r["severity"])
+        kind_label = {"motor": "motor loss", "servo": "servo stuck deg", "none": "no fault"}
+        sev = ((r["fault_kind"], skey), f"{kind_label[r['fault_kind']]} {slabel}"
+               if r["fault_kind"] != "none" else "no fault")
+        out.setdefault((r["controller"], wkey, sev), []).append(r)
+    return out
+
+
+def _rmse_of(r: dict) -> float | None:
+    v = r.get("rmse_pos_after_fault_m")
+    return v if v is not None else r.get("rmse_pos_m")
+
+
+def summarise(campaign: Campaign, rows: list[dict]):
+    groups = cells(rows)
+    winds = sorted({k[1] for k in groups}, key=lambda w: w[0])
+    sevs = sorted({k[2] for k in groups}, key=lambda s: s[0])
+    stats = {}
+    for key, rs in groups.items():
+        ok = sum(r["success"] for r in rs)
+        rm = [v for r in rs if not r["crashed"] and (v := _rmse_of(r)) is not None]
+        stats[key] = {"n": len(rs), "ok": ok, "rate": ok / len(rs),
+                      "crashed": sum(bool(r["crashed"]) for r in rs),
+                      "failed": sum(r["status"] == "failed" for r in rs),
+                      "rmse_median": float(statistics.median(rm)) if rm else None,
+                      "rmse_max": max(rm) if rm else None}
+    return winds, sevs, stats
+
+
+def coping_limit(campaign, winds, sevs, stats, controller, wind) -> str:
+    """The largest motor-loss severity up to which every flight of this controller and wind
+    succeeded (every smaller severity as well)."""
+    last = None
+    for sev in sevs:
+        if sev[0][0] != "motor":
+            continue
+        s = stats.get((controller, wind, sev))
+        if s is None:
+            continue
+        if s["ok"] < s["n"]:
+            break
+        last = sev
+    return "none" if last is None else last[1].replace("motor loss ", "")
+
+
+def heatmaps(campaign: Campaign, winds, sevs, stats, out: Path) -> list[Path]:
+    made = []
+    ctrls = list(campaign.controllers)
+    for what, fname, title in (("rate", "success.png", "success rate"),
+                               ("rmse_median", "rmse.png", "median position RMSE after fault, m")):
+        fig, axes = plt.subplots(1, len(ctrls), figsize=(2.2 + 0.7 * len(sevs) * len(ctrls),
+                                                         1.6 + 0.45 * len(winds)),
+                                 squeeze=False, sharey=True)
+        grid_all = []
+        for c in ctrls:
+            g = np.full((len(winds), len(sevs)), np.nan)
+            for i, w in enumerate(winds):
+                for j, s in enumerate(sevs):
+                    st = stats.get((c, w, s))
+                    if st is not None and st[what] is not None:
+                        g[i, j] = st[what]
+            grid_all.append(g)
+        finite = np.concatenate([g[np.isfinite(g)] for g in grid_all]) if grid_all else []
+        for ax, c, g in zip(axes[0], ctrls, grid_all):
+            if what == "rate":
+                im = ax.imshow(g, vmin=0.0, vmax=1.0, cmap="RdYlGn", aspect="auto")
+            else:
+                lo = max(float(np.min(finite)), 1e-4) if len(finite) else 1e-3
+                hi = max(float(np.max(finite)), lo * 10) if len(finite) else 1.0
+                im = ax.imshow(g, norm=LogNorm(lo, hi), cmap="viridis_r", aspect="auto")
+            for i in range(g.shape[0]):
+                for j in range(g.shape[1]):
+                    if np.isfinite(g[i, j]):
+                        txt = f"{g[i, j]:.0%}" if what == "rate" else f"{g[i, j]:.3f}"
+                        ax.text(j, i, txt, ha="center", va="center", fontsize=7)
+            ax.set_title(c, fontsize=9)
+            ax.set_xticks(range(len(sevs)))
+            ax.set_xticklabels([s[1].replace("motor loss ", "") for s in sevs], rotation=60,
+                               fontsize=7)
+            ax.set_xlabel("motor effectiveness lost" if all(s[0][0] in ("motor", "none")
+                                                            for s in sevs) else "fault", fontsize=8)
+            ax.set_yticks(range(len(winds)))
+            ax.set_yticklabels([w[1] for w in winds], fontsize=7)
+        axes[0][0].set_ylabel("wind", fontsize=8)
+        fig.colorbar(im, ax=axes[0].tolist(), shrink=0.85)
+        fig.suptitle(f"{campaign.name}: {title} (success: not crashed, RMSE after fault < "
+                     f"{campaign.success_rmse_m:g} m)" if what == "rate" else
+                     f"{campaign.name}: {title}", fontsize=9, y=1.04)
+        path = out / fname
+        fig.savefig(path, dpi=110, bbox_inches="tight")
+        plt.close(fig)
+        made.append(path)
+    return made
+
+
+def write_report(campaign: Campaign, rows: list[dict], out: Path, run_info: dict | None = None,
+                 figures: bool = True) -> Path:
+    lines = [f"# Campaign `{campaign.name}`", "", campaign.description.strip(), ""]
+    n_plan = len(campaign.flights)
+    failed = [r for r in rows if r["status"] == "failed"]
+    lines += [f"{len(rows)} of {n_plan} flights flown; {sum(r['success'] for r in rows)} "
+              f"successful, {sum(bool(r['crashed']) for r in rows)} crashed, {len(failed)} "
+              f"failed (errors in `flights/<id>.json`). Success: not crashed, landed and "
+              f"position RMSE after the fault below {campaign.success_rmse_m:g} m. Controllers: "
+              + ", ".join(f"`{c}`" for c in campaign.controllers) + ".", ""]
+    if run_info:
+        lines += [f"Last run: {run_info['flown']} flights in {run_info['wall_s']:.0f} s on "
+                  f"{run_info['workers']} worker(s): **{run_info['flights_per_hour']:.0f} "
+                  f"flights/hour**.", ""]
+    summary: dict = {"campaign": campaign.name, "description": campaign.description.strip(),
+                     "planned": n_plan, "flights": len(rows),
+                     "failed": len(failed), "success_rmse_m": campaign.success_rmse_m}
+    if not rows:
+        (out / "report.md").write_text("\n".join(lines) + "\n")
+        write_json(out / "metrics.json", summary)
+        return out / "report.md"
+    winds, sevs, stats = summarise(campaign, rows)
+    lines += ["## Success rate per controller", "",
+              "| controller | flights | success | crashed | failed | median RMSE after fault m |",
+              "|---|---|---|---|---|---|"]
+    for c in campaign.controllers:
+        rs = [r for r in rows if r["controller"] == c]
+        if not rs:
+            continue
+        rm = sorted(v for r in rs if not r["crashed"] and (v := _rmse_of(r)) is not None)
+        lines.append(f"| {c} | {len(rs)} | {sum(r['success'] for r in rs) / len(rs):.0%} | "
+                     f"{sum(bool(r['crashed']) for r in rs)} | "
+                     f"{sum(r['status'] == 'failed' for r in rs)} | "
+                     f"{fmt(statistics.median(rm) if rm else None)} |")
+    lines.append("")
+    if campaign.has_plant:
+        plant_lines, plant_summary = plant_campaign.report(campaign, rows, out, figures)
+        lines += plant_lines
+        summary.update(plant_summary)
+    else:
+        summary["controllers"] = {}
+        for c in campaign.controllers:
+            rs = [r for r in rows if r["controller"] == c]
+            rm = [v for r in rs if not r["crashed"] and (v := _rmse_of(r)) is not None]
+            if rs:
+                summary["controllers"][c] = {
+                    "flights": len(rs), "success_rate": sum(r["success"] for r in rs) / len(rs),
+                    "crashed": sum(bool(r["crashed"]) for r in rs),
+                    "rmse_median_m": float(statistics.median(rm)) if rm else None}
+    write_json(out / "metrics.json", summary)
+    if campaign.has_plant and len(winds) * len(sevs) == 1:
+        figures = False                  # one cell: the cell tables and heat maps say nothing
+        stats = {}
+    head = "| wind | " + " | ".join(s[1] for s in sevs) + " |"
+    rule = "|---|" + "---|" * len(sevs)
+    for c in campaign.controllers:
+        if not any(k[0] == c for k in stats):
+            continue
+        lines += [f"## `{c}`", "", "Success rate (successful / flown) and, below, the median "
+                  "position RMSE after the fault (m) of the flights that did not crash, per wind "
+                  "(rows) and fault severity (columns).", "", head, rule]
+        for w in winds:
+            cellv = []
+            for s in sevs:
+                st = stats.get((c, w, s))
+                cellv.append("" if st is None else f"{st['rate']:.0%} ({st['ok']}/{st['n']})")
+            lines.append(f"| {w[1]} | " + " | ".join(cellv) + " |")
+        lines += ["", head, rule]
+        for w in winds:
+            cellv = []
+            for s in sevs:
+                st = stats.get((c, w, s))
+                cellv.append("" if st is None else fmt(st["rmse_median"]))
+            lines.append(f"| {w[1]} | " + " | ".join(cellv) + " |")
+        lines.append("")
+    if stats and any(s[0][0] == "motor" for s in sevs):
+        lines += ["## Where each controller stops coping", "",
+                  "The largest loss of motor effectiveness up to which every flight (every motor, "
+                  "every smaller loss) succeeded.", "",
+                  "| wind | " + " | ".join(campaign.controllers) + " |",
+                  "|---|" + "---|" * len(campaign.controllers)]
+        for w in winds:
+            lines.append(f"| {w[1]} | " + " | ".join(
+                coping_limit(campaign, winds, sevs, stats, c, w) for c in campaign.controllers)
+                + " |")
+        lines.append("")
+        first = campaign.controllers[0]
+        worse = []
+        for (c, w, s), st in stats.items():
+            if c == first:
+                continue
+            mine = stats.get((first, w, s))
+            if mine is not None and mine["rate"] < st["rate"]:
+                worse.append(f"{w[1]}, {s[1]}: `{first}` {mine['rate']:.0%} < `{c}` "
+                             f"{st['rate']:.0%}")
+        lines += [f"`{first}` copes at least as often as every other controller in every cell."
+                  if not worse else f"Cells where `{first}` succeeds less often than another "
+                  "controller:", ""] + [f"- {x}" for x in sorted(worse)] + [""]
+    if figures:
+        for p in heatmaps(campaign, winds, sevs, stats, out):
+            lines += [f"![{p.stem}]({p.name})", ""]
+    if failed:
+        lines += ["## Failed flights", ""]
+        for r in failed[:20]:
+            lines.append(f"- `{r['id']}` ({r['controller']}): {r['error']}")
+        if len(failed) > 20:
+            lines.append(f"- ... and {len(failed) - 20} more")
+        lines.append("")
+    (out / "report.md").write_text("\n".join(lines) + "\n")
+    return out / "report.md"
