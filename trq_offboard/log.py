@@ -13,7 +13,7 @@ the thread that ran it: cpu_observer_ms, cpu_effectiveness_ms, cpu_predictor_ms,
 cpu_feedback_ms (the step's parts), cpu_prepare_ms (the preparation after the command),
 cpu_wire_ms (the state's decode, the target's encode and send), cpu_log_ms (this log's share),
 cpu_period_ms (the whole period, every thread of the process: the parts, the event loop, the
-transport's frame parse, with --worker-thread the hand-offs to that thread)."""
+transport's frame parse)."""
 
 from __future__ import annotations
 
