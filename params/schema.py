@@ -396,7 +396,6 @@ class ControllerFile(Strict):
     delay_compensation: Choice("predict", "none", "auto") = "auto"
     lagged_actuators: _ON_OFF_AUTO = "auto"
     actuator_states: _ON_OFF_AUTO = "auto"
-    tilt_rate_limit: Choice("horizon", "first_step") = "horizon"
     motor_effectiveness: Optional[Effectiveness] = None
     control_rate_hz: Int(1, 1000)
     horizon: Horizon

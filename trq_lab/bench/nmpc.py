@@ -61,8 +61,6 @@ MODES = {     # name: solver overrides of params/controller/trq_nmpc_eso.yaml (a
                        controller=dict(actuator_states="on")),   # the actuators' lag states
     "rti-gn-conic": dict(kind="rti", hessian="gauss_newton", max_iterations=1,
                          hpipm_interface="conic"),     # HPIPM through casadi.conic
-    "rti-gn-tilt1": dict(kind="rti", hessian="gauss_newton", max_iterations=1,
-                         controller=dict(tilt_rate_limit="first_step")),  # tilts as inputs
     "rti-gn-cap8": dict(kind="rti", hessian="gauss_newton", max_iterations=1,
                         qp_max_iterations=8),          # the QP stopped after 8 iterations
     "rti-exact": dict(kind="rti", hessian="exact", max_iterations=1),

@@ -387,7 +387,7 @@ class RtiSolver:
         # the preparation's constraint and cost data: in the buffers the kernel reads
         w, status = self._kernel(P.w, P.d, d, P.xr_w,
                                  np.reshape(x_ref, (self._N + 1, self._nx)),
-                                 self.ocp.initial_stage(x0, tilt, y0), tilt, s0_hess)
+                                 self.ocp.initial_stage(x0, tilt, y0), s0_hess)
         self.qp_iterations = self._hqp.iterations
         if w is None:
             return None, "non-finite QP step"
