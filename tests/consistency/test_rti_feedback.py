@@ -130,26 +130,3 @@ def test_the_kernel_takes_any_layout_and_refuses_a_wrong_shape():
     buffers[1] = buffers[1][:-1]
     with pytest.raises(ValueError, match="the preparation's gaps must be"):
         feedback.FeedbackKernel(rti.ocp, rti._hqp, rti._q2_w, buffers)
-
-
-def test_rebuilding_the_qp_rebuilds_the_compiled_feedback_on_it():
-    """RtiSolver.rebuild_qp (the benchmark's partial condensing) builds the compiled feedback
-    again on the new QP, whose handles it holds: the step through the condensed QP is the
-    uncondensed one's to the interior point's tolerance, and describe() says which path."""
-    rti, kernel, (u_trim, x0, x_ref, d, guess) = _solver("trq_nmpc_eso")
-    u, x, _ = rti.solve(x0, x_ref, d, u_trim, guess)
-    rti.prepare(x_ref, d, u_trim, (u, x))
-    prepared = rti._prepared
-    rti._kernel, rti._prepared = kernel, dataclasses.replace(prepared)
-    w_full, msg_full = rti._feedback(x0, x_ref, d, u_trim, None)
-    rti._codegen = True                  # as a solver built with codegen: the kernel is rebuilt
-    rti.rebuild_qp(condensed_stages=5)
-    assert rti._hqp.condensed_stages == 5 and all(rti._hqp.handles)   # part_cond's too
-    assert rti._kernel is not None and rti._kernel is not kernel
-    rti._prepared = dataclasses.replace(prepared)
-    w_pc, msg_pc = rti._feedback(x0, x_ref, d, u_trim, None)
-    assert msg_pc == msg_full
-    np.testing.assert_allclose(w_pc, w_full, atol=1e-6)
-    line = rti.describe()
-    assert line.startswith("rti gauss_newton, hpipm direct ") and "condensed to 5 blocks" in line
-    assert "compiled feedback" in line and str(hpipm.loaded_library()) in line

@@ -64,9 +64,6 @@ MODES = {     # name: solver overrides of params/controller/trq_nmpc_eso.yaml (a
     "rti-gn-cap8": dict(kind="rti", hessian="gauss_newton", max_iterations=1,
                         qp_max_iterations=8),          # the QP stopped after 8 iterations
     "rti-exact": dict(kind="rti", hessian="exact", max_iterations=1),
-    # HPIPM's partial condensing: the horizon's N stages condensed into this many blocks
-    **{f"rti-gn-pc{n2}": dict(kind="rti", hessian="gauss_newton", max_iterations=1,
-                              hpipm=dict(condensed_stages=n2)) for n2 in (10, 5, 4, 2)},
     "rti-gn-py": dict(kind="rti", hessian="gauss_newton", max_iterations=1, codegen="off"),
     "sqp-gn": dict(kind="sqp", hessian="gauss_newton", max_iterations=1),
     "ipopt": dict(kind="ipopt"),
@@ -90,7 +87,6 @@ def fly(mode: str, seconds: float | None, controller: str = "trq_nmpc_eso",
     cfg = load_controller(trq_params.resolve("controller", controller))
     overrides = dict(MODES[mode])
     cfg = dataclasses.replace(cfg, **overrides.pop("controller", {}))
-    qp_args = overrides.pop("hpipm", None)
     cfg = dataclasses.replace(cfg, solver=dataclasses.replace(cfg.solver, **overrides))
     t0 = timer.wall_s()
     Controller(cfg)
@@ -98,8 +94,6 @@ def fly(mode: str, seconds: float | None, controller: str = "trq_nmpc_eso",
     compiled_cold = cache.COUNTS["compiled"]
     t0 = timer.wall_s()
     ctl = Controller(cfg)
-    if qp_args:               # the direct HPIPM QP rebuilt with these arguments
-        ctl.solver.rebuild_qp(**qp_args)
     build_cached = timer.wall_s() - t0
     compiled_cached = cache.COUNTS["compiled"] - compiled_cold
     recorder = None

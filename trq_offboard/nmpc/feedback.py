@@ -44,27 +44,27 @@ static double clip(double x, double lo, double hi)
 }
 
 /* dims: N, ns, nv, nb, nx, nw.
-   st: HPIPM's qp, sol, arg, ws and partial condensing's six (hpipm.OcpQp.handles), then
-   [10] idxbx (int, nb), [11] q2w (nw), [12] lbw0, [13] ubw0 (nw: the OCP's bounds),
-   [14] work (3 nw + 2 (N+1) ns + 4 N nv + 2 (N+1) nb + 6 doubles), [15] x ((N+1) ns),
-   [16] u (N nv), [17] pi (N ns), [18] iter (int); the preparation's [19] a (N (ns+nv) ns),
-   [20] gaps (N ns), [21] grad (nw), [22] jd (N 6 ns); the step's [23] w (nw), [24] d_prep (6),
-   [25] d (6), [26] xr_prep (nw), [27] x_ref ((N+1) nx), [28] s0 (ns),
-   [29] S0 (nv ns); [30] w_out (nw).
+   st: HPIPM's qp, sol, arg, ws (hpipm.OcpQp.handles), then
+   [4] idxbx (int, nb), [5] q2w (nw), [6] lbw0, [7] ubw0 (nw: the OCP's bounds),
+   [8] work (3 nw + 2 (N+1) ns + 4 N nv + 2 (N+1) nb + 6 doubles), [9] x ((N+1) ns),
+   [10] u (N nv), [11] pi (N ns), [12] iter (int); the preparation's [13] a (N (ns+nv) ns),
+   [14] gaps (N ns), [15] grad (nw), [16] jd (N 6 ns); the step's [17] w (nw), [18] d_prep (6),
+   [19] d (6), [20] xr_prep (nw), [21] x_ref ((N+1) nx), [22] s0 (ns),
+   [23] S0 (nv ns); [24] w_out (nw).
    Returns HPIPM's status (0 converged), or -1 when the step or the multipliers are not finite
    (w_out then untouched). */
 int trq_rti_feedback(const int *dims, void *const *st)
 {
     const int N = dims[0], ns = dims[1], nv = dims[2], nb = dims[3], nx = dims[4];
     const int nw = dims[5], nz = ns + nv;
-    const int *idxbx = (const int *) st[10];
-    const double *q2w = st[11], *lbw0 = st[12], *ubw0 = st[13];
-    double *work = st[14], *x = st[15], *u = st[16], *pi = st[17];
-    int *iter = st[18];
-    const double *a = st[19], *gaps = st[20], *grad = st[21], *jd = st[22];
-    const double *w = st[23], *d_prep = st[24], *d = st[25], *xr_prep = st[26];
-    const double *x_ref = st[27], *s0 = st[28], *S0 = st[29];
-    double *w_out = st[30];
+    const int *idxbx = (const int *) st[4];
+    const double *q2w = st[5], *lbw0 = st[6], *ubw0 = st[7];
+    double *work = st[8], *x = st[9], *u = st[10], *pi = st[11];
+    int *iter = st[12];
+    const double *a = st[13], *gaps = st[14], *grad = st[15], *jd = st[16];
+    const double *w = st[17], *d_prep = st[18], *d = st[19], *xr_prep = st[20];
+    const double *x_ref = st[21], *s0 = st[22], *S0 = st[23];
+    double *w_out = st[24];
     double *lbw = work, *ubw = lbw + nw, *g = ubw + nw, *b = g + nw;
     double *q = b + N * ns, *r = q + (N + 1) * ns, *lbx = r + N * nv, *ubx = lbx + (N + 1) * nb;
     double *lbu = ubx + (N + 1) * nb, *ubu = lbu + N * nv, *ds0 = ubu + N * nv, *dd = ds0 + ns;
@@ -139,8 +139,7 @@ int trq_rti_feedback(const int *dims, void *const *st)
     }
     status = trq_hpipm_solve(N, ns, nv, nb, st[0], st[1], st[2], st[3],
                              (double *) a, nz * ns, (double *) a + ns * ns, nz * ns, b, q, r,
-                             lbx, ubx, lbu, ubu, x, u, pi, iter,
-                             st[4], st[5], st[6], st[7], st[8], st[9]);
+                             lbx, ubx, lbu, ubu, x, u, pi, iter);
     for (k = 0; k < N * ns; ++k)
         if (!(pi[k] - pi[k] == 0.0))
             return -1;

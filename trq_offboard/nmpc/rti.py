@@ -223,52 +223,38 @@ class RtiSolver:
         self._q2_w[self._x_pos[:N]] = q2
         self._q2_w[self._x_pos[N]] = wts.terminal_factor * q2
         self._kernel = None
-        self._codegen = enabled
         if direct:
-            self.rebuild_qp()
+            # the direct interface's HPIPM QP with this solver's mode, options and Hessian, and
+            # the feedback in one compiled call, which holds the QP's handles, where it can be
+            # built (else the NumPy feedback serves)
+            self._hqp = hpipm.OcpQp(ns, nv, N, self._idxbx, mode=self.hpipm_mode,
+                                    iter_max=sc.qp_max_iterations, options=self.hpipm_options,
+                                    shim=enabled)
+            if hessian != "exact":
+                self._hqp.set_hessian(self._hc, self._hcN)
+            if enabled and self._hqp.uses_shim and feedback.available():
+                self._kernel = feedback.FeedbackKernel(o, self._hqp, self._q2_w,
+                                                       self._prep_np.results[0:4])
+                self._s0_hess = np.ascontiguousarray(self._hc[ns:, :ns])
         self._prepared: _Prepared | None = None
         self.last_prepare_s = 0.0
         self.qp_iterations = 0
         self.build_s = time.perf_counter() - t_build
 
-    def rebuild_qp(self, **qp_args) -> None:
-        """(Re)build the direct interface's HPIPM QP with this solver's mode, options and
-        Hessian, and further hpipm.OcpQp arguments (the benchmark's partial condensing:
-        condensed_stages), and with it the compiled feedback, which holds the QP's handles
-        (else the NumPy feedback serves)."""
-        if self.qp_interface != "direct":
-            raise RuntimeError(f"rebuild_qp: the QP goes through {self.qp_interface}, not the "
-                               "direct HPIPM interface")
-        o, sc = self.ocp, self.cfg.solver
-        ns = o.ns
-        self._hqp = hpipm.OcpQp(ns, o.nv, o.n_steps, self._idxbx, mode=self.hpipm_mode,
-                                iter_max=sc.qp_max_iterations, options=self.hpipm_options,
-                                shim=self._codegen, **qp_args)
-        if self.hessian != "exact":
-            self._hqp.set_hessian(self._hc, self._hcN)
-        # the feedback in one compiled call where it can be built (else the NumPy one below)
-        self._kernel = None
-        if self._codegen and self._hqp.uses_shim and feedback.available():
-            self._kernel = feedback.FeedbackKernel(o, self._hqp, self._q2_w,
-                                                   self._prep_np.results[0:4])
-            self._s0_hess = np.ascontiguousarray(self._hc[ns:, :ns])
-
     def describe(self) -> str:
         """The QP path this solver took, for logs and benchmarks: the interface, HPIPM's mode and
-        arguments, the per-solve loop (compiled shim or ctypes), partial condensing, the feedback
+        arguments, the per-solve loop (compiled shim or ctypes), the feedback
         (one compiled call or NumPy) and which libhpipm (a flight is replayed bit for bit only
         on the same library: BLASFEO's kernels round differently)."""
         if self.qp_interface != "direct":
             return conic_line("rti", self.hessian, self.cfg.solver.qp_solver)
         opts = "".join(f" {k} {v:g}" for k, v in self.hpipm_options.items())
         loop = "shim" if self._hqp.uses_shim else "ctypes loop"
-        pc = (f", condensed to {self._hqp.condensed_stages} blocks"
-              if self._hqp.condensed_stages else "")
         fb = "compiled feedback" if self._kernel is not None else "numpy feedback"
         lib = hpipm.loaded_library()
         which = "-" if lib is None else (
             f"{lib} (CasADi's)" if lib == hpipm.bundled_path() else f"{lib} (${hpipm.LIBRARY_ENV})")
-        return (f"rti {self.hessian}, hpipm direct {self.hpipm_mode}{opts}, {loop}{pc}, {fb}, "
+        return (f"rti {self.hessian}, hpipm direct {self.hpipm_mode}{opts}, {loop}, {fb}, "
                 f"libhpipm {which}")
 
     @staticmethod
