@@ -359,7 +359,7 @@ class SolverFile(Strict):
     hessian: Choice("gauss_newton", "exact")
     max_iterations: Int(1, 100)
     tolerance: Num(0.0, 1.0)
-    qp_solver: Choice("qrqp", "osqp", "qpoases", "hpipm", "daqp", "proxqp")
+    qp_solver: Choice("qrqp", "osqp", "hpipm")
     regularization: Num(0.0, 1e3)
     ipopt_max_iterations: Int(1, 10_000)
     codegen: Choice("auto", "off") = "auto"
