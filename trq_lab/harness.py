@@ -191,6 +191,9 @@ class _MeteredController:
     def last_prepare_cpu_ns(self) -> int:
         return self.inner.last_prepare_cpu_ns
 
+    def solver_line(self) -> str:
+        return self.inner.solver_line()
+
     def reset(self, *args, **kwargs):
         return self.inner.reset(*args, **kwargs)
 
@@ -329,14 +332,8 @@ def build_controller(cfg):
     ctl = _CONTROLLERS.get(key)
     if ctl is None:
         ctl = _CONTROLLERS[key] = Controller(cfg)
-    _zero_multipliers(ctl)
+    ctl.solver.zero_multipliers()
     return ctl
-
-
-def _zero_multipliers(ctl) -> None:
-    lam = getattr(ctl.solver, "_lam", None)
-    if lam is not None:
-        lam[:] = 0.0
 
 
 # --- scripted events -------------------------------------------------------------------------
@@ -463,6 +460,7 @@ def fly_inprocess(controller, sim, fault_events=(), seed: int | None = None, *,
     from sil_vehicle.mavlink.codec import Codec
     from sil_vehicle.sitl import LOG_COLUMNS, Sitl
     from trq_offboard.config import ControllerConfig, load_controller
+    from trq_offboard.controller import Controller
     from trq_offboard.log import ControllerLog, solver_header
     from trq_offboard.loop import OffboardFlight
     from trq_offboard.reference import Reference
@@ -478,7 +476,7 @@ def fly_inprocess(controller, sim, fault_events=(), seed: int | None = None, *,
         cfg = controller
         if reference:
             raise ValueError("reference: give it in the ControllerConfig")
-    elif hasattr(controller, "step") and hasattr(controller, "cfg"):
+    elif isinstance(controller, Controller):
         built, cfg = controller, controller.cfg
         if reference:
             raise ValueError("reference: give it in the Controller's config")
@@ -497,7 +495,7 @@ def fly_inprocess(controller, sim, fault_events=(), seed: int | None = None, *,
         ctl = build_controller(cfg)
     else:
         ctl = built
-        _zero_multipliers(ctl)
+        ctl.solver.zero_multipliers()
     sitl = Sitl(sim)
     flight_log = clog = None
     if out_dir is not None:

@@ -5,8 +5,8 @@
     cmd, info = ctl.step(t_s, state, applied, reference)   # once per control period
     ctl.prepare(reference)                      # after sending cmd: the RTI's preparation phase
 
-`reference` is anything with `sample(t_s) -> ReferenceSample` (reference.Reference, or
-reference.ConstantReference for a fixed target); the NMPC samples it at t_s + k h, k = 0..N.
+`reference` is a reference.FlightReference (Reference, or ConstantReference for a fixed
+target); the NMPC takes its grid at t_s + k h, k = 0..N.
 `applied` is the ActuatorCommand the vehicle has been flying since the previous step (None:
 the one this controller returned last).
 
@@ -48,11 +48,12 @@ from trq_offboard.eso import ExtendedStateObserver
 from trq_offboard.model import PredictionModel
 from trq_offboard.model.dynamics import NumpyFunction
 from trq_offboard.nmpc.cache import compiled_many
-from trq_offboard.nmpc.solver import Solver, make_solver
+from trq_offboard.nmpc.base import Solver
+from trq_offboard.nmpc.factory import make_solver
+from trq_offboard.reference import FlightReference
 from trq_offboard.records import (
     ActuatorCommand,
     CommandSource,
-    ReferenceSample,
     SolveInfo,
     SolveStatus,
     StateEstimate,
@@ -158,10 +159,6 @@ class Controller:
                                                          codegen=cfg.solver.codegen == "auto")
                               if cfg.effectiveness is not None and self.eso is not None else None)
         self._nt = 4 if self.model.tilting else 0         # where the throttles start in u
-        if self.effectiveness is not None and not hasattr(getattr(self.solver, "ocp", None),
-                                                          "set_throttle_scale"):
-            raise ValueError(f"{cfg.file}: motor_effectiveness needs a solver on nmpc/ocp.py's "
-                             "Ocp (its throttle bounds follow the estimate)")
         self._scale = np.ones(self.model.nu)              # plan (effective) = scale x command
         # auto: also whenever the NMPC carries the lag states, which must not meet an observer
         # whose b0 ignores the lags (measured: docs/decisions/2026-12-02-figures-from-comments.md);
@@ -198,7 +195,7 @@ class Controller:
         self._effective_fn = built.get("effective")
         # the NMPC's stage carries the actuators' lag states (actuator_states): its plan starts
         # from the actuators' outputs predicted for t + delay (self._y_act)
-        self._act_states = bool(getattr(getattr(self.solver, "ocp", None), "n_lag", 0))
+        self._act_states = bool(self.solver.ocp.n_lag)
         self._y_act: np.ndarray | None = None
         self._u_lo = np.array(([vm.tilt_min_rad] * 4 if self.model.tilting else [])
                               + [vm.idle_pct] * 4)
@@ -221,10 +218,8 @@ class Controller:
 
     def solver_line(self) -> str:
         """What solves this controller's NMPC, for the log's header: the solver's own account
-        (its describe(): the QP path and the libhpipm), else, for an injected solver that has
-        none, its class."""
-        describe = getattr(self.solver, "describe", None)
-        return describe() if describe is not None else type(self.solver).__name__
+        (its describe(): the QP path and the libhpipm)."""
+        return self.solver.describe()
 
     # --- lifecycle ------------------------------------------------------------------------------
     def reset(self, t_s: float, state: StateEstimate,
@@ -248,9 +243,7 @@ class Controller:
         self._y_act = None
         self._last_t = float(t_s)
         self._last_d = np.zeros(6)
-        discard = getattr(self.solver, "discard", None)
-        if discard is not None:
-            discard()
+        self.solver.discard()
         self.clip_count = 0
         self.failures = 0
 
@@ -489,7 +482,7 @@ class Controller:
 
     # --- one control step -----------------------------------------------------------------------
     def step(self, t_s: float, state: StateEstimate, applied: ActuatorCommand | None,
-             reference) -> tuple[ActuatorCommand, StepInfo]:
+             reference: FlightReference) -> tuple[ActuatorCommand, StepInfo]:
         clock = self.cpu_ns
         c0 = clock()
         if self._last_t is None:
@@ -663,7 +656,7 @@ class Controller:
         path, y_act = self._walk_from(y_true, t1, t_act, self._scale)
         return d, path, y_act
 
-    def prepare(self, reference) -> None:
+    def prepare(self, reference: FlightReference) -> None:
         """Preparation phase for the next step (t + one control period): the solver linearises
         at the current plan shifted by one period, with the current disturbance estimate. A
         no-op for solvers without one and before the first plan."""
@@ -673,9 +666,8 @@ class Controller:
         finally:
             self.last_prepare_cpu_ns = self.cpu_ns() - c0
 
-    def _prepare(self, reference) -> None:
-        prep = getattr(self.solver, "prepare", None)
-        if prep is None or self._plan is None or self._last_t is None:
+    def _prepare(self, reference: FlightReference) -> None:
+        if not self.solver.prepares or self._plan is None or self._last_t is None:
             return
         # when the next step's command acts: the next state's time formed as the flight loop
         # forms a state's (whole microseconds times 1e-6), so that the next step, one period
@@ -692,35 +684,28 @@ class Controller:
         if self._act_states and self._y_act is not None:
             # the actuators one period on, under the command just sent (it acts from t_act)
             y_next = self._lag(self._y_act, self._last_u * self._scale, self.cfg.control_dt_s)
-            prep(x_ref, self._last_d, self._last_u, guess, y0=y_next)
+            self.solver.prepare(x_ref, self._last_d, self._last_u, guess, y0=y_next)
         else:
-            prep(x_ref, self._last_d, self._last_u, guess)
+            self.solver.prepare(x_ref, self._last_d, self._last_u, guess)
 
     # --- helpers --------------------------------------------------------------------------------
-    def _reference_states(self, t_s: float, x: np.ndarray, reference) -> np.ndarray:
+    def _reference_states(self, t_s: float, x: np.ndarray,
+                          reference: FlightReference) -> np.ndarray:
         """The reference states of the horizon from t_s (N+1, 12), the yaw unwrapped next to
-        x's. A reference with `grid` (Reference, ConstantReference) is a pure function of time:
-        the same object asked for the same t gives the same grid."""
+        x's. A reference's grid is a pure function of time: the same object asked for the same
+        t gives the same grid."""
         xr = np.zeros((self.N + 1, 12))
         yaw = x[8]
-        grid = getattr(reference, "grid", None)
-        if grid is not None:                              # Reference, ConstantReference
-            # the preparation samples the time the next step then asks for (when the two
-            # floats agree): the last grid kept
-            key = self._grid_key
-            if key is not None and key[0] is reference and key[1] == t_s:
-                pv, yaw_ref = self._grid_val
-            else:
-                pv, yaw_ref = grid(t_s, self.h, self.N + 1)
-                self._grid_key, self._grid_val = (reference, t_s), (pv, yaw_ref)
-            xr[:, 0:6] = pv
-            xr[:, 8] = yaw + _wrap(yaw_ref - yaw)
-            return xr
-        for k in range(self.N + 1):                        # any object with sample(t)
-            s: ReferenceSample = reference.sample(t_s + k * self.h)
-            xr[k, 0:3] = s.pos_ned_m
-            xr[k, 3:6] = s.vel_ned_m_s
-            xr[k, 8] = yaw + _wrap(s.yaw_rad - yaw)       # unwrapped next to the measured yaw
+        # the preparation samples the time the next step then asks for (when the two floats
+        # agree): the last grid kept
+        key = self._grid_key
+        if key is not None and key[0] is reference and key[1] == t_s:
+            pv, yaw_ref = self._grid_val
+        else:
+            pv, yaw_ref = reference.grid(t_s, self.h, self.N + 1)
+            self._grid_key, self._grid_val = (reference, t_s), (pv, yaw_ref)
+        xr[:, 0:6] = pv
+        xr[:, 8] = yaw + _wrap(yaw_ref - yaw)
         return xr
 
     def _guess(self, t_s: float, x: np.ndarray, d: np.ndarray, xs: np.ndarray | None = None):

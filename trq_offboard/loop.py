@@ -16,7 +16,8 @@ docs/decisions/2026-12-04-direct-calls-default.md.
 Every period is timed by part with injected CPU clocks: `cpu_ns` (default time.thread_time_ns:
 the calling thread's) for the wire (the telemetry's decode into a state, the target's encode and
 send) and the log, `process_cpu_ns` (default time.process_time_ns: every thread's) for the whole
-period; the controller times its own step's parts and its preparation. StepRecord.cpu holds them, completed as the period runs (records.PeriodTimes).
+period; the controller times its own step's parts and its preparation. StepRecord.cpu holds
+them, completed as the period runs (records.PeriodTimes).
 """
 
 from __future__ import annotations
@@ -122,11 +123,14 @@ class FlightController(Protocol):
 
     def prepare(self, reference: FlightReference) -> None: ...
 
+    def solver_line(self) -> str: ...   # what solves the NMPC, for the log's header
+
 
 class OffboardFlight:
     def __init__(self, link: MavlinkUdp, controller: FlightController,
                  make_reference: Callable[..., FlightReference], *,
-                 name: str, tilt_limit_rad: float, record: Callable[[StepRecord], None] | None = None,
+                 name: str, tilt_limit_rad: float,
+                 record: Callable[[StepRecord], None] | None = None,
                  connect_timeout_s: float = 30.0, telemetry_timeout_s: float = 2.0,
                  telemetry_lost_s: float = 10.0, ack_timeout_s: float = 1.0,
                  yield_core: bool = True,
@@ -417,7 +421,8 @@ class OffboardFlight:
         if hb is None or not wire.is_armed(hb):
             return "the vehicle is disarmed"
         try:
-            if odo is not None and odo.state.pos_ned_m[2] < wire.HOME_GROUND_DOWN_M - TOUCHDOWN_ALT_M:
+            flying_z = wire.HOME_GROUND_DOWN_M - TOUCHDOWN_ALT_M
+            if odo is not None and odo.state.pos_ned_m[2] < flying_z:
                 result = await self._command(wire.set_mode_land(), mavlink.MAV_CMD_DO_SET_MODE,
                                              retries=2)
                 return f"asked the vehicle to land (MAV_RESULT {result})"

@@ -16,22 +16,34 @@ from trq_offboard.config import load_controller
 from trq_offboard.controller import PREDICT_STEP_S, CommandHistory, Controller
 from trq_offboard.effectiveness import MotorEffectivenessObserver
 from trq_offboard.eso import ExtendedStateObserver
+from trq_offboard.nmpc.base import Solver
 from trq_offboard.records import (
     CommandSource,
+    ReferenceSample,
     SolveInfo,
     SolveStatus,
     StateEstimate,
 )
+from trq_offboard.reference import ConstantReference
 
 PARAMS = Path(__file__).resolve().parents[2] / "params" / "controller"
 CTRL = PARAMS / "trq_nmpc_eso.yaml"
 
 
-class _HoverSolver:
+class _NoOcp:
+    """The part of an Ocp the controller uses: no lag states, throttle bounds ignored."""
+    n_lag = 0
+
+    def set_throttle_scale(self, e) -> None:
+        pass
+
+
+class _HoverSolver(Solver):
     """No NMPC (building one costs seconds): the plan holds the given command."""
 
     def __init__(self, u, n, nx=12):
         self.u, self.n, self.nx = np.asarray(u, float), n, nx
+        self.ocp = _NoOcp()
 
     def solve(self, x0, x_ref, d, u_prev, guess, y0=None):
         return (np.tile(self.u, (self.n, 1)), np.tile(x0, (self.n + 1, 1)),
@@ -50,21 +62,19 @@ def test_step_parts_come_from_the_injected_clock_and_add_up():
     ctl.reset(0.0, _hover_state())
     for k in range(1, 4):
         before = clock.t
-        cmd, info = ctl.step(0.01 * k, _hover_state(), None, _Const())
+        cmd, info = ctl.step(0.01 * k, _hover_state(), None, _const_reference())
         cpu = info.cpu
         parts = (cpu.observer_ns, cpu.effectiveness_ns, cpu.predictor_ns, cpu.feedback_ns)
         assert info.source is CommandSource.NMPC
         assert all(p >= 1000 for p in parts)      # each part between two readings
         # the parts are contiguous: the step's first reading to its last
         assert sum(parts) == clock.t - before - 1000
-        ctl.prepare(_Const())                     # no prepare on this solver: timed anyway
+        ctl.prepare(_const_reference())           # no preparation on this solver: timed anyway
         assert ctl.last_prepare_cpu_ns == 1000
 
 
-class _Const:
-    def sample(self, t_s):
-        from trq_offboard.records import ReferenceSample
-        return ReferenceSample((0.0, 0.0, -2.0), (0.0, 0.0, 0.0), 0.0)
+def _const_reference() -> ConstantReference:
+    return ConstantReference(ReferenceSample((0.0, 0.0, -2.0), (0.0, 0.0, 0.0), 0.0))
 
 
 @pytest.mark.parametrize("name", ["trq_nmpc_eso", "trq_nmpc_eso_paper"])
@@ -287,6 +297,8 @@ def test_reference_grid_is_sampled_once_for_the_same_time():
 class _PreparingSolver(_HoverSolver):
     """_HoverSolver with a preparation phase: records the reference each phase is handed."""
 
+    prepares = True
+
     def __init__(self, u, n, nx=12):
         super().__init__(u, n, nx)
         self.solved, self.prepared = [], []
@@ -373,7 +385,7 @@ def test_commands_in_effect_are_the_command_by_command_segments(delay):
 class _ScaledHoverSolver(_HoverSolver):
     """The hover solver with the throttle bounds the effectiveness observer sets (recorded)."""
 
-    class _Ocp:
+    class _Ocp(_NoOcp):
         def __init__(self):
             self.scales = []
 
@@ -416,7 +428,7 @@ def test_compiled_effective_step_is_the_step_by_step_one():
         x[6:9] += rng.normal(size=3) * 0.002
         x[9:12] = rng.normal(size=3) * 0.05
         s = StateEstimate.from_vector(x)
-        out = [c.step(t, s, None, _Const()) for c in ctls]
+        out = [c.step(t, s, None, _const_reference()) for c in ctls]
         a, b = ctls
         assert out[0][0] == out[1][0], k
         assert np.array_equal(a._last_d, b._last_d), k

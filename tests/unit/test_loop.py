@@ -71,6 +71,9 @@ class FakeController:
     def prepare(self, reference) -> None:
         pass
 
+    def solver_line(self) -> str:
+        return "fake"
+
 
 class FakeReference:
     def __init__(self, done_at_s: float, land: bool = True) -> None:
@@ -121,8 +124,8 @@ def make_flight(reference: FakeReference | None = None, **kw):
     ref = reference or FakeReference(done_at_s=1e9)
     kw.setdefault("connect_timeout_s", 1.0)
     kw.setdefault("ack_timeout_s", 0.5)
-    flight = OffboardFlight(link, ctl, lambda state, airborne=False: ref, name="fake", tilt_limit_rad=LIMIT,
-                            **kw)
+    flight = OffboardFlight(link, ctl, lambda state, airborne=False: ref, name="fake",
+                            tilt_limit_rad=LIMIT, **kw)
     assert link.on_message == flight.on_message     # the loop takes over the link's callback
     return flight, link, ctl
 

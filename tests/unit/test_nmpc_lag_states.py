@@ -18,6 +18,7 @@ from trq_offboard.config import ConfigError, load_controller
 from trq_params.loader import read_yaml     # the loader's YAML 1.2 dialect: `off` stays a string
 from trq_offboard.model import PredictionModel
 from trq_offboard.nmpc.ocp import Ocp, Stage
+from trq_offboard.nmpc.base import Solver
 
 PARAMS = Path(__file__).resolve().parents[2] / "params"
 CTRL = PARAMS / "controller"
@@ -230,8 +231,11 @@ class _LagOcp:
         pass
 
 
-class _LagSolver:
+class _LagSolver(Solver):
     ocp = _LagOcp()
+
+    def solve(self, x0, x_ref, d, u_prev, guess, y0=None):
+        raise NotImplementedError              # only built, never flown
 
 
 def test_controller_starts_the_plan_from_the_lagged_actuators():

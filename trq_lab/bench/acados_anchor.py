@@ -352,7 +352,7 @@ class Recorder:
         o, c = self.ctl.solver.ocp, np.array
         lin = self._pending
         if lin is None:                # not prepared: the solve linearises at its guess
-            from trq_offboard.nmpc.solver import plan_of
+            from trq_offboard.nmpc.base import plan_of
             guess = plan_of(guess)
             lin = (c(guess[0], float), c(guess[1], float), c(u_prev, float))
         self._pending = None

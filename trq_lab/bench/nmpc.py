@@ -110,7 +110,7 @@ def fly(mode: str, seconds: float | None, controller: str = "trq_nmpc_eso",
     res = harness.fly_inprocess(
         ctl, sim, events, timeout_s=seconds if seconds is not None else 600.0, trace=True,
         timer=timer, name=mode,
-        on_step=lambda sample: qp_iterations.append(getattr(ctl.solver, "qp_iterations", 0)))
+        on_step=lambda sample: qp_iterations.append(ctl.solver.qp_iterations))
     if res.status.startswith("failed"):
         raise RuntimeError(f"{mode}: {res.summary}")
     if recorder is not None:
@@ -157,7 +157,7 @@ def fly(mode: str, seconds: float | None, controller: str = "trq_nmpc_eso",
         max_yaw_err_deg=float(np.abs(yerr).max()),
         build_cold_s=build_cold, build_cached_s=build_cached,
         compilations_cold=compiled_cold, compilations_cached=compiled_cached,
-        build_mode=getattr(ctl.solver, "build_mode", "-"),
+        build_mode=ctl.solver.build_mode,
         qp=ctl.solver_line(),
         peak_rss_mb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0)
 

@@ -14,9 +14,9 @@ step is an index into lists built at load, with one check that the step's time i
 one (a replay that left the recording stops with ReplayDiverged); its `prepare` does nothing but
 hand over the recorded preparation time. So the daemon around it (asyncio, the telemetry's
 receive and decode, the target's encode and send, the step's calls, the reference's sample, the
-accounting, the ground-station diagnosis, controller.csv and the .tlog) does the same work as in the recorded flight: the log writes the
-same bytes but for the loop's own measurements (cpu_wire_ms, cpu_log_ms, cpu_period_ms), and
-the vehicle flies the same flight, identically in lockstep (controller.csv carries the commands
+accounting, the ground-station diagnosis, controller.csv and the .tlog) does the same work as
+in the recorded flight: the log writes the same bytes but for the loop's own measurements
+(cpu_wire_ms, cpu_log_ms, cpu_period_ms) and its header's solver line, and the vehicle flies the same flight, identically in lockstep (controller.csv carries the commands
 at full precision: trq_wire.logfile writes floats with repr). What the replay's process costs
 per control period is the floor: what the daemon costs when the controller's math costs nothing.
 It is a lower bound of that machinery's share in the real daemon, where the math's allocations
@@ -209,6 +209,10 @@ class ReplayController:
             raise self._diverged(i, t_s)
         self._i = i + 1
         return self._steps[i]
+
+    def solver_line(self) -> str:
+        """What 'solves' this controller, for the log's header: the recording."""
+        return f"replay of {self.source}"
 
     def prepare(self, reference) -> None:
         """Nothing to prepare: hands over the recorded preparation time of the last step."""

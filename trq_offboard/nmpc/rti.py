@@ -46,9 +46,9 @@ from trq_offboard.config import ControllerConfig
 from trq_offboard.model import PredictionModel
 from trq_offboard.model.dynamics import NumpyFunction
 from trq_offboard.nmpc import feedback, hpipm
+from trq_offboard.nmpc.base import Solver, conic_line, conic_qp, plan_of
 from trq_offboard.nmpc.cache import compiled_many
 from trq_offboard.nmpc.ocp import Ocp, Stage
-from trq_offboard.nmpc.solver import conic_line, plan_of
 from trq_offboard.records import SolveInfo, SolveStatus
 
 __all__ = ["RtiSolver", "HPIPM_AUTO"]
@@ -74,8 +74,10 @@ class _Prepared:
     xr_w: np.ndarray         # x_ref placed at the state positions of w (nw)
 
 
-class RtiSolver:
+class RtiSolver(Solver):
     """One SQP step per control step on compiled per-stage functions; HPIPM QP."""
+
+    prepares = True
 
     def __init__(self, cfg: ControllerConfig, model: PredictionModel, u_trim: np.ndarray,
                  hessian: str = "gauss_newton", ocp=None):
@@ -205,15 +207,7 @@ class RtiSolver:
                 opts = {**preset, **opts}
             self.hpipm_mode, self.hpipm_options = mode, opts
         else:
-            # the QP: HPIPM (Riccati, stage structure detected from the sparsity)
-            qp_opts = {"error_on_fail": False, "print_time": False}
-            if sc.qp_solver == "hpipm":
-                hpipm.check_conic()
-                qp_opts["hpipm"] = {"iter_max": sc.qp_max_iterations, "warm_start": 0}
-            elif sc.qp_solver == "qrqp":
-                qp_opts.update({"print_iter": False, "print_header": False,
-                                "print_info": False})
-            self._qp = ca.conic("rti_qp", sc.qp_solver, {"h": h_sp, "a": a_sp}, qp_opts)
+            self._qp = conic_qp("rti_qp", sc.qp_solver, h_sp, a_sp, sc.qp_max_iterations)
         # feedback helpers (NumPy)
         self._lam = np.zeros(N * ns)
         wts = cfg.weights
@@ -302,6 +296,9 @@ class RtiSolver:
     def discard(self) -> None:
         """Forget a pending preparation (the controller was reset)."""
         self._prepared = None
+
+    def zero_multipliers(self) -> None:
+        self._lam[:] = 0.0
 
     def solve(self, x0, x_ref, d, u_prev, guess, y0=None):
         t0 = time.perf_counter()
@@ -421,9 +418,3 @@ class RtiSolver:
         p_in[:x_ref.size] = np.ravel(x_ref)          # (N+1, nx) rows: vec of (nx, N+1)
         fn.evaluate()
         return float(fn.results[0][0])
-
-    def _failed(self, guess, t0, iters, msg):
-        u, x = (np.nan_to_num(np.asarray(a, float)) for a in guess)
-        return u, x, SolveInfo(SolveStatus.FAILED, iters, time.perf_counter() - t0,
-                               float("nan"), msg)
-
