@@ -54,9 +54,8 @@ MAX_MODE_REQUESTS = 5
 TOUCHDOWN_SPEED_M_S = 0.15
 IDLE_STEPS_BEFORE_DISARM = 10
 ACK_TIMEOUT_VEHICLE_US = 300_000   # a command's ACK missing this long in vehicle time: resend
-# tries of a command (arming, disarming) before giving up: with 10 % loss each way a try fails
-# 19 % of the time; three tries failed a landed flight's disarm in 1 campaign flight of 12
-# (params/campaigns/lossy_link_seeds.yaml), six fail about once in 20,000
+# tries of a command (arming, disarming) before giving up, enough for a lossy link (measured:
+# docs/decisions/2026-12-02-figures-from-comments.md)
 COMMAND_TRIES = 6
 LAND_DETECT_S = 0.2                # on the ground and still this long while landing: landed
 IDLE = ActuatorCommand((0.0,) * 4, (0.0,) * 4)   # motors at idle, tilts centred

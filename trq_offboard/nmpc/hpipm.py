@@ -20,10 +20,10 @@ constraints, and the initial state is not a variable.
 
 Only the stable per-field entry points of HPIPM are used (`d_ocp_qp_set_A(stage, mat, qp)` and the
 like, column-major), not the `*_set_all` ones whose argument lists changed between versions.
-Setting a QP takes about 190 of them (9 fields, 21 stages): through ctypes that is 0.2 ms, so with
-a C compiler a 40-line shim (`_SHIM`, compiled once and cached by `cache.compiled_c`, linked
-against the same libhpipm) makes them and the solve in one call; without one the loop runs in
-Python. `available()` says whether the library was found and loaded; the caller falls back to
+Setting a QP takes one call per field and stage, costly through ctypes (measured:
+docs/decisions/2026-12-02-figures-from-comments.md), so with a C compiler a small shim (`_SHIM`,
+compiled once and cached by `cache.compiled_c`, linked against the same libhpipm) makes them and
+the solve in one call; without one the loop runs in Python. `available()` says whether the library was found and loaded; the caller falls back to
 CasADi's conic interface when it was not.
 """
 
