@@ -15,8 +15,25 @@ from sil_vehicle.dynamics.actuators import first_order_step, lag_factor
 from trq_offboard.config import ConfigError, EffectivenessConfig, load_controller
 from trq_params.loader import read_yaml     # the loader's YAML 1.2 dialect: `off` stays a string
 from trq_offboard.effectiveness import MotorEffectivenessObserver
+from trq_offboard.nmpc.base import Solver
 
 PARAMS = Path(__file__).resolve().parents[2] / "params"
+
+
+class _NoOcp:
+    """The part of an Ocp the controller uses: no lag states, throttle bounds ignored."""
+    n_lag = 0
+
+    def set_throttle_scale(self, e):
+        pass
+
+
+class _NoNmpc(Solver):
+    """The effectiveness observer needs no NMPC; building one would cost seconds."""
+    ocp = _NoOcp()
+
+    def solve(self, x0, x_ref, d, u_prev, guess, y0=None):
+        raise NotImplementedError
 T = 0.03                 # params/vehicle/trq.yaml: motor time constant
 DT = 0.01                # control period
 TICK = 0.001             # the vehicle's physics tick
@@ -140,16 +157,8 @@ def test_the_faulty_motor_is_isolated_from_the_disturbance(motor, loss):
     thousandth (the secant of the quadratic thrust curve)."""
     from trq_offboard.controller import Controller
 
-    class _Ocp:
-        n_lag = 0
 
-        def set_throttle_scale(self, e):
-            pass
-
-    class _Solver:
-        ocp = _Ocp()
-
-    ctl = Controller(load_controller(PARAMS / "controller/trq_nmpc_eso.yaml"), solver=_Solver())
+    ctl = Controller(load_controller(PARAMS / "controller/trq_nmpc_eso.yaml"), solver=_NoNmpc())
     x = np.zeros(12)
     x[6:9] = [0.1, -0.05, 0.4]
     x[9:12] = [0.2, -0.1, 0.3]
@@ -205,16 +214,8 @@ def test_the_compiled_deficit_is_its_specification_bit_for_bit():
     commands and disturbances (deficits, surpluses, and nothing to explain), bit for bit."""
     from trq_offboard.controller import Controller
 
-    class _Ocp:
-        n_lag = 0
 
-        def set_throttle_scale(self, e):
-            pass
-
-    class _Solver:
-        ocp = _Ocp()
-
-    ctl = Controller(load_controller(PARAMS / "controller/trq_nmpc_eso.yaml"), solver=_Solver())
+    ctl = Controller(load_controller(PARAMS / "controller/trq_nmpc_eso.yaml"), solver=_NoNmpc())
     rng = np.random.default_rng(18)
     picked = set()
     for k in range(300):

@@ -7,19 +7,25 @@ from __future__ import annotations
 import dataclasses
 import math
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
 from trq_offboard.config import load_controller
 from trq_offboard.controller import CommandHistory, Controller
+from trq_offboard.nmpc.base import Solver
 
 CTRL = Path(__file__).resolve().parents[2] / "params" / "controller" / "trq_nmpc_eso.yaml"
 DELAY_S = 0.04
 
 
-class _NoSolver:
+class _NoSolver(Solver):
     """The predictor needs no NMPC; building one would cost seconds."""
+    ocp = SimpleNamespace(n_lag=0)
+
+    def solve(self, x0, x_ref, d, u_prev, guess, y0=None):
+        raise NotImplementedError
 
 
 def controller(lagged: str, delay_s: float = DELAY_S) -> Controller:
