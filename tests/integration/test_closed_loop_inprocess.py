@@ -125,9 +125,9 @@ class _FailingSolver(Solver):
     def zero_multipliers(self) -> None:
         self.inner.zero_multipliers()
 
-    def solve(self, x0, x_ref, d, u_prev, guess):
+    def solve(self, x0, x_ref, d, u_prev, guess, y0=None):
         self.calls += 1
-        u, x, info = self.inner.solve(x0, x_ref, d, u_prev, guess)
+        u, x, info = self.inner.solve(x0, x_ref, d, u_prev, guess, y0)
         if self.fail_from <= self.calls < self.fail_to:
             if self.nan:     # a broken solver that returns NaN with an OK status
                 return u * np.nan, x, info

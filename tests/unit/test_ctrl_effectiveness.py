@@ -167,18 +167,18 @@ def test_the_faulty_motor_is_isolated_from_the_disturbance(motor, loss):
     y_true[4 + motor] *= 1.0 - loss
     acc = ctl.model.b0(x, y_true) - ctl.model.b0(x, y_nom)
     d = acc[[0, 1, 2, 6, 7, 8]]
-    dz = ctl._motor_deficit(x, d, y_nom)
+    dz = ctl.motors.motor_deficit(x, d, y_nom)
     want = np.zeros(4)
     want[motor] = y_true[4 + motor] - y_nom[4 + motor]
     np.testing.assert_allclose(dz, want, atol=1e-3)
     # the same motor over-producing: never read as its deficit (at most as another motor's,
     # whose roll and pitch pattern it shares: the isolation's known limit, README)
-    over = ctl._motor_deficit(x, -d, y_nom)
+    over = ctl.motors.motor_deficit(x, -d, y_nom)
     assert over[motor] == 0.0 and np.all(over <= 0.0) and np.count_nonzero(over) <= 1
 
 
 def _deficit_step_by_step(ctl, x, d, y_nom):
-    """The specification of Controller._motor_deficit in plain floats: each motor's
+    """The specification of MotorEffectiveness.motor_deficit in plain floats: each motor's
     least-squares deficit alone, the first with the largest share of |d[2:5]|^2 among those
     with a deficit, three Gauss-Newton steps on the quadratic curves' exact change; dots summed
     left to right."""
@@ -223,7 +223,7 @@ def test_the_compiled_deficit_is_its_specification_bit_for_bit():
         x[6:12] = rng.normal(0.0, 0.2, 6)
         y_nom = np.concatenate([rng.uniform(-0.3, 0.3, 4), rng.uniform(30.0, 90.0, 4)])
         d = rng.normal(0.0, 1.0, 6) if k % 10 else np.zeros(6)
-        got = ctl._motor_deficit(x, d, y_nom)
+        got = ctl.motors.motor_deficit(x, d, y_nom)
         want = _deficit_step_by_step(ctl, x, d, y_nom)
         assert np.array_equal(got, want), (k, got, want)
         picked.update(np.flatnonzero(got).tolist())

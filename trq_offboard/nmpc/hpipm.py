@@ -23,8 +23,8 @@ like, column-major), not the `*_set_all` ones whose argument lists changed betwe
 Setting a QP takes one call per field and stage, costly through ctypes (measured:
 docs/decisions/2026-12-02-figures-from-comments.md), so with a C compiler a small shim (`_SHIM`,
 compiled once and cached by `cache.compiled_c`, linked against the same libhpipm) makes them and
-the solve in one call; without one the loop runs in Python. `available()` says whether the library was found and loaded; the caller falls back to
-CasADi's conic interface when it was not.
+the solve in one call; without one the loop runs in Python. `available()` says whether the
+library was found and loaded; the caller falls back to CasADi's conic interface when it was not.
 """
 
 from __future__ import annotations
