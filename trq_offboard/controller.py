@@ -101,6 +101,10 @@ def _interp_with(x: np.ndarray, w) -> np.ndarray:
 
 
 class Controller:
+    """One controller file's controller (see the module docstring): its parts built once
+    (`solver`: another Solver instead of the file's, e.g. a test's), then reset, step and
+    prepare; `cpu_ns` the CPU clock that times the parts (a measurement only)."""
+
     def __init__(self, cfg: ControllerConfig, solver: Solver | None = None,
                  cpu_ns: Callable[[], int] = time.thread_time_ns) -> None:
         self.cfg = cfg
