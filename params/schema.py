@@ -374,7 +374,7 @@ class SolverFile(Strict):
     hessian: Choice("gauss_newton", "exact")
     max_iterations: Int(1, 100)
     tolerance: Num(0.0, 1.0)
-    qp_solver: Choice("qrqp", "osqp", "qpoases", "hpipm", "daqp", "proxqp")
+    qp_solver: Choice("qrqp", "osqp", "hpipm")
     regularization: Num(0.0, 1e3)
     ipopt_max_iterations: Int(1, 10_000)
     codegen: Choice("auto", "off") = "auto"
@@ -411,7 +411,6 @@ class ControllerFile(Strict):
     delay_compensation: Choice("predict", "none", "auto") = "auto"
     lagged_actuators: _ON_OFF_AUTO = "auto"
     actuator_states: _ON_OFF_AUTO = "auto"
-    tilt_rate_limit: Choice("horizon", "first_step") = "horizon"
     motor_effectiveness: Optional[Effectiveness] = None
     control_rate_hz: Int(1, 1000)
     horizon: Horizon

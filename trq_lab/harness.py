@@ -29,9 +29,8 @@ The flight ends when `OffboardFlight.run()` returns (landed and disarmed), or `c
 simulated seconds after a crash, or at `timeout_s` of simulated time. It writes `flight.csv`
 (`trq_wire.logfile.CsvLog`, columns `sil_vehicle.sitl.LOG_COLUMNS`) and `controller.csv`
 (`trq_offboard.log.ControllerLog`) in `out_dir`, so `trq_lab.metrics` computes the same metrics
-as for a scenario run. The controller's solve goes through `run_in_executor`, on an executor
-that runs it inline by default (one thread per flight, as the daemon calls it from its flight
-loop; `inline_solve=False`: a worker thread, as the daemon's --worker-thread).
+as for a scenario run. The flight loop calls the controller's step and preparation in its own
+thread, as in the daemon.
 
 The same loop serves the tests and the benchmark (`trq_lab.bench.nmpc`):
 
@@ -49,9 +48,8 @@ The same loop serves the tests and the benchmark (`trq_lab.bench.nmpc`):
   their own). The controller's period runs from the vehicle's hand-over
   (the end of its ticks) to the end of `prepare`, less the time the vehicle spends inside the
   controller's sends (decoding and handling the target): the telemetry's parse, the flight
-  loop's turn, the step, the target's encode, the log and `prepare`. It is measured in the
-  loop's thread (`inline_solve=True`; with a worker thread it is NaN, as the vehicle then flies
-  while the controller prepares);
+  loop's turn, the step, the target's encode, the log and `prepare`, measured in the loop's
+  thread;
 - scripted events (`script`: the mappings of a fault script's `events`, wind or faults at a
   time) are played by the vehicle itself, as `--faults` files are.
 
@@ -61,7 +59,6 @@ Measuring changes nothing that is flown: a traced flight is bit for bit the untr
 from __future__ import annotations
 
 import asyncio
-import concurrent.futures
 import dataclasses
 import hashlib
 import json
@@ -77,6 +74,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 if TYPE_CHECKING:
     from sil_vehicle.vehicle import VehicleState
+    from trq_offboard.loop import FlightController
     from trq_offboard.records import ActuatorCommand, ReferenceSample, StateEstimate, StepInfo
 
 PARAMS = trq_params.DIR
@@ -95,19 +93,6 @@ class _Connection:
 
     def __str__(self) -> str:
         return "inprocess:memory"
-
-
-class _InlineExecutor(concurrent.futures.ThreadPoolExecutor):
-    """`run_in_executor` on this executor calls the function at once in the loop's thread (the
-    vehicle waits for the answer anyway): no thread hand-off per control step."""
-
-    def submit(self, fn, /, *args, **kwargs):
-        fut: concurrent.futures.Future = concurrent.futures.Future()
-        try:
-            fut.set_result(fn(*args, **kwargs))
-        except BaseException as exc:  # handed to the awaiting coroutine, as a thread would
-            fut.set_exception(exc)
-        return fut
 
 
 class Timer(Protocol):
@@ -167,11 +152,10 @@ class _Meter:
     `_MeteredController`), the vehicle's share of the controller's sends (`InMemoryLink`), the
     period's opening (the vehicle's hand-over); builds a StepSample at the end of prepare."""
 
-    def __init__(self, timer: Timer, samples: list | None, on_step, inline: bool) -> None:
+    def __init__(self, timer: Timer, samples: list | None, on_step) -> None:
         self.timer = timer
         self.samples = samples
         self.on_step = on_step
-        self.inline = inline                 # the step runs in the loop's thread
         self.open = (math.nan, math.nan)
         self.vehicle = [0.0, 0.0]            # wall, cpu of the vehicle inside the window
         self.step = (math.nan, math.nan)
@@ -185,11 +169,8 @@ class _Meter:
         r, self.record = self.record, None
         if r is None:
             return
-        if self.inline:
-            period = (end[0] - self.open[0] - self.vehicle[0],
-                      end[1] - self.open[1] - self.vehicle[1])
-        else:
-            period = (math.nan, math.nan)
+        period = (end[0] - self.open[0] - self.vehicle[0],
+                  end[1] - self.open[1] - self.vehicle[1])
         sample = StepSample(r.t_s, r.stamp_us, r.state, r.ref, r.cmd, r.applied, r.info,
                             self.step[0], self.step[1], prep_wall, prep_cpu, *period)
         if self.samples is not None:
@@ -198,13 +179,20 @@ class _Meter:
             self.on_step(sample)
 
 
-class _MeteredStep:
-    """A controller without `prepare` as `OffboardFlight` sees it (reset, step), timing the
-    step; its sample is complete with the step's record."""
+class _MeteredController:
+    """A controller as `OffboardFlight` sees it (loop.FlightController), timing its step and
+    its preparation: the sample is complete after the preparation."""
 
-    def __init__(self, inner, meter: _Meter) -> None:
+    def __init__(self, inner: FlightController, meter: _Meter) -> None:
         self.inner = inner
         self._meter = meter
+
+    @property
+    def last_prepare_cpu_ns(self) -> int:
+        return self.inner.last_prepare_cpu_ns
+
+    def solver_line(self) -> str:
+        return self.inner.solver_line()
 
     def reset(self, *args, **kwargs):
         return self.inner.reset(*args, **kwargs)
@@ -217,23 +205,12 @@ class _MeteredStep:
         self._meter.step = (w1 - w0, c1 - c0)
         return out
 
-
-class _MeteredController(_MeteredStep):
-    """A controller with `prepare` (as `Controller`): the sample is complete after it."""
-
     def prepare(self, reference) -> None:
         timer = self._meter.timer
         w0, c0 = timer.wall_s(), timer.cpu_s()
         self.inner.prepare(reference)
         w1, c1 = timer.wall_s(), timer.cpu_s()
         self._meter.close(w1 - w0, c1 - c0, (w1, c1))
-
-
-def _metered(ctl, meter: _Meter):
-    """`ctl` timed, offering `prepare` only if it has one: OffboardFlight awaits a prepare
-    that exists, and an extra await would change the order of the loop's callbacks."""
-    cls = _MeteredController if hasattr(ctl, "prepare") else _MeteredStep
-    return cls(ctl, meter)
 
 
 class InMemoryLink:
@@ -355,14 +332,8 @@ def build_controller(cfg):
     ctl = _CONTROLLERS.get(key)
     if ctl is None:
         ctl = _CONTROLLERS[key] = Controller(cfg)
-    _zero_multipliers(ctl)
+    ctl.solver.zero_multipliers()
     return ctl
-
-
-def _zero_multipliers(ctl) -> None:
-    lam = getattr(ctl.solver, "_lam", None)
-    if lam is not None:
-        lam[:] = 0.0
 
 
 # --- scripted events -------------------------------------------------------------------------
@@ -468,7 +439,7 @@ async def _fly(sitl, flight, link, *, timeout_us: int, crash_grace_us: int,
 def fly_inprocess(controller, sim, fault_events=(), seed: int | None = None, *,
                   out_dir: Path | None = None, reference: dict | None = None,
                   timeout_s: float = 600.0, crash_grace_s: float = 1.0,
-                  inline_solve: bool = True, name: str | None = None, trace: bool = False,
+                  name: str | None = None, trace: bool = False,
                   on_step: Callable[[StepSample], None] | None = None,
                   timer: Timer | None = None) -> FlightResult:
     """Fly one lockstep flight in this process; with out_dir, write out_dir/flight.csv and
@@ -489,6 +460,7 @@ def fly_inprocess(controller, sim, fault_events=(), seed: int | None = None, *,
     from sil_vehicle.mavlink.codec import Codec
     from sil_vehicle.sitl import LOG_COLUMNS, Sitl
     from trq_offboard.config import ControllerConfig, load_controller
+    from trq_offboard.controller import Controller
     from trq_offboard.log import ControllerLog, solver_header
     from trq_offboard.loop import OffboardFlight
     from trq_offboard.reference import Reference
@@ -504,7 +476,7 @@ def fly_inprocess(controller, sim, fault_events=(), seed: int | None = None, *,
         cfg = controller
         if reference:
             raise ValueError("reference: give it in the ControllerConfig")
-    elif hasattr(controller, "step") and hasattr(controller, "cfg"):
+    elif isinstance(controller, Controller):
         built, cfg = controller, controller.cfg
         if reference:
             raise ValueError("reference: give it in the Controller's config")
@@ -523,7 +495,7 @@ def fly_inprocess(controller, sim, fault_events=(), seed: int | None = None, *,
         ctl = build_controller(cfg)
     else:
         ctl = built
-        _zero_multipliers(ctl)
+        ctl.solver.zero_multipliers()
     sitl = Sitl(sim)
     flight_log = clog = None
     if out_dir is not None:
@@ -539,38 +511,30 @@ def fly_inprocess(controller, sim, fault_events=(), seed: int | None = None, *,
                               "frames": "world NED, body FRD", **solver_header(ctl)})
     samples: list[StepSample] | None = [] if trace else None
     truth: list | None = [] if trace else None
-    meter = (_Meter(timer, samples, on_step, inline_solve)
-             if trace or on_step is not None else None)
+    meter = _Meter(timer, samples, on_step) if trace or on_step is not None else None
     record = clog
     if meter is not None:
-        has_prepare = hasattr(ctl, "prepare")
 
         def record(r) -> None:
             if clog is not None:
                 clog(r)
             meter.record = r
-            if not has_prepare:
-                end = (timer.wall_s(), timer.cpu_s())
-                meter.close(0.0, 0.0, end)
     try:
         sitl.log_sink = flight_log
         sitl.schedule(fault_events)
         link = InMemoryLink(sitl, Codec(counters=sitl.counters["offboard"]), lambda: None,
                             meter)
         flight = OffboardFlight(
-            link, ctl if meter is None else _metered(ctl, meter),
+            link, ctl if meter is None else _MeteredController(ctl, meter),
             lambda state, airborne=False: Reference(
                 cfg.reference, state.pos_ned_m, state.euler_rad[2], airborne=airborne,
                 ground_down_m=0.0 if airborne else None),
             name=name or cfg.name,
             tilt_limit_rad=tilt_half_range(cfg.vehicle.tilt_min_rad, cfg.vehicle.tilt_max_rad),
-            # inline: called directly, no event-loop turn; nobody to yield the core to (the
-            # vehicle is this thread)
-            record=record, direct=inline_solve, yield_core=False)
+            # nobody to yield the core to (the vehicle is this thread)
+            record=record, yield_core=False)
 
         async def main() -> tuple[str, str]:
-            if inline_solve:
-                asyncio.get_running_loop().set_default_executor(_InlineExecutor(max_workers=1))
             return await _fly(sitl, flight, link, timeout_us=int(round(timeout_s * 1e6)),
                               crash_grace_us=int(round(crash_grace_s * 1e6)), meter=meter,
                               truth=truth)
@@ -622,9 +586,6 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", type=Path, required=True, help="output directory")
     ap.add_argument("--only", action="append", default=None,
                     help="fly only this controller (repeatable)")
-    ap.add_argument("--thread", action="store_true",
-                    help="solve in a worker thread (as the daemon's --worker-thread) instead "
-                         "of inline")
     args = ap.parse_args(argv)
     try:
         sc = run_scenario.load_scenario(trq_params.resolve("scenarios", args.scenario))
@@ -647,7 +608,7 @@ def main(argv: list[str] | None = None) -> int:
         ev = load_script(sc.faults, (math.degrees(vp.tilt_min_rad),
                                      math.degrees(vp.tilt_max_rad))) if sc.faults else ()
         res = fly_inprocess(cfg, sim, ev, out_dir=args.out / c,
-                            timeout_s=sc.timeout_s, inline_solve=not args.thread, name=c)
+                            timeout_s=sc.timeout_s, name=c)
         m = flight_metrics(res.out_dir, c, onset, sc.recovery_threshold_m)
         m.update(status=res.status, wall_s=round(res.wall_s, 2), sim_s=round(res.sim_s, 3),
                  flight_csv_sha=fingerprint(res.flight_csv))

@@ -391,7 +391,7 @@ def main(argv: list[str] | None = None) -> int:
                     help="run each vehicle process under this command, e.g. 'taskset -c 0'")
     ap.add_argument("--controller-args", default=None, metavar="ARGS",
                     help="more options for each controller process (trq-offboard's), given "
-                         "with '=': --controller-args=--worker-thread")
+                         "with '=': --controller-args='--connect-timeout 60 -v'")
     ap.add_argument("--signing-key-file", type=Path, default=None,
                     help="fly with MAVLink 2 signing (both daemons get the key file)")
     ap.add_argument("--link", choices=LINKS, default="udp",

@@ -1,4 +1,21 @@
 """Offboard controller of the tilt-rotor quadcopter: NMPC + extended state observer + control
 allocation, flying a vehicle through MAVLink alone (it never imports sil_vehicle). What both
 ends of the wire must compute identically (signing, actuator scaling, log files, the compiled-code
-cache) comes from trq_wire."""
+cache) comes from trq_wire.
+
+    config          the controller and vehicle files, loaded and checked (ControllerConfig)
+    model/          the prediction model in CasADi (PredictionModel: dynamics, b0)
+    allocation      body wrench <-> throttles and tilts (the hover trim)
+    eso             the extended state observer (the disturbance d)
+    predictor       the delay predictor: the commands sent, the actuators' walk, the state when
+                    the command acts, the observer's b0 under the commands in effect
+    effectiveness   the motor effectiveness observer and its composition with the model
+    nmpc/           the OCP and its solvers (base, rti, solver, factory; hpipm, feedback, cache)
+    controller      Controller: the parts composed; step, prepare, the fallback
+    reference       the flight's plan (Reference, ConstantReference)
+    records         typed records across module boundaries
+    loop            the offboard flight over MAVLink (OffboardFlight)
+    link/           the MAVLink transport and the wire's arithmetic
+    log, diagnosis  controller.csv; the motors' estimates for the ground station
+    daemon          trq-offboard: the flight loop with its link, logs and signals
+"""

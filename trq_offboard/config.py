@@ -248,8 +248,6 @@ class ControllerConfig:
                                           # observer's b0 and the predictor through the lags
     actuator_states: str = "auto"         # on | off | auto (on when predicting): the NMPC's
                                           # stage state carries the actuators' lag states
-    tilt_rate_limit: str = "horizon"      # horizon | first_step: where the NMPC enforces the
-                                          # servos' rate limit (nmpc/ocp.py)
     effectiveness: EffectivenessConfig | None = None   # motor_effectiveness (None: off)
 
     @property
@@ -310,7 +308,7 @@ def controller_config(c: schema.ControllerFile, file: str) -> ControllerConfig:
                             c.constraints.max_roll_pitch_deg, c.constraints.max_body_rate_rad_s,
                             solver, reference, c.applied_input, c.applied_delay_s,
                             c.delay_compensation, c.lagged_actuators, c.actuator_states,
-                            c.tilt_rate_limit, effectiveness)
+                            effectiveness)
 
 
 def load_controller(path: Path | str) -> ControllerConfig:

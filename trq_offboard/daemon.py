@@ -71,11 +71,6 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--signing-key-file", type=Path, default=None,
                    help="MAVLink 2 signing: a file with the 32-byte secret as 64 hex characters; "
                         "everything sent is signed and only signed, fresh telemetry is trusted")
-    p.add_argument("--worker-thread", action="store_true",
-                   help="run the step and the preparation on a worker thread, one job a period, "
-                        "instead of in the event loop's thread (the default: no thread "
-                        "hand-off, less CPU a period); may help where two lockstep flights share "
-                        "two busy cores (docs/decisions/2026-12-04-direct-calls-default.md)")
     p.add_argument("--connect-timeout", type=float, default=30.0,
                    help="seconds to wait for the vehicle's heartbeat")
     p.add_argument("-v", "--verbose", action="store_true", help="debug logging")
@@ -146,7 +141,7 @@ def main(argv: list[str] | None = None,
         name=cfg.name,
         tilt_limit_rad=tilt_half_range(cfg.vehicle.tilt_min_rad, cfg.vehicle.tilt_max_rad),
         record=clog,
-        connect_timeout_s=args.connect_timeout, direct=not args.worker_thread)
+        connect_timeout_s=args.connect_timeout)
 
     async def _main() -> int:
         await link.open()

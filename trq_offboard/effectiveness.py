@@ -9,14 +9,15 @@ the NMPC that the motor's loss will keep growing as its output falls behind, nor
 command buys only e_i of the thrust. This observer reads the same d as motor outputs and estimates
 e_i, so that the NMPC can plan with it (controller.py: the effective throttle e_i c_i).
 
-Per control step (controller.py):
+Per control step (`MotorEffectiveness.step`, which composes the observer with the prediction
+model's deficit functions and the delay predictor's walk; the Controller owns one):
   1. the outputs the motors would produce if healthy, y_nom (the commands in effect through the
      motors' lags: what the observer's b0 flies), and the model's sensitivity of the vertical
      (NED z) and the body roll and pitch accelerations to each motor's throttle at y_nom;
-  2. isolation (Controller._motor_deficit): the deficit of each motor alone that best explains
-     the disturbance's vertical, roll and pitch parts in least squares; the motor whose deficit
-     (< 0) explains the largest share takes it, refined by Gauss-Newton on the quadratic thrust
-     and torque curves (exact to 1e-3 % of throttle); the other motors get none. So
+  2. isolation (MotorEffectiveness.motor_deficit): the deficit of each motor alone that best
+     explains the disturbance's vertical, roll and pitch parts in least squares; the motor whose
+     deficit (< 0) explains the largest share takes it, refined by Gauss-Newton on the quadratic
+     thrust and torque curves (exact to 1e-3 % of throttle); the other motors get none. So
      y_meas = y_nom + that deficit. Yaw is left out (the rotors' drag torque moves it little: a
      small yaw disturbance would read as a large deficit) and so is the horizontal force (wind).
      One fault at a time: a second motor's loss stays in the additive d; and a torque from
@@ -51,8 +52,10 @@ import casadi as ca
 import numpy as np
 
 from trq_offboard.config import EffectivenessConfig
+from trq_offboard.model import PredictionModel
+from trq_offboard.predictor import DelayPredictor
 
-__all__ = ["MotorEffectivenessObserver"]
+__all__ = ["MotorEffectivenessObserver", "MotorEffectiveness"]
 
 
 class MotorEffectivenessObserver:
@@ -155,3 +158,132 @@ class MotorEffectivenessObserver:
         self.y, self.e = y, e
         self._y_meas_prev = y_meas.copy()
         return e.copy()
+
+
+class MotorEffectiveness:
+    """The motor effectiveness observer composed with the prediction model (the motors' deficit
+    that explains the disturbance, their share of it) and the delay predictor (the commands in
+    effect, the actuators' walk in effective throttles): steps 1 to 4 above, per control step.
+    Its compiled functions are built with the controller's (`functions`, then `bind`)."""
+
+    def __init__(self, observer: MotorEffectivenessObserver, model: PredictionModel,
+                 predictor: DelayPredictor) -> None:
+        self.observer = observer
+        self.model = model
+        self.predictor = predictor
+        self._nt = 4 if model.tilting else 0           # where the throttles start in u
+        self._deficit_fn = self._effective_fn = None
+
+    def functions(self) -> dict[str, ca.Function]:
+        """The functions to compile (nmpc/cache.py), by name, for `bind`: the motors' deficit
+        and a regular period of `step` (one command in effect) in one."""
+        return {"deficit": self._deficit_function(), "effective": self._effective_function()}
+
+    def bind(self, built: dict) -> None:
+        """The compiled `functions` (NumpyFunction by name)."""
+        self._deficit_fn, self._effective_fn = built["deficit"], built["effective"]
+
+    def motor_deficit(self, x: np.ndarray, d: np.ndarray, y_nom: np.ndarray) -> np.ndarray:
+        """The motors' outputs less their healthy ones y_nom (4, throttle %) that explain the
+        disturbance d: one motor at a time, the one whose pattern (the model's sensitivity of
+        the vertical, roll and pitch accelerations to its throttle) explains most of d[2:5]
+        with a deficit; the others 0. One call of the compiled `_deficit_function`."""
+        return self._deficit_fn(x, d, y_nom)
+
+    def _deficit_function(self) -> ca.Function:
+        """`motor_deficit` as one CasADi function (x, d, y_nom) -> dz (generated as C and
+        compiled once): each motor's least-squares deficit alone and its share of |r|^2
+        (r = d[2:5]), the first motor with the largest share (np.argmax's), and for it, if it
+        explains some of r with a deficit, Gauss-Newton on |A(y + delta) - A(y) - r| (the
+        thrust and torque curves are quadratic in the throttle: the change A is the mean of the
+        two end slopes times delta, exactly) from the tangent's estimate, 3 steps (quadratic
+        convergence), clamped to a deficit. Every motor's candidate is computed and the chosen
+        one selected: the same operations in the same order as the plain-float specification
+        that a test (test_ctrl_effectiveness.py) holds it to."""
+        nt, nu = self._nt, self.model.nu
+        jac_fn = self.model.motor_jacobian.fn
+        x, d, y = ca.SX.sym("x", 12), ca.SX.sym("d", 6), ca.SX.sym("y_nom", nu)
+        r = d[2:5]
+        jac = jac_fn(x, y)[0:3, :]
+
+        def dot3(a, b):
+            return (a[0] * b[0] + a[1] * b[1]) + a[2] * b[2]
+
+        num = [dot3(jac[:, j], r) for j in range(4)]
+        den = [ca.fmax(dot3(jac[:, j], jac[:, j]), 1e-12) for j in range(4)]
+        fit = [ca.if_else(num[j] < 0.0, num[j] * num[j] / den[j], -1.0) for j in range(4)]
+        deficit = []
+        for j in range(4):
+            delta, col0 = num[j] / den[j], jac[:, j]
+            for _ in range(3):
+                u_end = ca.vertcat(y[:nt + j], y[nt + j] + delta, y[nt + j + 1:])
+                col1 = jac_fn(x, u_end)[0:3, j]
+                rho = 0.5 * (col0 + col1) * delta - r
+                delta = delta - dot3(col1, rho) / ca.fmax(dot3(col1, col1), 1e-12)
+            deficit.append(ca.fmin(0.0, delta))
+        best, pick = fit[0], ca.SX(0)
+        for j in range(1, 4):                          # the first of the largest (np.argmax)
+            better = fit[j] > best
+            best, pick = ca.if_else(better, fit[j], best), ca.if_else(better, j, pick)
+        dz = ca.vertcat(*[ca.if_else(ca.logic_and(pick == j, best > 0.0), deficit[j], 0.0)
+                          for j in range(4)])
+        return ca.Function(f"motor_deficit_{nu}", [x, d, y], [dz], ["x", "d", "y_nom"], ["dz"])
+
+    def _effective_function(self) -> ca.Function:
+        """`step` over a period with one command in effect, as one CasADi function of
+        (x, d, y_nom, the effectiveness observer's y, e and last measured outputs, the
+        command's throttles c, [dur, 0, dt, n]) -> (y, e, y_meas, d less the motors' share):
+        the deficit, the observer's piece and b0(y_true) - b0(y_nom) composed symbolically,
+        each the same operations as its own compiled function in `step`'s order."""
+        nt, nu = self._nt, self.model.nu
+        x, d, y_nom = ca.SX.sym("x", 12), ca.SX.sym("d", 6), ca.SX.sym("y_nom", nu)
+        y, e, y0, c = (ca.SX.sym(name, 4) for name in ("y", "e", "y0", "c"))
+        p = ca.SX.sym("p", 4)
+        dz = self._deficit_function()(x, d, y_nom)
+        y_meas = y_nom[nt:] + dz
+        y1, e1, _ = self.observer.piece_function()(y, e, y0, y_meas, c, p)
+        y_true = ca.vertcat(y_nom[:nt], y1)
+        b0 = self.model.b0.fn
+        share = b0(x, y_true) - b0(x, y_nom)
+        d1 = d - share[[0, 1, 2, 6, 7, 8]]
+        return ca.Function(f"effective_step_{nu}_{self.observer.cfg.substeps}",
+                           [x, d, y_nom, y, e, y0, c, p], [y1, e1, y_meas, d1],
+                           ["x", "d", "y_nom", "y", "e", "y_meas_prev", "c", "p"],
+                           ["y_next", "e_next", "y_meas", "d_less_share"])
+
+    def step(self, x, d, y_nom, t0, t1, t_act, ocp):
+        """Advance the observer over [t0, t1] and return (d less the motors' share, the
+        predictor's actuator path over [t1, t_act] and the actuators' outputs at t_act, both in
+        effective throttles, and the plan's throttle scale: 1 but e for the throttles), the
+        scale also set as `ocp`'s throttle bounds. y_nom: the actuators' outputs at t1 if
+        the motors were healthy (the observer's b0 flies those)."""
+        nt, eff = self._nt, self.observer
+        segs = self.predictor.in_effect(t0, t1) if t1 > t0 else []
+        n = eff.piece_steps(segs[0][1] - segs[0][0]) if len(segs) == 1 else 0
+        if n and self._effective_fn is not None:         # one command in effect: one call
+            lo, hi, u = segs[0]
+            y, e, y_meas, d = self._effective_fn.outputs(
+                x, d, y_nom, eff.y, eff.e, eff._y_meas_prev, u[nt:], (hi - lo, 0.0, t1 - t0, n))
+            eff.advance(y, e, y_meas)
+            return self._end(e, y_nom, d, t1, t_act, ocp)
+        dz = self.motor_deficit(x, d, y_nom)
+        if t1 > t0:
+            e = eff.update(y_nom[nt:] + dz, [(hi - lo, u[nt:]) for lo, hi, u in segs], t1 - t0)
+        else:
+            e = eff.e.copy()
+        y_true = y_nom.copy()
+        y_true[nt:] = eff.y
+        share = self.predictor.b0(x, y_true) - self.predictor.b0(x, y_nom)
+        return self._end(e, y_nom, d - share[[0, 1, 2, 6, 7, 8]], t1, t_act, ocp)
+
+    def _end(self, e, y_nom, d, t1, t_act, ocp):
+        """`step`'s result once the observer has its e and outputs: the plan's throttle scale
+        (set as `ocp`'s bounds), and the predictor's walk from the estimated outputs."""
+        nt = self._nt
+        scale = np.ones(self.model.nu)
+        scale[nt:] = e
+        ocp.set_throttle_scale(e)
+        y_true = y_nom.copy()
+        y_true[nt:] = self.observer.y
+        path, y_act = self.predictor.walk_from(y_true, t1, t_act, scale)
+        return d, path, y_act, scale

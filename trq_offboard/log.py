@@ -13,14 +13,14 @@ the thread that ran it: cpu_observer_ms, cpu_effectiveness_ms, cpu_predictor_ms,
 cpu_feedback_ms (the step's parts), cpu_prepare_ms (the preparation after the command),
 cpu_wire_ms (the state's decode, the target's encode and send), cpu_log_ms (this log's share),
 cpu_period_ms (the whole period, every thread of the process: the parts, the event loop, the
-transport's frame parse, with --worker-thread the hand-offs to that thread)."""
+transport's frame parse)."""
 
 from __future__ import annotations
 
 import math
 from pathlib import Path
 
-from trq_offboard.loop import StepRecord
+from trq_offboard.loop import FlightController, StepRecord
 from trq_wire.logfile import CsvLog
 
 CPU_PARTS = ("observer", "effectiveness", "predictor", "feedback", "prepare", "wire", "log",
@@ -43,11 +43,9 @@ def _ms(ns: int) -> float:
     return ns * 1e-6 if ns >= 0 else math.nan
 
 
-def solver_header(controller) -> dict:
-    """The header's `solver` line (what solved the NMPC, Controller.solver_line), where the
-    controller can say it: a measurement device such as the period floor's replay need not."""
-    line = getattr(controller, "solver_line", None)
-    return {"solver": line()} if line is not None else {}
+def solver_header(controller: FlightController) -> dict:
+    """The header's `solver` line: what solved the NMPC (Controller.solver_line)."""
+    return {"solver": controller.solver_line()}
 
 
 class ControllerLog:

@@ -6,36 +6,29 @@ time it is simply an event-driven controller. A repeated stamp (the vehicle rese
 gets the same target again; an older stamp is stale and ignored: no command is ever computed from
 an old state.
 
-The controller's step and preparation are called from the flight loop by default (`direct`): no
+The controller's step and preparation are called from the flight loop, in its thread: no
 thread hand-off and no event-loop turn a period. Once the answer is sent the loop yields its core
 (os.sched_yield) to whoever the answer woke, before the log and the preparation
 (`yield_core=False`: not, where the answer woke nobody, as in the in-process harness, whose
-vehicle runs in the same thread). `direct=False` runs them on a worker thread instead, as one job
-a period: the worker steps, hands the command to the event loop (which sends it at once) and goes
-straight on to the preparation of the next step (`executor`: a concurrent.futures.Executor that
-runs one job at a time, so that the next step waits for the preparation; None: the flight's own
-one-thread executor). Measured (docs/decisions/2026-12-04-direct-calls-default.md): direct costs
-less CPU a period and flies the demo's parallel flights as fast on a quiet machine; the worker
-thread helped two lockstep flights on two busy cores once
-(docs/decisions/2026-12-02-flight-loop-direct-calls.md).
+vehicle runs in the same thread). Why (and the worker thread this replaced):
+docs/decisions/2026-12-04-direct-calls-default.md.
 
 Every period is timed by part with injected CPU clocks: `cpu_ns` (default time.thread_time_ns:
 the calling thread's) for the wire (the telemetry's decode into a state, the target's encode and
 send) and the log, `process_cpu_ns` (default time.process_time_ns: every thread's) for the whole
-period; the controller times its own step's parts and its preparation in the thread that runs
-them. StepRecord.cpu holds them, completed as the period runs (records.PeriodTimes).
+period; the controller times its own step's parts and its preparation. StepRecord.cpu holds
+them, completed as the period runs (records.PeriodTimes).
 """
 
 from __future__ import annotations
 
 import asyncio
-import concurrent.futures
 import logging
 import math
 import os
 import time
 from dataclasses import dataclass, field
-from typing import Callable
+from typing import Callable, Protocol
 
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
@@ -50,6 +43,7 @@ from trq_offboard.records import (
     StateEstimate,
     StepInfo,
 )
+from trq_offboard.reference import FlightReference
 
 log = logging.getLogger("trq_offboard")
 _sched_yield = getattr(os, "sched_yield", None)      # POSIX; None elsewhere
@@ -60,9 +54,8 @@ MAX_MODE_REQUESTS = 5
 TOUCHDOWN_SPEED_M_S = 0.15
 IDLE_STEPS_BEFORE_DISARM = 10
 ACK_TIMEOUT_VEHICLE_US = 300_000   # a command's ACK missing this long in vehicle time: resend
-# tries of a command (arming, disarming) before giving up: with 10 % loss each way a try fails
-# 19 % of the time; three tries failed a landed flight's disarm in 1 campaign flight of 12
-# (params/campaigns/lossy_link_seeds.yaml), six fail about once in 20,000
+# tries of a command (arming, disarming) before giving up, enough for a lossy link (measured:
+# docs/decisions/2026-12-02-figures-from-comments.md)
 COMMAND_TRIES = 6
 LAND_DETECT_S = 0.2                # on the ground and still this long while landing: landed
 IDLE = ActuatorCommand((0.0,) * 4, (0.0,) * 4)   # motors at idle, tilts centred
@@ -116,32 +109,34 @@ class FlightSummary:
                 f"{'disarmed' if self.disarmed else 'armed'}")
 
 
-def _settle(fut: asyncio.Future, result, error: BaseException | None) -> None:
-    """The worker's answer into the awaiting future (unless the wait was cancelled)."""
-    if fut.done():
-        return
-    if error is not None:
-        fut.set_exception(error)
-    else:
-        fut.set_result(result)
+class FlightController(Protocol):
+    """What the flight loop uses of a controller (trq_offboard.controller.Controller)."""
+
+    last_prepare_cpu_ns: int      # the CPU of the last `prepare`
+
+    def reset(self, t_s: float, state: StateEstimate,
+              applied: ActuatorCommand | None = None) -> None: ...
+
+    def step(self, t_s: float, state: StateEstimate, applied: ActuatorCommand | None,
+             reference: FlightReference) -> tuple[ActuatorCommand, StepInfo | None]: ...
+
+    def prepare(self, reference: FlightReference) -> None: ...
+
+    def solver_line(self) -> str: ...   # what solves the NMPC, for the log's header
 
 
 class OffboardFlight:
-    def __init__(self, link: MavlinkUdp, controller, make_reference: Callable, *,
-                 name: str, tilt_limit_rad: float, record: Callable[[StepRecord], None] | None = None,
+    def __init__(self, link: MavlinkUdp, controller: FlightController,
+                 make_reference: Callable[..., FlightReference], *,
+                 name: str, tilt_limit_rad: float,
+                 record: Callable[[StepRecord], None] | None = None,
                  connect_timeout_s: float = 30.0, telemetry_timeout_s: float = 2.0,
                  telemetry_lost_s: float = 10.0, ack_timeout_s: float = 1.0,
-                 executor=None, direct: bool = True, yield_core: bool = True,
+                 yield_core: bool = True,
                  cpu_ns: Callable[[], int] = time.thread_time_ns,
                  process_cpu_ns: Callable[[], int] = time.process_time_ns) -> None:
         self.link = link
-        self.executor = executor        # where step and prepare run, one job at a time (None:
-        self._own_executor = None       # a one-thread executor of the flight's own)
-        self._prepare_ns = 0            # the last preparation's CPU (set by the worker)
-        self._prepared_ns = 0           # the one before this step (handed over with it)
-        self._prepare_error: BaseException | None = None
-        self.direct = direct            # called from the flight loop, or on the worker
-        self.yield_core = yield_core and _sched_yield is not None   # direct: after the answer
+        self.yield_core = yield_core and _sched_yield is not None   # after the answer
         self.cpu_ns = cpu_ns                    # the loop thread's parts (wire, log)
         self.process_cpu_ns = process_cpu_ns    # the whole period: every thread of the process
         self._wire_ns = 0               # the wire's CPU since the last step's start
@@ -268,61 +263,6 @@ class OffboardFlight:
         self.link.send(self._last_target)
         self._wire_ns += self.cpu_ns() - c0
 
-    def _worker(self) -> concurrent.futures.Executor:
-        if self.executor is not None:
-            return self.executor
-        if self._own_executor is None:
-            self._own_executor = concurrent.futures.ThreadPoolExecutor(
-                max_workers=1, thread_name_prefix="trq-step")
-        return self._own_executor
-
-    async def _step(self, prepare, t, state, applied, reference):
-        """The controller's step: called directly with `direct` (its preparation is the
-        caller's), else one job on the worker that steps, hands the result over and then runs
-        `prepare` (if any) while the event loop sends the answer. The next job, queued behind
-        that preparation, hands over with its answer the preparation's CPU (in
-        `_prepared_ns`) or its exception (raised here, before any step from it)."""
-        if self.direct:
-            return self.controller.step(t, state, applied, reference)
-        loop = asyncio.get_running_loop()
-        answer = loop.create_future()
-        self._worker().submit(self._job, loop, answer, prepare, (t, state, applied, reference))
-        result, self._prepared_ns = await answer
-        return result
-
-    def _job(self, loop, answer, prepare, args) -> None:
-        """On the worker thread: the last preparation's outcome, step, answer, prepare."""
-        before, error = self._prepare_ns, self._prepare_error
-        self._prepare_error = None
-        result = None
-        if error is None:
-            try:
-                result = self.controller.step(*args)
-            except BaseException as exc:  # handed to the awaiting coroutine
-                error = exc
-        try:
-            loop.call_soon_threadsafe(_settle, answer, (result, before), error)
-        except RuntimeError:          # the event loop has closed: nobody is waiting
-            return
-        if error is not None or prepare is None:
-            return
-        reference = args[3]
-        try:
-            prepare(reference)
-            self._prepare_ns = getattr(self.controller, "last_prepare_cpu_ns", -1)
-        except Exception as exc:
-            self._prepare_error = exc
-
-    async def _last_prepared(self, rec: StepRecord | None, prepare) -> None:
-        """The flight loop ends: wait for the worker's last preparation, close its record."""
-        if self.direct or rec is None or prepare is None:
-            return
-        await asyncio.wrap_future(self._worker().submit(lambda: None))
-        rec.cpu.prepare_ns = self._prepare_ns
-        if self._prepare_error is not None:
-            exc, self._prepare_error = self._prepare_error, None
-            raise exc
-
     async def _heartbeats(self) -> None:
         while True:
             self.link.send(wire.heartbeat())
@@ -335,9 +275,6 @@ class OffboardFlight:
             return await self._fly()
         finally:
             beat.cancel()
-            if self._own_executor is not None:
-                self._own_executor.shutdown(wait=False)
-                self._own_executor = None
             if self._mode_task is not None:
                 self._mode_task.cancel()
 
@@ -372,7 +309,6 @@ class OffboardFlight:
         pending: wire.Odometry | None = first
         prev: StepRecord | None = None       # the last period's record, its period to close
         prev_start = 0
-        prepare = getattr(self.controller, "prepare", None)
         while True:
             odo = pending if pending is not None else await self._next_odometry()
             pending = None
@@ -394,14 +330,12 @@ class OffboardFlight:
                 down_since = None
             applied = self.applied
             wire_rx, self._wire_ns = self._wire_ns, 0     # this state's decode
-            cmd, info = await self._step(prepare, t, odo.state, applied, reference)
-            if prev is not None and not self.direct and prepare is not None:
-                prev.cpu.prepare_ns = self._prepared_ns    # it ran first on the worker: over
+            cmd, info = self.controller.step(t, odo.state, applied, reference)
             self._answer(odo.stamp_us, cmd)
-            # direct: the answer is out, hand the core to whoever it woke (in lockstep the
-            # vehicle) before the log and the preparation, which are off the latency path
+            # the answer is out, hand the core to whoever it woke (in lockstep the vehicle)
+            # before the log and the preparation, which are off the latency path
             # (docs/decisions/2026-12-02-flight-loop-direct-calls.md)
-            if self.direct and self.yield_core:
+            if self.yield_core:
                 _sched_yield()
             rec = self._account(t, odo, ref, cmd, applied, info)
             rec.cpu.wire_ns = wire_rx + self._wire_ns
@@ -414,21 +348,15 @@ class OffboardFlight:
             if answered == 2:
                 self._mode_task = asyncio.ensure_future(self._request_offboard())
             # the preparation phase of the next step (RTI), while the vehicle flies this one
-            # (on the worker it is already running, after the answer)
-            if self.direct and prepare is not None:
-                prepare(reference)
-                rec.cpu.prepare_ns = getattr(self.controller, "last_prepare_cpu_ns", -1)
-            elif prepare is None:
-                rec.cpu.prepare_ns = 0
+            self.controller.prepare(reference)
+            rec.cpu.prepare_ns = self.controller.last_prepare_cpu_ns
             if self.heartbeat is not None and wire.is_crashed(self.heartbeat):
                 self.summary.crashed = True
                 log.error("the vehicle reports a crash (EMERGENCY)")
-                await self._last_prepared(rec, prepare)
                 self._finish(t)
                 return self.summary
-            if reference.done(t) and not getattr(getattr(reference, "cfg", None), "land", True):
+            if reference.done(t) and not reference.land:
                 break
-        await self._last_prepared(prev, prepare)
         if not self._touched_down(odo.state, ground_z):
             # a plan without landing ends in the air: never idle the motors or disarm there
             self._finish(t)
@@ -492,7 +420,8 @@ class OffboardFlight:
         if hb is None or not wire.is_armed(hb):
             return "the vehicle is disarmed"
         try:
-            if odo is not None and odo.state.pos_ned_m[2] < wire.HOME_GROUND_DOWN_M - TOUCHDOWN_ALT_M:
+            flying_z = wire.HOME_GROUND_DOWN_M - TOUCHDOWN_ALT_M
+            if odo is not None and odo.state.pos_ned_m[2] < flying_z:
                 result = await self._command(wire.set_mode_land(), mavlink.MAV_CMD_DO_SET_MODE,
                                              retries=2)
                 return f"asked the vehicle to land (MAV_RESULT {result})"

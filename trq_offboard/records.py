@@ -84,8 +84,8 @@ class PeriodTimes:
     filled in as the period runs (the step's parts in StepInfo.cpu): the preparation phase after
     the command, the wire (the telemetry's decode into a state, the target's encode and send),
     the log, and the whole period: the CPU of every thread of the process from this step's start
-    to the next one's (the parts, the event loop, the transport's frame parse, heartbeats, a
-    worker thread's hand-offs); -1 until known."""
+    to the next one's (the parts, the event loop, the transport's frame parse, heartbeats); -1
+    until known."""
     prepare_ns: int = -1
     wire_ns: int = -1
     log_ns: int = -1

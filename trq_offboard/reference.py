@@ -26,6 +26,7 @@ Keep within what the vehicle can do: the defaults fly at 0.63 m/s with 0.4 m/s^2
 from __future__ import annotations
 
 import math
+from typing import Protocol
 
 import numpy as np
 
@@ -44,6 +45,20 @@ def _smoothstep5(s: float) -> tuple[float, float]:
     if s >= 1.0:
         return 1.0, 0.0
     return s ** 3 * (10 - 15 * s + 6 * s * s), 30 * s * s * (1 - s) ** 2
+
+
+class FlightReference(Protocol):
+    """What the flight loop and the controller use of a reference (Reference,
+    ConstantReference)."""
+
+    @property
+    def land(self) -> bool: ...   # the plan ends on the ground (else: in the air, held)
+
+    def sample(self, t_s: float) -> ReferenceSample: ...
+
+    def grid(self, t_s: float, step_s: float, n: int) -> tuple[np.ndarray, np.ndarray]: ...
+
+    def done(self, t_s: float) -> bool: ...
 
 
 class Reference:
@@ -160,6 +175,11 @@ class Reference:
     def end_time_s(self) -> float:
         return self.t5 if self.cfg.land else self.t4
 
+    @property
+    def land(self) -> bool:
+        """The plan ends on the ground (else it ends holding in the air)."""
+        return self.cfg.land
+
 
 class ConstantReference:
     """Hold one sample forever (e.g. a position-hold target set by the daemon)."""
@@ -176,4 +196,8 @@ class ConstantReference:
 
     def done(self, t_s: float) -> bool:
         return False
+
+    @property
+    def land(self) -> bool:
+        return True
 

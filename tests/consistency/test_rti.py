@@ -36,9 +36,9 @@ def cache_env(cache_root, monkeypatch):
     return cache_root
 
 
-def _cfg(name="trq_nmpc_eso", tilt_rate_limit="horizon", **solver):
+def _cfg(name="trq_nmpc_eso", **solver):
     cfg = load_controller(CTRL / f"{name}.yaml")
-    return dataclasses.replace(cfg, tilt_rate_limit=tilt_rate_limit, solver=dataclasses.replace(
+    return dataclasses.replace(cfg, solver=dataclasses.replace(
         cfg.solver, kind="rti", **solver))
 
 
@@ -48,18 +48,15 @@ def _has_compiler() -> bool:
     return cache.find_compiler() is not None
 
 
-@pytest.mark.parametrize("hessian,codegen,interface,tilt_rate_limit", [
-    ("gauss_newton", "auto", "direct", "horizon"), ("exact", "off", "direct", "horizon"),
-    ("gauss_newton", "auto", "conic", "horizon"), ("exact", "off", "conic", "horizon"),
-    ("gauss_newton", "auto", "direct", "first_step")])
-def test_rti_steps_at_fixed_state_converge_to_ipopt(cache_env, hessian, codegen, interface,
-                                                     tilt_rate_limit):
+@pytest.mark.parametrize("hessian,codegen,interface", [
+    ("gauss_newton", "auto", "direct"), ("exact", "off", "direct"),
+    ("gauss_newton", "auto", "conic"), ("exact", "off", "conic")])
+def test_rti_steps_at_fixed_state_converge_to_ipopt(cache_env, hessian, codegen, interface):
     """Repeated real-time iterations at a fixed x0, each warm-started from the previous plan,
     converge to IPOPT's solution of the same NLP (exact-Hessian case interpreted: its C takes
     tens of seconds to compile, the algorithm is the same), with HPIPM called directly or
-    through casadi.conic, and with either place for the servos' rate limit."""
-    cfg = _cfg(hessian=hessian, codegen=codegen, hpipm_interface=interface,
-               tilt_rate_limit=tilt_rate_limit)
+    through casadi.conic."""
+    cfg = _cfg(hessian=hessian, codegen=codegen, hpipm_interface=interface)
     model, u_trim, x0, x_ref, d, guess = ocp_problem(cfg)
     u_r, x_r, info_r = IpoptSolver(cfg, model, u_trim).solve(x0, x_ref, d, u_trim, guess)
     assert info_r.status is SolveStatus.OK
@@ -146,25 +143,6 @@ def test_direct_hpipm_missing_falls_back_to_conic(cache_env, monkeypatch):
     assert rti.qp_interface == "conic"
     u, x, info = rti.solve(x0, x_ref, d, u_trim, guess)
     assert info.status is SolveStatus.OK
-
-
-def test_first_step_tilt_rate_limit(cache_env):
-    """tilt_rate_limit first_step: the tilts are inputs and only the first command is limited
-    against the applied tilt (rate x control period); later steps move farther."""
-    cfg = _cfg(codegen="off", tilt_rate_limit="first_step")
-    model, u_trim, x0, x_ref, d, guess = ocp_problem(cfg)
-    rti = RtiSolver(cfg, model, u_trim)
-    assert (rti.ocp.ns, rti.ocp.nv) == (12, 8)
-    u_prev = u_trim.copy()
-    u_prev[0:4] += 0.3                          # the servos sit 0.3 rad away from the trim
-    step = cfg.vehicle.servo_rate_limit_rad_s * cfg.control_dt_s
-    plan = guess
-    for _ in range(5):
-        u, x, info = rti.solve(x0, x_ref, d, u_prev, plan)
-        assert info.status is SolveStatus.OK
-        plan = (u, x)
-    assert np.all(np.abs(u[0, 0:4] - u_prev[0:4]) <= step + 1e-9)
-    assert np.max(np.abs(u[1, 0:4] - u_prev[0:4])) > step     # not limited beyond the first
 
 
 @pytest.mark.skipif(not _has_compiler(), reason="no C compiler")

@@ -22,6 +22,7 @@ import trq_params
 from trq_lab import harness
 from trq_offboard.config import load_controller
 from trq_offboard.controller import Controller
+from trq_offboard.nmpc.base import Solver
 from trq_offboard.records import CommandSource, SolveInfo, SolveStatus
 
 pytestmark = pytest.mark.slow
@@ -109,8 +110,9 @@ def test_takeoff_hover_helix(name, limit):
     assert sum(s is CommandSource.NMPC for s in f.sources) >= 0.98 * len(f.sources)
 
 
-class _FailingSolver:
-    """Wraps a real solver and fails on chosen calls (to exercise the fallback)."""
+class _FailingSolver(Solver):
+    """Wraps a real solver and fails on chosen calls (to exercise the fallback); no
+    preparation (every solve prepares itself)."""
 
     def __init__(self, inner, fail_from: int, fail_to: int, nan: bool = False):
         self.inner, self.ocp = inner, inner.ocp
@@ -118,13 +120,14 @@ class _FailingSolver:
 
     def discard(self) -> None:
         """At take-over the inner solver forgets its warm start, as it does unwrapped."""
-        discard = getattr(self.inner, "discard", None)
-        if discard is not None:
-            discard()
+        self.inner.discard()
 
-    def solve(self, x0, x_ref, d, u_prev, guess):
+    def zero_multipliers(self) -> None:
+        self.inner.zero_multipliers()
+
+    def solve(self, x0, x_ref, d, u_prev, guess, y0=None):
         self.calls += 1
-        u, x, info = self.inner.solve(x0, x_ref, d, u_prev, guess)
+        u, x, info = self.inner.solve(x0, x_ref, d, u_prev, guess, y0)
         if self.fail_from <= self.calls < self.fail_to:
             if self.nan:     # a broken solver that returns NaN with an OK status
                 return u * np.nan, x, info

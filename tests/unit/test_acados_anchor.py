@@ -16,7 +16,7 @@ from trq_lab.bench import nmpc as bench
 from trq_offboard.allocation import Allocator
 from trq_offboard.config import load_controller
 from trq_offboard.model import PredictionModel
-from trq_offboard.nmpc.solver import plan_of
+from trq_offboard.nmpc.base import plan_of
 from trq_offboard.records import SolveInfo, SolveStatus
 
 

@@ -1,6 +1,6 @@
 """trq-bench-cpu-budget's pieces that need no cgroup: the controller's CPU per period read from its
-log, the table, `--worker-thread` reaching the controller's command line through trq-scenario's
-`--controller-args` (checked there by trq-offboard's own parser)."""
+log, the table, the scenario's command, and trq-scenario's `--controller-args` reaching the
+controller's command line (checked there by trq-offboard's own parser)."""
 
 from __future__ import annotations
 
@@ -39,8 +39,7 @@ def test_the_table_shows_the_period_and_the_ratio_to_the_whole_core():
     assert "| - / - |" in lines[4] and "| no | True |" in lines[4]
 
 
-@pytest.mark.parametrize("worker", [False, True])
-def test_worker_thread_reaches_the_scenario_command(tmp_path, monkeypatch, worker):
+def test_the_flight_is_the_scenario_command_pinned(tmp_path, monkeypatch):
     seen = []
 
     def run(cmd, **kwargs):
@@ -57,9 +56,9 @@ def test_worker_thread_reaches_the_scenario_command(tmp_path, monkeypatch, worke
         return Done()
 
     monkeypatch.setattr(cpu_budget.subprocess, "run", run)
-    row = cpu_budget.fly("paper_fault50", "trq_nmpc_eso", 1.0, 4000, tmp_path / "f", "x", worker)
+    row = cpu_budget.fly("paper_fault50", "trq_nmpc_eso", 1.0, 4000, tmp_path / "f", "x")
     (cmd,) = seen
-    assert ("--controller-args=--worker-thread" in cmd) is worker
+    assert not any(c.startswith("--controller-args") for c in cmd)
     assert cmd[cmd.index("--controller-prefix") + 1] == "taskset -c 1"     # whole core: no quota
     assert row.targets_met and row.rmse_pos_after_fault_m == 0.003
     assert (row.cpu_period_ms_p50, row.cpu_period_ms_p99) == (2.0, 2.0)
@@ -78,14 +77,14 @@ def test_scenario_controller_args_reach_the_controller_only(tmp_path, monkeypatc
     monkeypatch.setattr(scenario.subprocess, "Popen", popen)
     with pytest.raises(Started):
         scenario._fly(sc, run, False, Path("c.yaml"), Path("s.yaml"), Path("v.yaml"), [],
-                      "udpin:127.0.0.1:14540", 14560, None, (), (), ("--worker-thread", "-v"))
+                      "udpin:127.0.0.1:14540", 14560, None, (), (), ("--connect-timeout", "60", "-v"))
     vcmd, ccmd = (tmp_path / "command.txt").read_text().splitlines()
-    assert ccmd.endswith(" --worker-thread -v") and "--worker-thread" not in vcmd
+    assert ccmd.endswith(" --connect-timeout 60 -v") and "--connect-timeout" not in vcmd
 
 
 def test_scenario_refuses_controller_args_the_controller_does_not_take(tmp_path, capsys):
     rc = scenario.main(["smoke", "--out", str(tmp_path / "out"),
-                        "--controller-args=--worker-thread --bogus 3"])
+                        "--controller-args=-v --bogus 3"])
     assert rc == 2
     err = capsys.readouterr().err
     assert "--bogus" in err and "not options of trq-offboard" in err
@@ -94,7 +93,7 @@ def test_scenario_refuses_controller_args_the_controller_does_not_take(tmp_path,
 
 @pytest.mark.parametrize("extra, named", [("--connect udpin:0.0.0.0:1", "--connect"),
                                           ("--log-d /tmp/x", "--log-dir"),   # abbreviated
-                                          ("--worker-thread --no-log", "--no-log"),
+                                          ("-v --no-log", "--no-log"),
                                           ("--applied-delay-s 0.1", "--applied-delay-s")])
 def test_scenario_refuses_controller_args_it_sets_itself(tmp_path, capsys, extra, named):
     rc = scenario.main(["smoke", "--out", str(tmp_path / "out"), f"--controller-args={extra}"])

@@ -15,8 +15,25 @@ from sil_vehicle.dynamics.actuators import first_order_step, lag_factor
 from trq_offboard.config import ConfigError, EffectivenessConfig, load_controller
 from trq_params.loader import read_yaml     # the loader's YAML 1.2 dialect: `off` stays a string
 from trq_offboard.effectiveness import MotorEffectivenessObserver
+from trq_offboard.nmpc.base import Solver
 
 PARAMS = Path(__file__).resolve().parents[2] / "params"
+
+
+class _NoOcp:
+    """The part of an Ocp the controller uses: no lag states, throttle bounds ignored."""
+    n_lag = 0
+
+    def set_throttle_scale(self, e):
+        pass
+
+
+class _NoNmpc(Solver):
+    """The effectiveness observer needs no NMPC; building one would cost seconds."""
+    ocp = _NoOcp()
+
+    def solve(self, x0, x_ref, d, u_prev, guess, y0=None):
+        raise NotImplementedError
 T = 0.03                 # params/vehicle/trq.yaml: motor time constant
 DT = 0.01                # control period
 TICK = 0.001             # the vehicle's physics tick
@@ -140,16 +157,8 @@ def test_the_faulty_motor_is_isolated_from_the_disturbance(motor, loss):
     thousandth (the secant of the quadratic thrust curve)."""
     from trq_offboard.controller import Controller
 
-    class _Ocp:
-        n_lag = 0
 
-        def set_throttle_scale(self, e):
-            pass
-
-    class _Solver:
-        ocp = _Ocp()
-
-    ctl = Controller(load_controller(PARAMS / "controller/trq_nmpc_eso.yaml"), solver=_Solver())
+    ctl = Controller(load_controller(PARAMS / "controller/trq_nmpc_eso.yaml"), solver=_NoNmpc())
     x = np.zeros(12)
     x[6:9] = [0.1, -0.05, 0.4]
     x[9:12] = [0.2, -0.1, 0.3]
@@ -158,18 +167,18 @@ def test_the_faulty_motor_is_isolated_from_the_disturbance(motor, loss):
     y_true[4 + motor] *= 1.0 - loss
     acc = ctl.model.b0(x, y_true) - ctl.model.b0(x, y_nom)
     d = acc[[0, 1, 2, 6, 7, 8]]
-    dz = ctl._motor_deficit(x, d, y_nom)
+    dz = ctl.motors.motor_deficit(x, d, y_nom)
     want = np.zeros(4)
     want[motor] = y_true[4 + motor] - y_nom[4 + motor]
     np.testing.assert_allclose(dz, want, atol=1e-3)
     # the same motor over-producing: never read as its deficit (at most as another motor's,
     # whose roll and pitch pattern it shares: the isolation's known limit, README)
-    over = ctl._motor_deficit(x, -d, y_nom)
+    over = ctl.motors.motor_deficit(x, -d, y_nom)
     assert over[motor] == 0.0 and np.all(over <= 0.0) and np.count_nonzero(over) <= 1
 
 
 def _deficit_step_by_step(ctl, x, d, y_nom):
-    """The specification of Controller._motor_deficit in plain floats: each motor's
+    """The specification of MotorEffectiveness.motor_deficit in plain floats: each motor's
     least-squares deficit alone, the first with the largest share of |d[2:5]|^2 among those
     with a deficit, three Gauss-Newton steps on the quadratic curves' exact change; dots summed
     left to right."""
@@ -205,16 +214,8 @@ def test_the_compiled_deficit_is_its_specification_bit_for_bit():
     commands and disturbances (deficits, surpluses, and nothing to explain), bit for bit."""
     from trq_offboard.controller import Controller
 
-    class _Ocp:
-        n_lag = 0
 
-        def set_throttle_scale(self, e):
-            pass
-
-    class _Solver:
-        ocp = _Ocp()
-
-    ctl = Controller(load_controller(PARAMS / "controller/trq_nmpc_eso.yaml"), solver=_Solver())
+    ctl = Controller(load_controller(PARAMS / "controller/trq_nmpc_eso.yaml"), solver=_NoNmpc())
     rng = np.random.default_rng(18)
     picked = set()
     for k in range(300):
@@ -222,7 +223,7 @@ def test_the_compiled_deficit_is_its_specification_bit_for_bit():
         x[6:12] = rng.normal(0.0, 0.2, 6)
         y_nom = np.concatenate([rng.uniform(-0.3, 0.3, 4), rng.uniform(30.0, 90.0, 4)])
         d = rng.normal(0.0, 1.0, 6) if k % 10 else np.zeros(6)
-        got = ctl._motor_deficit(x, d, y_nom)
+        got = ctl.motors.motor_deficit(x, d, y_nom)
         want = _deficit_step_by_step(ctl, x, d, y_nom)
         assert np.array_equal(got, want), (k, got, want)
         picked.update(np.flatnonzero(got).tolist())

@@ -13,25 +13,38 @@ import pytest
 from conftest import Ticks
 
 from trq_offboard.config import load_controller
-from trq_offboard.controller import PREDICT_STEP_S, CommandHistory, Controller
+from trq_offboard.controller import Controller
 from trq_offboard.effectiveness import MotorEffectivenessObserver
 from trq_offboard.eso import ExtendedStateObserver
+from trq_offboard.nmpc.base import Solver
+from trq_offboard.predictor import PREDICT_STEP_S, CommandHistory, run_walk
 from trq_offboard.records import (
     CommandSource,
+    ReferenceSample,
     SolveInfo,
     SolveStatus,
     StateEstimate,
 )
+from trq_offboard.reference import ConstantReference
 
 PARAMS = Path(__file__).resolve().parents[2] / "params" / "controller"
 CTRL = PARAMS / "trq_nmpc_eso.yaml"
 
 
-class _HoverSolver:
+class _NoOcp:
+    """The part of an Ocp the controller uses: no lag states, throttle bounds ignored."""
+    n_lag = 0
+
+    def set_throttle_scale(self, e) -> None:
+        pass
+
+
+class _HoverSolver(Solver):
     """No NMPC (building one costs seconds): the plan holds the given command."""
 
     def __init__(self, u, n, nx=12):
         self.u, self.n, self.nx = np.asarray(u, float), n, nx
+        self.ocp = _NoOcp()
 
     def solve(self, x0, x_ref, d, u_prev, guess, y0=None):
         return (np.tile(self.u, (self.n, 1)), np.tile(x0, (self.n + 1, 1)),
@@ -50,21 +63,19 @@ def test_step_parts_come_from_the_injected_clock_and_add_up():
     ctl.reset(0.0, _hover_state())
     for k in range(1, 4):
         before = clock.t
-        cmd, info = ctl.step(0.01 * k, _hover_state(), None, _Const())
+        cmd, info = ctl.step(0.01 * k, _hover_state(), None, _const_reference())
         cpu = info.cpu
         parts = (cpu.observer_ns, cpu.effectiveness_ns, cpu.predictor_ns, cpu.feedback_ns)
         assert info.source is CommandSource.NMPC
         assert all(p >= 1000 for p in parts)      # each part between two readings
         # the parts are contiguous: the step's first reading to its last
         assert sum(parts) == clock.t - before - 1000
-        ctl.prepare(_Const())                     # no prepare on this solver: timed anyway
+        ctl.prepare(_const_reference())           # no preparation on this solver: timed anyway
         assert ctl.last_prepare_cpu_ns == 1000
 
 
-class _Const:
-    def sample(self, t_s):
-        from trq_offboard.records import ReferenceSample
-        return ReferenceSample((0.0, 0.0, -2.0), (0.0, 0.0, 0.0), 0.0)
+def _const_reference() -> ConstantReference:
+    return ConstantReference(ReferenceSample((0.0, 0.0, -2.0), (0.0, 0.0, 0.0), 0.0))
 
 
 @pytest.mark.parametrize("name", ["trq_nmpc_eso", "trq_nmpc_eso_paper"])
@@ -115,11 +126,11 @@ def test_lag_chain_is_the_step_by_step_lag():
         y0 = rng.uniform(lo, hi)
         us = rng.uniform(lo, hi, (n, len(lo)))
         hs = rng.choice([0.0025, 0.005, 0.01, 0.03, 0.0123456789], n)
-        ys, mids = ctl._chain(y0, us, hs)
+        ys, mids = ctl.predictor._chain(y0, us, hs)
         y = y0
         for k, (u, h) in enumerate(zip(us, hs)):
-            assert np.array_equal(mids[k], ctl._lag(y, u, 0.5 * h))
-            y = ctl._lag(y, u, h)
+            assert np.array_equal(mids[k], ctl.predictor.lag(y, u, 0.5 * h))
+            y = ctl.predictor.lag(y, u, h)
             assert np.array_equal(ys[k], y)
 
 
@@ -151,9 +162,9 @@ def test_controller_log_writes_every_row_in_order_after_its_period(tmp_path):
 
 def _walk_step_by_step(ctl, t0, t1, cut=None):
     """The actuator walk laid out command piece by command piece, each step through `_lag`:
-    the specification `Controller._actuator_walk` (NumPy layout, compiled chain) must meet to
+    the specification `DelayPredictor.actuator_walk` (NumPy layout, compiled chain) must meet to
     the bit."""
-    segs = ctl._in_effect(-math.inf, t1)
+    segs = ctl.predictor.in_effect(-math.inf, t1)
     y = segs[0][2].copy()
     path, y_cut = [], None
     for lo, hi, u in segs:
@@ -166,10 +177,10 @@ def _walk_step_by_step(ctl, t0, t1, cut=None):
                 h = (b - a) / n
                 for i in range(n):
                     path.append((a + i * h, b if i == n - 1 else a + (i + 1) * h,
-                                 ctl._lag(y, u, 0.5 * h)))
-                    y = ctl._lag(y, u, h)
+                                 ctl.predictor.lag(y, u, 0.5 * h)))
+                    y = ctl.predictor.lag(y, u, h)
             else:
-                y = ctl._lag(y, u, b - a)
+                y = ctl.predictor.lag(y, u, b - a)
             if cut is not None and b == cut:
                 y_cut = y.copy()
     if cut is not None and y_cut is None:
@@ -199,12 +210,12 @@ def test_actuator_walk_is_the_step_by_step_walk(delay):
     """Random histories of commands (stamps regular, jittered, repeated, some out of order),
     walks over (t0, t1] with and without a cut in [t0, t1], t0 = t1, the cut at t0 or t1, t0
     before the oldest command, gaps of lost samples, and no commands at all: the NumPy layout
-    and each compiled walk that fits (walk.py) give the same path, outputs and cut outputs as
-    the step-by-step walk, bit for bit, and the compiled b0 sum is the observer's loop's."""
-    from trq_offboard.walk import run_walk
+    and each compiled walk that fits (predictor.walk_function) give the same path, outputs and
+    cut outputs as the step-by-step walk, bit for bit, and the compiled b0 sum is the observer's
+    loop's."""
 
     ctl = _history_controller(delay, lagged="on")
-    fns = list(ctl._walk_fns)
+    fns = list(ctl.predictor._walk_fns)
     assert len(fns) == 2
     fitted = [0] * len(fns)
     rng = np.random.default_rng(11)
@@ -217,9 +228,9 @@ def test_actuator_walk_is_the_step_by_step_walk(delay):
         stamps = np.maximum.accumulate(stamps + rng.uniform(0, 1e-3, n) * (trial % 3 == 0))
         if trial % 7 == 0 and n > 3:                      # a late sample: an older stamp last
             stamps[-1] = stamps[-3] - 0.001
-        ctl._sent = CommandHistory(32, ctl.model.nu,
+        ctl.predictor.sent = CommandHistory(32, ctl.model.nu,
                                    [(float(t), rng.uniform(lo, hi)) for t in stamps])
-        ctl._last_u = rng.uniform(lo, hi)
+        ctl.predictor.last_u = rng.uniform(lo, hi)
         last = float(stamps[-1]) if n else 0.0
         t0 = last - float(rng.choice([0.0, 0.0, 0.01, 0.02, 0.5]))
         t1 = t0 + float(rng.choice([0.0, 0.01, 0.01, 0.0102, 0.013, 0.03, delay + 0.01]))
@@ -228,19 +239,20 @@ def test_actuator_walk_is_the_step_by_step_walk(delay):
             cut = None
         x = rng.normal(size=12) * 0.3
         want = _walk_step_by_step(ctl, t0, t1, cut)
-        ctl._walk_fns = []
-        _same_walk(ctl._actuator_walk(t0, t1, cut), want, ("numpy", trial))
-        ctl._walk_fns = fns
+        ctl.predictor._walk_fns = []
+        _same_walk(ctl.predictor.actuator_walk(t0, t1, cut), want, ("numpy", trial))
+        ctl.predictor._walk_fns = fns
         for i, fn in enumerate(fns):
-            got = (run_walk(fn, ctl._sent.times, ctl._sent.commands, delay, t0, t1, cut, x)
-                   if len(ctl._sent) else None)
+            sent = ctl.predictor.sent
+            got = (run_walk(fn, sent.times, sent.commands, delay, t0, t1, cut, x)
+                   if len(sent) else None)
             if got is None:
                 continue
             fitted[i] += 1
             _same_walk(got, want, ("compiled", i, trial))
             if cut is not None and cut > t0:              # the observer's b0 over (t0, cut)
-                b0 = ctl._b0_delayed(x, t0, cut, got[0])
-                loop = ctl._b0_delayed(x, t0, cut, list(got[0]))
+                b0 = ctl.predictor.b0_delayed(x, t0, cut, got[0])
+                loop = ctl.predictor.b0_delayed(x, t0, cut, list(got[0]))
                 assert np.array_equal(b0, loop), ("b0", i, trial)
     assert min(fitted) >= 40, fitted                     # each size serves many of them
 
@@ -286,6 +298,8 @@ def test_reference_grid_is_sampled_once_for_the_same_time():
 
 class _PreparingSolver(_HoverSolver):
     """_HoverSolver with a preparation phase: records the reference each phase is handed."""
+
+    prepares = True
 
     def __init__(self, u, n, nx=12):
         super().__init__(u, n, nx)
@@ -358,13 +372,13 @@ def test_commands_in_effect_are_the_command_by_command_segments(delay):
         if trial % 4 == 0:
             stamps = rng.permutation(stamps)               # out of order: still the spec's
         sent = [(float(t), rng.uniform(lo, hi)) for t in stamps]
-        ctl._sent = CommandHistory(32, ctl.model.nu, sent)
-        ctl._last_u = rng.uniform(lo, hi)
+        ctl.predictor.sent = CommandHistory(32, ctl.model.nu, sent)
+        ctl.predictor.last_u = rng.uniform(lo, hi)
         last = float(stamps[-1]) if n else 0.0
         t0 = last - float(rng.choice([-0.01, 0.0, 0.01, 0.03, 0.5]))
         t1 = t0 + float(rng.choice([-0.01, 0.0, 0.01, 0.013, delay + 0.01]))
-        got = ctl._in_effect(t0, t1)
-        want = _in_effect_spec(sent[-32:], ctl._last_u, delay, t0, t1)
+        got = ctl.predictor.in_effect(t0, t1)
+        want = _in_effect_spec(sent[-32:], ctl.predictor.last_u, delay, t0, t1)
         assert len(got) == len(want), (trial, got, want)
         for (a, b, u), (a2, b2, u2) in zip(got, want):
             assert a == a2 and b == b2 and np.array_equal(u, u2), trial
@@ -373,7 +387,7 @@ def test_commands_in_effect_are_the_command_by_command_segments(delay):
 class _ScaledHoverSolver(_HoverSolver):
     """The hover solver with the throttle bounds the effectiveness observer sets (recorded)."""
 
-    class _Ocp:
+    class _Ocp(_NoOcp):
         def __init__(self):
             self.scales = []
 
@@ -395,9 +409,9 @@ def test_compiled_effective_step_is_the_step_by_step_one():
                        solver=_HoverSolver(np.zeros(8), cfg.horizon_steps))
     ctls = [Controller(cfg, solver=_ScaledHoverSolver(probe.u_trim, cfg.horizon_steps))
             for _ in range(2)]
-    ctls[1]._effective_fn = None                 # call by call
+    ctls[1].motors._effective_fn = None                 # call by call
     calls = [0]
-    fused = ctls[0]._effective_fn
+    fused = ctls[0].motors._effective_fn
     real = fused.outputs
 
     def counted(*args):
@@ -416,14 +430,14 @@ def test_compiled_effective_step_is_the_step_by_step_one():
         x[6:9] += rng.normal(size=3) * 0.002
         x[9:12] = rng.normal(size=3) * 0.05
         s = StateEstimate.from_vector(x)
-        out = [c.step(t, s, None, _Const()) for c in ctls]
+        out = [c.step(t, s, None, _const_reference()) for c in ctls]
         a, b = ctls
         assert out[0][0] == out[1][0], k
         assert np.array_equal(a._last_d, b._last_d), k
         for name in ("e", "y", "_y_meas_prev"):
-            assert np.array_equal(getattr(a.effectiveness, name),
-                                  getattr(b.effectiveness, name)), (k, name)
+            assert np.array_equal(getattr(a.motors.observer, name),
+                                  getattr(b.motors.observer, name)), (k, name)
         assert np.array_equal(a._scale, b._scale)
         assert np.array_equal(a.solver.ocp.scales[-1], b.solver.ocp.scales[-1])
     assert calls[0] > 150                        # the compiled call served most periods
-    assert np.min(ctls[0].effectiveness.e) < 1.0  # and the deficit was read
+    assert np.min(ctls[0].motors.observer.e) < 1.0  # and the deficit was read

@@ -1,4 +1,4 @@
-"""The controller's delay predictor (controller.Controller._predict): over a link whose round
+"""The controller's delay predictor (predictor.DelayPredictor.predict): over a link whose round
 trip is applied_delay_s, the NMPC plans from the state predicted for the time its command will
 act, driven by the commands in flight, through the actuators' lags when asked to."""
 
@@ -7,19 +7,26 @@ from __future__ import annotations
 import dataclasses
 import math
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
 from trq_offboard.config import load_controller
-from trq_offboard.controller import CommandHistory, Controller
+from trq_offboard.controller import Controller
+from trq_offboard.nmpc.base import Solver
+from trq_offboard.predictor import CommandHistory
 
 CTRL = Path(__file__).resolve().parents[2] / "params" / "controller" / "trq_nmpc_eso.yaml"
 DELAY_S = 0.04
 
 
-class _NoSolver:
+class _NoSolver(Solver):
     """The predictor needs no NMPC; building one would cost seconds."""
+    ocp = SimpleNamespace(n_lag=0)
+
+    def solve(self, x0, x_ref, d, u_prev, guess, y0=None):
+        raise NotImplementedError
 
 
 def controller(lagged: str, delay_s: float = DELAY_S) -> Controller:
@@ -37,7 +44,7 @@ def hover_state() -> np.ndarray:
 
 
 def fill(ctl: Controller, commands: list[tuple[float, np.ndarray]]) -> None:
-    ctl._sent = CommandHistory(32, ctl.model.nu, commands)
+    ctl.predictor.sent = CommandHistory(32, ctl.model.nu, commands)
 
 
 def test_hover_commands_in_flight_predict_no_motion():
@@ -45,7 +52,7 @@ def test_hover_commands_in_flight_predict_no_motion():
     u = ctl.u_trim
     fill(ctl, [(-0.01 * k, u) for k in range(32, -1, -1)])
     x = hover_state()
-    xp = ctl._predict(x, 0.0, DELAY_S, np.zeros(6))
+    xp = ctl.predictor.predict(x, 0.0, DELAY_S, np.zeros(6))
     assert np.max(np.abs(xp - x)) < 1e-6
 
 
@@ -63,7 +70,7 @@ def test_a_climb_command_in_flight_acts_only_from_its_stamp_plus_the_delay():
         fill(ctl, [(-0.01 * k, hover) for k in range(32, 2, -1)]
              + [(-0.02, u_up), (-0.01, u_up)])
         x = hover_state()
-        out[lagged] = ctl._predict(x, 0.0, DELAY_S, np.zeros(6))
+        out[lagged] = ctl.predictor.predict(x, 0.0, DELAY_S, np.zeros(6))
     ctl = controller("off")
     a_z = float(np.asarray(ctl.model.accel(hover_state(), u_up)).ravel()[2])
     assert a_z < -1.0                                  # upward (NED) and not small
@@ -88,7 +95,7 @@ def test_actuator_path_is_the_first_order_lag():
     step = hover.copy()
     step[4:8] += 2.0
     fill(ctl, [(-0.01 * k, hover) for k in range(31, 0, -1)] + [(0.0, step)])
-    path = ctl._actuator_path(tau - 0.0025, tau + 0.0025)     # one step centred on tau
+    path = ctl.predictor.actuator_path(tau - 0.0025, tau + 0.0025)     # one step centred on tau
     (a, b, y_mid), = path
     assert (a, b) == pytest.approx((tau - 0.0025, tau + 0.0025))
     assert y_mid[4:8] == pytest.approx(hover[4:8] + 2.0 * (1.0 - math.exp(-1.0)), abs=1e-9)
@@ -98,17 +105,17 @@ def test_actuator_path_is_the_first_order_lag():
 
 def test_no_delay_no_prediction():
     ctl = controller("auto", delay_s=0.0)
-    assert ctl.delay_s == 0.0 and not ctl._lagged
-    assert controller("auto")._lagged and controller("off").delay_s == DELAY_S
-    assert not controller("off")._lagged
+    assert ctl.delay_s == 0.0 and not ctl.predictor.lagged
+    assert controller("auto").predictor.lagged and controller("off").delay_s == DELAY_S
+    assert not controller("off").predictor.lagged
     # auto: nothing is predicted below one control period (10 ms; real time's solve latency)
     short = controller("auto", delay_s=0.005)
-    assert short.delay_s == 0.0 and not short._lagged
+    assert short.delay_s == 0.0 and not short.predictor.lagged
     cfg = dataclasses.replace(load_controller(CTRL), applied_delay_s=0.005,
                               delay_compensation="predict", lagged_actuators="auto",
                               effectiveness=None)
     forced = Controller(cfg, solver=_NoSolver())
-    assert forced.delay_s == 0.005 and forced._lagged
+    assert forced.delay_s == 0.005 and forced.predictor.lagged
 
 
 def test_one_path_serves_the_observer_and_the_predictor():
@@ -122,12 +129,13 @@ def test_one_path_serves_the_observer_and_the_predictor():
     t_last, t_s = 1.0 / 3.0, 1.0 / 3.0 + 0.0101
     fill(ctl, [(t_s - 0.0101 * k, hover if k % 2 else up) for k in range(31, -1, -1)])
     x, d = hover_state(), np.zeros(6)
-    path = ctl._actuator_path(t_last, t_s + DELAY_S, t_s)
-    b0_alone = ctl._b0_delayed(x, t_last, t_s)
-    pred_alone = ctl._predict(x, t_s, t_s + DELAY_S, d)
-    assert ctl._b0_delayed(x, t_last, t_s, path) == pytest.approx(b0_alone, rel=1e-12, abs=1e-12)
-    assert ctl._predict(x, t_s, t_s + DELAY_S, d, path) == pytest.approx(pred_alone, rel=1e-9,
-                                                                          abs=1e-12)
+    path = ctl.predictor.actuator_path(t_last, t_s + DELAY_S, t_s)
+    p = ctl.predictor
+    b0_alone = p.b0_delayed(x, t_last, t_s)
+    pred_alone = p.predict(x, t_s, t_s + DELAY_S, d)
+    assert p.b0_delayed(x, t_last, t_s, path) == pytest.approx(b0_alone, rel=1e-12, abs=1e-12)
+    assert p.predict(x, t_s, t_s + DELAY_S, d, path) == pytest.approx(pred_alone, rel=1e-9,
+                                                                      abs=1e-12)
     # the steps cover both intervals exactly
     before = sum(b - a for a, b, _ in path if 0.5 * (a + b) < t_s)
     after = sum(b - a for a, b, _ in path if 0.5 * (a + b) > t_s)

@@ -130,28 +130,6 @@ def test_shim_build_failure_falls_back_to_the_ctypes_loop(tmp_path, monkeypatch)
     np.testing.assert_allclose(qp.u, u_ref, atol=1e-6)
 
 
-@pytest.mark.parametrize("shim", [True, False])
-@pytest.mark.parametrize("blocks", [1, 2, 3])
-def test_partial_condensing_gives_the_same_solution(shim, blocks):
-    rng = np.random.default_rng(7)
-    At, Bt, b, q, r, H, HN = _problem(rng)
-    N, ns, nv = 4, 3, 2
-    u_free, _ = _dense_kkt(At, Bt, b, q, r, H, HN)
-    ubu = np.full((N, nv), 1e6)
-    ubu[2, 1] = u_free[2, 1] - 0.3                          # one active input bound
-    lbx, ubx = np.full((N + 1, 1), -1e6), np.full((N + 1, 1), 1e6)
-    ref = hpipm.OcpQp(ns, nv, N, [0], shim=shim)
-    pc = hpipm.OcpQp(ns, nv, N, [0], shim=shim, condensed_stages=blocks)
-    out = []
-    for qp in (ref, pc):
-        qp.set_hessian(H, HN)
-        x, u, pi = qp.solve(At, Bt, b, q, r, lbx, ubx, np.full((N, nv), -1e6), ubu)
-        assert qp.status == 0
-        out.append((x.copy(), u.copy(), pi.copy()))
-    for a, c in zip(*out):
-        np.testing.assert_allclose(a, c, atol=1e-6)
-
-
 def _fake_blasfeo(tmp_path, cpu_ok: int) -> Path:
     """A libblasfeo.so whose processor check answers cpu_ok, beside a libhpipm.so path."""
     import subprocess

@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import asyncio
 import math
-from types import SimpleNamespace
 
 import pytest
 from conftest import Ticks
@@ -53,9 +52,12 @@ class FakeLink:
 
 
 class FakeController:
+    """A loop.FlightController whose preparation does nothing (and costs nothing)."""
+
     def __init__(self) -> None:
         self.steps: list[tuple[float, object]] = []
         self.resets: list[float] = []
+        self.last_prepare_cpu_ns = 0
 
     def reset(self, t_s, state, applied=None) -> None:
         self.resets.append(t_s)
@@ -66,11 +68,17 @@ class FakeController:
                         (0.0,) * 6, 0.0, 0, 0, 0)
         return CMD, info
 
+    def prepare(self, reference) -> None:
+        pass
+
+    def solver_line(self) -> str:
+        return "fake"
+
 
 class FakeReference:
     def __init__(self, done_at_s: float, land: bool = True) -> None:
         self.done_at_s = done_at_s
-        self.cfg = SimpleNamespace(land=land)
+        self.land = land
 
     def sample(self, t_s):
         return ReferenceSample((0.0, 0.0, -1.0), (0.0, 0.0, 0.0), 0.0, "hold")
@@ -116,8 +124,8 @@ def make_flight(reference: FakeReference | None = None, **kw):
     ref = reference or FakeReference(done_at_s=1e9)
     kw.setdefault("connect_timeout_s", 1.0)
     kw.setdefault("ack_timeout_s", 0.5)
-    flight = OffboardFlight(link, ctl, lambda state, airborne=False: ref, name="fake", tilt_limit_rad=LIMIT,
-                            **kw)
+    flight = OffboardFlight(link, ctl, lambda state, airborne=False: ref, name="fake",
+                            tilt_limit_rad=LIMIT, **kw)
     assert link.on_message == flight.on_message     # the loop takes over the link's callback
     return flight, link, ctl
 
@@ -138,7 +146,7 @@ async def cancelled(task) -> None:
 
 
 async def settle() -> None:
-    """Give the loop (and its worker thread) time to do whatever it would do."""
+    """Give the loop time to do whatever it would do."""
     await asyncio.sleep(0.05)
 
 
@@ -390,16 +398,11 @@ def test_a_lost_arm_is_resent_after_vehicle_time_not_wall_time():
     asyncio.run(scenario())
 
 
-@pytest.mark.parametrize("threaded", [False, True])
-def test_each_period_is_timed_by_part_directly_or_on_an_executor(threaded):
-    import concurrent.futures
-
+def test_each_period_is_timed_by_part():
     records = []
-    executor = concurrent.futures.ThreadPoolExecutor(1) if threaded else None
 
     async def scenario():
-        flight, link, ctl = make_flight(record=records.append, executor=executor,
-                                        direct=not threaded, cpu_ns=Ticks(),
+        flight, link, ctl = make_flight(record=records.append, cpu_ns=Ticks(),
                                         process_cpu_ns=Ticks())
         task = asyncio.create_task(flight.run())
         await take_off(flight, link)
@@ -411,25 +414,20 @@ def test_each_period_is_timed_by_part_directly_or_on_an_executor(threaded):
         return ctl
 
     ctl = asyncio.run(scenario())
-    if executor is not None:
-        executor.shutdown()
     assert [r.stamp_us for r in records] == [10_000, 20_000, 30_000] and len(ctl.steps) == 3
     for r in records:
-        assert r.cpu.prepare_ns == 0                     # FakeController has no prepare
+        assert r.cpu.prepare_ns == 0                     # FakeController's costs nothing
         assert r.cpu.wire_ns >= 2000 and r.cpu.log_ns == 1000   # decode, encode; one log call
     # a period is closed by the next step's start; the last one is still open
     assert all(r.cpu.period_ns > 0 for r in records[:-1]) and records[-1].cpu.period_ns == -1
 
 
 class PreparingController(FakeController):
-    """A controller with a preparation phase that can be held (threading.Event) and fail."""
+    """A controller with a preparation phase that can fail."""
 
     def __init__(self, fail_at: int | None = None) -> None:
-        import threading
         super().__init__()
         self.events: list[str] = []
-        self.go = threading.Event()
-        self.go.set()
         self.fail_at = fail_at
         self.prepares = 0
         self.last_prepare_cpu_ns = 0
@@ -439,7 +437,6 @@ class PreparingController(FakeController):
         return super().step(t_s, state, applied, reference)
 
     def prepare(self, reference) -> None:
-        self.go.wait(5.0)
         self.prepares += 1
         self.last_prepare_cpu_ns = 7_000 * self.prepares
         self.events.append("prepare")
@@ -455,60 +452,9 @@ def make_preparing_flight(ctl: PreparingController, **kw):
     return flight, link
 
 
-def test_worker_answers_before_its_preparation_and_steps_after_it():
-    """One job a period on the worker: the answer goes out while the preparation still runs,
-    the next step waits for it, and each period's record gets its preparation's CPU."""
-    records: list = []
-
-    async def scenario():
-        ctl = PreparingController()
-        flight, link = make_preparing_flight(ctl, record=records.append, direct=False)
-        task = asyncio.create_task(flight.run())
-        await take_off(flight, link)
-        ctl.go.clear()                                  # hold the next preparation
-        flight.on_message(odometry(10_000, down_m=-0.5))
-        await until(lambda: link.targets(10_000), "the target of stamp 10000")
-        flight.on_message(odometry(20_000, down_m=-0.5))
-        await settle()
-        assert not link.targets(20_000), "stepped before the preparation was over"
-        assert ctl.events[-1] == "step 0.00"
-        ctl.go.set()
-        await until(lambda: link.targets(20_000), "the target of stamp 20000")
-        flight.on_message(odometry(30_000, down_m=-0.5))
-        await until(lambda: link.targets(30_000), "the target of stamp 30000")
-        await settle()
-        await cancelled(task)
-        return ctl
-
-    ctl = asyncio.run(scenario())
-    assert ctl.events[:6] == ["step 0.00", "prepare", "step 0.01", "prepare", "step 0.02",
-                              "prepare"]
-    # every closed period carries its own preparation's CPU (the k-th: 7000 k ns)
-    assert [r.cpu.prepare_ns for r in records[:-1]] == [7_000 * (k + 1)
-                                                        for k in range(len(records) - 1)]
-
-
-def test_a_failed_preparation_on_the_worker_ends_the_flight():
-    async def scenario():
-        ctl = PreparingController(fail_at=1)
-        flight, link = make_preparing_flight(ctl, direct=False)
-        task = asyncio.create_task(flight.run())
-        await take_off(flight, link)
-        flight.on_message(odometry(10_000, down_m=-0.5))
-        await until(lambda: link.targets(10_000), "the target of stamp 10000")
-        await until(lambda: ctl.prepares == 1, "the failing preparation")
-        flight.on_message(odometry(20_000, down_m=-0.5))
-        with pytest.raises(ArithmeticError, match="preparation failed"):
-            await asyncio.wait_for(task, WAIT_S)
-        return link
-
-    link = asyncio.run(scenario())
-    assert not link.targets(20_000)        # no command after the failure
-
-
 @pytest.mark.parametrize("fail_at", [None, 2])
-def test_direct_calls_answer_then_prepare_in_the_loop(fail_at):
-    """The default, called from the flight loop: each step's answer is sent before its
+def test_the_loop_answers_then_prepares_in_its_thread(fail_at):
+    """Called from the flight loop: each step's answer is sent before its
     preparation runs, the next step after it, each period's record gets its own preparation's
     CPU, and a failed preparation ends the flight before any step from it."""
     import threading
@@ -543,7 +489,7 @@ def test_direct_calls_answer_then_prepare_in_the_loop(fail_at):
         return ctl, sent_before_prepare
 
     ctl, sent_before_prepare = asyncio.run(scenario())
-    assert threads == {loop_thread}                       # no worker thread
+    assert threads == {loop_thread}                       # in the loop's thread
     assert all(sent_before_prepare) and sent_before_prepare
     if fail_at is None:
         assert ctl.events[:6] == ["step 0.00", "prepare", "step 0.01", "prepare", "step 0.02",

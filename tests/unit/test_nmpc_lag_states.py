@@ -18,6 +18,7 @@ from trq_offboard.config import ConfigError, load_controller
 from trq_params.loader import read_yaml     # the loader's YAML 1.2 dialect: `off` stays a string
 from trq_offboard.model import PredictionModel
 from trq_offboard.nmpc.ocp import Ocp, Stage
+from trq_offboard.nmpc.base import Solver
 
 PARAMS = Path(__file__).resolve().parents[2] / "params"
 CTRL = PARAMS / "controller"
@@ -230,26 +231,31 @@ class _LagOcp:
         pass
 
 
-class _LagSolver:
+class _LagSolver(Solver):
     ocp = _LagOcp()
+
+    def solve(self, x0, x_ref, d, u_prev, guess, y0=None):
+        raise NotImplementedError              # only built, never flown
 
 
 def test_controller_starts_the_plan_from_the_lagged_actuators():
     """With a 40 ms round trip the controller builds the lag-state NMPC (auto) and starts its
     plan from the actuators' outputs predicted for t + delay: the lag of the commands in
     flight, as its delay predictor computes them."""
-    from trq_offboard.controller import CommandHistory, Controller
+    from trq_offboard.controller import Controller
+    from trq_offboard.predictor import CommandHistory
 
     cfg = dataclasses.replace(load_controller(CTRL / "trq_nmpc_eso.yaml"), applied_delay_s=0.04)
     ctl = Controller(cfg, solver=_LagSolver())
-    assert ctl._act_states and ctl._lagged and ctl.delay_s == 0.04
+    assert ctl._act_states and ctl.predictor.lagged and ctl.delay_s == 0.04
     hover = ctl.u_trim
     up = hover.copy()
     up[4:8] += 10.0
-    ctl._sent = CommandHistory(32, ctl.model.nu, [(-0.01 * k, hover) for k in range(32, 0, -1)]
-                               + [(0.0, up)])
+    ctl.predictor.sent = CommandHistory(32, ctl.model.nu,
+                                        [(-0.01 * k, hover) for k in range(32, 0, -1)]
+                                        + [(0.0, up)])
     # the step command (sent for the state at 0) acts from 0.04; at 0.07 it has lagged 30 ms
-    path, y, y_cut = ctl._actuator_walk(0.0, 0.07, 0.05)
+    path, y, y_cut = ctl.predictor.actuator_walk(0.0, 0.07, 0.05)
     tau = cfg.vehicle.motor_time_constant_s
     expect = up[4:8] + (hover[4:8] - up[4:8]) * math.exp(-0.03 / tau)
     np.testing.assert_allclose(y[4:8], expect, rtol=0, atol=1e-9)
@@ -257,7 +263,7 @@ def test_controller_starts_the_plan_from_the_lagged_actuators():
     expect = up[4:8] + (hover[4:8] - up[4:8]) * math.exp(-0.01 / tau)
     np.testing.assert_allclose(y_cut[4:8], expect, rtol=0, atol=1e-9)
     np.testing.assert_allclose(y[0:4], hover[0:4], atol=1e-12)
-    again = ctl._actuator_path(0.0, 0.07, 0.05)
+    again = ctl.predictor.actuator_path(0.0, 0.07, 0.05)
     assert len(path) == len(again)
     for (a, b, ym), (a2, b2, ym2) in zip(path, again):
         assert (a, b) == (a2, b2)
@@ -271,15 +277,15 @@ def test_lag_states_bring_the_lagged_observer_along():
     from trq_offboard.controller import Controller
 
     shipped = load_controller(CTRL / "trq_nmpc_eso.yaml")
-    assert Controller(shipped, solver=_LagSolver())._lagged
+    assert Controller(shipped, solver=_LagSolver()).predictor.lagged
     base = load_controller(CTRL / "trq_nmpc_eso_paper.yaml")
     assert base.lagged_actuators == "auto"
-    assert not Controller(base, solver=_LagSolver())._lagged           # auto, lockstep
+    assert not Controller(base, solver=_LagSolver()).predictor.lagged           # auto, lockstep
     forced = dataclasses.replace(base, actuator_states="on")
     ctl = Controller(forced, solver=_LagSolver())
-    assert ctl._lagged and ctl._act_states and ctl.delay_s == 0.0
+    assert ctl.predictor.lagged and ctl._act_states and ctl.delay_s == 0.0
     off = dataclasses.replace(forced, lagged_actuators="off")
-    assert not Controller(off, solver=_LagSolver())._lagged
+    assert not Controller(off, solver=_LagSolver()).predictor.lagged
 
 
 def test_bare_yaml_on_off_read_as_words(tmp_path):

@@ -157,9 +157,6 @@ def problem(cfg, model, u_trim) -> Problem:
         raise ValueError("the acados anchor is built for the tilt-rotor (12 + 4 tilt states)")
     if cfg.nmpc_actuator_states:
         raise ValueError("the acados anchor has no actuator lag states (actuator_states on)")
-    if cfg.tilt_rate_limit != "horizon":
-        raise ValueError("the acados anchor carries the tilts as states "
-                         "(tilt_rate_limit: horizon)")
     stage = Stage.build(cfg, model)
     ocp = Ocp.build(cfg, model)
     N, h, nx, ns, nv = cfg.horizon_steps, cfg.step_s, model.nx, stage.ns, stage.nv
@@ -355,7 +352,7 @@ class Recorder:
         o, c = self.ctl.solver.ocp, np.array
         lin = self._pending
         if lin is None:                # not prepared: the solve linearises at its guess
-            from trq_offboard.nmpc.solver import plan_of
+            from trq_offboard.nmpc.base import plan_of
             guess = plan_of(guess)
             lin = (c(guess[0], float), c(guess[1], float), c(u_prev, float))
         self._pending = None

@@ -16,8 +16,6 @@ controller's own CPU per control period (every thread of its process, from its c
 and how often and how long the kernel held the controller back; and the tracking as a ratio of
 the anchor's, so that what degrades first is read off one table.
 
-`--worker-thread` flies the controller with trq-offboard's `--worker-thread`: its step and
-preparation on a worker thread, instead of called from the flight loop as by default.
 The controller loads the HPIPM that `$TRQ_HPIPM_LIBRARY` names (trq-hpipm-fetch), else CasADi's
 bundled one; the header says which.
 """
@@ -127,17 +125,14 @@ class Row:
 
 
 def fly(scenario: str, controller: str, share: float, period_us: int, out: Path,
-        name: str, worker_thread: bool = False) -> Row:
-    """One real-time flight of `controller` in `scenario` at `share` of a core (`worker_thread`:
-    the controller daemon with --worker-thread)."""
+        name: str) -> Row:
+    """One real-time flight of `controller` in `scenario` at `share` of a core."""
     quota = None if share >= 1.0 else CpuQuota(name, share, period_us)
     try:
         prefix = quota.prefix(1) if quota else "taskset -c 1"
         cmd = [sys.executable, "-m", "trq_lab.scenario", scenario, "--realtime", "--only",
                controller, "--out", str(out), "--no-figures", "--jobs", "1",
                "--controller-prefix", prefix, "--vehicle-prefix", "taskset -c 0"]
-        if worker_thread:
-            cmd.append("--controller-args=--worker-thread")
         out.mkdir(parents=True, exist_ok=True)
         with open(out / "run.log", "w") as log:
             rc = subprocess.run(cmd, stdout=log, stderr=subprocess.STDOUT).returncode
@@ -204,9 +199,6 @@ def main(argv: list[str] | None = None) -> int:
                     help="the quota's period in microseconds (default 4000)")
     ap.add_argument("--out", type=Path, default=Path("out/cpu_budget"), help="output folder")
     ap.add_argument("--json", type=Path, default=None, help="also write the rows as JSON")
-    ap.add_argument("--worker-thread", action="store_true",
-                    help="fly the controller daemon with --worker-thread (its step on a worker "
-                         "thread, not called from the flight loop)")
     args = ap.parse_args(argv)
     try:
         shares = [float(Fraction(s)) for s in args.shares.split(",")]
@@ -237,8 +229,7 @@ def main(argv: list[str] | None = None) -> int:
     from trq_offboard.nmpc.hpipm import LIBRARY_ENV
 
     print(machine_line())
-    print(f"{args.scenario} in real time, {args.controller}"
-          f"{' (--worker-thread)' if args.worker_thread else ''}, quota period "
+    print(f"{args.scenario} in real time, {args.controller}, quota period "
           f"{args.period_us} us; HPIPM: "
           + (f"${LIBRARY_ENV}={os.environ[LIBRARY_ENV]}" if os.environ.get(LIBRARY_ENV)
              else "CasADi's bundled library"))
@@ -246,8 +237,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         for k, share in enumerate(shares):
             row = fly(args.scenario, args.controller, share, args.period_us,
-                      args.out / f"share_{share:.3f}", f"trq-cpu-budget-{os.getpid()}-{k}",
-                      args.worker_thread)
+                      args.out / f"share_{share:.3f}", f"trq-cpu-budget-{os.getpid()}-{k}")
             print(f"  share {share:.3f}: exit {row.exit_code}, RMSE after fault "
                   f"{row.rmse_pos_after_fault_m}, crashed {row.crashed}", flush=True)
             rows.append(row)

@@ -61,14 +61,9 @@ MODES = {     # name: solver overrides of params/controller/trq_nmpc_eso.yaml (a
                        controller=dict(actuator_states="on")),   # the actuators' lag states
     "rti-gn-conic": dict(kind="rti", hessian="gauss_newton", max_iterations=1,
                          hpipm_interface="conic"),     # HPIPM through casadi.conic
-    "rti-gn-tilt1": dict(kind="rti", hessian="gauss_newton", max_iterations=1,
-                         controller=dict(tilt_rate_limit="first_step")),  # tilts as inputs
     "rti-gn-cap8": dict(kind="rti", hessian="gauss_newton", max_iterations=1,
                         qp_max_iterations=8),          # the QP stopped after 8 iterations
     "rti-exact": dict(kind="rti", hessian="exact", max_iterations=1),
-    # HPIPM's partial condensing: the horizon's N stages condensed into this many blocks
-    **{f"rti-gn-pc{n2}": dict(kind="rti", hessian="gauss_newton", max_iterations=1,
-                              hpipm=dict(condensed_stages=n2)) for n2 in (10, 5, 4, 2)},
     "rti-gn-py": dict(kind="rti", hessian="gauss_newton", max_iterations=1, codegen="off"),
     "sqp-gn": dict(kind="sqp", hessian="gauss_newton", max_iterations=1),
     "ipopt": dict(kind="ipopt"),
@@ -92,7 +87,6 @@ def fly(mode: str, seconds: float | None, controller: str = "trq_nmpc_eso",
     cfg = load_controller(trq_params.resolve("controller", controller))
     overrides = dict(MODES[mode])
     cfg = dataclasses.replace(cfg, **overrides.pop("controller", {}))
-    qp_args = overrides.pop("hpipm", None)
     cfg = dataclasses.replace(cfg, solver=dataclasses.replace(cfg.solver, **overrides))
     t0 = timer.wall_s()
     Controller(cfg)
@@ -100,8 +94,6 @@ def fly(mode: str, seconds: float | None, controller: str = "trq_nmpc_eso",
     compiled_cold = cache.COUNTS["compiled"]
     t0 = timer.wall_s()
     ctl = Controller(cfg)
-    if qp_args:               # the direct HPIPM QP rebuilt with these arguments
-        ctl.solver.rebuild_qp(**qp_args)
     build_cached = timer.wall_s() - t0
     compiled_cached = cache.COUNTS["compiled"] - compiled_cold
     recorder = None
@@ -118,7 +110,7 @@ def fly(mode: str, seconds: float | None, controller: str = "trq_nmpc_eso",
     res = harness.fly_inprocess(
         ctl, sim, events, timeout_s=seconds if seconds is not None else 600.0, trace=True,
         timer=timer, name=mode,
-        on_step=lambda sample: qp_iterations.append(getattr(ctl.solver, "qp_iterations", 0)))
+        on_step=lambda sample: qp_iterations.append(ctl.solver.qp_iterations))
     if res.status.startswith("failed"):
         raise RuntimeError(f"{mode}: {res.summary}")
     if recorder is not None:
@@ -165,7 +157,7 @@ def fly(mode: str, seconds: float | None, controller: str = "trq_nmpc_eso",
         max_yaw_err_deg=float(np.abs(yerr).max()),
         build_cold_s=build_cold, build_cached_s=build_cached,
         compilations_cold=compiled_cold, compilations_cached=compiled_cached,
-        build_mode=getattr(ctl.solver, "build_mode", "-"),
+        build_mode=ctl.solver.build_mode,
         qp=ctl.solver_line(),
         peak_rss_mb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0)
 

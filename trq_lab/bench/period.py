@@ -75,13 +75,11 @@ def _listening(port: int, proc: subprocess.Popen, timeout_s: float) -> None:
 
 
 def fly_daemons(seconds: float, controller: str, log_dir: Path,
-                python: str = sys.executable, direct: bool = True,
+                python: str = sys.executable,
                 controller_cmd: list[str] | None = None) -> dict:
     """One lockstep flight of both daemons for `seconds` of vehicle time: CPU s of each
-    process, the vehicle's wall time (start to exit) and both exit codes. `direct`: the
-    controller daemon's default (its step called from the flight loop); False: its
-    --worker-thread. `controller_cmd`: the command that starts
-    the controller daemon, before its options (default `python -m trq_offboard`; another
+    process, the vehicle's wall time (start to exit) and both exit codes. `controller_cmd`: the
+    command that starts the controller daemon, before its options (default `python -m trq_offboard`; another
     program taking trq-offboard's options, e.g. trq_lab/bench/period_floor.py's replay)."""
     pv, pc, pg, pt = _free_ports(4)
     vcmd = [python, "-m", "sil_vehicle", "--duration", f"{seconds:g}", "--mode", "lockstep",
@@ -91,7 +89,6 @@ def fly_daemons(seconds: float, controller: str, log_dir: Path,
     ccmd = list(controller_cmd or [python, "-m", "trq_offboard"])
     ccmd += ["--controller", controller, "--connect", f"udpin:127.0.0.1:{pc}",
              "--log-dir", str(log_dir)]
-    ccmd += [] if direct else ["--worker-thread"]
     out = dict(stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     ctl = subprocess.Popen(ccmd, **out)
     _listening(pc, ctl, 60.0)              # built and listening: the vehicle's clock starts now
@@ -137,7 +134,7 @@ def cpu_parts(csv_path: Path, lo_s: float, hi_s: float) -> dict:
 
 def daemons_period(short_s: float = 5.0, long_s: float = 35.0,
                    controller: str = "trq_nmpc_eso", control_rate_hz: int = 100,
-                   direct: bool = True, controller_cmd: list[str] | None = None,
+                   controller_cmd: list[str] | None = None,
                    log_root: Path | None = None) -> dict:
     """The two flights and what follows from them (see the module docstring).
     `controller_cmd`: fly_daemons'. `log_root`: the flights' logs go to its `short/` and
@@ -145,10 +142,8 @@ def daemons_period(short_s: float = 5.0, long_s: float = 35.0,
     with contextlib.ExitStack() as stack:
         root = Path(log_root) if log_root is not None else Path(
             stack.enter_context(tempfile.TemporaryDirectory(prefix="trq-bench-period-")))
-        short = fly_daemons(short_s, controller, root / "short", direct=direct,
-                            controller_cmd=controller_cmd)
-        long_ = fly_daemons(long_s, controller, root / "long", direct=direct,
-                            controller_cmd=controller_cmd)
+        short = fly_daemons(short_s, controller, root / "short", controller_cmd=controller_cmd)
+        long_ = fly_daemons(long_s, controller, root / "long", controller_cmd=controller_cmd)
         parts = cpu_parts(root / "long" / "controller.csv", short_s, long_s)
     periods = (long_s - short_s) * control_rate_hz
     dwall = long_["wall_s"] - short["wall_s"]

@@ -13,11 +13,10 @@ effectiveness, the step's CPU parts and, through `last_prepare_cpu_ns`, the prep
 step is an index into lists built at load, with one check that the step's time is the recorded
 one (a replay that left the recording stops with ReplayDiverged); its `prepare` does nothing but
 hand over the recorded preparation time. So the daemon around it (asyncio, the telemetry's
-receive and decode, the target's encode and send, the step's direct calls or the worker
-thread's hand-offs, the reference's sample, the accounting, the ground-station diagnosis,
-controller.csv and the .tlog) does the same work as in the recorded flight: the log writes the
-same bytes but for the loop's own measurements (cpu_wire_ms, cpu_log_ms, cpu_period_ms), and
-the vehicle flies the same flight, identically in lockstep (controller.csv carries the commands
+receive and decode, the target's encode and send, the step's calls, the reference's sample, the
+accounting, the ground-station diagnosis, controller.csv and the .tlog) does the same work as
+in the recorded flight: the log writes the same bytes but for the loop's own measurements
+(cpu_wire_ms, cpu_log_ms, cpu_period_ms) and its header's solver line, and the vehicle flies the same flight, identically in lockstep (controller.csv carries the commands
 at full precision: trq_wire.logfile writes floats with repr). What the replay's process costs
 per control period is the floor: what the daemon costs when the controller's math costs nothing.
 It is a lower bound of that machinery's share in the real daemon, where the math's allocations
@@ -211,6 +210,10 @@ class ReplayController:
         self._i = i + 1
         return self._steps[i]
 
+    def solver_line(self) -> str:
+        """What 'solves' this controller, for the log's header: the recording."""
+        return f"replay of {self.source}"
+
     def prepare(self, reference) -> None:
         """Nothing to prepare: hands over the recorded preparation time of the last step."""
         self.last_prepare_cpu_ns = self._prep[self._i - 1] if self._i else 0
@@ -313,14 +316,13 @@ def _nan(v: np.ndarray) -> np.ndarray:
     return np.array([isinstance(x, float) and math.isnan(x) for x in v.tolist()], dtype=bool)
 
 
-def floor_run(short_s: float, long_s: float, controller: str, direct: bool,
-              work: Path) -> dict:
+def floor_run(short_s: float, long_s: float, controller: str, work: Path) -> dict:
     """One run: the real controller's flights, then the replay of its long flight's log."""
     from trq_lab.bench.period import daemons_period
 
-    real = daemons_period(short_s, long_s, controller, direct=direct, log_root=work / "real")
+    real = daemons_period(short_s, long_s, controller, log_root=work / "real")
     csv = work / "real" / "long" / "controller.csv"
-    floor = daemons_period(short_s, long_s, controller, direct=direct,
+    floor = daemons_period(short_s, long_s, controller,
                            controller_cmd=replay_command(csv), log_root=work / "floor")
     checks = {}
     for flight in ("short", "long"):
@@ -443,9 +445,6 @@ def build_parser() -> argparse.ArgumentParser:
                     help="the long flight, s of vehicle time (default 35)")
     ap.add_argument("--controller", default="trq_nmpc_eso",
                     help="the controller file of the real flights (default trq_nmpc_eso)")
-    ap.add_argument("--worker-thread", action="store_true",
-                    help="both daemons' flights with trq-offboard --worker-thread (the step "
-                         "on a worker thread)")
     ap.add_argument("--anchor", choices=("acados",), default=None,
                     help="measure acados' exact-Hessian RTI step in each run, on our rti-exact "
                          "flight of 16 s (needs acados: trq_lab/bench/acados_anchor.py)")
@@ -486,14 +485,12 @@ def main(argv: list[str] | None = None) -> int:
 
     print(machine_line(), flush=True)
     print(f"controller: {args.controller}; flights {args.short_s:g} s and {args.long_s:g} s of "
-          f"vehicle time in lockstep, "
-          f"{'worker thread' if args.worker_thread else 'direct calls'}; "
+          f"vehicle time in lockstep; "
           f"{args.repeat} run(s)", flush=True)
     runs, anchors = [], []
     for k in range(args.repeat):
         with tempfile.TemporaryDirectory(prefix="trq-bench-floor-") as work:
-            r = floor_run(args.short_s, args.long_s, args.controller, not args.worker_thread,
-                          Path(work))
+            r = floor_run(args.short_s, args.long_s, args.controller, Path(work))
         runs.append(r)
         c = r["checks"]
         print(f"  run {k + 1}: controller {r['real']['controller_cpu_ms']:.3f} ms CPU a period "

@@ -61,8 +61,7 @@ def period_text(rows: list[tuple[str, dict[str, float], str]]) -> list[str]:
              "CPU time per control period, mean over the flight (ms, measured by the "
              "controller itself: `cpu_*_ms` in controller.csv). The whole period is the CPU "
              "of every thread of the controller process from one step's start to the next: "
-             "the parts, the event loop, the transport's frame parse (and, with "
-             "`--worker-thread`, the hand-offs to that thread).", "",
+             "the parts, the event loop, the transport's frame parse.", "",
              head, "|" + "---|" * (len(PERIOD_PARTS) + 1)]
     for name, parts, _ in rows:
         lines.append(f"| {name} | " + " | ".join(fmt(parts[k], "{:.3f}") for k, _ in

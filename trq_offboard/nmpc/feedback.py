@@ -5,7 +5,7 @@ corrects it for what the step measured, then solves it:
 
     gaps  += dF/dd (d - d_prep)                       (when the disturbance estimate moved)
     grad  -= q2 (x_ref - x_ref_prep)                   (when the reference moved)
-    bounds: s_0 fixed to the measured [x0, tilt, lags], the first tilt's rate (tilts as inputs)
+    bounds: s_0 fixed to the measured [x0, tilt, lags]
     ds_0 = s_0 - w_0 eliminated: b_0 += A_0 ds_0, r_0 += S_0 ds_0
     HPIPM (nmpc/hpipm.py's shim: the stage fields set, the QP solved, its solution read)
     w+ = clip(w + dw, lbw, ubw), with dw finite
@@ -13,8 +13,8 @@ corrects it for what the step measured, then solves it:
 In NumPy that is some forty array operations and a copy of every stage's [A B] a period, each
 costing more in the interpreter than in arithmetic; here it is one ctypes call into C compiled
 with the shim's source (the same HPIPM entry points), linked against the libhpipm in use. The
-arithmetic is NumPy's operation for operation (elementwise; np.minimum, np.maximum and np.clip with
-their NaN propagation), except the three small products (dF/dd d, A_0 ds_0, S_0 ds_0),
+arithmetic is NumPy's operation for operation (elementwise; np.clip with its NaN propagation),
+except the three small products (dF/dd d, A_0 ds_0, S_0 ds_0),
 summed in index order where NumPy's BLAS may order or fuse them differently: the same plan to
 rounding. RtiSolver keeps its NumPy feedback as the reference and the path without a C compiler;
 tests/consistency/test_rti_feedback.py holds the two to each other.
@@ -36,38 +36,35 @@ __all__ = ["FeedbackKernel", "available"]
 
 _SOURCE = hpipm._SHIM_SOURCE + r"""
 /* trq_rti_feedback: the RTI's feedback phase (nmpc/feedback.py). */
-/* NumPy's np.maximum / np.minimum (a NaN in either propagates) and np.clip's steps */
-static double maximum(double a, double b) { return (a >= b || a != a) ? a : b; }
-static double minimum(double a, double b) { return (a <= b || a != a) ? a : b; }
+/* np.clip's steps (a NaN propagates) */
 static double clip(double x, double lo, double hi)
 {
     x = (x != x || x > lo) ? x : lo;
     return (x != x || x < hi) ? x : hi;
 }
 
-/* dims: N, ns, nv, nb, nx, tilt_clamp (1: the first stage's tilts are inputs whose rate is
-   bounded from the applied tilt), nw.
-   st: HPIPM's qp, sol, arg, ws and partial condensing's six (hpipm.OcpQp.handles), then
-   [10] idxbx (int, nb), [11] q2w (nw), [12] lbw0, [13] ubw0 (nw: the OCP's bounds),
-   [14] work (3 nw + 2 (N+1) ns + 4 N nv + 2 (N+1) nb + 6 doubles), [15] x ((N+1) ns),
-   [16] u (N nv), [17] pi (N ns), [18] iter (int); the preparation's [19] a (N (ns+nv) ns),
-   [20] gaps (N ns), [21] grad (nw), [22] jd (N 6 ns); the step's [23] w (nw), [24] d_prep (6),
-   [25] d (6), [26] xr_prep (nw), [27] x_ref ((N+1) nx), [28] s0 (ns), [29] tilt (4),
-   [30] S0 (nv ns); [31] w_out (nw).
+/* dims: N, ns, nv, nb, nx, nw.
+   st: HPIPM's qp, sol, arg, ws (hpipm.OcpQp.handles), then
+   [4] idxbx (int, nb), [5] q2w (nw), [6] lbw0, [7] ubw0 (nw: the OCP's bounds),
+   [8] work (3 nw + 2 (N+1) ns + 4 N nv + 2 (N+1) nb + 6 doubles), [9] x ((N+1) ns),
+   [10] u (N nv), [11] pi (N ns), [12] iter (int); the preparation's [13] a (N (ns+nv) ns),
+   [14] gaps (N ns), [15] grad (nw), [16] jd (N 6 ns); the step's [17] w (nw), [18] d_prep (6),
+   [19] d (6), [20] xr_prep (nw), [21] x_ref ((N+1) nx), [22] s0 (ns),
+   [23] S0 (nv ns); [24] w_out (nw).
    Returns HPIPM's status (0 converged), or -1 when the step or the multipliers are not finite
    (w_out then untouched). */
-int trq_rti_feedback(const int *dims, void *const *st, double tilt_step0)
+int trq_rti_feedback(const int *dims, void *const *st)
 {
     const int N = dims[0], ns = dims[1], nv = dims[2], nb = dims[3], nx = dims[4];
-    const int tilt_clamp = dims[5], nw = dims[6], nz = ns + nv;
-    const int *idxbx = (const int *) st[10];
-    const double *q2w = st[11], *lbw0 = st[12], *ubw0 = st[13];
-    double *work = st[14], *x = st[15], *u = st[16], *pi = st[17];
-    int *iter = st[18];
-    const double *a = st[19], *gaps = st[20], *grad = st[21], *jd = st[22];
-    const double *w = st[23], *d_prep = st[24], *d = st[25], *xr_prep = st[26];
-    const double *x_ref = st[27], *s0 = st[28], *tilt = st[29], *S0 = st[30];
-    double *w_out = st[31];
+    const int nw = dims[5], nz = ns + nv;
+    const int *idxbx = (const int *) st[4];
+    const double *q2w = st[5], *lbw0 = st[6], *ubw0 = st[7];
+    double *work = st[8], *x = st[9], *u = st[10], *pi = st[11];
+    int *iter = st[12];
+    const double *a = st[13], *gaps = st[14], *grad = st[15], *jd = st[16];
+    const double *w = st[17], *d_prep = st[18], *d = st[19], *xr_prep = st[20];
+    const double *x_ref = st[21], *s0 = st[22], *S0 = st[23];
+    double *w_out = st[24];
     double *lbw = work, *ubw = lbw + nw, *g = ubw + nw, *b = g + nw;
     double *q = b + N * ns, *r = q + (N + 1) * ns, *lbx = r + N * nv, *ubx = lbx + (N + 1) * nb;
     double *lbu = ubx + (N + 1) * nb, *ubu = lbu + N * nv, *ds0 = ubu + N * nv, *dd = ds0 + ns;
@@ -102,7 +99,7 @@ int trq_rti_feedback(const int *dims, void *const *st, double tilt_step0)
                 const int p = k * nz + i;
                 g[p] = grad[p] - q2w[p] * (x_ref[k * nx + i] - xr_prep[p]);
             }
-    /* bounds: s_0 fixed, the first tilt's rate from the applied tilt */
+    /* bounds: s_0 fixed */
     for (i = 0; i < nw; ++i) {
         lbw[i] = lbw0[i];
         ubw[i] = ubw0[i];
@@ -111,12 +108,6 @@ int trq_rti_feedback(const int *dims, void *const *st, double tilt_step0)
         lbw[i] = ubw[i] = s0[i];
         ds0[i] = s0[i] - w[i];
     }
-    if (tilt_clamp)
-        for (i = ns; i < ns + 4; ++i) {
-            const double t = tilt[i - ns];
-            lbw[i] = minimum(maximum(lbw[i], t - tilt_step0), ubw[i]);
-            ubw[i] = maximum(minimum(ubw[i], t + tilt_step0), lbw[i]);
-        }
     /* s_0 eliminated: b_0 += A_0 ds_0 (a[0]'s first ns rows are A_0' row-major) */
     for (j = 0; j < ns; ++j) {
         double acc = 0.0;
@@ -148,8 +139,7 @@ int trq_rti_feedback(const int *dims, void *const *st, double tilt_step0)
     }
     status = trq_hpipm_solve(N, ns, nv, nb, st[0], st[1], st[2], st[3],
                              (double *) a, nz * ns, (double *) a + ns * ns, nz * ns, b, q, r,
-                             lbx, ubx, lbu, ubu, x, u, pi, iter,
-                             st[4], st[5], st[6], st[7], st[8], st[9]);
+                             lbx, ubx, lbu, ubu, x, u, pi, iter);
     for (k = 0; k < N * ns; ++k)
         if (!(pi[k] - pi[k] == 0.0))
             return -1;
@@ -191,7 +181,7 @@ def _load() -> ctypes.CDLL | None:
                     lib = ctypes.CDLL(str(path))
                     f = lib.trq_rti_feedback
                     f.restype = ctypes.c_int
-                    f.argtypes = [ctypes.c_void_p] * 2 + [ctypes.c_double]
+                    f.argtypes = [ctypes.c_void_p] * 2
                     _LIB = lib
                 except OSError:
                     pass
@@ -230,8 +220,7 @@ class FeedbackKernel:
                                  f"{size} float64, C-contiguous (got {buf.size} {buf.dtype})")
         self._fn = lib.trq_rti_feedback
         self.ocp, self.qp = ocp, qp
-        tilt_clamp = int(ocp.tilting and not ocp.tilt_states)
-        self._dims = np.array([N, ns, nv, qp.idxbx.size, nx, tilt_clamp, nw], np.intc)
+        self._dims = np.array([N, ns, nv, qp.idxbx.size, nx, nw], np.intc)
         self._idxbx = np.ascontiguousarray(qp.idxbx, np.intc)
         self._q2w = np.ascontiguousarray(q2w, float)
         nb = self._idxbx.size
@@ -244,7 +233,7 @@ class FeedbackKernel:
         # the step's inputs, copied in by each call (any layout and dtype a copy converts)
         self._inputs = tuple((name, np.zeros(shape)) for name, shape in (
             ("w", nw), ("d_prep", 6), ("d", 6), ("xr_prep", nw), ("x_ref", (N + 1, nx)),
-            ("s0", ns), ("tilt", 4), ("S0", (nv, ns))))
+            ("s0", ns), ("S0", (nv, ns))))
         self._out = np.zeros(nw)
         handles = [h or 0 for h in qp.handles]
         ptrs = handles + [a.ctypes.data for a in (
@@ -255,22 +244,20 @@ class FeedbackKernel:
         self._st = (ctypes.c_void_p * len(ptrs))(*ptrs)
         self._dims_ptr = self._dims.ctypes.data
 
-    def __call__(self, w, d_prep, d, xr_prep, x_ref, s0, tilt, S0):
+    def __call__(self, w, d_prep, d, xr_prep, x_ref, s0, S0):
         """The feedback on the preparation in the bound buffers, from its w (nw), d_prep (6)
         and xr_prep (nw, the reference at the states' positions) and the step's d (6), x_ref
-        (N+1, nx), s0 (ns), applied tilt (4, or None) and S_0 (nv, ns). Returns (w+ (a new
+        (N+1, nx), s0 (ns) and S_0 (nv, ns). Returns (w+ (a new
         array), HPIPM's status), or (None, -1) for a non-finite step. An array of another size
         is a ValueError that names it."""
         if self.ocp.lbw is not self._lbw0 or self.ocp.ubw is not self._ubw0:
             raise RuntimeError("the OCP's bounds were replaced: the kernel holds their address")
-        for (name, buf), arr in zip(self._inputs, (w, d_prep, d, xr_prep, x_ref, s0, tilt, S0)):
-            if arr is None:                            # no tilt (the quadcopter): unused
-                continue
+        for (name, buf), arr in zip(self._inputs, (w, d_prep, d, xr_prep, x_ref, s0, S0)):
             if arr.shape != buf.shape:                 # (a copy would broadcast)
                 raise ValueError(f"compiled RTI feedback: {name} must have the shape "
                                  f"{buf.shape} (got {arr.shape})")
             buf[...] = arr
-        status = self._fn(self._dims_ptr, self._st, self.ocp.tilt_step0)
+        status = self._fn(self._dims_ptr, self._st)
         self.qp.iterations = self._iter.value
         if status < 0:
             return None, status

@@ -20,11 +20,11 @@ constraints, and the initial state is not a variable.
 
 Only the stable per-field entry points of HPIPM are used (`d_ocp_qp_set_A(stage, mat, qp)` and the
 like, column-major), not the `*_set_all` ones whose argument lists changed between versions.
-Setting a QP takes about 190 of them (9 fields, 21 stages): through ctypes that is 0.2 ms, so with
-a C compiler a 40-line shim (`_SHIM`, compiled once and cached by `cache.compiled_c`, linked
-against the same libhpipm) makes them and the solve in one call; without one the loop runs in
-Python. `available()` says whether the library was found and loaded; the caller falls back to
-CasADi's conic interface when it was not.
+Setting a QP takes one call per field and stage, costly through ctypes (measured:
+docs/decisions/2026-12-02-figures-from-comments.md), so with a C compiler a small shim (`_SHIM`,
+compiled once and cached by `cache.compiled_c`, linked against the same libhpipm) makes them and
+the solve in one call; without one the loop runs in Python. `available()` says whether the
+library was found and loaded; the caller falls back to CasADi's conic interface when it was not.
 """
 
 from __future__ import annotations
@@ -67,15 +67,12 @@ extern void d_ocp_qp_ipm_get_iter(void *, int *);
 extern void d_ocp_qp_sol_get_u(int, void *, double *);
 extern void d_ocp_qp_sol_get_x(int, void *, double *);
 extern void d_ocp_qp_sol_get_pi(int, void *, double *);
-extern void d_part_cond_qp_cond(void *, void *, void *, void *);
-extern void d_part_cond_qp_expand_sol(void *, void *, void *, void *, void *);
 
 /* A and B: stage k's block (column-major) at A + k sa and B + k sb */
 int trq_hpipm_solve(int N, int ns, int nv, int nb, void *qp, void *sol, void *arg, void *ws,
                     double *A, int sa, double *B, int sb, double *b, double *q, double *r,
                     double *lbx, double *ubx, double *lbu, double *ubu,
-                    double *x, double *u, double *pi, int *iter,
-                    void *qp2, void *sol2, void *arg2, void *ws2, void *carg, void *cws)
+                    double *x, double *u, double *pi, int *iter)
 {
     int k, status;
     for (k = 0; k < N; ++k) {
@@ -94,17 +91,9 @@ int trq_hpipm_solve(int N, int ns, int nv, int nb, void *qp, void *sol, void *ar
     d_ocp_qp_set_q(N, q + N * ns, qp);
     d_ocp_qp_set_lbx(N, lbx + N * nb, qp);
     d_ocp_qp_set_ubx(N, ubx + N * nb, qp);
-    if (qp2) {      /* partial condensing: solve the condensed QP, expand its solution */
-        d_part_cond_qp_cond(qp, qp2, carg, cws);
-        d_ocp_qp_ipm_solve(qp2, sol2, arg2, ws2);
-        d_ocp_qp_ipm_get_status(ws2, &status);
-        d_ocp_qp_ipm_get_iter(ws2, iter);
-        d_part_cond_qp_expand_sol(qp, sol2, sol, carg, cws);
-    } else {
-        d_ocp_qp_ipm_solve(qp, sol, arg, ws);
-        d_ocp_qp_ipm_get_status(ws, &status);
-        d_ocp_qp_ipm_get_iter(ws, iter);
-    }
+    d_ocp_qp_ipm_solve(qp, sol, arg, ws);
+    d_ocp_qp_ipm_get_status(ws, &status);
+    d_ocp_qp_ipm_get_iter(ws, iter);
     for (k = 0; k < N; ++k) {
         d_ocp_qp_sol_get_u(k, sol, u + k * nv);
         d_ocp_qp_sol_get_pi(k, sol, pi + k * ns);
@@ -251,16 +240,6 @@ def _load() -> ctypes.CDLL | None:
             "d_ocp_qp_ipm_get_status": (None, P, P),
             "d_ocp_qp_ipm_get_iter": (None, P, P),
         }
-        sig.update({
-            "d_part_cond_qp_compute_block_size": (None, I, I, P),
-            "d_part_cond_qp_compute_dim": (None, P, P, P),
-            "d_part_cond_qp_arg_memsize": (S, I), "d_part_cond_qp_arg_create": (None, I, P, P),
-            "d_part_cond_qp_arg_set_default": (None, P),
-            "d_part_cond_qp_ws_memsize": (S, P, P, P, P),
-            "d_part_cond_qp_ws_create": (None, P, P, P, P, P, P),
-            "d_part_cond_qp_cond": (None, P, P, P, P),
-            "d_part_cond_qp_expand_sol": (None, P, P, P, P, P),
-        })
         for name in ("nx", "nu", "nbx", "nbu", "ng", "ns"):
             sig[f"d_ocp_qp_dim_set_{name}"] = (None, I, I, P)
         for name in ("A", "B", "b", "Q", "S", "R", "q", "r", "lbx", "ubx", "lbu", "ubu",
@@ -302,7 +281,7 @@ def _load_shim() -> ctypes.CDLL | None:
                 f = shim.trq_hpipm_solve
                 f.restype = ctypes.c_int
                 f.argtypes = ([ctypes.c_int] * 4 + [ctypes.c_void_p] * 5 + [ctypes.c_int]
-                              + [ctypes.c_void_p, ctypes.c_int] + [ctypes.c_void_p] * 17)
+                              + [ctypes.c_void_p, ctypes.c_int] + [ctypes.c_void_p] * 11)
                 _SHIM = shim
             except OSError:
                 pass
@@ -326,8 +305,7 @@ class OcpQp:
     at stage N); state boxes on idxbx (the same at every stage 1..N), every input boxed."""
 
     def __init__(self, ns: int, nv: int, N: int, idxbx, mode: str = "speed",
-                 iter_max: int = 50, shim: bool = True, options: dict | None = None,
-                 condensed_stages: int = 0):
+                 iter_max: int = 50, shim: bool = True, options: dict | None = None):
         lib = _load()
         if lib is None:
             raise RuntimeError(f"HPIPM is not available: {_LIB_ERROR}")
@@ -387,38 +365,6 @@ class OcpQp:
 
         ws = ipm(dim_s, arg_s)
         self._qp, self._sol, self._arg, self._ws = qp_s, sol_s, arg_s, ws
-        # partial condensing (HPIPM's part_cond): the N stages condensed into N2 blocks, the
-        # condensed QP solved by the same interior point, its solution expanded
-        self.condensed_stages = int(condensed_stages)
-        self._pc = (None,) * 6
-        if self.condensed_stages:
-            N2 = self.condensed_stages
-            if not 1 <= N2 < N:
-                raise ValueError(f"condensed_stages {N2}: expected 1 to {N - 1} (N = {N})")
-            self._block = np.zeros(N2 + 1, np.int32)
-            lib.d_part_cond_qp_compute_block_size(N, N2, self._block.ctypes.data)
-            dim2_s, dim2_m = struct_and_mem(lib.d_ocp_qp_dim_strsize, (N2,),
-                                            lib.d_ocp_qp_dim_memsize)
-            lib.d_ocp_qp_dim_create(N2, dim2_s, dim2_m)
-            lib.d_part_cond_qp_compute_dim(dim_s, self._block.ctypes.data, dim2_s)
-            # the condensing's arg and workspace structs have no strsize entry point: a
-            # generous zeroed buffer each (they hold a few pointers and sizes)
-            carg = struct(1 << 16)
-            lib.d_part_cond_qp_arg_create(N2, carg, struct(lib.d_part_cond_qp_arg_memsize(N2)))
-            lib.d_part_cond_qp_arg_set_default(carg)
-            qp2_s, qp2_m = struct_and_mem(lib.d_ocp_qp_strsize, (dim2_s,), lib.d_ocp_qp_memsize)
-            lib.d_ocp_qp_create(dim2_s, qp2_s, qp2_m)
-            sol2_s, sol2_m = struct_and_mem(lib.d_ocp_qp_sol_strsize, (dim2_s,),
-                                            lib.d_ocp_qp_sol_memsize)
-            lib.d_ocp_qp_sol_create(dim2_s, sol2_s, sol2_m)
-            arg2_s = struct(lib.d_ocp_qp_ipm_arg_strsize())
-            ws2 = ipm(dim2_s, arg2_s)
-            cws = struct(1 << 16)
-            lib.d_part_cond_qp_ws_create(
-                dim_s, self._block.ctypes.data, dim2_s, carg, cws,
-                struct(lib.d_part_cond_qp_ws_memsize(dim_s, self._block.ctypes.data, dim2_s,
-                                                      carg)))
-            self._pc = (qp2_s, sol2_s, arg2_s, ws2, carg, cws)
         self._keep = keep
         self._idxbx_addr = self.idxbx.ctypes.data
         self._idxbu = np.arange(nv, dtype=np.int32)
@@ -438,10 +384,10 @@ class OcpQp:
 
     @property
     def handles(self) -> tuple:
-        """The addresses of HPIPM's QP, solution, argument and workspace structs, then
-        partial condensing's six (None without it): `trq_hpipm_solve`'s arguments, for
-        compiled callers that solve this QP themselves (nmpc/feedback.py)."""
-        return (self._qp, self._sol, self._arg, self._ws, *self._pc)
+        """The addresses of HPIPM's QP, solution, argument and workspace structs:
+        `trq_hpipm_solve`'s arguments, for compiled callers that solve this QP themselves
+        (nmpc/feedback.py)."""
+        return (self._qp, self._sol, self._arg, self._ws)
 
     # --- data ------------------------------------------------------------------------------
     def set_hessian(self, H, HN) -> None:
@@ -481,7 +427,7 @@ class OcpQp:
                 b.ctypes.data, q.ctypes.data, r.ctypes.data,
                 lbx.ctypes.data, ubx.ctypes.data, lbu.ctypes.data, ubu.ctypes.data,
                 self.x.ctypes.data, self.u.ctypes.data, self.pi.ctypes.data,
-                ctypes.addressof(self._iter), *self._pc)
+                ctypes.addressof(self._iter))
             self.iterations = self._iter.value
             return self.x, self.u, self.pi
         # without the shim: the same calls from Python (field, data, stages)
@@ -493,16 +439,9 @@ class OcpQp:
             fn, ptr, stride = getattr(lib, f"d_ocp_qp_set_{name}"), arr.ctypes.data, arr.strides[0]
             for k in stages:
                 fn(k, ptr + k * stride, qp)
-        qp2, sol2, arg2, ws2, carg, cws = self._pc
-        if qp2 is not None:
-            lib.d_part_cond_qp_cond(qp, qp2, carg, cws)
-            lib.d_ocp_qp_ipm_solve(qp2, sol2, arg2, ws2)
-            lib.d_part_cond_qp_expand_sol(qp, sol2, self._sol, carg, cws)
-        else:
-            lib.d_ocp_qp_ipm_solve(qp, self._sol, self._arg, self._ws)
-        ws = self._ws if qp2 is None else ws2
-        lib.d_ocp_qp_ipm_get_status(ws, ctypes.byref(self._status))
-        lib.d_ocp_qp_ipm_get_iter(ws, ctypes.byref(self._iter))
+        lib.d_ocp_qp_ipm_solve(qp, self._sol, self._arg, self._ws)
+        lib.d_ocp_qp_ipm_get_status(self._ws, ctypes.byref(self._status))
+        lib.d_ocp_qp_ipm_get_iter(self._ws, ctypes.byref(self._iter))
         self.status, self.iterations = self._status.value, self._iter.value
         for name, arr, stages in (("u", self.u, inputs), ("pi", self.pi, inputs),
                                   ("x", self.x, states)):

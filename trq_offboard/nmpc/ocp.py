@@ -72,7 +72,6 @@ class Stage:
     ns: int
     nv: int
     n_lag: int = 0                     # actuator lag states (0, 4 quad, 8 TRQ) at the end of s
-    tilt_states: bool = False          # TRQ: s carries the 4 tilt states a_k (tilt_rate_limit)
 
     @staticmethod
     def lag_gain(cfg: ControllerConfig, model: PredictionModel, dt_s: float) -> np.ndarray:
@@ -87,8 +86,7 @@ class Stage:
         h = cfg.step_s
         nx, nu, tilting = model.nx, model.nu, model.tilting
         n_lag = nu if cfg.nmpc_actuator_states else 0
-        tilt_states = tilting and cfg.tilt_rate_limit == "horizon"
-        ns, nv = (nx + 4 * tilt_states + n_lag, 8) if tilting else (nx + n_lag, 4)
+        ns, nv = (nx + 4 + n_lag, 8) if tilting else (nx + n_lag, 4)
         F = model.discrete(h, 1)
         wts = cfg.weights
         Q = np.array([*wts.position, *wts.velocity, *wts.euler, *wts.rates])
@@ -97,13 +95,11 @@ class Stage:
         xr, u_trim, d = ca.SX.sym("x_ref", nx), ca.SX.sym("u_trim", nu), ca.SX.sym("d", 6)
         x = s[0:nx]
         ex = x - xr
-        if tilt_states:
+        if tilting:
             a_next = s[nx:nx + 4] + h * v[0:4]
             u_scaled = ca.vertcat(a_next, v[4:8])
             u_phys = ca.vertcat(a_next, 100.0 * v[4:8])
             l_rate = wts.tilt_rate * ca.sumsqr(v[0:4])
-        elif tilting:
-            u_scaled, u_phys, l_rate = v, ca.vertcat(v[0:4], 100.0 * v[4:8]), 0
         else:
             u_scaled, u_phys, l_rate = v, 100.0 * v, 0
         eu = u_scaled - u_trim
@@ -116,18 +112,18 @@ class Stage:
             y_mid = y + g_mid * (u_scaled - y)
             y_end = y + g_end * (u_scaled - y)
             x_next = model.discrete_varying(h)(x, scale * y, scale * y_mid, scale * y_end, d)
-            s_next = (ca.vertcat(x_next, a_next, y_end) if tilt_states
+            s_next = (ca.vertcat(x_next, a_next, y_end) if tilting
                       else ca.vertcat(x_next, y_end))
         else:
             x_next = F(x, u_phys, d)
-            s_next = ca.vertcat(x_next, a_next) if tilt_states else x_next
+            s_next = ca.vertcat(x_next, a_next) if tilting else x_next
         return Stage(
             ca.Function("stage_dynamics", [s, v, d], [s_next], ["s", "v", "d"], ["s_next"]),
             ca.Function("stage_cost", [s, v, xr, u_trim], [l_k],
                         ["s", "v", "x_ref", "u_trim"], ["l"]),
             ca.Function("terminal_cost", [s, xr], [wts.terminal_factor * ca.dot(Q * ex, ex)],
                         ["s", "x_ref"], ["l"]),
-            ns, nv, n_lag, tilt_states)
+            ns, nv, n_lag)
 
 @dataclass
 class Ocp:
@@ -143,15 +139,13 @@ class Ocp:
     nu: int                            # model input (8 TRQ, 4 quad)
     ns: int                            # stage state (16 TRQ, 12 quad; + n_lag)
     nv: int                            # stage input (8 TRQ, 4 quad)
-    tilting: bool
+    tilting: bool                      # TRQ: s carries the 4 tilt states a_k, v the servo rates
     s_index: np.ndarray                # (N+1, ns) positions of s_k in w
     v_index: np.ndarray                # (N, nv) positions of v_k in w
     cost_fn: ca.Function               # cost(w, p)
     n_params: int
     n_lag: int = 0                     # actuator lag states, the last n_lag rows of s_k
     lag_gain: np.ndarray | None = None  # (n_lag,) 1 - exp(-h/T) (scaled units, as v)
-    tilt_states: bool = False          # TRQ: tilts as states a_k, servo rates as inputs
-    tilt_step0: float = 0.0            # tilt_rate_limit first_step: |alpha_0 - alpha_prev| bound
     _c_bounds: tuple | None = None     # set_throttle_scale: (indices, healthy lbw, healthy ubw)
 
     @staticmethod
@@ -175,14 +169,13 @@ class Ocp:
         slo[9:12], shi[9:12] = -cfg.max_rate_rad_s, cfg.max_rate_rad_s
         rate = vm.servo_rate_limit_rad_s
         c_lo, c_hi = [vm.idle_pct / 100.0] * 4, [1.0] * 4
-        if stage.tilt_states:
+        if tilting:
             slo[12:16], shi[12:16] = vm.tilt_min_rad, vm.tilt_max_rad
             vlo, vhi = np.array([-rate] * 4 + c_lo), np.array([rate] * 4 + c_hi)
             rate0 = min(rate, rate * cfg.control_dt_s / h)
             v0lo, v0hi = np.array([-rate0] * 4 + c_lo), np.array([rate0] * 4 + c_hi)
-        else:      # tilts (if any) are inputs; the first one's rate bound is set per solve
-            vlo = np.array(([vm.tilt_min_rad] * 4 if tilting else []) + c_lo)
-            vhi = np.array(([vm.tilt_max_rad] * 4 if tilting else []) + c_hi)
+        else:      # the quadcopter: throttles only
+            vlo, vhi = np.array(c_lo), np.array(c_hi)
             v0lo, v0hi = vlo, vhi
 
         w, lbw, ubw, s_index, v_index = [], [], [], [], []
@@ -212,8 +205,7 @@ class Ocp:
         return Ocp(nlp, zeros, zeros.copy(), np.concatenate(lbw), np.concatenate(ubw), N, h,
                    nx, nu, ns, nv, tilting, np.array(s_index), np.array(v_index),
                    ca.Function("cost", [wv, p], [cost]), int(p.shape[0]), n_lag,
-                   Stage.lag_gain(cfg, model, h) if n_lag else None, stage.tilt_states,
-                   rate * cfg.control_dt_s)
+                   Stage.lag_gain(cfg, model, h) if n_lag else None)
 
     def set_throttle_scale(self, e) -> None:
         """Bound the throttles of every stage to [e idle, e 100 %] (e (4): the motors'
@@ -250,7 +242,7 @@ class Ocp:
     def initial_stage(self, x0, alpha_prev, y0=None) -> np.ndarray:
         """s_0 (ns): x0, the applied tilt (tilts as states) and the actuators' outputs (lag
         states, scaled)."""
-        s0 = np.concatenate([x0, alpha_prev]) if self.tilt_states else np.asarray(x0, float)
+        s0 = np.concatenate([x0, alpha_prev]) if self.tilting else np.asarray(x0, float)
         if self.n_lag:
             s0 = np.concatenate([s0, self._lag_rows(y0)])
         return s0
@@ -261,11 +253,6 @@ class Ocp:
         s0 = self.initial_stage(x0, alpha_prev, y0)
         lbw[self.s_index[0]] = s0
         ubw[self.s_index[0]] = s0
-        if self.tilting and not self.tilt_states:       # the servos' rate over the first step
-            a = np.asarray(alpha_prev, float).reshape(4)
-            i = self.v_index[0][0:4]
-            lbw[i] = np.minimum(np.maximum(lbw[i], a - self.tilt_step0), ubw[i])
-            ubw[i] = np.maximum(np.minimum(ubw[i], a + self.tilt_step0), lbw[i])
         return lbw, ubw
 
     def stage_major(self) -> bool:
@@ -295,7 +282,7 @@ class Ocp:
         u_plan = np.asarray(u_plan, float)
         W[:, :nx] = x_plan[:N]
         sN[:nx] = x_plan[N]
-        if self.tilt_states:          # s_k's tilts: the applied one, then the plan's
+        if self.tilting:              # s_k's tilts: the applied one, then the plan's
             W[0, nx:nx + 4] = np.asarray(alpha_prev, float).reshape(4)
             W[1:, nx:nx + 4] = u_plan[:N - 1, 0:4]
             sN[nx:nx + 4] = u_plan[N - 1, 0:4]
@@ -319,7 +306,7 @@ class Ocp:
         x = np.empty((N + 1, nx))
         x[:N] = W[:, :nx]
         x[N] = sN[:nx]
-        if self.tilt_states:          # the plan's tilts are s_1..s_N's
+        if self.tilting:              # the plan's tilts are s_1..s_N's
             u = np.empty((N, self.nu))
             u[:N - 1, 0:4] = W[1:, nx:nx + 4]
             u[N - 1, 0:4] = sN[nx:nx + 4]

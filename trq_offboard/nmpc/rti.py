@@ -46,9 +46,9 @@ from trq_offboard.config import ControllerConfig
 from trq_offboard.model import PredictionModel
 from trq_offboard.model.dynamics import NumpyFunction
 from trq_offboard.nmpc import feedback, hpipm
+from trq_offboard.nmpc.base import Solver, conic_line, conic_qp, plan_of
 from trq_offboard.nmpc.cache import compiled_many
 from trq_offboard.nmpc.ocp import Ocp, Stage
-from trq_offboard.nmpc.solver import conic_line, plan_of
 from trq_offboard.records import SolveInfo, SolveStatus
 
 __all__ = ["RtiSolver", "HPIPM_AUTO"]
@@ -74,8 +74,10 @@ class _Prepared:
     xr_w: np.ndarray         # x_ref placed at the state positions of w (nw)
 
 
-class RtiSolver:
+class RtiSolver(Solver):
     """One SQP step per control step on compiled per-stage functions; HPIPM QP."""
+
+    prepares = True
 
     def __init__(self, cfg: ControllerConfig, model: PredictionModel, u_trim: np.ndarray,
                  hessian: str = "gauss_newton", ocp=None):
@@ -205,15 +207,7 @@ class RtiSolver:
                 opts = {**preset, **opts}
             self.hpipm_mode, self.hpipm_options = mode, opts
         else:
-            # the QP: HPIPM (Riccati, stage structure detected from the sparsity)
-            qp_opts = {"error_on_fail": False, "print_time": False}
-            if sc.qp_solver == "hpipm":
-                hpipm.check_conic()
-                qp_opts["hpipm"] = {"iter_max": sc.qp_max_iterations, "warm_start": 0}
-            elif sc.qp_solver == "qrqp":
-                qp_opts.update({"print_iter": False, "print_header": False,
-                                "print_info": False})
-            self._qp = ca.conic("rti_qp", sc.qp_solver, {"h": h_sp, "a": a_sp}, qp_opts)
+            self._qp = conic_qp("rti_qp", sc.qp_solver, h_sp, a_sp, sc.qp_max_iterations)
         # feedback helpers (NumPy)
         self._lam = np.zeros(N * ns)
         wts = cfg.weights
@@ -223,52 +217,38 @@ class RtiSolver:
         self._q2_w[self._x_pos[:N]] = q2
         self._q2_w[self._x_pos[N]] = wts.terminal_factor * q2
         self._kernel = None
-        self._codegen = enabled
         if direct:
-            self.rebuild_qp()
+            # the direct interface's HPIPM QP with this solver's mode, options and Hessian, and
+            # the feedback in one compiled call, which holds the QP's handles, where it can be
+            # built (else the NumPy feedback serves)
+            self._hqp = hpipm.OcpQp(ns, nv, N, self._idxbx, mode=self.hpipm_mode,
+                                    iter_max=sc.qp_max_iterations, options=self.hpipm_options,
+                                    shim=enabled)
+            if hessian != "exact":
+                self._hqp.set_hessian(self._hc, self._hcN)
+            if enabled and self._hqp.uses_shim and feedback.available():
+                self._kernel = feedback.FeedbackKernel(o, self._hqp, self._q2_w,
+                                                       self._prep_np.results[0:4])
+                self._s0_hess = np.ascontiguousarray(self._hc[ns:, :ns])
         self._prepared: _Prepared | None = None
         self.last_prepare_s = 0.0
         self.qp_iterations = 0
         self.build_s = time.perf_counter() - t_build
 
-    def rebuild_qp(self, **qp_args) -> None:
-        """(Re)build the direct interface's HPIPM QP with this solver's mode, options and
-        Hessian, and further hpipm.OcpQp arguments (the benchmark's partial condensing:
-        condensed_stages), and with it the compiled feedback, which holds the QP's handles
-        (else the NumPy feedback serves)."""
-        if self.qp_interface != "direct":
-            raise RuntimeError(f"rebuild_qp: the QP goes through {self.qp_interface}, not the "
-                               "direct HPIPM interface")
-        o, sc = self.ocp, self.cfg.solver
-        ns = o.ns
-        self._hqp = hpipm.OcpQp(ns, o.nv, o.n_steps, self._idxbx, mode=self.hpipm_mode,
-                                iter_max=sc.qp_max_iterations, options=self.hpipm_options,
-                                shim=self._codegen, **qp_args)
-        if self.hessian != "exact":
-            self._hqp.set_hessian(self._hc, self._hcN)
-        # the feedback in one compiled call where it can be built (else the NumPy one below)
-        self._kernel = None
-        if self._codegen and self._hqp.uses_shim and feedback.available():
-            self._kernel = feedback.FeedbackKernel(o, self._hqp, self._q2_w,
-                                                   self._prep_np.results[0:4])
-            self._s0_hess = np.ascontiguousarray(self._hc[ns:, :ns])
-
     def describe(self) -> str:
         """The QP path this solver took, for logs and benchmarks: the interface, HPIPM's mode and
-        arguments, the per-solve loop (compiled shim or ctypes), partial condensing, the feedback
+        arguments, the per-solve loop (compiled shim or ctypes), the feedback
         (one compiled call or NumPy) and which libhpipm (a flight is replayed bit for bit only
         on the same library: BLASFEO's kernels round differently)."""
         if self.qp_interface != "direct":
             return conic_line("rti", self.hessian, self.cfg.solver.qp_solver)
         opts = "".join(f" {k} {v:g}" for k, v in self.hpipm_options.items())
         loop = "shim" if self._hqp.uses_shim else "ctypes loop"
-        pc = (f", condensed to {self._hqp.condensed_stages} blocks"
-              if self._hqp.condensed_stages else "")
         fb = "compiled feedback" if self._kernel is not None else "numpy feedback"
         lib = hpipm.loaded_library()
         which = "-" if lib is None else (
             f"{lib} (CasADi's)" if lib == hpipm.bundled_path() else f"{lib} (${hpipm.LIBRARY_ENV})")
-        return (f"rti {self.hessian}, hpipm direct {self.hpipm_mode}{opts}, {loop}{pc}, {fb}, "
+        return (f"rti {self.hessian}, hpipm direct {self.hpipm_mode}{opts}, {loop}, {fb}, "
                 f"libhpipm {which}")
 
     @staticmethod
@@ -316,6 +296,9 @@ class RtiSolver:
     def discard(self) -> None:
         """Forget a pending preparation (the controller was reset)."""
         self._prepared = None
+
+    def zero_multipliers(self) -> None:
+        self._lam[:] = 0.0
 
     def solve(self, x0, x_ref, d, u_prev, guess, y0=None):
         t0 = time.perf_counter()
@@ -387,7 +370,7 @@ class RtiSolver:
         # the preparation's constraint and cost data: in the buffers the kernel reads
         w, status = self._kernel(P.w, P.d, d, P.xr_w,
                                  np.reshape(x_ref, (self._N + 1, self._nx)),
-                                 self.ocp.initial_stage(x0, tilt, y0), tilt, s0_hess)
+                                 self.ocp.initial_stage(x0, tilt, y0), s0_hess)
         self.qp_iterations = self._hqp.iterations
         if w is None:
             return None, "non-finite QP step"
@@ -435,9 +418,3 @@ class RtiSolver:
         p_in[:x_ref.size] = np.ravel(x_ref)          # (N+1, nx) rows: vec of (nx, N+1)
         fn.evaluate()
         return float(fn.results[0][0])
-
-    def _failed(self, guess, t0, iters, msg):
-        u, x = (np.nan_to_num(np.asarray(a, float)) for a in guess)
-        return u, x, SolveInfo(SolveStatus.FAILED, iters, time.perf_counter() - t0,
-                               float("nan"), msg)
-

@@ -1,63 +1,34 @@
-"""NMPC solvers behind one interface: `Solver.solve(x0, x_ref, d, u_prev, guess) -> (u, x, info)`.
+"""The NLP solvers on ocp.py's whole-horizon NLP (behind nmpc/base.py's `Solver`), the test
+oracles and the latency bound's solver; the real-time default is rti.py's RtiSolver.
 
-    RtiSolver    (rti.py, kind "rti", the default) the real-time iteration on per-stage C
-                 compiled once and cached, with a preparation / feedback split (`prepare`).
-    SqpSolver    (kind "sqp") a hand-written SQP (full steps) on the NLP of ocp.py with a
-                 structured QP solver (HPIPM through casadi.conic, no code generation); Hessian
-                 either Gauss-Newton (the constant Hessian of the quadratic cost: always convex,
-                 cheapest) or exact (cost + constraint curvature with the QP multipliers);
-                 a few iterations per step, warm-started from the caller's guess.
-    IpoptSolver  the converged reference: the same NLP solved by IPOPT to tight tolerance.
-
-Both never return NaN: on a failure (exception, non-finite iterate, status) they return the
-guess (finite) with `SolveInfo.status == FAILED`; the caller decides what to fly. Each solve
-measures its wall time with time.perf_counter (a measurement, returned in SolveInfo).
+    SqpSolver    (kind "sqp") a hand-written SQP (full steps) with a structured QP solver (HPIPM
+                 through casadi.conic, no code generation); Hessian either Gauss-Newton (the
+                 constant Hessian of the quadratic cost: always convex, cheapest) or exact
+                 (cost + constraint curvature with the QP multipliers); a few iterations per
+                 step, warm-started from the caller's guess.
+    IpoptSolver  (kind "ipopt") the converged reference: the same NLP solved by IPOPT to tight
+                 tolerance.
 """
 
 from __future__ import annotations
 
 import time
-from typing import Callable, Protocol, Union
 
 import casadi as ca
 import numpy as np
 
 from trq_offboard.config import ControllerConfig
 from trq_offboard.model import PredictionModel
-from trq_offboard.nmpc import hpipm
+from trq_offboard.nmpc.base import Solver, conic_line, conic_qp, plan_of
 from trq_offboard.nmpc.ocp import Ocp
 from trq_offboard.records import SolveInfo, SolveStatus
 
-__all__ = ["Solver", "SqpSolver", "IpoptSolver", "make_solver", "Plan", "Guess", "plan_of",
-           "conic_line"]
-
-Plan = tuple[np.ndarray, np.ndarray]      # (u (N, nu) physical, x (N+1, 12))
-# a plan, or a function making one: called only if the solver needs it (a real-time iteration
-# that was prepared needs it only to fail with)
-Guess = Union[Plan, Callable[[], Plan]]
+__all__ = ["SqpSolver", "IpoptSolver"]
 
 
-def plan_of(guess: Guess) -> Plan:
-    """The plan of a Guess (calling it if it is a function)."""
-    return guess() if callable(guess) else guess
+class _NlpSolver(Solver):
+    """A solver of the whole-horizon NLP (Ocp.nlp): the bounds and the packed guess."""
 
-
-class Solver(Protocol):
-    ocp: Ocp
-
-    def solve(self, x0: np.ndarray, x_ref: np.ndarray, d: np.ndarray, u_prev: np.ndarray,
-              guess: Guess, y0: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray,
-                                                                 SolveInfo]:
-        """x0 (12) measured state, x_ref (N+1, 12) reference states, d (6) disturbance held
-        over the horizon, u_prev (nu) the command applied now (its tilts bound the first tilt
-        step), guess an initial plan (u, x) or a function making one (plan_of), y0 (nu,
-        physical; only with actuator lag states, default u_prev) the actuators' outputs when
-        the plan starts. Returns the plan (u (N, nu) physical [alpha, zeta] or [zeta]: the
-        commands, x (N+1, 12)) and a SolveInfo."""
-        ...
-
-
-class _Base:
     def __init__(self, cfg: ControllerConfig, model: PredictionModel, u_trim: np.ndarray):
         self.cfg = cfg
         self.ocp = Ocp.build(cfg, model)
@@ -75,20 +46,8 @@ class _Base:
         w0 = np.clip(w0, lbw, ubw)
         return p, lbw, ubw, w0
 
-    def _failed(self, guess, t0, iters, msg) -> tuple[np.ndarray, np.ndarray, SolveInfo]:
-        u, x = (np.nan_to_num(np.asarray(a, float)) for a in guess)
-        return u, x, SolveInfo(SolveStatus.FAILED, iters, time.perf_counter() - t0,
-                               float("nan"), msg)
 
-
-def conic_line(kind: str, hessian: str, qp_solver: str) -> str:
-    """describe() of a solver whose QP goes through casadi.conic (whose hpipm plugin is always
-    the libhpipm CasADi ships)."""
-    return f"{kind} {hessian}, {qp_solver} conic" + (
-        ", libhpipm CasADi's" if qp_solver == "hpipm" else "")
-
-
-class SqpSolver(_Base):
+class SqpSolver(_NlpSolver):
     """Full-step SQP with HPIPM (or another casadi conic plugin) and a fixed iteration budget."""
 
     def __init__(self, cfg: ControllerConfig, model: PredictionModel, u_trim: np.ndarray,
@@ -119,22 +78,16 @@ class SqpSolver(_Base):
             self._h_const = hf(np.zeros(w.shape[0]), np.zeros(p.shape[0]))
             h_sp = self._h_const.sparsity()
         a_sp = self._lin.sparsity_out(1)
-        qp_opts = {"error_on_fail": False, "print_time": False}
-        if sc.qp_solver == "hpipm":
-            hpipm.check_conic()
-            qp_opts["hpipm"] = {"iter_max": sc.qp_max_iterations, "warm_start": 0}
-        elif sc.qp_solver == "qrqp":
-            qp_opts.update({"print_iter": False, "print_header": False, "print_info": False})
-        elif sc.qp_solver == "osqp":
-            qp_opts["osqp"] = {"verbose": False, "eps_abs": 1e-8, "eps_rel": 1e-8,
-                               "polish": True}
-        self._qp = ca.conic("qp", sc.qp_solver, {"h": h_sp, "a": a_sp}, qp_opts)
+        self._qp = conic_qp("qp", sc.qp_solver, h_sp, a_sp, sc.qp_max_iterations)
         self._lam = np.zeros(g.shape[0])
         self._fg = ca.Function("fg", [w, p], [f, g])
 
     def describe(self) -> str:
         """What solves the NMPC, for logs and benchmarks."""
         return conic_line("sqp", self.hessian, self.cfg.solver.qp_solver)
+
+    def zero_multipliers(self) -> None:
+        self._lam[:] = 0.0
 
     def solve(self, x0, x_ref, d, u_prev, guess, y0=None):
         t0 = time.perf_counter()
@@ -176,7 +129,7 @@ class SqpSolver(_Base):
             return self._failed(guess, t0, 0, f"exception: {exc}")
 
 
-class IpoptSolver(_Base):
+class IpoptSolver(_NlpSolver):
     """IPOPT on the same NLP to a tight tolerance: the reference for tests, not for real time."""
 
     def __init__(self, cfg: ControllerConfig, model: PredictionModel, u_trim: np.ndarray,
@@ -206,12 +159,3 @@ class IpoptSolver(_Base):
         u, x = ocp.unpack(w)
         return u, x, SolveInfo(SolveStatus.OK, st["iter_count"], time.perf_counter() - t0,
                                float(r["f"]), st["return_status"])
-
-
-def make_solver(cfg: ControllerConfig, model: PredictionModel, u_trim: np.ndarray) -> Solver:
-    if cfg.solver.kind == "ipopt":
-        return IpoptSolver(cfg, model, u_trim)
-    if cfg.solver.kind == "rti":
-        from trq_offboard.nmpc.rti import RtiSolver
-        return RtiSolver(cfg, model, u_trim, cfg.solver.hessian)
-    return SqpSolver(cfg, model, u_trim, cfg.solver.hessian)
