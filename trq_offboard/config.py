@@ -24,6 +24,7 @@ from pathlib import Path
 
 from trq_params import loader, schema
 from trq_params.loader import ConfigError
+from trq_params.schema import throttle_curve
 
 __all__ = ["ConfigError", "RotorGeometry", "Curve", "VehicleModel", "EsoChannelGains",
            "EsoConfig", "EffectivenessConfig", "Weights", "SolverConfig", "ReferenceConfig",
@@ -44,7 +45,7 @@ class Curve:
     c0: float
 
     def value(self, zeta_pct: float) -> float:
-        return (self.c2 * zeta_pct + self.c1) * zeta_pct + self.c0
+        return throttle_curve(self.c2, self.c1, self.c0, zeta_pct)
 
     def slope(self, zeta_pct: float) -> float:
         return 2.0 * self.c2 * zeta_pct + self.c1

@@ -11,7 +11,7 @@ import trq_params
 from ocp_problem import ocp_problem
 
 from trq_offboard.config import load_controller
-from trq_offboard.nmpc.solver import IpoptSolver, SqpSolver
+from trq_offboard.nmpc.nlp import IpoptSolver, SqpSolver
 from trq_offboard.records import SolveStatus
 
 

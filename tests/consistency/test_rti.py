@@ -19,7 +19,7 @@ from trq_offboard.config import load_controller
 from trq_offboard.model import PredictionModel
 from trq_offboard.nmpc import cache
 from trq_offboard.nmpc.rti import RtiSolver
-from trq_offboard.nmpc.solver import IpoptSolver
+from trq_offboard.nmpc.nlp import IpoptSolver
 from trq_offboard.records import SolveStatus
 
 CTRL = trq_params.DIR / "controller"
@@ -201,7 +201,7 @@ def test_rti_and_sqp_with_actuator_lag_states_converge_to_ipopt(cache_env, name)
     """actuator_states on (the actuators start behind the applied command): repeated real-time
     iterations and the SQP converge to IPOPT on the same NLP (they share ocp.Stage); the plan
     is the commands, which lead the lagged outputs."""
-    from trq_offboard.nmpc.solver import SqpSolver
+    from trq_offboard.nmpc.nlp import SqpSolver
 
     cfg = dataclasses.replace(_cfg(name=name, hessian="gauss_newton"), actuator_states="on")
     model, u_trim, x0, x_ref, d, guess = ocp_problem(cfg)

@@ -1,3 +1,10 @@
-"""The controller's side of the wire: MAVLink messages in and out (wire), and the UDP endpoint
-(udp), with signing and the actuator scalings from trq_wire. Nothing here knows about the
-simulator; see sil_vehicle/PROTOCOL.md for the contract."""
+"""The controller's side of the wire. Nothing here knows about the simulator; see
+sil_vehicle/PROTOCOL.md for the contract.
+
+    wire      MAVLink messages in and out: ODOMETRY into a state, the actuator target, commands
+    endpoint  what every transport shares: the trusted peer, signing, counters, `send`
+    udp       the UDP endpoint (`udpin:`, `udpout:`), the hot frames through trq_wire.frames
+    stream    the byte-stream endpoint: a serial line or TCP (trq_wire.stream, trq_wire.framing)
+
+Signing, the actuator scalings and the frames are trq_wire's (shared with the vehicle).
+"""

@@ -22,6 +22,8 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
+from trq_params.schema import throttle_curve
+
 from trq_offboard.config import VehicleModel
 
 NX, ND = 12, 6
@@ -106,8 +108,8 @@ class PredictionModel:
         for i, rotor in enumerate(vm.rotors):
             ax, ay, _ = rotor.arm_frd
             z = zeta[i]
-            f_i = (th.c2 * z + th.c1) * z + th.c0
-            tau_i = (tq.c2 * z + tq.c1) * z + tq.c0
+            f_i = throttle_curve(th.c2, th.c1, th.c0, z)
+            tau_i = throttle_curve(tq.c2, tq.c1, tq.c0, z)
             n = ca.vertcat(-ay * ca.sin(alpha[i]), ax * ca.sin(alpha[i]), -ca.cos(alpha[i]))
             r = ca.DM(rotor.position_frd_m)
             force += f_i * n

@@ -1,4 +1,4 @@
-"""Compiled CasADi functions, cached on disk and never committed (STYLE principle 10).
+"""Compiled CasADi functions, cached on disk and never committed.
 
     fn, how = compiled(casadi_function)      # how: "compiled" | "cached" | "interpreted"
 

@@ -8,7 +8,7 @@ from trq_offboard.config import ControllerConfig
 from trq_offboard.model import PredictionModel
 from trq_offboard.nmpc.base import Solver
 from trq_offboard.nmpc.rti import RtiSolver
-from trq_offboard.nmpc.solver import IpoptSolver, SqpSolver
+from trq_offboard.nmpc.nlp import IpoptSolver, SqpSolver
 
 __all__ = ["make_solver"]
 
