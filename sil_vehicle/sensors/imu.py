@@ -20,7 +20,7 @@ of (params, state, truth, noise) returning the next state and the reading.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -44,27 +44,24 @@ class ImuParams:
     accel_turn_on_bias_m_s2: float
     accel_vibration_m_s2: float
 
-    @property
-    def period_us(self) -> int:
-        return 1_000_000 // self.rate_hz
+    # derived once (per-sample standard deviations)
+    period_us: int = field(init=False)
+    gyro_white_rad_s: float = field(init=False)
+    accel_white_m_s2: float = field(init=False)
+    gyro_bias_step_rad_s: float = field(init=False)
+    accel_bias_step_m_s2: float = field(init=False)
 
-    @property
-    def gyro_white_rad_s(self) -> float:
-        """Per-sample std of the gyro's white noise."""
-        return white_std(self.gyro_noise_density_rad_s_rthz, self.rate_hz)
-
-    @property
-    def accel_white_m_s2(self) -> float:
-        return white_std(self.accel_noise_density_m_s2_rthz, self.rate_hz)
-
-    @property
-    def gyro_bias_step_rad_s(self) -> float:
-        """Per-sample std of the gyro bias increment."""
-        return random_walk_std(self.gyro_bias_random_walk_rad_s2_rthz, 1.0 / self.rate_hz)
-
-    @property
-    def accel_bias_step_m_s2(self) -> float:
-        return random_walk_std(self.accel_bias_random_walk_m_s3_rthz, 1.0 / self.rate_hz)
+    def __post_init__(self) -> None:
+        dt = 1.0 / self.rate_hz
+        for name, value in (
+                ("period_us", 1_000_000 // self.rate_hz),
+                ("gyro_white_rad_s", white_std(self.gyro_noise_density_rad_s_rthz, self.rate_hz)),
+                ("accel_white_m_s2", white_std(self.accel_noise_density_m_s2_rthz, self.rate_hz)),
+                ("gyro_bias_step_rad_s",
+                 random_walk_std(self.gyro_bias_random_walk_rad_s2_rthz, dt)),
+                ("accel_bias_step_m_s2",
+                 random_walk_std(self.accel_bias_random_walk_m_s3_rthz, dt))):
+            object.__setattr__(self, name, value)
 
 
 @dataclass(frozen=True)
@@ -95,7 +92,8 @@ def draw(rng: np.random.Generator) -> np.ndarray:
 
 
 def step(p: ImuParams, s: ImuState, truth: Truth, w: np.ndarray) -> tuple[ImuState, ImuReading]:
-    z = float(np.mean(truth.motor_pct)) / 100.0 if truth.motor_pct.size else 0.0
+    n = truth.motor_pct.size
+    z = float(truth.motor_pct.sum()) / (100.0 * n) if n else 0.0
     z2 = z * z
     gyro = (truth.rates_frd_rad_s + s.gyro_bias_frd_rad_s + p.gyro_white_rad_s * w[0:3]
             + p.gyro_vibration_rad_s * z2 * w[6:9])

@@ -12,7 +12,7 @@ Model (k the sample index, dt = 1 / rate_hz, w.[k] independent standard normals,
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -34,24 +34,24 @@ class MagParams:
     bias_random_walk_gauss_s_rthz: float
     turn_on_bias_gauss: float
 
-    @property
-    def period_us(self) -> int:
-        return 1_000_000 // self.rate_hz
+    # derived once
+    period_us: int = field(init=False)
+    field_ned_gauss: np.ndarray = field(init=False, compare=False)     # (3,)
+    white_gauss: float = field(init=False)
+    bias_step_gauss: float = field(init=False)
 
-    @property
-    def field_ned_gauss(self) -> np.ndarray:
+    def __post_init__(self) -> None:
         ci = math.cos(self.inclination_rad)
-        return self.field_gauss * np.array((ci * math.cos(self.declination_rad),
-                                            ci * math.sin(self.declination_rad),
-                                            math.sin(self.inclination_rad)))
-
-    @property
-    def white_gauss(self) -> float:
-        return white_std(self.noise_density_gauss_rthz, self.rate_hz)
-
-    @property
-    def bias_step_gauss(self) -> float:
-        return random_walk_std(self.bias_random_walk_gauss_s_rthz, 1.0 / self.rate_hz)
+        m = self.field_gauss * np.array((ci * math.cos(self.declination_rad),
+                                         ci * math.sin(self.declination_rad),
+                                         math.sin(self.inclination_rad)))
+        m.flags.writeable = False
+        for name, value in (
+                ("period_us", 1_000_000 // self.rate_hz), ("field_ned_gauss", m),
+                ("white_gauss", white_std(self.noise_density_gauss_rthz, self.rate_hz)),
+                ("bias_step_gauss",
+                 random_walk_std(self.bias_random_walk_gauss_s_rthz, 1.0 / self.rate_hz))):
+            object.__setattr__(self, name, value)
 
 
 @dataclass(frozen=True)

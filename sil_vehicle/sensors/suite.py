@@ -6,10 +6,13 @@
 `sample` must be called once per physics tick, in order (t_us = k * dt_us). It returns the
 readings that arrive at t_us, in a fixed order: IMU, barometer, magnetometer, GNSS, motion
 capture (a delayed reading arrives at t + delay and carries its time of validity `t_us` and its
-`arrival_us`). A sensor samples on the ticks where t_us is a multiple of its period; its noise
-is then drawn from the injected generator in that fixed order, so the same seed and the same
-truths give the same readings bit for bit, and nothing else (no clock, no global random state)
-enters. The `truth` profile has no sensor: the suite returns nothing, and the vehicle keeps its
+`arrival_us`). A sensor samples on the ticks where t_us is a multiple of its period. Each of the
+five sensor slots draws its noise from its own child of the injected generator
+(`rng.spawn(5)`, in that order, whether the profile carries the sensor or not), so the same seed
+and the same truths give the same readings bit for bit, a sensor's noise does not change when
+another sensor is added or removed, and nothing else (no clock, no global random state) enters.
+
+The `truth` profile has no sensor: the suite returns nothing, and the vehicle keeps its
 truth-plus-noise state stream (today's ODOMETRY) for debugging.
 
 The state of every sensor is in `states` (frozen records), for logs and replays.
@@ -39,14 +42,15 @@ class SensorSuite:
     def __init__(self, profile: SensingProfile, rng: np.random.Generator, *,
                  home_alt_m: float = 0.0) -> None:
         self.profile = profile
-        self._rng = rng
+        slots = _IMMEDIATE + _DELAYED
+        self._rngs = dict(zip((name for name, _ in slots), rng.spawn(len(slots))))
         self.params: dict[str, Any] = {}
         for name, _ in _IMMEDIATE + _DELAYED:
             p = getattr(profile, name)
             if p is not None:
                 self.params[name] = replace(p, home_alt_m=home_alt_m) if name == "baro" else p
         # turn-on biases and stationary starts, drawn once, in the fixed order
-        self.states: dict[str, Any] = {name: module.initial(self.params[name], rng)
+        self.states: dict[str, Any] = {name: module.initial(self.params[name], self._rngs[name])
                                        for name, module in _IMMEDIATE + _DELAYED
                                        if name in self.params}
         self._dt_us = profile.dt_us
@@ -65,7 +69,7 @@ class SensorSuite:
             p = self.params.get(name)
             if p is not None and t_us % p.period_us == 0:
                 self.states[name], reading = module.step(p, self.states[name], truth,
-                                                         module.draw(self._rng))
+                                                         module.draw(self._rngs[name]))
                 out.append(reading)
         for name, module in _DELAYED:
             p = self.params.get(name)
@@ -73,7 +77,7 @@ class SensorSuite:
                 continue
             state = self.states[name]
             if t_us % p.period_us == 0:
-                state = module.sample(p, state, truth, module.draw(self._rng))
+                state = module.sample(p, state, truth, module.draw(self._rngs[name]))
             self.states[name], arrived = module.release(state, t_us)
             out.extend(arrived)
         return out

@@ -125,3 +125,10 @@ def test_sample_refuses_a_time_off_the_tick_or_off_the_truth():
         suite.sample(500, moving(500))
     with pytest.raises(ValueError, match="truth.t_us"):
         suite.sample(1000, moving(2000))
+
+
+def test_a_sensor_s_noise_does_not_depend_on_the_others():
+    """rtk and mocap carry the same IMU: from one seed, its readings are the same in both."""
+    def imu_bytes(profile):
+        return [r for r in as_bytes(fly(profile, 5, 200)) if r[1].startswith("ImuReading")]
+    assert imu_bytes("rtk") == imu_bytes("mocap")
