@@ -6,11 +6,15 @@ process's stationary std and its correlation, the gravity an accelerometer at re
 from __future__ import annotations
 
 import math
+from pathlib import Path
+from types import SimpleNamespace as R
 
 import numpy as np
 import pytest
 
-from sil_vehicle.sensors import baro, gnss, imu, mag, mocap, noise
+import sil_vehicle.sensors as pkg
+from sil_vehicle.sensors import baro, delay, gnss, imu, mag, mocap, noise
+from sil_vehicle.sensors.profile import load_sensing
 from sil_vehicle.sensors.truth import STANDARD_GRAVITY_M_S2, Truth, specific_force_frd
 
 G = STANDARD_GRAVITY_M_S2
@@ -97,7 +101,6 @@ def test_level_vehicle_at_rest_reads_minus_g_on_body_z():
     _, accel = run_imu(imu_params(), 10)
     assert np.array_equal(accel, np.tile([0.0, 0.0, -G], (10, 1)))
     # with the built-in profile's noise and biases: the mean is -g on z within the turn-on bias
-    from sil_vehicle.sensors.profile import load_sensing
     _, accel = run_imu(load_sensing("gnss", 1000).imu, 2000)
     assert np.all(np.abs(accel.mean(axis=0) - [0.0, 0.0, -G]) < 5 * 0.196)
     # rolled 90 degrees right wing down: body y points down, so the upward reading is along -y
@@ -224,3 +227,21 @@ def test_mocap_scripted_windows_drop_exactly_their_samples():
         s, out = mocap.release(s, t)
         got += [r.t_us for r in out]
     assert got == [k * 10_000 for k in range(30) if not 10 <= k < 15]
+
+
+def test_delay_line_releases_in_order_and_refuses_to_overflow():
+    assert delay.capacity(120, 200) == 1 and delay.capacity(110, 100) == 2
+    line = delay.push(delay.push((), R(arrival_us=5), 2), R(arrival_us=9), 2)
+    with pytest.raises(RuntimeError, match="delay line full"):
+        delay.push(line, R(arrival_us=12), 2)
+    rest, out = delay.release(line, 8)
+    assert [r.arrival_us for r in out] == [5] and [r.arrival_us for r in rest] == [9]
+    assert delay.release(rest, 8) == (rest, ())
+
+
+def test_the_package_map_names_every_module():
+    """sil_vehicle.sensors' docstring lists each of its modules as `    name      what it is`."""
+    modules = {p.stem for p in Path(pkg.__file__).parent.glob("*.py")} - {"__init__"}
+    named = {line.split()[0] for line in pkg.__doc__.splitlines()
+             if line.startswith("    ") and not line.startswith("     ")}
+    assert modules == named
