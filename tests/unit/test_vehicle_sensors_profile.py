@@ -11,7 +11,7 @@ import pytest
 import trq_params
 from trq_params import loader
 from trq_params.loader import ConfigError
-from trq_params.schema_sensing import DELAY_BUFFER_MS
+from trq_params.schema_sensing import DELAY_BUFFER_MS, SensingFile
 
 from sil_vehicle.sensors.profile import load_sensing
 
@@ -120,7 +120,6 @@ def test_a_bad_physics_rate_is_the_caller_s_error():
 
 
 def test_the_schema_without_physics_rate_still_bounds_the_delay(tmp_path):
-    from trq_params.schema_sensing import SensingFile
     path = overlay(tmp_path, "gnss:\n  delay_ms: 700\n")
     with pytest.raises(ConfigError, match="gnss.delay_ms"):
         loader.load(path, SensingFile)
