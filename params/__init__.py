@@ -8,6 +8,7 @@ a name, or a path. What comes out: the path of the file.
     loader    the one YAML reader: `extends:` chains, strict validation, errors naming the file,
               the key, the value and what was expected
     schema    the typed schema of every kind of file, one model per kind
+    schema_sensing  the sensing profiles' schema (params/sensing/), to join `schema` on merge
 
     builtin("controller", "trq_nmpc_eso")   -> .../controller/trq_nmpc_eso.yaml
     resolve("vehicle", "quad")              -> the built-in quad.yaml
@@ -28,7 +29,7 @@ __all__ = ["DIR", "KINDS", "builtin", "resolve", "exists", "names", "is_name", "
 DIR = Path(__file__).resolve().parent
 """The folder of the shipped files (wheels install unzipped, so this is a real folder)."""
 
-KINDS = ("vehicle", "sim", "controller", "scenarios", "faults", "campaigns")
+KINDS = ("vehicle", "sim", "controller", "scenarios", "faults", "campaigns", "sensing")
 
 
 class ConfigError(ValueError):
