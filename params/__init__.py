@@ -8,7 +8,6 @@ a name, or a path. What comes out: the path of the file.
     loader    the one YAML reader: `extends:` chains, strict validation, errors naming the file,
               the key, the value and what was expected
     schema    the typed schema of every kind of file, one model per kind
-    schema_sensing  the sensing profiles' schema (params/sensing/), to join `schema` on merge
 
     builtin("controller", "trq_nmpc_eso")   -> .../controller/trq_nmpc_eso.yaml
     resolve("vehicle", "quad")              -> the built-in quad.yaml

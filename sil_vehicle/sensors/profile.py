@@ -5,7 +5,7 @@ records of the sensor modules.
     load_sensing("mocap", 1000)            the built-in profile, for a 1 kHz physics tick
     load_sensing("my/sensing.yaml", 1000)  a user's file (it may `extends: builtin:sensing/rtk`)
 
-The file is validated by `trq_params.loader` against `trq_params.schema_sensing.SensingFile`,
+The file is validated by `trq_params.loader` against `trq_params.schema.SensingFile`,
 with the physics rate passed as context, so every bad value is a `ConfigError` naming the file,
 the key, the value and what was expected: a negative noise density, a rate that does not divide
 the physics rate, a delay beyond the estimator's buffer (DELAY_BUFFER_MS) or not a whole number
@@ -21,7 +21,7 @@ from pathlib import Path
 
 import trq_params
 from trq_params import loader
-from trq_params.schema_sensing import DELAY_BUFFER_MS, SensingFile
+from trq_params.schema import DELAY_BUFFER_MS, SensingFile
 
 from sil_vehicle.sensors.baro import BaroParams
 from sil_vehicle.sensors.gnss import GnssParams

@@ -11,7 +11,7 @@ import pytest
 import trq_params
 from trq_params import loader
 from trq_params.loader import ConfigError
-from trq_params.schema_sensing import DELAY_BUFFER_MS, SensingFile
+from trq_params.schema import DELAY_BUFFER_MS, SensingFile
 
 from sil_vehicle.sensors.profile import load_sensing
 
