@@ -101,7 +101,8 @@ def load_core() -> CompiledCore | None:
     cc = find_compiler()
     if cc is None:
         warnings.warn("no C compiler found (tried $CC, gcc, cc, clang): the vehicle's physics "
-                      "runs in Python (the same results, slower: docs/simulator.md)", RuntimeWarning,
+                      "runs in Python (the same results, slower: docs/simulator.md)",
+                      RuntimeWarning,
                       stacklevel=2)
         return None
     try:

@@ -1,7 +1,8 @@
 """Frames and conversions. World frame NED, body frame FRD, quaternions scalar first (w, x, y, z)
 rotating body vectors into the world frame, Euler angles ZYX (roll, pitch, yaw) in radians.
 
-Every conversion of the package lives here, with round-trip tests in tests/unit/test_frames.py.
+Every conversion of the package lives here, with round-trip tests in
+tests/unit/sil_vehicle/test_frames.py.
 """
 
 from __future__ import annotations

@@ -199,7 +199,7 @@ class MotorEffectiveness:
         two end slopes times delta, exactly) from the tangent's estimate, 3 steps (quadratic
         convergence), clamped to a deficit. Every motor's candidate is computed and the chosen
         one selected: the same operations in the same order as the plain-float specification
-        that a test (test_ctrl_effectiveness.py) holds it to."""
+        that tests/unit/trq_offboard/test_effectiveness.py holds it to."""
         nt, nu = self._nt, self.model.nu
         jac_fn = self.model.motor_jacobian.fn
         x, d, y = ca.SX.sym("x", 12), ca.SX.sym("d", 6), ca.SX.sym("y_nom", nu)

@@ -6,11 +6,10 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import Ticks
+from conftest import ROOT, Ticks
 
 from trq_offboard.config import load_controller
 from trq_offboard.controller import Controller
@@ -27,7 +26,7 @@ from trq_offboard.records import (
 )
 from trq_offboard.reference import ConstantReference
 
-PARAMS = Path(__file__).resolve().parents[2] / "params" / "controller"
+PARAMS = ROOT / "params" / "controller"
 CTRL = PARAMS / "trq_nmpc_eso.yaml"
 
 

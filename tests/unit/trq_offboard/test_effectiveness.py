@@ -5,7 +5,6 @@ its controller file keys."""
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -17,7 +16,9 @@ from trq_params.loader import read_yaml     # the loader's YAML 1.2 dialect: `of
 from trq_offboard.effectiveness import MotorEffectivenessObserver
 from trq_offboard.nmpc.base import Solver
 
-PARAMS = Path(__file__).resolve().parents[2] / "params"
+from conftest import ROOT
+
+PARAMS = ROOT / "params"
 
 
 class _NoOcp:

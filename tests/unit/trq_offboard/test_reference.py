@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -11,7 +10,9 @@ import pytest
 from trq_offboard.config import load_controller
 from trq_offboard.reference import LAND_BELOW_M, Reference
 
-CFG = load_controller(Path(__file__).resolve().parents[2] / "params/controller/trq_nmpc.yaml")
+from conftest import ROOT
+
+CFG = load_controller(ROOT / "params/controller/trq_nmpc.yaml")
 
 
 @pytest.mark.parametrize("kind", ["hover", "circle", "helix", "figure8", "step"])

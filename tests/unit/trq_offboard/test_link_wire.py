@@ -1,6 +1,6 @@
 """The controller's MAVLink codec (trq_offboard/link/wire.py) and connection strings (udp.py),
 against hand-computed values and pymavlink's own packing and parsing. The actuator scalings
-themselves are trq_wire.actuators' (tests/unit/test_wire_actuators.py); here only which
+themselves are trq_wire.actuators' (tests/unit/trq_wire/test_actuators.py); here only which
 message fields they are applied to, and the controller's clipping."""
 
 from __future__ import annotations

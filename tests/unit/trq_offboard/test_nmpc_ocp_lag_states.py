@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from pathlib import Path
 
 import casadi as ca
 import numpy as np
@@ -20,7 +19,9 @@ from trq_offboard.model import PredictionModel
 from trq_offboard.nmpc.ocp import Ocp, Stage
 from trq_offboard.nmpc.base import Solver
 
-PARAMS = Path(__file__).resolve().parents[2] / "params"
+from conftest import ROOT
+
+PARAMS = ROOT / "params"
 CTRL = PARAMS / "controller"
 RNG = np.random.default_rng(3)
 

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -11,7 +10,9 @@ import pytest
 from trq_offboard.allocation import Allocator, rotor_wrench
 from trq_offboard.config import load_vehicle_model
 
-VEH = Path(__file__).resolve().parents[2] / "params" / "vehicle"
+from conftest import ROOT
+
+VEH = ROOT / "params" / "vehicle"
 
 
 @pytest.fixture(scope="module", params=["trq", "quad"])

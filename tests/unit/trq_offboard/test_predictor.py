@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
@@ -17,7 +16,9 @@ from trq_offboard.controller import Controller
 from trq_offboard.nmpc.base import Solver
 from trq_offboard.predictor import CommandHistory
 
-CTRL = Path(__file__).resolve().parents[2] / "params" / "controller" / "trq_nmpc_eso.yaml"
+from conftest import ROOT
+
+CTRL = ROOT / "params" / "controller" / "trq_nmpc_eso.yaml"
 DELAY_S = 0.04
 
 

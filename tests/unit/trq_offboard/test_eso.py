@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -11,7 +10,9 @@ from trq_offboard.config import load_eso
 from trq_offboard.eso import ExtendedStateObserver, fal
 from dataclasses import replace
 
-ESO = Path(__file__).resolve().parents[2] / "params" / "controller" / "eso.yaml"
+from conftest import ROOT
+
+ESO = ROOT / "params" / "controller" / "eso.yaml"
 ESO_PAPER = ESO.with_name("eso_paper.yaml")     # the paper's form: position and angles
 D_X = 2.0 / 2.1          # 2 N on 2.1 kg, m/s^2
 

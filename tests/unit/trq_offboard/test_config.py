@@ -11,7 +11,9 @@ import yaml
 from trq_offboard.config import ConfigError, load_controller, load_eso, load_vehicle_model
 from trq_params.loader import read_yaml     # the loader's YAML 1.2 dialect: `off` stays a string
 
-PARAMS = Path(__file__).resolve().parents[2] / "params"
+from conftest import ROOT
+
+PARAMS = ROOT / "params"
 
 
 def test_shipped_files_load():

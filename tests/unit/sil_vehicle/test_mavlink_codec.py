@@ -1,7 +1,7 @@
 """The MAVLink codec (sil_vehicle.mavlink.codec): framing, error counting, target decoding and
 the telemetry fields' integer scalings, against hand-computed values. The actuator scalings
-are trq_wire.actuators' (tests/unit/test_wire_actuators.py), signing trq_wire.signing's
-(test_wire_signing.py); here only how the codec uses them."""
+are trq_wire.actuators' (tests/unit/trq_wire/test_actuators.py), signing trq_wire.signing's
+(tests/unit/trq_wire/test_signing.py); here only how the codec uses them."""
 
 from __future__ import annotations
 

@@ -5,7 +5,6 @@ the same floats, to the bit."""
 from __future__ import annotations
 
 import dataclasses
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -15,7 +14,9 @@ from trq_offboard.config import load_controller
 from trq_offboard.model import PredictionModel
 from trq_offboard.nmpc.ocp import Ocp
 
-CTRL = Path(__file__).resolve().parents[2] / "params" / "controller"
+from conftest import ROOT
+
+CTRL = ROOT / "params" / "controller"
 
 
 def _ocp(name, actuator_states):

@@ -1,0 +1,1 @@
+"""Unit tests of sil_vehicle, named after the module each tests."""

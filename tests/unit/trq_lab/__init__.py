@@ -1,0 +1,1 @@
+"""Unit tests of trq_lab, named after the module each tests."""

@@ -1,0 +1,1 @@
+"""Unit tests of trq_offboard, named after the module each tests."""

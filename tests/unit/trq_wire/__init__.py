@@ -1,0 +1,1 @@
+"""Unit tests of trq_wire, named after the module each tests."""
