@@ -20,6 +20,7 @@ counted as a cycle (it is how a package names its public API).
 from __future__ import annotations
 
 import ast
+import functools
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -78,6 +79,7 @@ def imports_of(name: str, path: Path, known: dict[str, Path]) -> set[str]:
     return found
 
 
+@functools.lru_cache(maxsize=4)
 def graph(root: Path = ROOT) -> dict[str, set[str]]:
     known = modules(root)
     return {name: imports_of(name, path, known) for name, path in known.items()}
