@@ -49,7 +49,8 @@ Measurements h(x) (each function returns h and H (m x 19)):
     mag        R(q)^T m_ned                    the earth's field in body axes (gauss)
 
 `predict(x, P, dA, dV, dt, a_gnss, qd)` returns (x+, P+ = F P F^T + G Qn G^T + Qd) with
-qd = (var dA, var dV, var dbg, var dba, var dbn, var dbb) per axis and per period.
+qd = (var dA, var dV, var dbg, var dba, var dbn north and east, var dbn down, var dbb), per axis
+and per period.
 
 The evaluator is CasADi: the functions are generated as C and compiled once by
 sil_vehicle.estimator.codegen (cached, never committed); without a compiler the same Functions run
@@ -148,7 +149,7 @@ def functions(gravity_m_s2: float) -> dict[str, ca.Function]:
     x, dx = ca.SX.sym("x", NX), ca.SX.sym("dx", NDX)
     dA, dV, n = ca.SX.sym("dA", 3), ca.SX.sym("dV", 3), ca.SX.sym("n", 6)
     dt, a_gnss = ca.SX.sym("dt"), ca.SX.sym("a_gnss")
-    P, qd = ca.SX.sym("P", NDX, NDX), ca.SX.sym("qd", 6)
+    P, qd = ca.SX.sym("P", NDX, NDX), ca.SX.sym("qd", 7)
     q_ref, m_ned = ca.SX.sym("q_ref", 4), ca.SX.sym("m_ned", 3)
     zero_dx, zero_n = ca.DM.zeros(NDX), ca.DM.zeros(6)
 
@@ -159,7 +160,7 @@ def functions(gravity_m_s2: float) -> dict[str, ca.Function]:
     G = ca.substitute(ca.jacobian(err_n, n), n, zero_n)
     Qn = ca.diag(ca.vertcat(qd[0], qd[0], qd[0], qd[1], qd[1], qd[1]))
     Qd = ca.diag(ca.vertcat(ca.SX.zeros(9), qd[2] * ca.DM.ones(3), qd[3] * ca.DM.ones(3),
-                            qd[4] * ca.DM.ones(3), qd[5]))
+                            qd[4], qd[4], qd[5], qd[6]))
     P_next = F @ P @ F.T + G @ Qn @ G.T + Qd
     P_next = (P_next + P_next.T) / 2
 
