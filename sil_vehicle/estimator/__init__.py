@@ -6,4 +6,16 @@ random numbers; time as integer microseconds.
                 each measurement's h and H, built once into casadi.Function objects
     codegen     those functions generated as C, compiled once into a cached library, called
                 through ctypes (CasADi's interpreter without a compiler)
+    params      EstimatorParams: the filter's noise figures, gates and time constants, matched
+                to a sensing profile by default
+    predictor   the output predictor: the delayed state carried to `now` at IMU rate, with
+                EKF2's complementary correction
+    eskf        Eskf: the filter on its delayed horizon (downsampled IMU buffer, measurement
+                buffers, gated Joseph-form fusion, alignment, health) and the Estimate it gives
+
+Use (the vehicle's tick loop; nothing here reads a clock or draws a random number):
+
+    est = Eskf(EstimatorParams.from_profile(load_sensing("mocap", 1000)))
+    est.step(t_us, readings)        # every physics tick, with the sensor suite's readings
+    e = est.output()                # Estimate: pose, velocity, rates, variances, health
 """

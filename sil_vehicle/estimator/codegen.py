@@ -32,7 +32,9 @@ from trq_wire.cache import build_library, cache_dir, find_compiler
 
 __all__ = ["load", "Evaluator", "CFLAGS"]
 
-CFLAGS = ("-O2", "-fPIC", "-shared")
+# -O1: builds faster than -O2 for the same speed on generated CasADi code (the controller's
+# finding, docs/decisions/2026-12-02-figures-from-comments.md)
+CFLAGS = ("-O1", "-fPIC", "-shared")
 
 
 def _source(fns: dict[str, ca.Function]) -> str:

@@ -48,6 +48,13 @@ Measurements h(x) (each function returns h and H (m x 19)):
     baro       -p_d + bb                       pressure altitude AMSL (m)
     mag        R(q)^T m_ned                    the earth's field in body axes (gauss)
 
+Each fusion, `fuse_<name>(x, P, z, r, m_ned)`, is generated whole (the filter's 100 Hz step runs
+in compiled code, not in NumPy): with y = z - h(x) (for mocap_att z is the measured quaternion
+and y = 2 vec(q^-1 (x) z), its sign that of the scalar part), S = H P H^T + diag(r),
+K = P H^T S^-1, it returns y, diag(S), x (+) K y and the Joseph-form
+(I - K H) P (I - K H)^T + K diag(r) K^T, symmetrised; the caller gates on y and diag(S) and keeps
+the update or drops it.
+
 `predict(x, P, dA, dV, dt, a_gnss, qd)` returns (x+, P+ = F P F^T + G Qn G^T + Qd) with
 qd = (var dA, var dV, var dbg, var dba, var dbn north and east, var dbn down, var dbb), per axis
 and per period.
@@ -145,6 +152,7 @@ def functions(gravity_m_s2: float) -> dict[str, ca.Function]:
     predict(x, P, dA, dV, dt, a_gnss, qd) -> (x+, P+)
     inject(x, dx) -> x                            the error folded into the nominal state
     h_<name>(x, q_ref, m_ned) -> (h, H)           each measurement of MEASUREMENTS
+    fuse_<name>(x, P, z, r, m_ned) -> (y, s, x+, P+)   its fusion (see the module's docstring)
     """
     x, dx = ca.SX.sym("x", NX), ca.SX.sym("dx", NDX)
     dA, dV, n = ca.SX.sym("dA", 3), ca.SX.sym("dV", 3), ca.SX.sym("n", 6)
@@ -180,4 +188,29 @@ def functions(gravity_m_s2: float) -> dict[str, ca.Function]:
         H = ca.substitute(ca.jacobian(h_err[name], dx), dx, zero_dx)
         fns[f"h_{name}"] = ca.Function(f"eskf_h_{name}", [x, q_ref, m_ned], [h_at[name], H],
                                        ["x", "q_ref", "m_ned"], ["h", "H"])
+        fns[f"fuse_{name}"] = _fusion(name, fns[f"h_{name}"], x, P, m_ned)
     return fns
+
+
+def _fusion(name: str, h_fn: ca.Function, x: ca.SX, P: ca.SX, m_ned: ca.SX) -> ca.Function:
+    h, H = h_fn(x, x[Q_], m_ned)
+    m = h.numel()
+    r = ca.SX.sym("r", m)
+    if name == "mocap_att":
+        z = ca.SX.sym("z", 4)
+        qx = x[Q_]
+        qe = quat_mul((qx[0], -qx[1], -qx[2], -qx[3]), z)
+        y = ca.if_else(qe[0] >= 0, 2, -2) * _vec(qe[1:]) - h
+    else:
+        z = ca.SX.sym("z", m)
+        y = z - h
+    PHt = P @ H.T
+    S = H @ PHt + ca.diag(r)
+    K = PHt @ ca.inv(S)
+    ikh = ca.DM.eye(NDX) - K @ H
+    P_next = ikh @ P @ ikh.T + K @ ca.diag(r) @ K.T
+    x_next = inject(x, K @ y)
+    x_next[Q_] = x_next[Q_] / ca.norm_2(x_next[Q_])
+    return ca.Function(f"eskf_fuse_{name}", [x, P, z, r, m_ned],
+                       [y, ca.diag(S), x_next, (P_next + P_next.T) / 2],
+                       ["x", "P", "z", "r", "m_ned"], ["y", "s", "x_next", "P_next"])

@@ -1,0 +1,407 @@
+"""The error-state Kalman filter on a delayed horizon, with an output predictor (PX4 EKF2's
+architecture: src/modules/ekf2/EKF, ekf.cpp, covariance.cpp, output_predictor.cpp; the
+error-state formulation of Sola 2017, "Quaternion kinematics for the error-state Kalman
+filter"). The states and equations: sil_vehicle.estimator.derivation.
+
+    est = Eskf(EstimatorParams.from_profile(load_sensing("mocap", 1000)))
+    every physics tick:   est.step(t_us, suite.sample(t_us, truth))
+    whenever wanted:      est.output()      -> Estimate at the last tick
+
+Timing. IMU samples (rates and specific force, each held over the IMU period ending at its
+t_us) are accumulated into delta angles and delta velocities over the filter period (10 ms,
+EKF2's FILTER_UPDATE_PERIOD_MS; the delta velocity rotated into the frame at the start of the
+period with the first-order sculling term dV += dv + (dA_acc + dA / 2) x dv) and pushed into a
+buffer. The filter state sits at the delayed horizon t_d = now - horizon (the longest delay of
+the profile's sensors): a period ending at t_end is processed once now >= t_end + horizon, and
+every buffered measurement whose time of validity is at or before t_end (and after the last
+processed period) is then fused, in a fixed order (mocap position, mocap attitude, GNSS position,
+GNSS velocity, baro, mag), the delayed ones (GNSS, mocap) exactly at their time of validity as
+EKF2 does; the barometer and magnetometer, undelayed, wait in their buffers for the horizon too.
+The output predictor (sil_vehicle.estimator.predictor) carries the delayed state to `now`.
+
+Fusion. For a measurement z with prediction h(x) and Jacobian H (one compiled CasADi function per
+kind computes all of it; the gate's decision is taken here):
+
+    y = z - h,  S = H P H^T + R,  test ratio r = max_i y_i^2 / (gate^2 S_ii)
+    r > 1: rejected and counted (EKF2's innovation gates: a chi-square test of one degree of
+           freedom per axis at gate^2, `gate` in standard deviations, one per measurement kind)
+    else:  K = P H^T S^-1,  dx = K y,  P = (I - K H) P (I - K H)^T + K R K^T  (Joseph form),
+           P = (P + P^T) / 2,  x = inject(x, dx)
+
+The reset of the covariance after injection (Sola 2017, eq. 287, G = I - [dtheta / 2]x on the
+attitude block) is left out, as EKF2 and most implementations do: dtheta is small.
+
+Initialisation. The first `align_us` of IMU (and magnetometer) readings are averaged with the
+vehicle at rest: tilt from the mean specific force, heading from the motion capture's attitude
+when the profile has one, else from the mean magnetic field and the profile's declination; the
+position from the latest position measurement already arrived (or, failing that, a reset on the
+first one fused); the barometer's offset from the first barometer reading. The filter starts at
+t_align (a filter-period boundary), independent of the horizon.
+
+Health: attitude aligned (after the initialisation); position valid (a position measurement
+fused within `no_aid_timeout_us` of the filter's time); diverged (a state or variance not
+finite, a variance above `max_var` or below zero). The variances the Estimate carries are the
+filter's, at the delayed horizon (EKF2 reports the same).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass
+from enum import IntEnum
+
+import numpy as np
+
+from sil_vehicle.estimator import derivation as d
+from sil_vehicle.estimator.codegen import load
+from sil_vehicle.estimator.params import EstimatorParams
+from sil_vehicle.estimator.predictor import OutputPredictor
+from sil_vehicle.frames import euler_to_quat, quat_to_dcm
+from sil_vehicle.sensors.baro import BaroReading
+from sil_vehicle.sensors.gnss import GnssReading
+from sil_vehicle.sensors.imu import ImuReading
+from sil_vehicle.sensors.mag import MagReading
+from sil_vehicle.sensors.mocap import MocapReading
+
+__all__ = ["Eskf", "Estimate", "Innovation", "Aid"]
+
+
+class Aid(IntEnum):
+    """The measurement kinds, in their fusion order."""
+    MOCAP_POS = 0
+    MOCAP_ATT = 1
+    GNSS_POS = 2
+    GNSS_VEL = 3
+    BARO = 4
+    MAG = 5
+
+
+_FUSE = {Aid.MOCAP_POS: "fuse_mocap_pos", Aid.MOCAP_ATT: "fuse_mocap_att",
+         Aid.GNSS_POS: "fuse_gnss_pos", Aid.GNSS_VEL: "fuse_gnss_vel", Aid.BARO: "fuse_baro",
+         Aid.MAG: "fuse_mag"}
+_NAID = len(Aid)
+
+
+@dataclass(frozen=True)
+class Innovation:
+    """The last fusion attempt of one kind, at the delayed horizon."""
+    aid: Aid
+    t_us: int                       # the measurement's time of validity
+    innovation: np.ndarray          # (m,) z - h(x)
+    variance: np.ndarray            # (m,) diag(S)
+    test_ratio: float               # max_i y_i^2 / (gate^2 S_ii): above 1 rejected
+    accepted: bool
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """The estimate at `t_us` (the output predictor's state) with the filter's variances."""
+    t_us: int
+    pos_ned_m: np.ndarray               # (3,)
+    vel_ned_m_s: np.ndarray             # (3,)
+    quat_wxyz: np.ndarray               # (4,) body FRD -> NED
+    rates_frd_rad_s: np.ndarray         # (3,) the last gyro sample less the bias estimate
+    pos_var_ned_m2: np.ndarray          # (3,)
+    vel_var_ned_m2_s2: np.ndarray       # (3,)
+    att_var_frd_rad2: np.ndarray        # (3,) of the body-frame attitude error
+    gyro_bias_frd_rad_s: np.ndarray     # (3,)
+    accel_bias_frd_m_s2: np.ndarray     # (3,)
+    delayed_t_us: int                   # the filter's (delayed horizon's) time
+    attitude_aligned: bool
+    position_valid: bool
+    diverged: bool
+    test_ratios: tuple[float, ...]      # by Aid: the last test ratio (nan: never tried)
+    fused: tuple[int, ...]              # by Aid: measurements fused
+    rejected: tuple[int, ...]           # by Aid: measurements rejected by the gate
+    output_tracking_error: tuple[float, float, float]   # rad, m/s, m (the predictor's fit)
+
+    @property
+    def pos_cov_ned_m2(self) -> np.ndarray:
+        return np.diag(self.pos_var_ned_m2)
+
+
+class Eskf:
+    """The filter, its buffers and its output predictor. `step` once per physics tick."""
+
+    def __init__(self, params: EstimatorParams, *, compiled: bool = True) -> None:
+        self.params = p = params
+        self._f, self.how = load(d.functions(p.gravity_m_s2), compiled)
+        self._dt_f = p.filter_period_us * 1e-6
+        self._dt_imu = p.imu_period_us * 1e-6
+        a = math.exp(-self._dt_f / p.gnss_markov_tau_s)
+        self._a_gnss = a
+        self._qd = np.array((
+            p.gyro_noise_rad_s_rthz ** 2 * self._dt_f, p.accel_noise_m_s2_rthz ** 2 * self._dt_f,
+            p.gyro_bias_rw_rad_s2_rthz ** 2 * self._dt_f,
+            p.accel_bias_rw_m_s3_rthz ** 2 * self._dt_f,
+            p.gnss_markov_ne_m ** 2 * (1 - a * a), p.gnss_markov_d_m ** 2 * (1 - a * a),
+            2 * p.baro_drift_sigma_m ** 2 * self._dt_f / p.baro_drift_tau_s))
+        self._m_ned = np.array(p.mag_field_ned_gauss)
+        self._gate = (p.gate_mocap_pos, p.gate_mocap_att, p.gate_gnss_pos, p.gate_gnss_vel,
+                      p.gate_baro, p.gate_mag)
+        self._r = (
+            np.full(3, (p.mocap_pos_noise_m or 0.0) ** 2),
+            np.full(3, (p.mocap_att_noise_rad or 0.0) ** 2),
+            np.array((p.gnss_pos_noise_ne_m or 0.0, p.gnss_pos_noise_ne_m or 0.0,
+                      p.gnss_pos_noise_d_m or 0.0)) ** 2,
+            np.array((p.gnss_vel_noise_ne_m_s or 0.0, p.gnss_vel_noise_ne_m_s or 0.0,
+                      p.gnss_vel_noise_d_m_s or 0.0)) ** 2,
+            np.full(1, (p.baro_noise_m or 0.0) ** 2),
+            np.full(3, (p.mag_noise_gauss or 0.0) ** 2))
+        capacity = p.horizon_us // p.filter_period_us + 2
+        self._imu_buf: deque = deque()          # (t_end_us, dA (3,), dV (3,))
+        self._meas: list[deque] = [deque() for _ in range(_NAID)]
+        self.out = OutputPredictor(gravity_m_s2=p.gravity_m_s2, imu_period_us=p.imu_period_us,
+                                   filter_period_us=p.filter_period_us, tau_vel_s=p.tau_vel_s,
+                                   tau_pos_s=p.tau_pos_s, capacity=capacity)
+        # the filter
+        self.x = np.zeros(d.NX)
+        self.x[6] = 1.0
+        self.P = np.zeros((d.NDX, d.NDX))
+        self.t_filter_us = 0
+        # the downsampler (floats)
+        self._dA = [0.0, 0.0, 0.0]
+        self._dV = [0.0, 0.0, 0.0]
+        # alignment
+        self._t_first: int | None = None
+        self._t_align = 0
+        self._sum_f = np.zeros(3)
+        self._sum_m = np.zeros(3)
+        self._n_f = self._n_m = 0
+        self.aligned = False
+        self._pos_init = False
+        self._baro_init = False
+        # health and diagnostics
+        self._now = -1
+        self._gyro = (0.0, 0.0, 0.0)
+        self._last_pos_fuse_us: int | None = None
+        self.innovations: list[Innovation | None] = [None] * _NAID
+        self._fused = [0] * _NAID
+        self._rejected = [0] * _NAID
+        self._bg = (0.0, 0.0, 0.0)
+        self._ba = (0.0, 0.0, 0.0)
+
+    # ---------------------------------------------------------------- per physics tick
+
+    def step(self, t_us: int, readings) -> None:
+        """Take one physics tick's readings (the sensor suite's output at t_us)."""
+        if t_us <= self._now:
+            raise ValueError(f"step: t_us {t_us} after {self._now} expected (one call per tick)")
+        self._now = t_us
+        for r in readings:
+            if isinstance(r, ImuReading):
+                self._imu(r)
+            elif isinstance(r, MocapReading):
+                if self.params.has_mocap:
+                    self._meas[Aid.MOCAP_POS].append(r)
+            elif isinstance(r, GnssReading):
+                if self.params.has_gnss:
+                    self._meas[Aid.GNSS_POS].append(r)
+            elif isinstance(r, BaroReading):
+                if self.params.has_baro:
+                    self._meas[Aid.BARO].append(r)
+            elif isinstance(r, MagReading):
+                if self.params.has_mag:
+                    self._meas[Aid.MAG].append(r)
+                    if not self.aligned:
+                        self._sum_m += r.field_frd_gauss
+                        self._n_m += 1
+        if not self.aligned:
+            if self._t_first is not None and t_us >= self._t_align and self._n_f:
+                self._align()
+            return
+        horizon = self.params.horizon_us
+        buf = self._imu_buf
+        while buf and buf[0][0] + horizon <= t_us:
+            self._update(*buf.popleft())
+
+    def _imu(self, r: ImuReading) -> None:
+        g, f = r.gyro_frd_rad_s.tolist(), r.accel_frd_m_s2.tolist()
+        self._gyro = g
+        t = r.t_us
+        if not self.aligned:
+            if self._t_first is None:
+                period = self.params.filter_period_us
+                self._t_first = t
+                self._t_align = -(-(t + self.params.align_us) // period) * period
+            if t <= self._t_align:
+                self._sum_f += f
+                self._n_f += 1
+            return
+        self.out.propagate(t, g, f, self._bg, self._ba)
+        dt = self._dt_imu
+        ax, ay, az = (g[0] * dt, g[1] * dt, g[2] * dt)
+        vx, vy, vz = (f[0] * dt, f[1] * dt, f[2] * dt)
+        A, V = self._dA, self._dV
+        # sculling: dv rotated into the start-of-period frame by the angle turned to mid-sample
+        rx, ry, rz = A[0] + 0.5 * ax, A[1] + 0.5 * ay, A[2] + 0.5 * az
+        V[0] += vx + ry * vz - rz * vy
+        V[1] += vy + rz * vx - rx * vz
+        V[2] += vz + rx * vy - ry * vx
+        A[0] += ax
+        A[1] += ay
+        A[2] += az
+        if t % self.params.filter_period_us == 0:
+            self._imu_buf.append((t, np.array(A), np.array(V)))
+            self._dA, self._dV = [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]
+            self.out.record()
+
+    # ---------------------------------------------------------------- initialisation
+
+    def _align(self) -> None:
+        p = self.params
+        fx, fy, fz = self._sum_f / self._n_f
+        roll = math.atan2(-fy, -fz)
+        pitch = math.atan2(fx, math.hypot(fy, fz))
+        mocap = self._meas[Aid.MOCAP_POS]
+        yaw_var = 0.1 ** 2
+        if mocap:
+            q = np.array(mocap[-1].quat_wxyz, float)
+            yaw_var = max(p.mocap_att_noise_rad, 1e-3) ** 2
+        elif self._n_m:
+            r_rp = np.array(quat_to_dcm(*euler_to_quat(roll, pitch, 0.0)))
+            m = r_rp @ (self._sum_m / self._n_m)
+            q = np.array(euler_to_quat(roll, pitch,
+                                       math.atan2(-m[1], m[0]) + p.mag_declination_rad))
+        else:
+            q = np.array(euler_to_quat(roll, pitch, 0.0))
+            yaw_var = math.pi ** 2
+        x = np.zeros(d.NX)
+        x[6:10] = q / np.linalg.norm(q)
+        tilt_var = (p.accel_bias_init_m_s2 / p.gravity_m_s2) ** 2 + 1e-6
+        P = np.diag(np.concatenate((
+            np.full(3, p.init_pos_var_m2), np.full(3, p.init_vel_var_m2_s2),
+            (tilt_var, tilt_var, yaw_var), np.full(3, p.gyro_bias_init_rad_s ** 2),
+            np.full(3, p.accel_bias_init_m_s2 ** 2),
+            (p.gnss_markov_ne_m ** 2, p.gnss_markov_ne_m ** 2, p.gnss_markov_d_m ** 2),
+            ((p.baro_drift_sigma_m ** 2 + (p.baro_noise_m or 0.0) ** 2),))))
+        self.x, self.P = x, P
+        self.t_filter_us = t = self._t_align
+        self.aligned = True
+        # the latest position measurement already arrived, at rest
+        src = [r for r in (mocap[-1] if mocap else None,
+                           self._meas[Aid.GNSS_POS][-1] if self._meas[Aid.GNSS_POS] else None)
+               if r is not None and r.t_us <= t]
+        if src:
+            self._reset_position(src[0], t, shift_output=False)
+        baro = self._meas[Aid.BARO]
+        if baro:
+            self._init_baro(baro[-1])
+        for buf in self._meas:
+            while buf and buf[0].t_us <= t:
+                buf.popleft()
+        self._dA, self._dV = [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]
+        self._imu_buf.clear()
+        self.out.reset(t, self.x[6:10], self.x[3:6], self.x[0:3])
+
+    def _reset_position(self, r, t_us: int, shift_output: bool = True) -> None:
+        """Position (and, from GNSS, velocity) set to the measurement's; applied as a jump to
+        the output predictor too (EKF2's resetHorizontalPositionTo and its output reset)."""
+        old_p, old_v = self.x[0:3].copy(), self.x[3:6].copy()
+        is_gnss = isinstance(r, GnssReading)
+        self.x[0:3] = r.pos_ned_m - (self.x[16:19] if is_gnss else 0.0)
+        var = self._r[Aid.GNSS_POS] if is_gnss else self._r[Aid.MOCAP_POS]
+        self.P[0:3, :] = 0.0
+        self.P[:, 0:3] = 0.0
+        self.P[0:3, 0:3] = np.diag(var)
+        if is_gnss:
+            self.x[3:6] = r.vel_ned_m_s
+            self.P[3:6, :] = 0.0
+            self.P[:, 3:6] = 0.0
+            self.P[3:6, 3:6] = np.diag(self._r[Aid.GNSS_VEL])
+        self.x[19] += self.x[2] - old_p[2]      # the baro offset follows the height
+        self._pos_init = True
+        self._last_pos_fuse_us = t_us
+        if shift_output:
+            self.out.shift(self.x[3:6] - old_v, self.x[0:3] - old_p)
+
+    def _init_baro(self, r: BaroReading) -> None:
+        self.x[19] = r.pressure_alt_m + self.x[2]
+        self._baro_init = True
+
+    # ---------------------------------------------------------------- the delayed horizon
+
+    def _update(self, t_end: int, dA: np.ndarray, dV: np.ndarray) -> None:
+        x_next, P_next = self._f["predict"](self.x, self.P, dA, dV, self._dt_f, self._a_gnss,
+                                            self._qd)
+        self.x = x_next.ravel().copy()
+        self.P = P_next.copy()
+        self.t_filter_us = t_end
+        meas = self._meas
+        for aid in (Aid.MOCAP_POS, Aid.GNSS_POS, Aid.BARO, Aid.MAG):
+            buf = meas[aid]
+            while buf and buf[0].t_us <= t_end:
+                self._fuse_reading(aid, buf.popleft())
+        self._bg = tuple(self.x[10:13].tolist())
+        self._ba = tuple(self.x[13:16].tolist())
+        self.out.correct(t_end, self.x[6:10].tolist(), self.x[3:6].tolist(),
+                         self.x[0:3].tolist())
+
+    def _fuse_reading(self, aid: Aid, r) -> None:
+        if aid == Aid.MOCAP_POS:
+            if not self._pos_init:
+                self._reset_position(r, r.t_us)
+                return
+            self._fuse(Aid.MOCAP_POS, r.t_us, r.pos_ned_m)
+            self._fuse(Aid.MOCAP_ATT, r.t_us, r.quat_wxyz)
+        elif aid == Aid.GNSS_POS:
+            if not self._pos_init:
+                self._reset_position(r, r.t_us)
+                return
+            self._fuse(Aid.GNSS_POS, r.t_us, r.pos_ned_m)
+            self._fuse(Aid.GNSS_VEL, r.t_us, r.vel_ned_m_s)
+        elif aid == Aid.BARO:
+            if not self._baro_init:
+                self._init_baro(r)
+                return
+            self._fuse(Aid.BARO, r.t_us, np.array((r.pressure_alt_m,)))
+        else:
+            self._fuse(Aid.MAG, r.t_us, r.field_frd_gauss)
+
+    def _fuse(self, aid: Aid, t_us: int, z: np.ndarray) -> bool:
+        y, s, x_next, P_next = self._f[_FUSE[aid]](self.x, self.P, z, self._r[aid], self._m_ned)
+        y, s = y.ravel().copy(), s.ravel().copy()
+        gate = self._gate[aid]
+        ratio = float(np.max(y * y / (gate * gate * s)))
+        ok = ratio <= 1.0
+        self.innovations[aid] = Innovation(aid, t_us, y, s, ratio, ok)
+        if not ok:
+            self._rejected[aid] += 1
+            return False
+        self.x = x_next.ravel().copy()
+        self.P = P_next.copy()
+        self._fused[aid] += 1
+        if aid == Aid.MOCAP_POS or aid == Aid.GNSS_POS:
+            self._last_pos_fuse_us = self.t_filter_us
+        return True
+
+    # ---------------------------------------------------------------- outputs
+
+    def diverged(self) -> bool:
+        diag = np.diag(self.P)
+        return bool(not (np.all(np.isfinite(self.x)) and np.all(np.isfinite(self.P)))
+                    or np.any(diag < 0.0) or np.any(diag > self.params.max_var))
+
+    def position_valid(self) -> bool:
+        last = self._last_pos_fuse_us
+        return bool(self._pos_init and last is not None
+                    and self.t_filter_us - last <= self.params.no_aid_timeout_us)
+
+    def output(self) -> Estimate:
+        """The estimate at the last tick (before alignment: the initial state, not aligned)."""
+        o, x, diag = self.out, self.x, np.diag(self.P)
+        g = self._gyro
+        bg = self._bg
+        return Estimate(
+            self._now, np.array(o.p), np.array(o.v), np.array(o.q),
+            np.array((g[0] - bg[0], g[1] - bg[1], g[2] - bg[2])),
+            diag[0:3].copy(), diag[3:6].copy(), diag[6:9].copy(), x[10:13].copy(),
+            x[13:16].copy(), self.t_filter_us, self.aligned, self.position_valid(),
+            self.diverged(),
+            tuple(i.test_ratio if i is not None else math.nan for i in self.innovations),
+            tuple(self._fused), tuple(self._rejected), o.tracking_error)
+
+    def filter_state(self) -> tuple[int, np.ndarray, np.ndarray]:
+        """(t_us, x, P) at the delayed horizon (copies)."""
+        return self.t_filter_us, self.x.copy(), self.P.copy()
