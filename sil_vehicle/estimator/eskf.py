@@ -32,11 +32,12 @@ The reset of the covariance after injection (Sola 2017, eq. 287, G = I - [dtheta
 attitude block) is left out, as EKF2 and most implementations do: dtheta is small.
 
 Initialisation. The first `align_us` of IMU (and magnetometer) readings are averaged with the
-vehicle at rest: tilt from the mean specific force, heading from the motion capture's attitude
-when the profile has one, else from the mean magnetic field and the profile's declination; the
-position from the latest position measurement already arrived (or, failing that, a reset on the
-first one fused); the barometer's offset from the first barometer reading. The filter starts at
-t_align (a filter-period boundary), independent of the horizon.
+vehicle at rest: the attitude from the motion capture's latest pose when the profile has one,
+else tilt from the mean specific force and heading from the mean magnetic field and the
+profile's declination. The position (and from GNSS the velocity) is reset to the first position
+measurement fused after t_align, the jump applied to the output predictor too; the barometer's
+offset is taken from the first barometer reading after that. The filter starts at t_align (a
+filter-period boundary): what it computes never depends on the horizon, only when it does.
 
 Health: attitude aligned (after the initialisation); position valid (a position measurement
 fused within `no_aid_timeout_us` of the filter's time); diverged (a state or variance not
@@ -255,10 +256,11 @@ class Eskf:
         roll = math.atan2(-fy, -fz)
         pitch = math.atan2(fx, math.hypot(fy, fz))
         mocap = self._meas[Aid.MOCAP_POS]
-        yaw_var = 0.1 ** 2
+        yaw_var = 0.3 ** 2            # the magnetometer heading: a wide prior (tilt error x tan I)
+        tilt_var = (p.accel_bias_init_m_s2 / p.gravity_m_s2) ** 2 + 1e-6
         if mocap:
             q = np.array(mocap[-1].quat_wxyz, float)
-            yaw_var = max(p.mocap_att_noise_rad, 1e-3) ** 2
+            yaw_var = tilt_var = max(p.mocap_att_noise_rad, 1e-3) ** 2
         elif self._n_m:
             r_rp = np.array(quat_to_dcm(*euler_to_quat(roll, pitch, 0.0)))
             m = r_rp @ (self._sum_m / self._n_m)
@@ -269,7 +271,6 @@ class Eskf:
             yaw_var = math.pi ** 2
         x = np.zeros(d.NX)
         x[6:10] = q / np.linalg.norm(q)
-        tilt_var = (p.accel_bias_init_m_s2 / p.gravity_m_s2) ** 2 + 1e-6
         P = np.diag(np.concatenate((
             np.full(3, p.init_pos_var_m2), np.full(3, p.init_vel_var_m2_s2),
             (tilt_var, tilt_var, yaw_var), np.full(3, p.gyro_bias_init_rad_s ** 2),
@@ -279,15 +280,6 @@ class Eskf:
         self.x, self.P = x, P
         self.t_filter_us = t = self._t_align
         self.aligned = True
-        # the latest position measurement already arrived, at rest
-        src = [r for r in (mocap[-1] if mocap else None,
-                           self._meas[Aid.GNSS_POS][-1] if self._meas[Aid.GNSS_POS] else None)
-               if r is not None and r.t_us <= t]
-        if src:
-            self._reset_position(src[0], t, shift_output=False)
-        baro = self._meas[Aid.BARO]
-        if baro:
-            self._init_baro(baro[-1])
         for buf in self._meas:
             while buf and buf[0].t_us <= t:
                 buf.popleft()
@@ -295,29 +287,39 @@ class Eskf:
         self._imu_buf.clear()
         self.out.reset(t, self.x[6:10], self.x[3:6], self.x[0:3])
 
-    def _reset_position(self, r, t_us: int, shift_output: bool = True) -> None:
+    def _reset_position(self, r, t_us: int) -> None:
         """Position (and, from GNSS, velocity) set to the measurement's; applied as a jump to
         the output predictor too (EKF2's resetHorizontalPositionTo and its output reset)."""
         old_p, old_v = self.x[0:3].copy(), self.x[3:6].copy()
         is_gnss = isinstance(r, GnssReading)
         self.x[0:3] = r.pos_ned_m - (self.x[16:19] if is_gnss else 0.0)
-        var = self._r[Aid.GNSS_POS] if is_gnss else self._r[Aid.MOCAP_POS]
         self.P[0:3, :] = 0.0
         self.P[:, 0:3] = 0.0
-        self.P[0:3, 0:3] = np.diag(var)
+        if is_gnss:
+            # p = z - bn: the receiver's error is the position's, anticorrelated
+            p_bn = self.P[15:18, 15:18].copy()
+            self.P[0:3, 0:3] = np.diag(self._r[Aid.GNSS_POS]) + p_bn
+            self.P[0:3, 15:18] = -p_bn
+            self.P[15:18, 0:3] = -p_bn
+        else:
+            self.P[0:3, 0:3] = np.diag(self._r[Aid.MOCAP_POS])
         if is_gnss:
             self.x[3:6] = r.vel_ned_m_s
             self.P[3:6, :] = 0.0
             self.P[:, 3:6] = 0.0
             self.P[3:6, 3:6] = np.diag(self._r[Aid.GNSS_VEL])
-        self.x[19] += self.x[2] - old_p[2]      # the baro offset follows the height
         self._pos_init = True
         self._last_pos_fuse_us = t_us
-        if shift_output:
-            self.out.shift(self.x[3:6] - old_v, self.x[0:3] - old_p)
+        self.out.shift(self.x[3:6] - old_v, self.x[0:3] - old_p)
 
     def _init_baro(self, r: BaroReading) -> None:
+        """bb = z + p_d: its error is the height's plus the reading's noise, and correlates
+        with the other states as the height does."""
         self.x[19] = r.pressure_alt_m + self.x[2]
+        P = self.P
+        P[18, :] = P[2, :]
+        P[:, 18] = P[:, 2]
+        P[18, 18] = P[2, 2] + self._r[Aid.BARO][0]
         self._baro_init = True
 
     # ---------------------------------------------------------------- the delayed horizon
@@ -352,6 +354,8 @@ class Eskf:
             self._fuse(Aid.GNSS_POS, r.t_us, r.pos_ned_m)
             self._fuse(Aid.GNSS_VEL, r.t_us, r.vel_ned_m_s)
         elif aid == Aid.BARO:
+            if not self._pos_init:
+                return                  # the offset is taken against a known height
             if not self._baro_init:
                 self._init_baro(r)
                 return
