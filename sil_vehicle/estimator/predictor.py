@@ -13,7 +13,10 @@ length. When the filter has processed the period ending at t_d (now - horizon), 
 state recorded at t_d is compared with the filter's state at t_d (EKF2's gains):
 
     dtheta  = 2 vec(q_out(t_d)^-1 (x) q_filter) (sign of the scalar part)
-    c_ang   = dtheta * 0.5 dt_imu / max(now - t_d, dt_imu)       applied on every IMU sample
+    c_ang   = dtheta * 0.5 dt_imu / max(now - t_d, dt_filter)    applied on every IMU sample
+              (EKF2 floors the delay at one IMU period; floored at the filter period, over which
+              the correction is applied until the next fit, it corrects at most half the error
+              per fit, so a horizon of zero stays stable)
     e_v     = v_filter - v_out(t_d),  I_v += e_v,  k_v = dt_filter / clip(tau_vel, dt_filter, 10)
     c_v     = k_v e_v + 0.1 k_v^2 I_v      (PD-like, about 5 % overshoot; likewise c_p with tau_pos)
 
@@ -66,7 +69,7 @@ class OutputPredictor:
                  tau_vel_s: float, tau_pos_s: float, capacity: int) -> None:
         self._g = gravity_m_s2
         self._dt_imu = imu_period_us * 1e-6
-        dt_f = filter_period_us * 1e-6
+        self._dt_f = dt_f = filter_period_us * 1e-6
         self._k_v = dt_f / min(max(tau_vel_s, dt_f), 10.0)
         self._k_p = dt_f / min(max(tau_pos_s, dt_f), 10.0)
         self._record: deque = deque(maxlen=capacity)
@@ -119,7 +122,7 @@ class OutputPredictor:
         _, q_o, v_o, p_o = self._record[0]
         qe = quat_mul((q_o[0], -q_o[1], -q_o[2], -q_o[3]), tuple(q))
         s = 2.0 if qe[0] >= 0.0 else -2.0
-        gain = 0.5 * self._dt_imu / max((self.t_us - t_delayed_us) * 1e-6, self._dt_imu)
+        gain = 0.5 * self._dt_imu / max((self.t_us - t_delayed_us) * 1e-6, self._dt_f)
         self._c_ang = (s * qe[1] * gain, s * qe[2] * gain, s * qe[3] * gain)
         e_v = [v[i] - v_o[i] for i in range(3)]
         e_p = [p[i] - p_o[i] for i in range(3)]
