@@ -14,7 +14,7 @@ period with the first-order sculling term dV += dv + (dA_acc + dA / 2) x dv) and
 buffer. The filter state sits at the delayed horizon t_d = now - horizon (the longest delay of
 the profile's sensors): a period ending at t_end is processed once now >= t_end + horizon, and
 every buffered measurement whose time of validity is at or before t_end (and after the last
-processed period) is then fused, in a fixed order (mocap position, mocap attitude, GNSS position,
+processed period: an older one, come too late, is dropped and counted as stale) is then fused, in a fixed order (mocap position, mocap attitude, GNSS position,
 GNSS velocity, baro, mag), the delayed ones (GNSS, mocap) exactly at their time of validity as
 EKF2 does; the barometer and magnetometer, undelayed, wait in their buffers for the horizon too.
 The output predictor (sil_vehicle.estimator.predictor) carries the delayed state to `now`.
@@ -115,6 +115,7 @@ class Estimate:
     test_ratios: tuple[float, ...]      # by Aid: the last test ratio (nan: never tried)
     fused: tuple[int, ...]              # by Aid: measurements fused
     rejected: tuple[int, ...]           # by Aid: measurements rejected by the gate
+    stale: int                          # measurements dropped: older than the horizon
     output_tracking_error: tuple[float, float, float]   # rad, m/s, m (the predictor's fit)
 
     @property
@@ -180,6 +181,7 @@ class Eskf:
         self.innovations: list[Innovation | None] = [None] * _NAID
         self._fused = [0] * _NAID
         self._rejected = [0] * _NAID
+        self._stale = 0                 # measurements older than the horizon when they came
         self._bg = (0.0, 0.0, 0.0)
         self._ba = (0.0, 0.0, 0.0)
 
@@ -329,12 +331,16 @@ class Eskf:
                                             self._qd)
         self.x = x_next.ravel().copy()
         self.P = P_next.copy()
-        self.t_filter_us = t_end
+        t_prev, self.t_filter_us = self.t_filter_us, t_end
         meas = self._meas
         for aid in (Aid.MOCAP_POS, Aid.GNSS_POS, Aid.BARO, Aid.MAG):
             buf = meas[aid]
             while buf and buf[0].t_us <= t_end:
-                self._fuse_reading(aid, buf.popleft())
+                r = buf.popleft()
+                if r.t_us > t_prev:
+                    self._fuse_reading(aid, r)
+                else:
+                    self._stale += 1
         self._bg = tuple(self.x[10:13].tolist())
         self._ba = tuple(self.x[13:16].tolist())
         self.out.correct(t_end, self.x[6:10].tolist(), self.x[3:6].tolist(),
@@ -404,7 +410,7 @@ class Eskf:
             x[13:16].copy(), self.t_filter_us, self.aligned, self.position_valid(),
             self.diverged(),
             tuple(i.test_ratio if i is not None else math.nan for i in self.innovations),
-            tuple(self._fused), tuple(self._rejected), o.tracking_error)
+            tuple(self._fused), tuple(self._rejected), self._stale, o.tracking_error)
 
     def filter_state(self) -> tuple[int, np.ndarray, np.ndarray]:
         """(t_us, x, P) at the delayed horizon (copies)."""
