@@ -10,6 +10,8 @@ Layers (each importing only the ones above it):
     faultscript         timed fault and wind events from a fault script (params/faults/)
     sensors/            simulated sensors (IMU, barometer, magnetometer, GNSS, motion capture):
                         pure seeded models and the sensing profiles that configure them
+    estimator/          the autopilot's estimator: an error-state Kalman filter on EKF2's
+                        delayed horizon with an output predictor (pure; not yet wired in)
     vehicle             the plant, one physics tick at a time (no I/O, injected RNG)
     compiled            the tick in C (dynamics/tick.c), built once and loaded; bit-identical
     failsafe            the autopilot's own hold-and-land controller when the offboard link is lost

@@ -9,20 +9,19 @@ trq_wire.cache.build_library and called through ctypes with preallocated buffers
 per function: the generated C entry point, `name(arg, res, iw, w, mem)`, on NumPy arrays; calling
 through casadi.external costs tens of microseconds of conversion per call, more than the
 arithmetic). Each call returns dense NumPy arrays (matrices column-major as CasADi's, shaped)
-that the next call of the same function overwrites: copy what you keep. The cache key is a SHA-256 of the
-generated source, the CasADi version, the compiler and its flags: the source holds the whole
-formulation, so a change of equations gives a new library and nothing else does. Without a C
-compiler, or when the build fails, the Functions are returned as they are (CasADi's interpreter,
-the same arithmetic, slower) with a RuntimeWarning.
+that the next call of the same function overwrites: copy what you keep. The cache key is a
+SHA-256 of the generated source, the CasADi version, the compiler and its flags: the source holds
+the whole formulation, so a change of equations gives a new library and nothing else does.
+Without a C compiler, or when the build fails, the Functions are returned as they are (CasADi's
+interpreter, the same arithmetic, slower) with a RuntimeWarning.
 """
 
 from __future__ import annotations
 
+import ctypes
 import hashlib
 import os
 import warnings
-
-import ctypes
 from pathlib import Path
 
 import casadi as ca
@@ -30,7 +29,7 @@ import numpy as np
 
 from trq_wire.cache import build_library, cache_dir, find_compiler
 
-__all__ = ["load", "Evaluator", "CFLAGS"]
+__all__ = ["CFLAGS", "Evaluator", "load"]
 
 # -O1: builds faster than -O2 for the same speed on generated CasADi code (the controller's
 # finding, docs/decisions/2026-12-02-figures-from-comments.md)

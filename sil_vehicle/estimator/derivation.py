@@ -70,7 +70,7 @@ from functools import lru_cache
 
 import casadi as ca
 
-__all__ = ["NX", "NDX", "MEASUREMENTS", "functions", "quat_mul", "quat_exp", "dcm"]
+__all__ = ["MEASUREMENTS", "NDX", "NX", "dcm", "functions", "quat_exp", "quat_mul"]
 
 NX, NDX = 20, 19
 P_, V_, Q_, BG, BA, BN, BB = (slice(0, 3), slice(3, 6), slice(6, 10), slice(10, 13),

@@ -14,9 +14,10 @@ period with the first-order sculling term dV += dv + (dA_acc + dA / 2) x dv) and
 buffer. The filter state sits at the delayed horizon t_d = now - horizon (the longest delay of
 the profile's sensors): a period ending at t_end is processed once now >= t_end + horizon, and
 every buffered measurement whose time of validity is at or before t_end (and after the last
-processed period: an older one, come too late, is dropped and counted as stale) is then fused, in a fixed order (mocap position, mocap attitude, GNSS position,
-GNSS velocity, baro, mag), the delayed ones (GNSS, mocap) exactly at their time of validity as
-EKF2 does; the barometer and magnetometer, undelayed, wait in their buffers for the horizon too.
+processed period: an older one, come too late, is dropped and counted as stale) is then fused,
+in a fixed order (mocap position, mocap attitude, GNSS position, GNSS velocity, baro, mag), the
+delayed ones (GNSS, mocap) exactly at their time of validity as EKF2 does; the barometer and
+magnetometer, undelayed, wait in their buffers for the horizon too.
 The output predictor (sil_vehicle.estimator.predictor) carries the delayed state to `now`.
 
 Fusion. For a measurement z with prediction h(x) and Jacobian H (one compiled CasADi function per
@@ -65,7 +66,7 @@ from sil_vehicle.sensors.imu import ImuReading
 from sil_vehicle.sensors.mag import MagReading
 from sil_vehicle.sensors.mocap import MocapReading
 
-__all__ = ["Eskf", "Estimate", "Innovation", "Aid"]
+__all__ = ["Aid", "Eskf", "Estimate", "Innovation"]
 
 
 class Aid(IntEnum):
@@ -82,6 +83,7 @@ _FUSE = {Aid.MOCAP_POS: "fuse_mocap_pos", Aid.MOCAP_ATT: "fuse_mocap_att",
          Aid.GNSS_POS: "fuse_gnss_pos", Aid.GNSS_VEL: "fuse_gnss_vel", Aid.BARO: "fuse_baro",
          Aid.MAG: "fuse_mag"}
 _NAID = len(Aid)
+_POSE = np.array((0, 1, 2, 6, 7, 8))     # dp, dtheta in the error state
 
 
 @dataclass(frozen=True)
@@ -117,10 +119,8 @@ class Estimate:
     rejected: tuple[int, ...]           # by Aid: measurements rejected by the gate
     stale: int                          # measurements dropped: older than the horizon
     output_tracking_error: tuple[float, float, float]   # rad, m/s, m (the predictor's fit)
-
-    @property
-    def pos_cov_ned_m2(self) -> np.ndarray:
-        return np.diag(self.pos_var_ned_m2)
+    pose_cov: np.ndarray                # (6, 6) of (dp NED m, dtheta FRD rad): ODOMETRY's pose
+    vel_cov_ned_m2_s2: np.ndarray       # (3, 3)
 
 
 class Eskf:
@@ -410,7 +410,8 @@ class Eskf:
             x[13:16].copy(), self.t_filter_us, self.aligned, self.position_valid(),
             self.diverged(),
             tuple(i.test_ratio if i is not None else math.nan for i in self.innovations),
-            tuple(self._fused), tuple(self._rejected), self._stale, o.tracking_error)
+            tuple(self._fused), tuple(self._rejected), self._stale, o.tracking_error,
+            self.P[np.ix_(_POSE, _POSE)], self.P[3:6, 3:6].copy())
 
     def filter_state(self) -> tuple[int, np.ndarray, np.ndarray]:
         """(t_us, x, P) at the delayed horizon (copies)."""

@@ -30,7 +30,7 @@ from trq_params.schema import DELAY_BUFFER_MS
 from sil_vehicle.sensors.profile import SensingProfile
 from sil_vehicle.sensors.truth import STANDARD_GRAVITY_M_S2
 
-__all__ = ["EstimatorParams", "FILTER_PERIOD_US"]
+__all__ = ["FILTER_PERIOD_US", "EstimatorParams"]
 
 FILTER_PERIOD_US = 10_000       # EKF2's FILTER_UPDATE_PERIOD_MS (10 ms)
 
@@ -114,7 +114,7 @@ class EstimatorParams:
         return self.mag_noise_gauss is not None
 
     @classmethod
-    def from_profile(cls, profile: SensingProfile, **overrides) -> "EstimatorParams":
+    def from_profile(cls, profile: SensingProfile, **overrides) -> EstimatorParams:
         """The filter matched to `profile`'s sensors; `overrides` replace any field."""
         imu = profile.imu
         if imu is None:

@@ -31,7 +31,7 @@ from __future__ import annotations
 import math
 from collections import deque
 
-__all__ = ["OutputPredictor", "quat_mul", "quat_exp", "rotate"]
+__all__ = ["OutputPredictor", "quat_exp", "quat_mul", "rotate"]
 
 
 def quat_mul(a, b) -> tuple[float, float, float, float]:
