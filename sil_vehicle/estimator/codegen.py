@@ -50,6 +50,9 @@ class Evaluator:
         self.name = fn.name()
         self._fn = fn if lib is None else None
         self._in = [np.zeros(fn.nnz_in(i)) for i in range(fn.n_in())]
+        # what an input is written through: a matrix as its column-major view, else flat
+        self._in_views = [b.reshape(fn.size_in(i), order="F") if min(fn.size_in(i)) > 1 else b
+                          for i, b in enumerate(self._in)]
         self._nz = [np.zeros(fn.nnz_out(i)) for i in range(fn.n_out())]
         self._out = [np.zeros(fn.size_out(i), order="F") for i in range(fn.n_out())]
         self._scatter = []
@@ -72,8 +75,8 @@ class Evaluator:
         self._c.restype = ctypes.c_int
 
     def __call__(self, *inputs) -> tuple[np.ndarray, ...]:
-        for buf, v in zip(self._in, inputs):
-            buf[:] = np.ravel(v, order="F")
+        for view, v in zip(self._in_views, inputs):
+            view[...] = v
         if self._fn is None:
             if self._c(self._arg, self._res, self._iw, self._w, 0):
                 raise RuntimeError(f"{self.name} failed")

@@ -42,8 +42,9 @@ filter-period boundary): what it computes never depends on the horizon, only whe
 
 Health: attitude aligned (after the initialisation); position valid (a position measurement
 fused within `no_aid_timeout_us` of the filter's time); diverged (a state or variance not
-finite, a variance above `max_var` or below zero). The variances the Estimate carries are the
-filter's, at the delayed horizon (EKF2 reports the same).
+finite, a variance above `max_var` or below zero; checked after each filter period and
+latched). The variances the Estimate carries are the filter's, at the delayed horizon (EKF2
+reports the same).
 """
 
 from __future__ import annotations
@@ -182,6 +183,7 @@ class Eskf:
         self._fused = [0] * _NAID
         self._rejected = [0] * _NAID
         self._stale = 0                 # measurements older than the horizon when they came
+        self._diverged = False          # latched: checked after each filter period
         self._bg = (0.0, 0.0, 0.0)
         self._ba = (0.0, 0.0, 0.0)
 
@@ -341,6 +343,7 @@ class Eskf:
                     self._fuse_reading(aid, r)
                 else:
                     self._stale += 1
+        self._diverged = self._diverged or self._check_divergence()
         self._bg = tuple(self.x[10:13].tolist())
         self._ba = tuple(self.x[13:16].tolist())
         self.out.correct(t_end, self.x[6:10].tolist(), self.x[3:6].tolist(),
@@ -388,10 +391,10 @@ class Eskf:
 
     # ---------------------------------------------------------------- outputs
 
-    def diverged(self) -> bool:
+    def _check_divergence(self) -> bool:
         diag = np.diag(self.P)
-        return bool(not (np.all(np.isfinite(self.x)) and np.all(np.isfinite(self.P)))
-                    or np.any(diag < 0.0) or np.any(diag > self.params.max_var))
+        return bool(not (np.isfinite(self.x).all() and np.isfinite(self.P).all())
+                    or (diag < 0.0).any() or (diag > self.params.max_var).any())
 
     def position_valid(self) -> bool:
         last = self._last_pos_fuse_us
@@ -408,7 +411,7 @@ class Eskf:
             np.array((g[0] - bg[0], g[1] - bg[1], g[2] - bg[2])),
             diag[0:3].copy(), diag[3:6].copy(), diag[6:9].copy(), x[10:13].copy(),
             x[13:16].copy(), self.t_filter_us, self.aligned, self.position_valid(),
-            self.diverged(),
+            self._diverged,
             tuple(i.test_ratio if i is not None else math.nan for i in self.innovations),
             tuple(self._fused), tuple(self._rejected), self._stale, o.tracking_error,
             self.P[np.ix_(_POSE, _POSE)], self.P[3:6, 3:6].copy())

@@ -95,12 +95,29 @@ class OutputPredictor:
         body FRD, held over the IMU period that ends at t_us."""
         dt = self._dt_imu
         c = self._c_ang
-        q_old = self.q
-        self.q = normalised(quat_mul(q_old, quat_exp((gyro[0] - bg[0]) * dt + c[0],
-                                                     (gyro[1] - bg[1]) * dt + c[1],
-                                                     (gyro[2] - bg[2]) * dt + c[2])))
-        dvx, dvy, dvz = rotate(q_old, (accel[0] - ba[0]) * dt, (accel[1] - ba[1]) * dt,
-                               (accel[2] - ba[2]) * dt)
+        # q <- q (x) exp(dA - bg dt + c_ang), normalised (quat_mul, quat_exp and rotate inlined)
+        vx = (gyro[0] - bg[0]) * dt + c[0]
+        vy = (gyro[1] - bg[1]) * dt + c[1]
+        vz = (gyro[2] - bg[2]) * dt + c[2]
+        t2 = vx * vx + vy * vy + vz * vz
+        bw = 1.0 - t2 / 8.0 + t2 * t2 / 384.0
+        sn = 0.5 - t2 / 48.0 + t2 * t2 / 3840.0
+        bx, by, bz = sn * vx, sn * vy, sn * vz
+        aw, ax, ay, az = self.q
+        qw = aw * bw - ax * bx - ay * by - az * bz
+        qx = aw * bx + ax * bw + ay * bz - az * by
+        qy = aw * by - ax * bz + ay * bw + az * bx
+        qz = aw * bz + ax * by - ay * bx + az * bw
+        n = math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
+        self.q = (qw / n, qx / n, qy / n, qz / n)
+        # v' = v + R(q_old) (dV - ba dt) + g dt,  p <- p + (v + v') dt / 2
+        x = (accel[0] - ba[0]) * dt
+        y = (accel[1] - ba[1]) * dt
+        z = (accel[2] - ba[2]) * dt
+        w, a, b, c2 = aw, ax, ay, az
+        dvx = (1 - 2 * (b * b + c2 * c2)) * x + 2 * (a * b - w * c2) * y + 2 * (a * c2 + w * b) * z
+        dvy = 2 * (a * b + w * c2) * x + (1 - 2 * (a * a + c2 * c2)) * y + 2 * (b * c2 - w * a) * z
+        dvz = 2 * (a * c2 - w * b) * x + 2 * (b * c2 + w * a) * y + (1 - 2 * (a * a + b * b)) * z
         v0, p0 = self.v, self.p
         v = (v0[0] + dvx, v0[1] + dvy, v0[2] + dvz + self._g * dt)
         h = 0.5 * dt

@@ -269,6 +269,21 @@ def test_position_valid_lapses_in_a_long_dropout():
     assert np.linalg.norm(flags[4_400_000].pos_ned_m - truth_at(4_400_000).pos_ned_m) < 0.1
 
 
+def test_divergence_is_flagged_and_latched():
+    prof, readings = flight("mocap")
+    est = Eskf(EstimatorParams.from_profile(prof))
+    for t, rs in readings[:1000]:
+        est.step(t, rs)
+    assert not est.output().diverged
+    est.P[4, 4] = math.nan                        # what a numerical failure leaves behind
+    for t, rs in readings[1000:1020]:
+        est.step(t, rs)
+    assert est.output().diverged
+    for t, rs in readings[1020:2000]:
+        est.step(t, rs)
+    assert est.output().diverged
+
+
 def test_same_readings_same_estimates_bit_for_bit():
     prof, readings = flight("mocap")
     _, a = run(prof, readings[:5000], every_us=1000)
