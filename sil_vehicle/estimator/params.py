@@ -11,8 +11,9 @@ Noise figures are continuous-time densities, as the sensor models state them
 with the vibration taken at full throttle (the models scale it with the square of the mean motor
 output; the filter does not know the throttle, so it takes the bound). Measurement standard
 deviations are per sample. Gates are in standard deviations, as EKF2's EKF2_*_GATE parameters
-(defaults: EKF2_GPS_P_GATE = EKF2_GPS_V_GATE = EKF2_EV_POS_GATE = EKF2_BARO_GATE = 5,
-EKF2_MAG_GATE = 3); the output predictor's time constants are EKF2_TAU_VEL and EKF2_TAU_POS
+(defaults: EKF2_GPS_P_GATE = EKF2_GPS_V_GATE = EKF2_EVP_GATE = EKF2_BARO_GATE = 5,
+EKF2_MAG_GATE = 3; EKF2 has no gate for a whole vision attitude, the motion capture's takes
+the position's 5); the output predictor's time constants are EKF2_TAU_VEL and EKF2_TAU_POS
 (0.25 s); EKF2_NOAID_TOUT (5 s) is the position-valid timeout.
 
 The delay horizon is the longest delay of the profile's delayed sensors (GNSS, motion capture)
