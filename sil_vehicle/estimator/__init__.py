@@ -18,4 +18,11 @@ Use (the vehicle's tick loop; nothing here reads a clock or draws a random numbe
     est = Eskf(EstimatorParams.from_profile(load_sensing("mocap", 1000)))
     est.step(t_us, readings)        # every physics tick, with the sensor suite's readings
     e = est.output()                # Estimate: pose, velocity, rates, variances, health
+
+What the telemetry takes from an Estimate (the codec's business; a sketch for the wiring):
+ODOMETRY's pose from pos_ned_m and quat_wxyz, velocity from vel_ned_m_s, rates from
+rates_frd_rad_s; its pose_covariance the upper triangle of pose_cov_rpy(), its
+velocity_covariance from vel_cov_ned_m2_s2 and rates_var_frd_rad2_s2 (the cross terms unknown);
+ESTIMATOR_STATUS's vel_ratio, pos_horiz_ratio, pos_vert_ratio and mag_ratio as they are, its
+accuracies from the variances, its flags from attitude_aligned, position_valid and diverged.
 """

@@ -60,7 +60,7 @@ from sil_vehicle.estimator import derivation as d
 from sil_vehicle.estimator.codegen import load
 from sil_vehicle.estimator.params import EstimatorParams
 from sil_vehicle.estimator.predictor import OutputPredictor
-from sil_vehicle.frames import euler_to_quat, quat_to_dcm
+from sil_vehicle.frames import euler_to_quat, quat_to_dcm, quat_to_euler
 from sil_vehicle.sensors.baro import BaroReading
 from sil_vehicle.sensors.gnss import GnssReading
 from sil_vehicle.sensors.imu import ImuReading
@@ -96,6 +96,7 @@ class Innovation:
     variance: np.ndarray            # (m,) diag(S)
     test_ratio: float               # max_i y_i^2 / (gate^2 S_ii): above 1 rejected
     accepted: bool
+    axis_ratios: np.ndarray         # (m,) y_i^2 / (gate^2 S_ii)
 
 
 @dataclass(frozen=True)
@@ -120,8 +121,28 @@ class Estimate:
     rejected: tuple[int, ...]           # by Aid: measurements rejected by the gate
     stale: int                          # measurements dropped: older than the horizon
     output_tracking_error: tuple[float, float, float]   # rad, m/s, m (the predictor's fit)
-    pose_cov: np.ndarray                # (6, 6) of (dp NED m, dtheta FRD rad): ODOMETRY's pose
+    pose_cov: np.ndarray                # (6, 6) of (dp NED m, dtheta FRD rad)
     vel_cov_ned_m2_s2: np.ndarray       # (3, 3)
+    rates_var_frd_rad2_s2: np.ndarray   # (3,) one gyro sample's noise plus the bias's variance
+    # ESTIMATOR_STATUS's test ratios (EKF2's: the largest of the last ones; nan: none yet)
+    vel_ratio: float                    # GNSS velocity
+    pos_horiz_ratio: float              # north and east of the position source
+    pos_vert_ratio: float               # down of the position source, the barometer
+    mag_ratio: float
+
+    def pose_cov_rpy(self) -> np.ndarray:
+        """(6, 6) covariance of (x, y, z, roll, pitch, yaw), ODOMETRY's pose_covariance (before
+        taking its upper triangle): the body-frame attitude error mapped to ZYX Euler angles,
+        d(rpy) = E^-1 dtheta with dtheta = E d(rpy) the Euler-rate to body-rate map (singular
+        at pitch +-90 deg)."""
+        roll, pitch, _ = quat_to_euler(*self.quat_wxyz)
+        sr, cr = math.sin(roll), math.cos(roll)
+        sp, cp = math.sin(pitch), math.cos(pitch)
+        e_inv = np.array(((1.0, sr * sp / cp, cr * sp / cp), (0.0, cr, -sr),
+                          (0.0, sr / cp, cr / cp)))
+        j = np.eye(6)
+        j[3:, 3:] = e_inv
+        return j @ self.pose_cov @ j.T
 
 
 class Eskf:
@@ -141,6 +162,7 @@ class Eskf:
             p.gnss_markov_ne_m ** 2 * (1 - a * a), p.gnss_markov_d_m ** 2 * (1 - a * a),
             2 * p.baro_drift_sigma_m ** 2 * self._dt_f / p.baro_drift_tau_s))
         self._m_ned = np.array(p.mag_field_ned_gauss)
+        self._gyro_var = p.gyro_noise_rad_s_rthz ** 2 * p.imu_rate_hz
         self._gate = (p.gate_mocap_pos, p.gate_mocap_att, p.gate_gnss_pos, p.gate_gnss_vel,
                       p.gate_baro, p.gate_mag)
         self._r = (
@@ -376,9 +398,10 @@ class Eskf:
         y, s, x_next, P_next = self._f[_FUSE[aid]](self.x, self.P, z, self._r[aid], self._m_ned)
         y, s = y.ravel().copy(), s.ravel().copy()
         gate = self._gate[aid]
-        ratio = float(np.max(y * y / (gate * gate * s)))
+        axes = y * y / (gate * gate * s)
+        ratio = float(axes.max())
         ok = ratio <= 1.0
-        self.innovations[aid] = Innovation(aid, t_us, y, s, ratio, ok)
+        self.innovations[aid] = Innovation(aid, t_us, y, s, ratio, ok, axes)
         if not ok:
             self._rejected[aid] += 1
             return False
@@ -414,7 +437,19 @@ class Eskf:
             self._diverged,
             tuple(i.test_ratio if i is not None else math.nan for i in self.innovations),
             tuple(self._fused), tuple(self._rejected), self._stale, o.tracking_error,
-            self.P[np.ix_(_POSE, _POSE)], self.P[3:6, 3:6].copy())
+            self.P[np.ix_(_POSE, _POSE)], self.P[3:6, 3:6].copy(),
+            self._gyro_var + diag[9:12], *self._status_ratios())
+
+    def _status_ratios(self) -> tuple[float, float, float, float]:
+        inn = self.innovations
+
+        def worst(*parts) -> float:
+            vals = [float(inn[a].axis_ratios[sl].max()) for a, sl in parts if inn[a] is not None]
+            return max(vals) if vals else math.nan
+        h, v, a = slice(0, 2), slice(2, 3), slice(0, 3)
+        return (worst((Aid.GNSS_VEL, a)), worst((Aid.MOCAP_POS, h), (Aid.GNSS_POS, h)),
+                worst((Aid.MOCAP_POS, v), (Aid.GNSS_POS, v), (Aid.BARO, a)),
+                worst((Aid.MAG, a)))
 
     def filter_state(self) -> tuple[int, np.ndarray, np.ndarray]:
         """(t_us, x, P) at the delayed horizon (copies)."""
