@@ -41,7 +41,8 @@ offset is taken from the first barometer reading after that. The filter starts a
 filter-period boundary): what it computes never depends on the horizon, only when it does.
 
 Health: attitude aligned (after the initialisation); position valid (a position measurement
-fused within `no_aid_timeout_us` of the filter's time); diverged (a state or variance not
+fused within `no_aid_timeout_us` of the filter's time; a position source rejected by its gate
+for longer than that resets the position to it, as EKF2 does); diverged (a state or variance not
 finite, a variance above `max_var` or below zero; checked after each filter period and
 latched). The variances the Estimate carries are the filter's, at the delayed horizon (EKF2
 reports the same).
@@ -120,6 +121,7 @@ class Estimate:
     fused: tuple[int, ...]              # by Aid: measurements fused
     rejected: tuple[int, ...]           # by Aid: measurements rejected by the gate
     stale: int                          # measurements dropped: older than the horizon
+    pos_resets: int                     # position resets: the source rejected too long
     output_tracking_error: tuple[float, float, float]   # rad, m/s, m (the predictor's fit)
     pose_cov: np.ndarray                # (6, 6) of (dp NED m, dtheta FRD rad)
     vel_cov_ned_m2_s2: np.ndarray       # (3, 3)
@@ -205,6 +207,7 @@ class Eskf:
         self._fused = [0] * _NAID
         self._rejected = [0] * _NAID
         self._stale = 0                 # measurements older than the horizon when they came
+        self._pos_resets = 0            # position resets after a lost position source
         self._diverged = False          # latched: checked after each filter period
         self._bg = (0.0, 0.0, 0.0)
         self._ba = (0.0, 0.0, 0.0)
@@ -338,6 +341,15 @@ class Eskf:
         self._last_pos_fuse_us = t_us
         self.out.shift(self.x[3:6] - old_v, self.x[0:3] - old_p)
 
+    def _reset_if_lost(self, r) -> None:
+        """The position source rejected for longer than the no-aid timeout: the filter, not the
+        source, is taken to be wrong, and the position reset to the measurement (EKF2 does the
+        same for GNSS after EKF2_NOAID_TOUT of failed innovation checks)."""
+        last = self._last_pos_fuse_us
+        if last is not None and self.t_filter_us - last > self.params.no_aid_timeout_us:
+            self._reset_position(r, self.t_filter_us)
+            self._pos_resets += 1
+
     def _init_baro(self, r: BaroReading) -> None:
         """bb = z + p_d: its error is the height's plus the reading's noise, and correlates
         with the other states as the height does."""
@@ -376,13 +388,15 @@ class Eskf:
             if not self._pos_init:
                 self._reset_position(r, r.t_us)
                 return
-            self._fuse(Aid.MOCAP_POS, r.t_us, r.pos_ned_m)
+            if not self._fuse(Aid.MOCAP_POS, r.t_us, r.pos_ned_m):
+                self._reset_if_lost(r)
             self._fuse(Aid.MOCAP_ATT, r.t_us, r.quat_wxyz)
         elif aid == Aid.GNSS_POS:
             if not self._pos_init:
                 self._reset_position(r, r.t_us)
                 return
-            self._fuse(Aid.GNSS_POS, r.t_us, r.pos_ned_m)
+            if not self._fuse(Aid.GNSS_POS, r.t_us, r.pos_ned_m):
+                self._reset_if_lost(r)
             self._fuse(Aid.GNSS_VEL, r.t_us, r.vel_ned_m_s)
         elif aid == Aid.BARO:
             if not self._pos_init:
@@ -436,7 +450,8 @@ class Eskf:
             x[13:16].copy(), self.t_filter_us, self.aligned, self.position_valid(),
             self._diverged,
             tuple(i.test_ratio if i is not None else math.nan for i in self.innovations),
-            tuple(self._fused), tuple(self._rejected), self._stale, o.tracking_error,
+            tuple(self._fused), tuple(self._rejected), self._stale, self._pos_resets,
+            o.tracking_error,
             self.P[np.ix_(_POSE, _POSE)], self.P[3:6, 3:6].copy(),
             self._gyro_var + diag[9:12], *self._status_ratios())
 

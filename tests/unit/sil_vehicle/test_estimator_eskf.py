@@ -249,6 +249,26 @@ def test_gating_rejects_an_outlier_and_counts_it():
     assert np.linalg.norm(e.pos_ned_m - c.pos_ned_m) < 0.01
 
 
+def test_a_position_source_rejected_too_long_resets_the_position():
+    """The GNSS jumps 3 m north for good at 8 s (a new datum): rejected by the gate, then, after
+    the no-aid timeout (1 s here), taken and the position reset to it."""
+    prof, readings = flight("rtk")
+    shifted = [(t, tuple(replace(r, pos_ned_m=r.pos_ned_m + np.array((3.0, 0.0, 0.0)))
+                         if isinstance(r, GnssReading) and r.t_us >= 8_000_000 else r
+                         for r in rs)) for t, rs in readings]
+    est = Eskf(EstimatorParams.from_profile(prof, no_aid_timeout_us=1_000_000))
+    seen = {}
+    for t, rs in shifted:
+        est.step(t, rs)
+        if t % 100_000 == 0:
+            seen[t] = est.output()
+    before, after = seen[8_900_000], seen[13_900_000]
+    assert before.rejected[Aid.GNSS_POS] >= 5 and before.pos_resets == 0
+    assert after.pos_resets == 1 and after.position_valid
+    err = after.pos_ned_m - truth_at(13_900_000).pos_ned_m
+    assert abs(err[0] - 3.0) < 0.1 and abs(err[1]) < 0.1
+
+
 def test_position_valid_lapses_in_a_long_dropout():
     """A scripted motion capture occlusion of 1.5 s against a 0.5 s timeout."""
     prof = load_sensing("mocap", 1000)
