@@ -338,6 +338,7 @@ class Eskf:
             self.P[:, 3:6] = 0.0
             self.P[3:6, 3:6] = np.diag(self._r[Aid.GNSS_VEL])
         self._pos_init = True
+        self._baro_init = False         # its offset is taken again against the new height
         self._last_pos_fuse_us = t_us
         self.out.shift(self.x[3:6] - old_v, self.x[0:3] - old_p)
 
