@@ -37,7 +37,7 @@ from sil_vehicle.config import (
 )
 from sil_vehicle.faultscript import load_script
 from sil_vehicle.mavlink.codec import COMPONENT_ID, SYSTEM_ID, Codec
-from sil_vehicle.sitl import LINKS, LOG_COLUMNS, Outgoing, Sitl
+from sil_vehicle.sitl import LINKS, Outgoing, Sitl
 from trq_wire.framing import NS_PER_S, LinePacer, frame_size, line_bytes_per_s
 from trq_wire.logfile import CsvLog, Tlog
 from trq_wire.signing import SignatureCheck, SigningKeyError, load_key, sign_outgoing
@@ -123,7 +123,9 @@ class VehicleDaemon:
                     "sim_file": sim.file, "seed": sim.seed, "physics_rate_hz": sim.physics_rate_hz,
                     "physics_core": self.sitl.vehicle.core_name,
                     "clock": sim.clock_mode, "frames": "world NED, body FRD, quaternion wxyz"}
-            self.flight_log = CsvLog(log_dir / "flight.csv", LOG_COLUMNS, meta,
+            if sim.senses:           # under truth the header stays as it has always been
+                meta["sensing"] = sim.sensing.file
+            self.flight_log = CsvLog(log_dir / "flight.csv", self.sitl.log_columns, meta,
                                      flush_every=max(1, sim.log_rate_hz))
             self.tlog = Tlog(log_dir / "vehicle.tlog")
             self.sitl.log_sink = self.flight_log

@@ -27,7 +27,8 @@ noise draws as in the daemon) but are not encoded: nobody listens.
 
 The flight ends when `OffboardFlight.run()` returns (landed and disarmed), or `crash_grace_s`
 simulated seconds after a crash, or at `timeout_s` of simulated time. It writes `flight.csv`
-(`trq_wire.logfile.CsvLog`, columns `sil_vehicle.sitl.LOG_COLUMNS`) and `controller.csv`
+(`trq_wire.logfile.CsvLog`, columns `Sitl.log_columns`: `sil_vehicle.sitl.LOG_COLUMNS`, and a
+position source's) and `controller.csv`
 (`trq_offboard.log.ControllerLog`) in `out_dir`, so `trq_lab.metrics` computes the same metrics
 as for a scenario run. The flight loop calls the controller's step and preparation in its own
 thread, as in the daemon.
@@ -458,7 +459,7 @@ def fly_inprocess(controller, sim, fault_events=(), seed: int | None = None, *,
     import tempfile
 
     from sil_vehicle.mavlink.codec import Codec
-    from sil_vehicle.sitl import LOG_COLUMNS, Sitl
+    from sil_vehicle.sitl import Sitl
     from trq_offboard.config import ControllerConfig, load_controller
     from trq_offboard.controller import Controller
     from trq_offboard.log import ControllerLog, solver_header
@@ -503,7 +504,9 @@ def fly_inprocess(controller, sim, fault_events=(), seed: int | None = None, *,
                 "sim_file": sim.file, "seed": sim.seed, "physics_rate_hz": sim.physics_rate_hz,
                 "clock": sim.clock_mode, "frames": "world NED, body FRD, quaternion wxyz",
                 "link": "in-process MAVLink bytes", "physics_core": sitl.vehicle.core_name}
-        flight_log = FlightLog(out_dir / "flight.csv", LOG_COLUMNS, meta,
+        if sim.senses:
+            meta["sensing"] = sim.sensing.file
+        flight_log = FlightLog(out_dir / "flight.csv", sitl.log_columns, meta,
                                flush_every=max(1, sim.log_rate_hz))
         clog = ControllerLog(out_dir / "controller.csv",
                              {"controller": cfg.name, "controller_file": cfg.file,
