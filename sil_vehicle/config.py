@@ -5,8 +5,8 @@ settings (`params/sim/*.yaml`, which names its airframe and its sensing profile,
 `params/sensing/*.yaml`, loaded by `sensing_profile` against the physics rate). Files are read
 and validated by `trq_params.loader` against `trq_params.schema` (the same vehicle schema the
 controller reads); unknown, missing or out-of-range keys raise `ConfigError` (the loader's)
-naming the file, the key, the value and the expected range. This module builds the records from the validated models:
-derived quantities (rotor geometry, hover throttle) are computed once here.
+naming the file, the key, the value and the expected range. This module builds the records from
+the validated models: derived quantities (rotor geometry, hover throttle) are computed once here.
 """
 
 from __future__ import annotations
