@@ -23,7 +23,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from sil_vehicle.config import STREAMS, SimParams
 from sil_vehicle.faultscript import Event, ParamAction
-from sil_vehicle.frames import euler_to_quat, quat_to_euler
+from sil_vehicle.frames import euler_to_quat, quat_to_dcm, quat_to_euler
 from sil_vehicle.mavlink import codec
 from sil_vehicle.mavlink.codec import Measured, RxCounters
 from sil_vehicle.failsafe import FailsafeLander
@@ -31,7 +31,7 @@ from sil_vehicle.impair import Impairment
 from sil_vehicle.mavlink.params import Param, ParamTable
 from sil_vehicle.sensors import baro, gnss, imu, mag, mocap
 from sil_vehicle.sensors.suite import Reading, SensorSuite
-from sil_vehicle.sensors.truth import Truth, specific_force_frd
+from sil_vehicle.sensors.truth import Truth
 from sil_vehicle.vehicle import ActuatorCommand, Vehicle, VehicleState
 
 LINKS = ("gcs", "offboard")
@@ -192,9 +192,13 @@ class Sitl:
         v0, v = self._sensed_vel, x[3:6]
         self._sensed_vel = v
         dt = self._dt_s
-        accel_ned = np.array(((v[0] - v0[0]) / dt, (v[1] - v0[1]) / dt, (v[2] - v0[2]) / dt))
-        truth = Truth.of(state.t_us, x[0:3], v, x[6:10], x[10:13],
-                         specific_force_frd(x[6:10], accel_ned, self._gravity), state.motor_pct)
+        # (a - g) in NED, then R^T of it (sensors.truth.specific_force_frd, in plain floats)
+        an, ae, ad = ((v[0] - v0[0]) / dt, (v[1] - v0[1]) / dt,
+                      (v[2] - v0[2]) / dt - self._gravity)
+        r = quat_to_dcm(*x[6:10])
+        f = (r[0][0] * an + r[1][0] * ae + r[2][0] * ad, r[0][1] * an + r[1][1] * ae
+             + r[2][1] * ad, r[0][2] * an + r[1][2] * ae + r[2][2] * ad)
+        truth = Truth.of(state.t_us, x[0:3], v, x[6:10], x[10:13], f, state.motor_pct)
         readings = self.suite.sample(state.t_us, truth)
         for r in readings:
             self.latest[SENSOR_OF[type(r)]] = r

@@ -283,3 +283,16 @@ def test_the_log_keeps_the_position_sources_latest_sample(sim, exact):
     assert rows[-1][-4] == t_us - latency - (t_us - latency) % 10_000
     rtk = Sitl(sim.with_changes(sensing=sensing_profile("rtk", 1000, "t")))
     assert rtk.log_columns[-4:] == ["gnss_t_us", "gnss_pos_n_m", "gnss_pos_e_m", "gnss_pos_d_m"]
+
+
+def test_the_specific_force_is_the_sensors_own_formula(sim, exact):
+    """Sitl._sense's plain-float R^T (a - g) against sensors.truth.specific_force_frd."""
+    from sil_vehicle.sensors.truth import specific_force_frd
+    s = sitl(sim, exact)
+    fly(s, tilt_rad=0.4)
+    for _ in range(300):
+        v0 = np.array(s.state.x[3:6])
+        s.step()
+        a = (np.array(s.state.x[3:6]) - v0) / (sim.dt_us * 1e-6)
+        expected = specific_force_frd(np.array(s.state.x[6:10]), a, sim.vehicle.gravity_m_s2)
+        assert np.allclose(s.latest["imu"].accel_frd_m_s2, expected, rtol=0, atol=1e-9)
