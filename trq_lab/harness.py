@@ -287,12 +287,12 @@ def prepare_controller(controller: str | Path, reference: dict | None, out_dir: 
 def sim_params(vehicle_file: Path | str, control_rate_hz: int, *, seed: int,
                wind_speed_m_s: float = 0.0, wind_from_deg: float = 0.0, gusts: bool = False,
                gust_sigma_m_s: float | None = None, sim_file: Path | str = SIM_DEFAULT,
-               offboard_impair: dict[str, float] | None = None):
+               offboard_impair: dict[str, float] | None = None, sensing: str | None = None):
     """The vehicle's settings as trq-scenario gives them to the daemon: the default sim file,
     the control rate (and offboard ODOMETRY rate) of the controller, its airframe, the seed and
-    the wind (the daemon's --seed, --wind-speed, --wind-dir, --gusts), and a scenario's
-    offboard_link impairment."""
-    from sil_vehicle.config import load_sim
+    the wind (the daemon's --seed, --wind-speed, --wind-dir, --gusts), a scenario's
+    offboard_link impairment and its sensing profile (--sensing; None: the sim file's)."""
+    from sil_vehicle.config import load_sim, sensing_profile
     from sil_vehicle.impair import ImpairParams
 
     sim = load_sim(sim_file, vehicle_file)
@@ -314,6 +314,9 @@ def sim_params(vehicle_file: Path | str, control_rate_hz: int, *, seed: int,
         changes["gusts_enabled"] = True
     if gust_sigma_m_s is not None:
         changes["gust_sigma_m_s"] = float(gust_sigma_m_s)
+    if sensing is not None:
+        changes["sensing"] = sensing_profile(sensing, sim.physics_rate_hz, "sim_params",
+                                             "sensing")
     return sim.with_changes(**changes)
 
 
@@ -606,7 +609,8 @@ def main(argv: list[str] | None = None) -> int:
             cfg, applied_delay_s=run_scenario.command_delay_s(sc.offboard_impair, False))
         sim = sim_params(cfg.vehicle.file, cfg.control_rate_hz, seed=sc.seed,
                          wind_speed_m_s=sc.wind_speed_m_s, wind_from_deg=sc.wind_from_deg,
-                         gusts=sc.gusts, offboard_impair=sc.offboard_impair)
+                         gusts=sc.gusts, offboard_impair=sc.offboard_impair,
+                         sensing=sc.sensing)
         vp = sim.vehicle        # the daemon checks stuck angles against the airframe's range
         ev = load_script(sc.faults, (math.degrees(vp.tilt_min_rad),
                                      math.degrees(vp.tilt_max_rad))) if sc.faults else ()

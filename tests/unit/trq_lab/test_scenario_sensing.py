@@ -58,3 +58,11 @@ def test_an_unknown_name_fails_at_load(tmp_path):
 def test_the_command_line_option_is_checked_before_any_flight(tmp_path, capsys):
     assert sc.main(["smoke", "--out", str(tmp_path), "--sensing", "sonar"]) == 2
     assert "--sensing" in capsys.readouterr().err and not (tmp_path / "metrics.json").exists()
+
+
+def test_the_in_process_vehicle_gets_it_too():
+    from trq_lab.harness import sim_params
+    from trq_params import builtin
+    vehicle = builtin("vehicle", "trq")
+    assert sim_params(vehicle, 100, seed=1, sensing="mocap").sensing.name == "mocap"
+    assert sim_params(vehicle, 100, seed=1).sensing.name == "truth"
