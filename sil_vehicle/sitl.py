@@ -169,6 +169,7 @@ class Sitl:
         self.tick += 1
         self._measured = None
         if self.suite is not None:
+            # the estimator's seam: the tick's readings, before the log and the telemetry
             self.readings = self._sense(state)
         if state.crashed and not self._was_crashed:
             self._was_crashed = True
@@ -195,9 +196,9 @@ class Sitl:
         # (a - g) in NED, then R^T of it (sensors.truth.specific_force_frd, in plain floats)
         an, ae, ad = ((v[0] - v0[0]) / dt, (v[1] - v0[1]) / dt,
                       (v[2] - v0[2]) / dt - self._gravity)
-        r = quat_to_dcm(*x[6:10])
-        f = (r[0][0] * an + r[1][0] * ae + r[2][0] * ad, r[0][1] * an + r[1][1] * ae
-             + r[2][1] * ad, r[0][2] * an + r[1][2] * ae + r[2][2] * ad)
+        m = quat_to_dcm(*x[6:10])
+        f = (m[0][0] * an + m[1][0] * ae + m[2][0] * ad, m[0][1] * an + m[1][1] * ae
+             + m[2][1] * ad, m[0][2] * an + m[1][2] * ae + m[2][2] * ad)
         truth = Truth.of(state.t_us, x[0:3], v, x[6:10], x[10:13], f, state.motor_pct)
         readings = self.suite.sample(state.t_us, truth)
         for r in readings:
