@@ -22,7 +22,9 @@ errors.
 Path-valued keys: a schema marks a field as a path with the `PathStr` type. `load` asks the model
 for the dotted keys of its path fields (`path_keys(Model)`) and `read` makes every relative value
 of those keys absolute against the folder of the file that wrote the value, before merging, so
-an inherited path points where its author meant whoever extends the file.
+an inherited path points where its author meant whoever extends the file. A `NameOrPath` field
+(a built-in file's bare name, or a path: `trq_params.is_name` tells them apart) is a path key
+too, but a bare name in it stays as written (`name_keys(Model)`).
 
 Errors: `ConfigError`, a ValueError whose message names the file, the dotted key (`rotors[2].spin`),
 the value and what was expected.
@@ -45,7 +47,8 @@ from pydantic_core import PydanticCustomError
 from trq_params import ConfigError
 
 __all__ = ["ConfigError", "Invalid", "load", "validate", "read", "read_yaml", "chain",
-           "path_keys", "leaf_types", "PathStr", "Num", "Int", "Flag", "Text", "Choice", "Vec",
+           "path_keys", "name_keys", "leaf_types", "PathStr", "NameOrPath", "Num", "Int", "Flag",
+           "Text", "Choice", "Vec",
            "Items", "Range", "range_of", "expect", "merge", "dump", "BUILTIN"]
 
 BUILTIN = "builtin:"
@@ -122,8 +125,10 @@ def _parent(ref: Any, file: Path) -> Path:
     return (file.parent / ref).resolve()
 
 
-def _absolute(data: dict[str, Any], file: Path, keys: tuple[str, ...]) -> dict[str, Any]:
-    """Relative values of the dotted `keys` made absolute against `file`'s folder."""
+def _absolute(data: dict[str, Any], file: Path, keys: tuple[str, ...],
+              names: tuple[str, ...] = ()) -> dict[str, Any]:
+    """Relative values of the dotted `keys` made absolute against `file`'s folder (a bare name
+    in one of the `names` keys stays as written)."""
     for dotted in keys:
         *outer, last = dotted.split(".")
         node: Any = data
@@ -131,7 +136,8 @@ def _absolute(data: dict[str, Any], file: Path, keys: tuple[str, ...]) -> dict[s
             node = node.get(part) if isinstance(node, dict) else None
         if isinstance(node, dict):
             value = node.get(last)
-            if isinstance(value, str) and not Path(value).is_absolute():
+            if isinstance(value, str) and not Path(value).is_absolute() \
+                    and not (dotted in names and trq_params.is_name(value)):
                 node[last] = str((file.parent / value).resolve())
     return data
 
@@ -149,12 +155,14 @@ def chain(path: Path | str) -> list[Path]:
     return files
 
 
-def read(path: Path | str, path_keys: tuple[str, ...] = ()) -> dict[str, Any]:
+def read(path: Path | str, path_keys: tuple[str, ...] = (),
+         name_keys: tuple[str, ...] = ()) -> dict[str, Any]:
     """The mapping of `path` with its `extends:` chain merged (children override parents), each
-    layer's relative values of `path_keys` resolved against its own folder."""
+    layer's relative values of `path_keys` resolved against its own folder (bare names in
+    `name_keys` left as they are)."""
     file = Path(path).resolve()
     chain = [file]
-    layers = [_absolute(read_yaml(path), file, path_keys)]
+    layers = [_absolute(read_yaml(path), file, path_keys, name_keys)]
     while "extends" in layers[-1]:
         parent = _parent(layers[-1].pop("extends"), chain[-1])
         if parent in chain:
@@ -162,7 +170,7 @@ def read(path: Path | str, path_keys: tuple[str, ...] = ()) -> dict[str, Any]:
         if not parent.is_file():
             raise ConfigError(f"{chain[-1]}: key 'extends': no such file {parent}")
         chain.append(parent)
-        layers.append(_absolute(read_yaml(parent), parent, path_keys))
+        layers.append(_absolute(read_yaml(parent), parent, path_keys, name_keys))
     merged: dict[str, Any] = {}
     for layer in reversed(layers):
         merged = merge(merged, layer)
@@ -178,7 +186,7 @@ M = TypeVar("M", bound=BaseModel)
 
 def load(path: Path | str, model: type[M], *, context: Any = None) -> M:
     """Read `path` (with `extends:`) and validate it as `model`."""
-    return validate(model, read(path, path_keys(model)), path, context=context)
+    return validate(model, read(path, path_keys(model), name_keys(model)), path, context=context)
 
 
 def validate(model: type[M], data: Any, file: Path | str, *, prefix: str = "",
@@ -255,11 +263,14 @@ def _model_at(model: type[BaseModel], loc: tuple[Any, ...]) -> type[BaseModel] |
     return current
 
 
+@dataclass(frozen=True)
 class _PathMark:
-    """Metadata of a path-valued field (see `PathStr`)."""
+    """Metadata of a path-valued field (see `PathStr`, `NameOrPath`)."""
+    names: bool = False          # a bare name is a built-in file's, left as written
 
 
 _PATH = _PathMark()
+_NAME_OR_PATH = _PathMark(names=True)
 
 
 def _field_type(field: Any) -> Any:
@@ -286,14 +297,17 @@ def leaf_types(model: type[BaseModel], prefix: str = "") -> dict[str, Any]:
     return out
 
 
-def path_keys(model: type[BaseModel], prefix: str = "") -> tuple[str, ...]:
-    """The dotted keys of the fields typed `PathStr` in `model` and its nested models (not
-    inside lists)."""
+def path_keys(model: type[BaseModel], prefix: str = "", *,
+              only_names: bool = False) -> tuple[str, ...]:
+    """The dotted keys of the fields typed `PathStr` or `NameOrPath` in `model` and its nested
+    models (not inside lists); `only_names`: of the `NameOrPath` ones alone."""
     out: list[str] = []
     for name, field in model.model_fields.items():
         key = f"{prefix}{field.alias or name}"
-        if any(m is _PATH for m in field.metadata):
-            out.append(key)
+        marks = [m for m in field.metadata if isinstance(m, _PathMark)]
+        if marks:
+            if marks[0].names or not only_names:
+                out.append(key)
             continue
         tp = field.annotation
         while typing.get_origin(tp) is Annotated:
@@ -302,8 +316,13 @@ def path_keys(model: type[BaseModel], prefix: str = "") -> tuple[str, ...]:
             args = [a for a in typing.get_args(tp) if a is not type(None)]
             tp = args[0] if len(args) == 1 else None
         if isinstance(tp, type) and issubclass(tp, BaseModel):
-            out.extend(path_keys(tp, key + "."))
+            out.extend(path_keys(tp, key + ".", only_names=only_names))
     return tuple(out)
+
+
+def name_keys(model: type[BaseModel]) -> tuple[str, ...]:
+    """The dotted keys of the `NameOrPath` fields: a bare name in them is not a path."""
+    return path_keys(model, only_names=True)
 
 
 # --------------------------------------------------------------------------------------------
@@ -377,6 +396,8 @@ def _text(value: Any) -> str:
 Text = Annotated[str, _checked(_text)]
 PathStr = Annotated[str, _checked(_text), _PATH]
 """A file path; relative values are resolved against the folder of the file that wrote them."""
+NameOrPath = Annotated[str, _checked(_text), _NAME_OR_PATH]
+"""A built-in file's bare name (`mocap`), or a path resolved as a `PathStr` is."""
 
 
 def Choice(*choices: str) -> Any:

@@ -26,8 +26,8 @@ from typing import Annotated, Any, Optional
 from pydantic import (BaseModel, BeforeValidator, ConfigDict, Field, ValidationInfo,
                       field_validator, model_validator)
 from trq_params import exists
-from trq_params.loader import (Choice, Flag, Int, Invalid, Items, Num, PathStr, Range, Text, Vec,
-                               expect)
+from trq_params.loader import (Choice, Flag, Int, Invalid, Items, NameOrPath, Num, PathStr, Range,
+                               Text, Vec, expect)
 
 __all__ = ["Strict", "VehicleFile", "SimFile", "ControllerFile", "EsoFile", "MotorEvent",
            "ServoEvent", "WindEvent", "ClearEvent", "ScenarioFile", "CampaignFile",
@@ -127,10 +127,12 @@ class VehicleFile(Strict):
 # simulation
 # --------------------------------------------------------------------------------------------
 
-# Telemetry streams the vehicle can send, by MAVLink message name.
+# Telemetry streams the vehicle can send, by MAVLink message name. The last two are the raw
+# sensors of a sensing profile (sil_vehicle/PROTOCOL.md): sent only when the profile carries the
+# sensor, 0 (off) when a file leaves them out.
 STREAMS = ("HEARTBEAT", "SYS_STATUS", "ODOMETRY", "ATTITUDE", "LOCAL_POSITION_NED",
            "SERVO_OUTPUT_RAW", "ACTUATOR_OUTPUT_STATUS", "GLOBAL_POSITION_INT", "GPS_RAW_INT",
-           "HOME_POSITION")
+           "HOME_POSITION", "HIGHRES_IMU", "ATT_POS_MOCAP")
 
 _RATE = Int(0, 10_000)      # then checked against physics_rate_hz by SimFile
 
@@ -146,6 +148,8 @@ class StreamRates(Strict):
     GLOBAL_POSITION_INT: _RATE
     GPS_RAW_INT: _RATE
     HOME_POSITION: _RATE
+    HIGHRES_IMU: _RATE = 0
+    ATT_POS_MOCAP: _RATE = 0
 
 
 class Telemetry(Strict):
@@ -245,6 +249,9 @@ class SimFile(Strict):
     control_rate_hz: _RATE
     seed: Int(0, 2**63 - 1)
     physics_core: Choice("auto", "compiled", "python") = "auto"
+    # the sensing profile (params/sensing): a built-in name or a path; checked, against the
+    # physics rate, when sil_vehicle.config loads the file
+    sensing: NameOrPath = "truth"
     clock: Clock
     telemetry: Telemetry
     links: Links
@@ -576,6 +583,9 @@ class ScenarioFile(Strict):
     reference: dict[str, Any]               # checked by the controller's loader when flown
     controllers: list[Text]
     offboard_link: Optional[ScenarioLink] = None
+    # the vehicle's sensing profile (params/sensing): a built-in name or a path; null (or left
+    # out): the sim file's
+    sensing: Optional[NameOrPath] = None
     recovery_threshold_m: Num(0.001, 100.0)
     timeout_s: Num(1.0, 36000.0)
     targets: dict[str, ScenarioTargets] = {}

@@ -4,20 +4,21 @@ interface that behaves like a PX4 SITL autopilot. See PROTOCOL.md for the wire c
 Layers (each importing only the ones above it):
     frames              every frame and unit conversion
     impair              a seeded bad link (loss, delay, jitter, duplication, reordering)
-    config              frozen parameter records from params/*.yaml (trq_params.loader)
-    dynamics/           pure physics (rotors, actuators, environment, rigid body; tick.c)
-    faults              actuator faults as data (effectiveness, time-varying, off, stuck)
-    faultscript         timed fault and wind events from a fault script (params/faults/)
     sensors/            simulated sensors (IMU, barometer, magnetometer, GNSS, motion capture):
                         pure seeded models and the sensing profiles that configure them
     estimator/          the autopilot's estimator: an error-state Kalman filter on EKF2's
                         delayed horizon with an output predictor (pure; not yet wired in)
+    config              frozen parameter records from params/*.yaml (trq_params.loader)
+    dynamics/           pure physics (rotors, actuators, environment, rigid body; tick.c)
+    faults              actuator faults as data (effectiveness, time-varying, off, stuck)
+    faultscript         timed fault and wind events from a fault script (params/faults/)
     vehicle             the plant, one physics tick at a time (no I/O, injected RNG)
     compiled            the tick in C (dynamics/tick.c), built once and loaded; bit-identical
     failsafe            the autopilot's own hold-and-land controller when the offboard link is lost
     mavlink/            codec (bytes <-> messages, field scalings) and the parameter protocol
     sitl                the autopilot without sockets: telemetry due, commands, parameters,
-                        actuator targets, failsafe; driven by messages, answers with messages
+                        actuator targets, failsafe, the sensing profile's sensors sampled each
+                        tick; driven by messages, answers with messages
     clock               real-time pacing (lockstep needs none)
     daemon              the only loop: wires clock, `Sitl` and links (UDP, serial, TCP), logs
 

@@ -1,11 +1,12 @@
 """Parameters of the SIL vehicle: frozen, validated records loaded from `params/` YAML files.
 
 `load_vehicle(path)` reads an airframe (`params/vehicle/*.yaml`), `load_sim(path)` the simulation
-settings (`params/sim/*.yaml`, which names its airframe). Files are read and validated by
-`trq_params.loader` against `trq_params.schema` (the same vehicle schema the controller reads);
-unknown, missing or out-of-range keys raise `ConfigError` (the loader's) naming the file, the key,
-the value and the expected range. This module builds the records from the validated models:
-derived quantities (rotor geometry, hover throttle) are computed once here.
+settings (`params/sim/*.yaml`, which names its airframe and its sensing profile,
+`params/sensing/*.yaml`, loaded by `sensing_profile` against the physics rate). Files are read
+and validated by `trq_params.loader` against `trq_params.schema` (the same vehicle schema the
+controller reads); unknown, missing or out-of-range keys raise `ConfigError` (the loader's)
+naming the file, the key, the value and the expected range. This module builds the records from
+the validated models: derived quantities (rotor geometry, hover throttle) are computed once here.
 """
 
 from __future__ import annotations
@@ -20,9 +21,11 @@ from trq_params.loader import ConfigError
 from trq_params.schema import STREAMS, throttle_curve
 
 from sil_vehicle.impair import ImpairParams
+from sil_vehicle.sensors.profile import SensingProfile, load_sensing
 
 __all__ = ["ConfigError", "VehicleParams", "SimParams", "RotorParams", "LinkParams",
-           "SerialPort", "load_vehicle", "load_sim", "parse_serial", "STREAMS", "PARAMS_DIR"]
+           "SerialPort", "load_vehicle", "load_sim", "parse_serial", "sensing_profile",
+           "STREAMS", "PARAMS_DIR"]
 
 from trq_params import DIR as PARAMS_DIR  # noqa: E402  (the shipped parameter files)
 
@@ -186,6 +189,10 @@ class SimParams:
     log_dir: str
     log_rate_hz: int
     physics_core: str = "auto"   # "auto" | "compiled" | "python" (sil_vehicle/compiled.py)
+    # the sensing profile, loaded for physics_rate_hz: always a profile, `truth` included (its
+    # `is_truth` says that it carries no sensor); None only for a record built by hand, read
+    # as truth
+    sensing: SensingProfile | None = None
 
     @property
     def dt_us(self) -> int:
@@ -194,6 +201,11 @@ class SimParams:
     @property
     def ticks_per_control(self) -> int:
         return self.physics_rate_hz // self.control_rate_hz
+
+    @property
+    def senses(self) -> bool:
+        """Does the profile carry any sensor (false under `truth`)?"""
+        return self.sensing is not None and not self.sensing.is_truth
 
     def link(self, name: str) -> LinkParams:
         for link in self.links:
@@ -227,10 +239,22 @@ def parse_serial(text: str, where: str) -> SerialPort:
     return SerialPort(c.device, c.baud)
 
 
+def sensing_profile(name_or_path: str | Path, physics_rate_hz: int, where: str,
+                    key: str = "sensing") -> SensingProfile:
+    """The sensing profile `name_or_path` (a built-in name or a path) for `physics_rate_hz`.
+    Any error, an unknown name or a bad file (whose own message names its key), is a
+    ConfigError naming `where` (a file or the command line), `key` and the value."""
+    try:
+        return load_sensing(name_or_path, physics_rate_hz)
+    except (ConfigError, OSError) as exc:
+        raise ConfigError(f"{where}: key '{key}': got {str(name_or_path)!r}: {exc}") from None
+
+
 def load_sim(path: Path | str, vehicle: Path | str | None = None) -> SimParams:
     """Load simulation settings; `vehicle` overrides the airframe file the settings name."""
     path = Path(path)
     sim = loader.load(path, schema.SimFile)
+    sensing = sensing_profile(sim.sensing, sim.physics_rate_hz, str(path))
     vparams = load_vehicle(Path(vehicle) if vehicle is not None else path.parent / sim.vehicle)
     links = []
     for name in ("gcs", "offboard"):
@@ -259,4 +283,4 @@ def load_sim(path: Path | str, vehicle: Path | str | None = None) -> SimParams:
         crash_speed_m_s=sim.ground.crash_speed_m_s,
         crash_tilt_rad=math.radians(sim.ground.crash_tilt_deg), home_lat_deg=sim.home.lat_deg,
         home_lon_deg=sim.home.lon_deg, home_alt_m=sim.home.alt_m, log_dir=sim.log.dir,
-        log_rate_hz=sim.log.rate_hz, physics_core=sim.physics_core)
+        log_rate_hz=sim.log.rate_hz, physics_core=sim.physics_core, sensing=sensing)

@@ -33,10 +33,11 @@ from sil_vehicle.config import (
     load_sim,
     parse_endpoint,
     parse_serial,
+    sensing_profile,
 )
 from sil_vehicle.faultscript import load_script
 from sil_vehicle.mavlink.codec import COMPONENT_ID, SYSTEM_ID, Codec
-from sil_vehicle.sitl import LINKS, LOG_COLUMNS, Outgoing, Sitl
+from sil_vehicle.sitl import LINKS, Outgoing, Sitl
 from trq_wire.framing import NS_PER_S, LinePacer, frame_size, line_bytes_per_s
 from trq_wire.logfile import CsvLog, Tlog
 from trq_wire.signing import SignatureCheck, SigningKeyError, load_key, sign_outgoing
@@ -122,7 +123,9 @@ class VehicleDaemon:
                     "sim_file": sim.file, "seed": sim.seed, "physics_rate_hz": sim.physics_rate_hz,
                     "physics_core": self.sitl.vehicle.core_name,
                     "clock": sim.clock_mode, "frames": "world NED, body FRD, quaternion wxyz"}
-            self.flight_log = CsvLog(log_dir / "flight.csv", LOG_COLUMNS, meta,
+            if sim.senses:           # under truth the header stays as it has always been
+                meta["sensing"] = sim.sensing.file
+            self.flight_log = CsvLog(log_dir / "flight.csv", self.sitl.log_columns, meta,
                                      flush_every=max(1, sim.log_rate_hz))
             self.tlog = Tlog(log_dir / "vehicle.tlog")
             self.sitl.log_sink = self.flight_log
@@ -449,6 +452,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--speed-up", type=float, default=None,
                    help="real time only: simulated seconds per wall second")
     p.add_argument("--seed", type=int, default=None, help="random seed (gusts, sensor noise)")
+    p.add_argument("--sensing", default=None, metavar="NAME|PATH",
+                   help="the sensors the vehicle carries: a sensing profile by built-in name ("
+                        + ", ".join(trq_params.names("sensing")) + ") or a YAML path (default: "
+                        "the sim file's, truth: no sensor, the state stream alone)")
     p.add_argument("--physics-core", choices=("auto", "compiled", "python"), default=None,
                    help="the physics tick: compiled C (built once, cached) or the Python "
                         "reference; bit-identical results (default: the sim file's, auto)")
@@ -503,6 +510,9 @@ def apply_overrides(sim: SimParams, args: argparse.Namespace) -> SimParams:
         changes["clock_mode"] = args.mode
     if args.physics_core is not None:
         changes["physics_core"] = args.physics_core
+    if getattr(args, "sensing", None) is not None:
+        changes["sensing"] = sensing_profile(args.sensing, sim.physics_rate_hz,
+                                             "command line", "--sensing")
     for option, (field, lo, hi, expected) in _NUMERIC_OVERRIDES.items():
         value = getattr(args, option)
         if value is None:

@@ -3,6 +3,13 @@ decides which telemetry is due, answers commands and parameters, and applies act
 
 The daemon moves bytes; everything that decides what the vehicle does or says is here, so that a
 test (or a campaign in one process) can drive it with messages and read back messages.
+
+Sensors: under a sensing profile that carries any (not `truth`), the Sitl owns a `SensorSuite`
+with its own generator (seeded from the simulation's seed, apart from the gusts', the noise's
+and the links'), sampled once per physics tick by `_sense`, the seam where an estimator plugs
+in: its readings are `readings` (the tick's) and `latest` (each sensor's newest), read by the
+raw-sensor telemetry (HIGHRES_IMU, GPS_RAW_INT, ATT_POS_MOCAP) and the flight log. Under
+`truth` no suite is built and nothing of this runs.
 """
 
 from __future__ import annotations
@@ -16,12 +23,15 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from sil_vehicle.config import STREAMS, SimParams
 from sil_vehicle.faultscript import Event, ParamAction
-from sil_vehicle.frames import euler_to_quat, quat_to_euler
+from sil_vehicle.frames import euler_to_quat, quat_to_dcm, quat_to_euler
 from sil_vehicle.mavlink import codec
 from sil_vehicle.mavlink.codec import Measured, RxCounters
 from sil_vehicle.failsafe import FailsafeLander
 from sil_vehicle.impair import Impairment
 from sil_vehicle.mavlink.params import Param, ParamTable
+from sil_vehicle.sensors import baro, gnss, imu, mag, mocap
+from sil_vehicle.sensors.suite import Reading, SensorSuite
+from sil_vehicle.sensors.truth import Truth
 from sil_vehicle.vehicle import ActuatorCommand, Vehicle, VehicleState
 
 LINKS = ("gcs", "offboard")
@@ -36,6 +46,13 @@ ANNOUNCE_EVERY_US = 1_000_000       # rejected-target STATUSTEXT at most once a 
 _MSG_IDS = {name: getattr(mavlink, f"MAVLINK_MSG_ID_{name}") for name in STREAMS}
 _MSG_NAMES = {v: k for k, v in _MSG_IDS.items()}
 
+SENSOR_SEED_KEY = 33            # the sensors' generator: default_rng([seed, SENSOR_SEED_KEY])
+# each reading type's sensor, as the suite and the profile name them
+SENSOR_OF = {imu.ImuReading: "imu", baro.BaroReading: "baro", mag.MagReading: "mag",
+             gnss.GnssReading: "gnss", mocap.MocapReading: "mocap"}
+# the raw-sensor messages sent at a reading's arrival (at most at the link's rate)
+ON_ARRIVAL = {"gnss": "GPS_RAW_INT", "mocap": "ATT_POS_MOCAP"}
+
 
 @dataclass(frozen=True)
 class Outgoing:
@@ -43,6 +60,11 @@ class Outgoing:
     msg: mavlink.MAVLink_message
     to: tuple[str, int] | None = None          # None: the link's target and every known peer
 
+
+# flight.csv's columns for a position source of the sensing profile (only when it has one): its
+# latest sample arrived by the row's time, with that sample's time of validity
+SOURCE_LOG_COLUMNS = {name: (f"{name}_t_us",) + tuple(f"{name}_pos_{a}_m" for a in "ned")
+                      for name in ("mocap", "gnss")}
 
 LOG_COLUMNS = (
     ["t_us"] + [f"pos_{a}_m" for a in "ned"] + [f"vel_{a}_m_s" for a in "ned"]
@@ -104,6 +126,31 @@ class Sitl:
         self._gcd_key: tuple | None = None
         self._gcd = 1
         self.events_played: list[tuple[int, str]] = []
+        # sensors: none under truth (no suite, no draw, no message)
+        profile = sim.sensing if sim.senses else None
+        self.suite: SensorSuite | None = None
+        self.readings: list[Reading] = []          # the latest tick's, in the suite's order
+        self.latest: dict[str, Reading] = {}       # each sensor's newest reading arrived
+        has = set() if profile is None else {
+            name for name in SENSOR_OF.values() if getattr(profile, name) is not None}
+        # streams the tick loop never sends (not carried, or sent at a reading's arrival)
+        self._not_periodic = frozenset(
+            {"ATT_POS_MOCAP"} | ({"HIGHRES_IMU"} if "imu" not in has else set())
+            | ({"GPS_RAW_INT"} if profile is not None else set()))
+        self._on_arrival = {ON_ARRIVAL[n]: n for n in ON_ARRIVAL if n in has}
+        self._arrival_sent: dict[tuple[str, str], int] = {}     # (link, stream) -> arrival_us
+        self._imu_sent: dict[str, dict[str, int]] = {link: {} for link in LINKS}
+        self._sources = tuple(n for n in ("mocap", "gnss") if n in has)
+        self.log_columns = list(LOG_COLUMNS) + [c for n in self._sources
+                                                for c in SOURCE_LOG_COLUMNS[n]]
+        if profile is not None:
+            self.suite = SensorSuite(profile,
+                                     np.random.default_rng([sim.seed, SENSOR_SEED_KEY]),
+                                     home_alt_m=sim.home_alt_m)
+            self._dt_s = sim.dt_us * 1e-6
+            self._gravity = sim.vehicle.gravity_m_s2
+            self._sensed_vel = self.vehicle.state.x[3:6]    # at rest before the first tick
+            self.readings = self._sense(self.vehicle.state)
 
     # --- time ------------------------------------------------------------------------------
     @property
@@ -121,6 +168,9 @@ class Sitl:
         state = self.vehicle.step()
         self.tick += 1
         self._measured = None
+        if self.suite is not None:
+            # the estimator's seam: the tick's readings, before the log and the telemetry
+            self.readings = self._sense(state)
         if state.crashed and not self._was_crashed:
             self._was_crashed = True
             self.vehicle.force_disarm()
@@ -132,6 +182,68 @@ class Sitl:
             for msg, sender in up.due(self.t_us):
                 replies += self._handle(link, msg, sender)
         return self._deliver(out + replies + self._due_streams())
+
+    def _sense(self, state: VehicleState) -> list[Reading]:
+        """The sensors at this tick: the readings that arrive now (each with its time of
+        validity), kept as the latest of each sensor. The truth they read: the tick's state,
+        and the specific force from the mean acceleration over the tick, a = (v_k - v_k-1) / dt
+        in NED (what an integrating accelerometer measures), f = R^T (a - g). An estimator
+        takes the readings from here (`readings`, `latest`)."""
+        x = state.x
+        v0, v = self._sensed_vel, x[3:6]
+        self._sensed_vel = v
+        dt = self._dt_s
+        # (a - g) in NED, then R^T of it (sensors.truth.specific_force_frd, in plain floats)
+        an, ae, ad = ((v[0] - v0[0]) / dt, (v[1] - v0[1]) / dt,
+                      (v[2] - v0[2]) / dt - self._gravity)
+        m = quat_to_dcm(*x[6:10])
+        f = (m[0][0] * an + m[1][0] * ae + m[2][0] * ad, m[0][1] * an + m[1][1] * ae
+             + m[2][1] * ad, m[0][2] * an + m[1][2] * ae + m[2][2] * ad)
+        truth = Truth.of(state.t_us, x[0:3], v, x[6:10], x[10:13], f, state.motor_pct)
+        readings = self.suite.sample(state.t_us, truth)
+        for r in readings:
+            self.latest[SENSOR_OF[type(r)]] = r
+        return readings
+
+    def _arrivals(self) -> list[Outgoing]:
+        """GPS_RAW_INT and ATT_POS_MOCAP of the readings that arrived at this tick, on each
+        link whose rate for the message is not 0, at most at that rate."""
+        out = []
+        for r in self.readings:
+            stream = ON_ARRIVAL.get(SENSOR_OF[type(r)])
+            if stream is None or stream not in self._on_arrival:
+                continue
+            msg = None
+            for link in LINKS:
+                period = self.periods[link][stream]
+                last = self._arrival_sent.get((link, stream))
+                if not period or (last is not None
+                                  and r.arrival_us - last < period * self.sim.dt_us):
+                    continue
+                self._arrival_sent[(link, stream)] = r.arrival_us
+                if msg is None:
+                    msg = self._sensor_message(stream, r)
+                out.append(Outgoing(link, msg))
+        return out
+
+    def _sensor_message(self, stream: str, r: Reading) -> mavlink.MAVLink_message:
+        if stream == "GPS_RAW_INT":
+            return codec.gnss_raw_int(r, self.home)
+        return codec.att_pos_mocap(r)
+
+    def _highres_imu(self, link: str | None) -> mavlink.MAVLink_message:
+        """HIGHRES_IMU of the latest IMU, barometer and magnetometer readings; fields_updated
+        marks those not yet sent on this link."""
+        latest = self.latest
+        sent = self._imu_sent[link] if link is not None else {}
+        bits = 0
+        for name, fields in (("imu", codec.IMU_FIELDS), ("baro", codec.BARO_FIELDS),
+                             ("mag", codec.MAG_FIELDS)):
+            r = latest.get(name)
+            if r is not None and sent.get(name) != r.t_us:
+                bits |= fields
+                sent[name] = r.t_us
+        return codec.highres_imu(latest["imu"], latest.get("baro"), latest.get("mag"), bits)
 
     def _deliver(self, out: list[Outgoing], impaired: bool = True) -> list[Outgoing]:
         """Pass outgoing messages through the impaired links (unless `impaired` is False), and
@@ -195,22 +307,24 @@ class Sitl:
         return self._deliver(self._due_streams(everything), impaired=not resend)
 
     def _due_streams(self, everything: bool = False) -> list[Outgoing]:
-        """Streams whose period divides the current tick (or one of each enabled stream)."""
+        """Streams whose period divides the current tick (or one of each enabled stream), and
+        the raw sensors' messages of the readings that arrived at this tick."""
+        out = self._arrivals() if self._on_arrival and self.readings else []
         if not everything and self.tick % self._period_gcd():
-            return []                   # most ticks: nothing is due (cheap test first)
-        out = []
+            return out                  # most ticks: nothing is due (cheap test first)
+        skip = self._not_periodic
         for link in LINKS:
             for stream, period in self.periods[link].items():
-                if period and (everything or self.tick % period == 0):
-                    out.append(Outgoing(link, self.build(stream)))
+                if period and (everything or self.tick % period == 0) and stream not in skip:
+                    out.append(Outgoing(link, self.build(stream, link)))
         return out
 
 
     def _period_gcd(self) -> int:
         if self._gcd_key is None:           # recomputed only after a rate change
             self._gcd_key = ()
-            self._gcd = math.gcd(*(p for link in LINKS for p in self.periods[link].values()
-                                   if p)) or 1
+            self._gcd = math.gcd(*(p for link in LINKS for s, p in self.periods[link].items()
+                                   if p and s not in self._not_periodic)) or 1
         return self._gcd
 
     @property
@@ -239,7 +353,22 @@ class Sitl:
                 q, tuple(x[10 + i] + sim.noise_rates_rad_s * n[9 + i] for i in range(3)))
         return self._measured
 
-    def build(self, stream: str) -> mavlink.MAVLink_message:
+    def available(self, stream: str) -> bool:
+        """Can `build` make the message now? Not a raw sensor's the profile does not carry,
+        nor one whose sensor has not reported yet."""
+        if stream == "HIGHRES_IMU":
+            return "HIGHRES_IMU" not in self._not_periodic and "imu" in self.latest
+        if stream in self._on_arrival:
+            return self._on_arrival[stream] in self.latest
+        return stream not in self._not_periodic
+
+    def build(self, stream: str, link: str | None = None) -> mavlink.MAVLink_message:
+        """The message of `stream` now (`link`: the link it goes to, for what HIGHRES_IMU
+        marks as updated). Raw sensors' messages: only when `available`."""
+        if stream == "HIGHRES_IMU":
+            return self._highres_imu(link)
+        if stream in self._on_arrival:
+            return self._sensor_message(stream, self.latest[self._on_arrival[stream]])
         s = self.vehicle.state
         if stream == "HEARTBEAT":
             return codec.heartbeat(self.vehicle.armed, s.crashed, not s.landed, self.mode,
@@ -414,8 +543,8 @@ class Sitl:
                       math.isfinite(msg.param1) else mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION)
             if wanted == mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION:
                 reply = codec.autopilot_version()
-            elif wanted in _MSG_NAMES:
-                reply = self.build(_MSG_NAMES[wanted])
+            elif wanted in _MSG_NAMES and self.available(_MSG_NAMES[wanted]):
+                reply = self.build(_MSG_NAMES[wanted], link)
             else:
                 return [self._ack(link, msg, mavlink.MAV_RESULT_UNSUPPORTED, sender)]
             return [self._ack(link, msg, ok, sender), Outgoing(link, reply, sender)]
@@ -525,11 +654,18 @@ class Sitl:
 
     # --- log -------------------------------------------------------------------------------
     def log_row(self) -> tuple:
+        """A row of `log_columns`: the truth, then (with a position source) its latest
+        sample (NaN before the first)."""
         s = self.vehicle.state
         t_s = s.t_us * 1e-6
         cmd = self.vehicle.command
+        extra: tuple = ()
+        for name in self._sources:
+            r = self.latest.get(name)
+            extra += ((r.t_us, *(float(v) for v in r.pos_ned_m)) if r is not None
+                      else (math.nan,) * 4)
         return ((s.t_us,) + s.x[0:10] + tuple(quat_to_euler(*s.x[6:10])) + s.x[10:13]
                 + tuple(cmd.throttle_pct) + tuple(cmd.tilt_rad) + s.motor_pct + s.tilt_rad
                 + tuple(m.factor(t_s) for m in self.vehicle.faults.motors)
                 + tuple(float(sv.stuck) for sv in self.vehicle.faults.servos)
-                + s.wind_ned_m_s + (int(s.armed), int(s.landed), int(s.crashed)))
+                + s.wind_ned_m_s + (int(s.armed), int(s.landed), int(s.crashed)) + extra)

@@ -27,7 +27,8 @@ noise draws as in the daemon) but are not encoded: nobody listens.
 
 The flight ends when `OffboardFlight.run()` returns (landed and disarmed), or `crash_grace_s`
 simulated seconds after a crash, or at `timeout_s` of simulated time. It writes `flight.csv`
-(`trq_wire.logfile.CsvLog`, columns `sil_vehicle.sitl.LOG_COLUMNS`) and `controller.csv`
+(`trq_wire.logfile.CsvLog`, columns `Sitl.log_columns`: `sil_vehicle.sitl.LOG_COLUMNS`, and a
+position source's) and `controller.csv`
 (`trq_offboard.log.ControllerLog`) in `out_dir`, so `trq_lab.metrics` computes the same metrics
 as for a scenario run. The flight loop calls the controller's step and preparation in its own
 thread, as in the daemon.
@@ -286,12 +287,12 @@ def prepare_controller(controller: str | Path, reference: dict | None, out_dir: 
 def sim_params(vehicle_file: Path | str, control_rate_hz: int, *, seed: int,
                wind_speed_m_s: float = 0.0, wind_from_deg: float = 0.0, gusts: bool = False,
                gust_sigma_m_s: float | None = None, sim_file: Path | str = SIM_DEFAULT,
-               offboard_impair: dict[str, float] | None = None):
+               offboard_impair: dict[str, float] | None = None, sensing: str | None = None):
     """The vehicle's settings as trq-scenario gives them to the daemon: the default sim file,
     the control rate (and offboard ODOMETRY rate) of the controller, its airframe, the seed and
-    the wind (the daemon's --seed, --wind-speed, --wind-dir, --gusts), and a scenario's
-    offboard_link impairment."""
-    from sil_vehicle.config import load_sim
+    the wind (the daemon's --seed, --wind-speed, --wind-dir, --gusts), a scenario's
+    offboard_link impairment and its sensing profile (--sensing; None: the sim file's)."""
+    from sil_vehicle.config import load_sim, sensing_profile
     from sil_vehicle.impair import ImpairParams
 
     sim = load_sim(sim_file, vehicle_file)
@@ -313,6 +314,9 @@ def sim_params(vehicle_file: Path | str, control_rate_hz: int, *, seed: int,
         changes["gusts_enabled"] = True
     if gust_sigma_m_s is not None:
         changes["gust_sigma_m_s"] = float(gust_sigma_m_s)
+    if sensing is not None:
+        changes["sensing"] = sensing_profile(sensing, sim.physics_rate_hz, "sim_params",
+                                             "sensing")
     return sim.with_changes(**changes)
 
 
@@ -458,7 +462,7 @@ def fly_inprocess(controller, sim, fault_events=(), seed: int | None = None, *,
     import tempfile
 
     from sil_vehicle.mavlink.codec import Codec
-    from sil_vehicle.sitl import LOG_COLUMNS, Sitl
+    from sil_vehicle.sitl import Sitl
     from trq_offboard.config import ControllerConfig, load_controller
     from trq_offboard.controller import Controller
     from trq_offboard.log import ControllerLog, solver_header
@@ -503,7 +507,9 @@ def fly_inprocess(controller, sim, fault_events=(), seed: int | None = None, *,
                 "sim_file": sim.file, "seed": sim.seed, "physics_rate_hz": sim.physics_rate_hz,
                 "clock": sim.clock_mode, "frames": "world NED, body FRD, quaternion wxyz",
                 "link": "in-process MAVLink bytes", "physics_core": sitl.vehicle.core_name}
-        flight_log = FlightLog(out_dir / "flight.csv", LOG_COLUMNS, meta,
+        if sim.senses:
+            meta["sensing"] = sim.sensing.file
+        flight_log = FlightLog(out_dir / "flight.csv", sitl.log_columns, meta,
                                flush_every=max(1, sim.log_rate_hz))
         clog = ControllerLog(out_dir / "controller.csv",
                              {"controller": cfg.name, "controller_file": cfg.file,
@@ -603,7 +609,8 @@ def main(argv: list[str] | None = None) -> int:
             cfg, applied_delay_s=run_scenario.command_delay_s(sc.offboard_impair, False))
         sim = sim_params(cfg.vehicle.file, cfg.control_rate_hz, seed=sc.seed,
                          wind_speed_m_s=sc.wind_speed_m_s, wind_from_deg=sc.wind_from_deg,
-                         gusts=sc.gusts, offboard_impair=sc.offboard_impair)
+                         gusts=sc.gusts, offboard_impair=sc.offboard_impair,
+                         sensing=sc.sensing)
         vp = sim.vehicle        # the daemon checks stuck angles against the airframe's range
         ev = load_script(sc.faults, (math.degrees(vp.tilt_min_rad),
                                      math.degrees(vp.tilt_max_rad))) if sc.faults else ()

@@ -5,7 +5,7 @@ report and figures.
 
     trq-scenario paper_fault50 --out out/paper_fault50
     trq-scenario SCENARIO.yaml --out DIR [--realtime] [--jobs N] [--only NAME]
-                 [--link udp|serial|tcp]
+                 [--link udp|serial|tcp] [--sensing NAME|PATH]
 
 Writes DIR/metrics.json, DIR/report.md, DIR/*.png and, per controller, DIR/<controller>/ with
 flight.csv and vehicle.tlog (the vehicle), controller.csv and offboard.tlog (the controller) and
@@ -30,6 +30,7 @@ import subprocess
 import sys
 import threading
 import time
+import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -39,7 +40,7 @@ from trq_params.loader import dump as dump_yaml
 from trq_params.loader import read_yaml, validate
 from trq_params.schema import ScenarioFile
 
-from sil_vehicle.config import load_vehicle
+from sil_vehicle.config import load_vehicle, sensing_profile
 from sil_vehicle.faultscript import load_script
 from trq_lab import metrics as metrics_mod
 from trq_lab import procs
@@ -69,6 +70,23 @@ class Scenario:
     targets: dict[str, dict[str, object]]
     better: tuple[tuple[str, str, str], ...]     # (better, worse, metric)
     offboard_impair: dict[str, float]            # links.offboard.impair of the vehicle
+    sensing: str | None = None      # the vehicle's sensing profile (a built-in name or an
+                                    # absolute path); None: the sim file's
+
+
+def _physics_rate_hz() -> int:
+    """The physics rate of the sim file every flight of a scenario extends."""
+    from trq_params.loader import load
+    from trq_params.schema import SimFile
+    return load(trq_params.builtin("sim", "default"), SimFile).physics_rate_hz
+
+
+def check_sensing(value: str, where: str, key: str) -> str:
+    """A sensing profile given to a scenario, as the vehicle will get it (a name, or a path made
+    absolute), loaded once to fail early: a ConfigError naming `where`, `key` and `value`."""
+    resolved = value if trq_params.is_name(value) else str(Path(value).resolve())
+    sensing_profile(resolved, _physics_rate_hz(), where, key)
+    return resolved
 
 
 def command_delay_s(impair: dict[str, float], realtime: bool) -> float:
@@ -90,12 +108,16 @@ def load_scenario(path: Path) -> Scenario:
                   else (path.parent / sc.faults).resolve())
         load_script(faults)     # fail now, with the script's own message, if it is bad
     impair = sc.offboard_link.model_dump(exclude_none=True) if sc.offboard_link else {}
+    sensing = None
+    if sc.sensing is not None:
+        value = sc.sensing if trq_params.is_name(sc.sensing) else str(path.parent / sc.sensing)
+        sensing = check_sensing(value, str(path), "sensing")
     targets = {c: t.model_dump(exclude_none=True) for c, t in sc.targets.items()}
     better = tuple((b.better, b.worse, b.metric) for b in sc.better)
     return Scenario(sc.name, path, sc.description, sc.seed, sc.wind.speed_m_s,
                     sc.wind.direction_deg, sc.wind.gusts, faults, dict(sc.reference),
                     tuple(sc.controllers), sc.recovery_threshold_m, sc.timeout_s, targets,
-                    better, impair)
+                    better, impair, sensing)
 
 
 LINKS = ("udp", "serial", "tcp")
@@ -193,10 +215,9 @@ def fly(scenario: Scenario, run: Run, realtime: bool, lock: threading.Lock,
             pair.close()
 
 
-def _fly(scenario: Scenario, run: Run, realtime: bool, ctrl_yaml: Path, sim_yaml: Path,
-         vehicle_file: Path, vlink: list[str], connect: str, p_gcs: int,
-         signing_key_file: Path | None, controller_prefix: tuple[str, ...],
-         vehicle_prefix: tuple[str, ...], controller_args: tuple[str, ...] = ()) -> None:
+def vehicle_command(scenario: Scenario, run: Run, realtime: bool, sim_yaml: Path,
+                    vehicle_file: Path, vlink: list[str], p_gcs: int) -> list[str]:
+    """The vehicle process of one run: the scenario's seed, wind, faults and sensing."""
     vcmd = [sys.executable, "-m", "sil_vehicle", "--sim", str(sim_yaml), "--vehicle",
             str(vehicle_file), "--seed", str(scenario.seed), "--wind-speed",
             str(scenario.wind_speed_m_s), "--wind-dir", str(scenario.wind_from_deg),
@@ -207,6 +228,16 @@ def _fly(scenario: Scenario, run: Run, realtime: bool, ctrl_yaml: Path, sim_yaml
         vcmd.append("--gusts")
     if scenario.faults:
         vcmd += ["--faults", str(scenario.faults)]
+    if scenario.sensing is not None:
+        vcmd += ["--sensing", scenario.sensing]
+    return vcmd
+
+
+def _fly(scenario: Scenario, run: Run, realtime: bool, ctrl_yaml: Path, sim_yaml: Path,
+         vehicle_file: Path, vlink: list[str], connect: str, p_gcs: int,
+         signing_key_file: Path | None, controller_prefix: tuple[str, ...],
+         vehicle_prefix: tuple[str, ...], controller_args: tuple[str, ...] = ()) -> None:
+    vcmd = vehicle_command(scenario, run, realtime, sim_yaml, vehicle_file, vlink, p_gcs)
     # how long a command takes to act: the link's round trip, plus in real time about a solve
     # (and on a paced serial line, the time the line takes to carry an ODOMETRY)
     delay_s = command_delay_s(scenario.offboard_impair, realtime) + (
@@ -397,9 +428,16 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--link", choices=LINKS, default="udp",
                     help="the offboard link: udp (default), serial (a pty pair at 921600 baud, "
                          "paced at the line's rate in real time) or tcp (the vehicle's server)")
+    ap.add_argument("--sensing", default=None, metavar="NAME|PATH",
+                    help="the sensors each vehicle carries, overriding the scenario's and the "
+                         "sim file's: a sensing profile by built-in name (" + ", ".join(
+                             trq_params.names("sensing")) + ") or a YAML path")
     args = ap.parse_args(argv)
     try:
         scenario = load_scenario(trq_params.resolve("scenarios", args.scenario))
+        if args.sensing is not None:
+            scenario = dataclasses.replace(
+                scenario, sensing=check_sensing(args.sensing, "command line", "--sensing"))
     except ConfigError as exc:
         print(f"trq-scenario: {exc}", file=sys.stderr)
         return 2
@@ -449,7 +487,8 @@ def main(argv: list[str] | None = None) -> int:
           f"over {args.link}, "
           f"{jobs} at a time, seed {scenario.seed}, wind {scenario.wind_speed_m_s:g} m/s from "
           f"{scenario.wind_from_deg:g} deg{' with gusts' if scenario.gusts else ''}, faults "
-          f"{scenario.faults.name if scenario.faults else 'none'}")
+          f"{scenario.faults.name if scenario.faults else 'none'}"
+          + (f", sensing {scenario.sensing}" if scenario.sensing is not None else ""))
     lock = threading.Lock()
     stop = threading.Event()
     reporter = threading.Thread(target=progress, args=(runs, stop), daemon=True)

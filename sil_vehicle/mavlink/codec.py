@@ -219,6 +219,78 @@ def gps_raw_int(m: Measured, home: tuple[float, float, float]) -> mavlink.MAVLin
         int(round(speed * 100.0)), cog, 14)
 
 
+# --- raw sensors of a sensing profile (sil_vehicle.sensors readings) -----------------------
+
+PA_PER_HPA = 100.0
+# HIGHRES_IMU.fields_updated: what each sensor's new sample updates
+IMU_FIELDS = (mavlink.HIGHRES_IMU_UPDATED_XACC | mavlink.HIGHRES_IMU_UPDATED_YACC
+              | mavlink.HIGHRES_IMU_UPDATED_ZACC | mavlink.HIGHRES_IMU_UPDATED_XGYRO
+              | mavlink.HIGHRES_IMU_UPDATED_YGYRO | mavlink.HIGHRES_IMU_UPDATED_ZGYRO)
+MAG_FIELDS = (mavlink.HIGHRES_IMU_UPDATED_XMAG | mavlink.HIGHRES_IMU_UPDATED_YMAG
+              | mavlink.HIGHRES_IMU_UPDATED_ZMAG)
+BARO_FIELDS = (mavlink.HIGHRES_IMU_UPDATED_ABS_PRESSURE | mavlink.HIGHRES_IMU_UPDATED_PRESSURE_ALT
+               | mavlink.HIGHRES_IMU_UPDATED_TEMPERATURE)
+COG_UNKNOWN = 65535
+COG_MIN_SPEED_M_S = 0.2       # below this ground speed the course is left unknown
+
+
+def highres_imu(imu, baro, mag, fields_updated: int) -> mavlink.MAVLink_message:
+    """HIGHRES_IMU from the latest readings (`baro`, `mag` None when the profile has none: their
+    fields 0): acceleration m/s^2 (specific force) and rates rad/s body FRD, field gauss body
+    FRD, pressure hPa, pressure altitude m AMSL, temperature degC; `time_usec` the IMU sample's
+    time; `fields_updated` the HIGHRES_IMU_UPDATED bits of what is new in this message."""
+    acc, gyro = imu.accel_frd_m_s2, imu.gyro_frd_rad_s
+    m = mag.field_frd_gauss if mag is not None else (0.0, 0.0, 0.0)
+    p_hpa, alt, temp = ((baro.pressure_pa / PA_PER_HPA, baro.pressure_alt_m, baro.temperature_degc)
+                        if baro is not None else (0.0, 0.0, 0.0))
+    return mavlink.MAVLink_highres_imu_message(
+        imu.t_us, float(acc[0]), float(acc[1]), float(acc[2]), float(gyro[0]), float(gyro[1]),
+        float(gyro[2]), float(m[0]), float(m[1]), float(m[2]), p_hpa, 0.0, alt, temp,
+        fields_updated, 0)
+
+
+def geodetic_e7(pos_ned_m, home: tuple[float, float, float]) -> tuple[int, int, int]:
+    """(lat degE7, lon degE7, alt mm AMSL) of a NED position around home (flat earth)."""
+    lat, lon, alt = ned_to_geodetic(float(pos_ned_m[0]), float(pos_ned_m[1]),
+                                    float(pos_ned_m[2]), *home)
+    return int(round(lat * 1e7)), int(round(lon * 1e7)), int(round(alt * 1000.0))
+
+
+def gnss_raw_int(r, home: tuple[float, float, float]) -> mavlink.MAVLink_message:
+    """GPS_RAW_INT from a GNSS receiver's reading: `time_usec` its time of validity, the
+    profile's fix type and satellites, lat/lon degE7 and alt mm AMSL around home, eph/epv cm
+    (the 1-sigma errors), ground speed cm/s, course over ground cdeg (65535 below 0.2 m/s);
+    MAVLink 2 extensions: alt_ellipsoid mm (= alt: no geoid), h_acc, v_acc mm, vel_acc mm/s."""
+    lat, lon, alt_mm = geodetic_e7(r.pos_ned_m, home)
+    vn, ve = float(r.vel_ned_m_s[0]), float(r.vel_ned_m_s[1])
+    speed = math.hypot(vn, ve)
+    cog = (int(round(math.degrees(math.atan2(ve, vn)) % 360.0 * 100.0)) % 36000
+           if speed > COG_MIN_SPEED_M_S else COG_UNKNOWN)
+    return mavlink.MAVLink_gps_raw_int_message(
+        r.t_us, r.fix_type, lat, lon, alt_mm, _u16(r.eph_m * 100.0), _u16(r.epv_m * 100.0),
+        _u16(speed * 100.0), cog, min(r.satellites, 255), alt_mm,
+        _u32(r.eph_m * 1000.0), _u32(r.epv_m * 1000.0), _u32(r.speed_accuracy_m_s * 1000.0), 0,
+        0)
+
+
+def att_pos_mocap(r) -> mavlink.MAVLink_message:
+    """ATT_POS_MOCAP from a motion-capture reading: `time_usec` its time of validity, `q` body
+    FRD -> NED (w, x, y, z), x, y, z m NED; covariance unknown (NaN first, as MAVLink asks)."""
+    q = r.quat_wxyz
+    return mavlink.MAVLink_att_pos_mocap_message(
+        r.t_us, [float(q[0]), float(q[1]), float(q[2]), float(q[3])], float(r.pos_ned_m[0]),
+        float(r.pos_ned_m[1]), float(r.pos_ned_m[2]), [math.nan] + [0.0] * 20)
+
+
+def _u16(value: float) -> int:
+    """A non-negative value rounded into a uint16 field, saturated below its 'unknown' 65535."""
+    return min(int(round(value)), 65534)
+
+
+def _u32(value: float) -> int:
+    return min(int(round(value)), 2**32 - 2)
+
+
 def home_position(home: tuple[float, float, float], t_us: int) -> mavlink.MAVLink_message:
     lat, lon, alt = home
     return mavlink.MAVLink_home_position_message(

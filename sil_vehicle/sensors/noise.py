@@ -23,7 +23,9 @@ __all__ = ["white_std", "random_walk_std", "markov_coefficients", "rotate_to_bod
 
 def white_std(density: float, rate_hz: float) -> float:
     """Per-sample std of white noise of one-sided density `density` (unit/sqrt(Hz)) sampled at
-    `rate_hz` (the sensor's bandwidth taken as rate/2, so variance = density^2 * rate)."""
+    `rate_hz`: sigma = density / sqrt(dt) = density * sqrt(rate), the usual discretisation of
+    a continuous white noise of that density held over one sample (Kalibr's IMU noise model;
+    PX4's gazebo IMU plugin)."""
     return density * math.sqrt(rate_hz)
 
 

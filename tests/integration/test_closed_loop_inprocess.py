@@ -1,6 +1,6 @@
 """Closed loop in one process, on the one harness (trq_lab.harness.fly_inprocess): the
-controller's `OffboardFlight` driving a trq_offboard.Controller against the vehicle's `Sitl`,
-joined by the in-memory link that carries the daemons' MAVLink bytes, in lockstep.
+controller's `OffboardFlight` driving a trq_offboard.controller.Controller against the vehicle's
+`Sitl`, joined by the in-memory link that carries the daemons' MAVLink bytes, in lockstep.
 
 Each flight arms, takes off and flies a reference; wind and faults are scripted events the
 vehicle plays in its own time. The figures come from the harness's trace: the vehicle's truth

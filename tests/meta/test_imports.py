@@ -9,8 +9,9 @@
       trq_offboard           trq_params, trq_wire
       trq_lab                all of them (the experiment layer drives both daemons)
 
-- nothing probes a solver or a controller with getattr/hasattr: what the flight loop and the
-  controller call on them is declared (trq_offboard.nmpc.base.Solver, the loop's protocol).
+- nothing probes a solver, a controller or a reference with getattr/hasattr: what the flight
+  loop and the controller call on them is declared (trq_offboard.nmpc.base.Solver, the loop's
+  FlightController, trq_offboard.reference.FlightReference).
 
 An import `from a.b import c` is an edge to the module a.b.c if c is a module, else to a.b;
 importing a.b.c runs a/__init__.py too, but a package's __init__ re-exporting its modules is not
@@ -21,6 +22,7 @@ from __future__ import annotations
 
 import ast
 import functools
+import re
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -31,7 +33,7 @@ ALLOWED = {"trq_params": set(), "trq_wire": set(),
            "sil_vehicle": {"trq_params", "trq_wire"},
            "trq_offboard": {"trq_params", "trq_wire"},
            "trq_lab": {"trq_params", "trq_wire", "sil_vehicle", "trq_offboard"}}
-PROBES = ("solver", "controller", "ctl")
+PROBES = ("solver", "controller", "ctl", "reference")
 
 
 def modules(root: Path = ROOT) -> dict[str, Path]:
@@ -49,7 +51,8 @@ def modules(root: Path = ROOT) -> dict[str, Path]:
 def _type_checking_nodes(tree: ast.Module) -> set[int]:
     skipped = set()
     for node in ast.walk(tree):
-        if isinstance(node, ast.If) and "TYPE_CHECKING" in ast.unparse(node.test):
+        if isinstance(node, ast.If) and ast.unparse(node.test) in ("TYPE_CHECKING",
+                                                                   "typing.TYPE_CHECKING"):
             skipped.update(id(n) for stmt in node.body for n in ast.walk(stmt))
     return skipped
 
@@ -162,26 +165,28 @@ def test_packages_import_only_downwards():
 
 
 def probes(tree: ast.Module) -> list[str]:
-    """getattr/hasattr calls whose object is a solver or a controller."""
+    """getattr/hasattr calls whose object is, or is reached through, a solver, a controller or
+    a reference (any name along its dotted path: `self.solver.ocp` too)."""
     found = []
     for node in ast.walk(tree):
         if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) \
                 and node.func.id in ("getattr", "hasattr") and node.args:
-            target = ast.unparse(node.args[0])
-            last = target.rpartition(".")[2].lower()
-            if any(last.endswith(word) for word in PROBES):
+            names = [n.lower() for n in re.findall(r"\w+", ast.unparse(node.args[0]))]
+            if any(n.endswith(word) for n in names for word in PROBES):
                 found.append(f"line {node.lineno}: {ast.unparse(node)}")
     return found
 
 
 def test_probe_finder_sees_probes():
     assert probes(ast.parse("getattr(self.solver, 'prepare', None)"))
+    assert probes(ast.parse("getattr(reference, 'grid', None)"))
+    assert probes(ast.parse("hasattr(self.solver.ocp, 'set_throttle_scale')"))
     assert probes(ast.parse("hasattr(ctl, 'prepare')"))
     assert probes(ast.parse("getattr(getattr(self.solver, 'ocp'), 'n_lag')"))
     assert not probes(ast.parse("getattr(args, 'seed')"))
 
 
-def test_nothing_probes_a_solver_or_a_controller():
+def test_nothing_probes_a_solver_a_controller_or_a_reference():
     offenders = [f"{path.relative_to(ROOT)} {use}" for path in modules().values()
                  for use in probes(ast.parse(path.read_text(encoding="utf-8")))]
     assert not offenders, offenders

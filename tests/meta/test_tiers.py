@@ -6,7 +6,7 @@
 - the unit tests mirror the packages they test: tests/unit/PACKAGE/test_MODULE[_what].py, where
   MODULE is a module or sub-package of PACKAGE with its dots written as underscores
   (`test_nmpc_hpipm.py` tests trq_offboard/nmpc/hpipm.py, `test_link_wire.py`
-  trq_offboard/link/wire.py), and the file imports PACKAGE."""
+  trq_offboard/link/wire.py), and the file imports that module."""
 
 from __future__ import annotations
 
@@ -66,29 +66,47 @@ def test_the_checks_see_what_they_look_for():
     assert marked_slow(ast.parse("pytestmark = [pytest.mark.x, pytest.mark.slow]\n"))
 
 
-def module_names(folder: Path) -> set[str]:
-    """The modules and sub-packages below `folder`, dots as underscores (`nmpc_hpipm`)."""
-    names = set()
+def module_names(folder: Path) -> dict[str, str]:
+    """The modules and sub-packages below `folder`: their names with dots as underscores
+    (`nmpc_hpipm`) -> their dotted paths (`nmpc.hpipm`)."""
+    names = {}
     for path in folder.rglob("*.py"):
         parts = path.relative_to(folder).with_suffix("").parts
         if parts[-1] == "__init__":
             parts = parts[:-1]
         if parts and parts[-1] != "__main__":
-            names.add("_".join(parts))
+            names["_".join(parts)] = ".".join(parts)
     return names
 
 
-def names_a_module(test_name: str, modules: set[str]) -> bool:
-    """Whether test_NAME names a module: NAME is one, or starts with one and '_'."""
+def named_modules(test_name: str, modules: dict[str, str]) -> list[str]:
+    """The dotted paths of the modules test_NAME can name: NAME is one, or starts with one and
+    '_' (`test_nmpc_hpipm_fetch` can name nmpc.hpipm_fetch or nmpc.hpipm or nmpc)."""
     name = test_name.removeprefix("test_")
-    return any(name == m or name.startswith(m + "_") for m in modules)
+    return [dotted for flat, dotted in modules.items()
+            if name == flat or name.startswith(flat + "_")]
+
+
+def imported(tree: ast.Module) -> set[str]:
+    """Every dotted name an import reaches: `from a.b import c` gives a.b and a.b.c."""
+    found = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            found.update(a.name for a in node.names)
+        elif isinstance(node, ast.ImportFrom) and node.module:
+            found.add(node.module)
+            found.update(f"{node.module}.{a.name}" for a in node.names)
+    return found
 
 
 def test_the_layout_check_reads_names():
-    modules = {"nmpc_hpipm", "nmpc", "loop", "link_wire"}
-    assert names_a_module("test_nmpc_hpipm_fetch", modules)
-    assert names_a_module("test_loop", modules) and names_a_module("test_link_wire", modules)
-    assert not names_a_module("test_wire", modules) and not names_a_module("test_loops", modules)
+    modules = {"nmpc_hpipm": "nmpc.hpipm", "nmpc": "nmpc", "loop": "loop", "link_wire": "link.wire"}
+    assert set(named_modules("test_nmpc_hpipm_fetch", modules)) == {"nmpc.hpipm", "nmpc"}
+    assert named_modules("test_loop", modules) == ["loop"]
+    assert named_modules("test_link_wire", modules) == ["link.wire"]
+    assert not named_modules("test_wire", modules) and not named_modules("test_loops", modules)
+    tree = ast.parse("from trq_offboard.nmpc import hpipm\nimport trq_offboard.loop\n")
+    assert {"trq_offboard.nmpc.hpipm", "trq_offboard.loop"} <= imported(tree)
 
 
 def test_unit_tests_mirror_the_packages():
@@ -99,15 +117,15 @@ def test_unit_tests_mirror_the_packages():
     wrong = []
     for folder, source in PACKAGES.items():
         modules = module_names(ROOT / source)
-        files = sorted((UNIT / folder).glob("test_*.py"))
+        files = sorted((UNIT / folder).rglob("test_*.py"))
         assert files, folder
         for path in files:
-            imports = {n.split(".")[0] for node in ast.walk(ast.parse(path.read_text()))
-                       for n in ([a.name for a in node.names] if isinstance(node, ast.Import)
-                                 else [node.module or ""] if isinstance(node, ast.ImportFrom)
-                                 else [])}
-            if not names_a_module(path.stem, modules):
+            candidates = named_modules(path.stem, modules)
+            if not candidates:
                 wrong.append(f"{folder}/{path.name}: names no module of {folder}")
-            if folder not in imports:
-                wrong.append(f"{folder}/{path.name}: does not import {folder}")
+                continue
+            reached = imported(ast.parse(path.read_text()))
+            if not any(f"{folder}.{m}" in reached for m in candidates):
+                wrong.append(f"{folder}/{path.name}: imports none of "
+                             + ", ".join(f"{folder}.{m}" for m in candidates))
     assert not wrong, wrong

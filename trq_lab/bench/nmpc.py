@@ -9,7 +9,8 @@
 
 The flight is trq_lab.harness's (`fly_inprocess`, the loop the campaigns and tests fly): the
 vehicle's `Sitl` and the controller's `OffboardFlight` in one process, joined by an in-memory link
-carrying the daemons' MAVLink bytes, in lockstep, the solve inline. trq_nmpc_eso (--controller:
+carrying the daemons' MAVLink bytes, in lockstep, the step called
+from the flight loop. trq_nmpc_eso (--controller:
 another file of params/controller/) arms, takes off and flies the helix of its reference on the
 SITL plant of params/sim/default.yaml (its seed and telemetry noise), 8 m/s wind from the north
 from the start, motor 1 at 50 % from t = 12 s of vehicle time (a fault script the vehicle plays).

@@ -79,8 +79,9 @@ def fly_daemons(seconds: float, controller: str, log_dir: Path,
                 controller_cmd: list[str] | None = None) -> dict:
     """One lockstep flight of both daemons for `seconds` of vehicle time: CPU s of each
     process, the vehicle's wall time (start to exit) and both exit codes. `controller_cmd`: the
-    command that starts the controller daemon, before its options (default `python -m trq_offboard`; another
-    program taking trq-offboard's options, e.g. trq_lab/bench/period_floor.py's replay)."""
+    command that starts the controller daemon, before its options (default
+    `python -m trq_offboard`; another program taking trq-offboard's options, e.g.
+    trq_lab/bench/period_floor.py's replay)."""
     pv, pc, pg, pt = _free_ports(4)
     vcmd = [python, "-m", "sil_vehicle", "--duration", f"{seconds:g}", "--mode", "lockstep",
             "--offboard-bind", f"127.0.0.1:{pv}", "--offboard-target", f"127.0.0.1:{pc}",

@@ -16,7 +16,8 @@ hand over the recorded preparation time. So the daemon around it (asyncio, the t
 receive and decode, the target's encode and send, the step's calls, the reference's sample, the
 accounting, the ground-station diagnosis, controller.csv and the .tlog) does the same work as
 in the recorded flight: the log writes the same bytes but for the loop's own measurements
-(cpu_wire_ms, cpu_log_ms, cpu_period_ms) and its header's solver line, and the vehicle flies the same flight, identically in lockstep (controller.csv carries the commands
+(cpu_wire_ms, cpu_log_ms, cpu_period_ms) and its header's solver line, and the vehicle flies
+the same flight, identically in lockstep (controller.csv carries the commands
 at full precision: trq_wire.logfile writes floats with repr). What the replay's process costs
 per control period is the floor: what the daemon costs when the controller's math costs nothing.
 It is a lower bound of that machinery's share in the real daemon, where the math's allocations

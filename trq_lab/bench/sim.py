@@ -1,7 +1,8 @@
 #!/usr/bin/env python3
 """Benchmark of the SIL vehicle: how fast the plant and the daemon run on this machine.
 
-    trq-bench-sim [--steps 20000] [--sim-seconds 20] [--json out/bench_sim.json]
+    trq-bench-sim [--steps 20000] [--sim-seconds 20] [--sensing NAME|PATH]
+                  [--json out/bench_sim.json]
 
 Each figure for both physics cores (`physics_core`: the compiled tick and the Python reference,
 which give bit-identical flights), with their ratio:
@@ -14,6 +15,8 @@ which give bit-identical flights), with their ratio:
     seconds per wall second, from the first ODOMETRY to the last), median of 3 runs; and the
     daemon's CPU time per simulated second (its whole process, start-up included), which is
     what bounds it when the responder is free.
+(2) and (3) fly the sim file's sensing profile (truth: no sensor) or `--sensing`'s, whose
+sensors then sample every tick: run it with and without to see their cost.
 The target is 20x real time with the default core. Numbers are measured, never estimated.
 """
 
@@ -38,7 +41,7 @@ from pymavlink.dialects.v20 import common as mavlink
 from trq_params.loader import dump as dump_yaml
 
 from sil_vehicle import compiled
-from sil_vehicle.config import PARAMS_DIR, load_sim
+from sil_vehicle.config import PARAMS_DIR, load_sim, sensing_profile
 from sil_vehicle.mavlink.codec import Codec
 from sil_vehicle.sitl import LINKS, Sitl
 from sil_vehicle.vehicle import ActuatorCommand, Vehicle
@@ -89,9 +92,13 @@ def bench_vehicle(steps: int, core: str, runs: int = 5) -> float:
     return statistics.median(rates)
 
 
-def bench_sitl(steps: int, core: str, runs: int = 5) -> tuple[float, float]:
+def bench_sitl(steps: int, core: str, runs: int = 5,
+               sensing: str | None = None) -> tuple[float, float]:
     """(steps/s, messages encoded per simulated second)."""
     sim = load_sim(SIM_DEFAULT).with_changes(clock_mode="realtime", physics_core=core)
+    if sensing is not None:
+        sim = sim.with_changes(sensing=sensing_profile(sensing, sim.physics_rate_hz,
+                                                       "command line", "--sensing"))
     rates, per_s = [], 0.0
     for _ in range(runs):
         s = Sitl(sim)
@@ -136,8 +143,8 @@ def odometry_frames(data: bytes) -> bytes:
     return b"".join(out)
 
 
-def lockstep_run(sim_yaml: Path, sim_seconds: float,
-                 log_dir: Path) -> tuple[float, float, float]:
+def lockstep_run(sim_yaml: Path, sim_seconds: float, log_dir: Path,
+                 sensing: str | None = None) -> tuple[float, float, float]:
     """One daemon run answered by a trivial responder: (real-time factor, the daemon's CPU
     seconds per simulated second, the responder's)."""
     trim = load_sim(sim_yaml).vehicle.hover_throttle_pct
@@ -150,6 +157,8 @@ def lockstep_run(sim_yaml: Path, sim_seconds: float,
            "--offboard-target", f"127.0.0.1:{sock.getsockname()[1]}",
            "--gcs-bind", f"127.0.0.1:{free_port()}", "--gcs-target", "127.0.0.1:9",
            "--log-dir", str(log_dir), "--duration", str(sim_seconds)]
+    if sensing is not None:
+        cmd += ["--sensing", sensing]
     env = dict(os.environ)
     usage0 = resource.getrusage(resource.RUSAGE_CHILDREN)
     proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL,
@@ -200,7 +209,8 @@ def lockstep_run(sim_yaml: Path, sim_seconds: float,
     return sim_seconds / wall, cpu / sim_seconds, (responder_cpu1 - responder_cpu0) / sim_seconds
 
 
-def bench_lockstep(sim_seconds: float, core: str, runs: int = 3) -> tuple[float, float, float]:
+def bench_lockstep(sim_seconds: float, core: str, runs: int = 3,
+                   sensing: str | None = None) -> tuple[float, float, float]:
     """Medians of lockstep_run's figures."""
     with tempfile.TemporaryDirectory(prefix="bench_sim_") as tmp:
         sim_yaml = Path(tmp) / "bench_100hz.yaml"
@@ -210,7 +220,8 @@ def bench_lockstep(sim_seconds: float, core: str, runs: int = 3) -> tuple[float,
             "extends": str(SIM_DEFAULT), "vehicle": str(VEHICLE), "control_rate_hz": 100,
             "physics_core": core, "telemetry": {"offboard": {"ODOMETRY": 100}}}),
             encoding="utf-8")
-        runs_ = [lockstep_run(sim_yaml, sim_seconds, Path(tmp) / f"run{i}") for i in range(runs)]
+        runs_ = [lockstep_run(sim_yaml, sim_seconds, Path(tmp) / f"run{i}", sensing)
+                 for i in range(runs)]
     return tuple(statistics.median(r[i] for r in runs_) for i in range(3))
 
 
@@ -227,10 +238,16 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--steps", type=int, default=20_000, help="ticks per run of (1) and (2)")
     ap.add_argument("--sim-seconds", type=float, default=20.0,
                     help="simulated seconds per daemon run of (3)")
+    ap.add_argument("--sensing", default=None, metavar="NAME|PATH",
+                    help="the vehicle's sensing profile in (2) and (3): a built-in name or a "
+                         "YAML path (default: the sim file's, truth)")
     ap.add_argument("--json", type=Path, default=None, help="also write the numbers here")
     args = ap.parse_args(argv)
 
     sim = load_sim(SIM_DEFAULT)
+    if args.sensing is not None:    # a bad profile fails here, before any measurement
+        sensing_profile(args.sensing, sim.physics_rate_hz, "command line", "--sensing")
+    sensing = args.sensing if args.sensing is not None else sim.sensing.name
     physics_hz = sim.physics_rate_hz
     if compiled.load_core() is None:
         print("no compiled physics core on this machine (no C compiler): Python only")
@@ -241,8 +258,9 @@ def main(argv: list[str] | None = None) -> int:
     per_core: dict[str, dict[str, float]] = {}
     for core in cores:
         vehicle_sps = bench_vehicle(args.steps, core)
-        sitl_sps, msgs_per_s = bench_sitl(args.steps, core)
-        rtf, cpu_per_s, responder_per_s = bench_lockstep(args.sim_seconds, core)
+        sitl_sps, msgs_per_s = bench_sitl(args.steps, core, sensing=args.sensing)
+        rtf, cpu_per_s, responder_per_s = bench_lockstep(args.sim_seconds, core,
+                                                         sensing=args.sensing)
         per_core[core] = {
             "vehicle_step_per_s": round(vehicle_sps, 1),
             "vehicle_step_rtf_bound": round(vehicle_sps / physics_hz, 2),
@@ -257,6 +275,7 @@ def main(argv: list[str] | None = None) -> int:
     result = {
         "machine": machine(),
         "physics_rate_hz": physics_hz,
+        "sensing": sensing,
         "default_core": default,
         "cores": per_core,
         "lockstep_sim_seconds": args.sim_seconds,
@@ -283,7 +302,7 @@ def main(argv: list[str] | None = None) -> int:
             ratio = f"{r:11.2f}x"
         print(f"{label:42s}" + "".join(cells) + ratio)
     print(f"(1), (2): median of 5 x {args.steps} ticks at {physics_hz} Hz; (3): "
-          f"{args.sim_seconds:g} simulated s, median of 3; "
+          f"{args.sim_seconds:g} simulated s, median of 3; sensing {sensing}; "
           f"{per_core[cores[0]]['sitl_messages_per_sim_s']:.0f} messages per simulated s")
     print(f"target: {TARGET_RTF:g}x real time in lockstep with the default core ({default}): "
           f"{rtf:.1f}x, {rtf / TARGET_RTF:.2f} of it, {'met' if rtf >= TARGET_RTF else 'NOT met'}")

@@ -18,7 +18,7 @@ from trq_lab.campaign.spec import LINK_KEYS, Campaign
 from trq_lab.campaign.store import write_json
 from trq_lab.reporting import plant_campaign
 from trq_lab.reporting.fmt import fmt
-from trq_lab.reporting.plot import LogNorm, plt
+from trq_lab.reporting.plot import log_norm, pyplot
 
 def _bins(values: list[float], max_distinct: int = 12, n_bins: int = 8):
     """A function value -> (sort key, label): distinct values if few, equal-width bins if many."""
@@ -122,6 +122,7 @@ def coping_limit(campaign, winds, sevs, stats, controller, wind) -> str:
 
 
 def heatmaps(campaign: Campaign, winds, sevs, stats, out: Path) -> list[Path]:
+    plt = pyplot()
     made = []
     ctrls = list(campaign.controllers)
     for what, fname, title in (("rate", "success.png", "success rate"),
@@ -145,7 +146,7 @@ def heatmaps(campaign: Campaign, winds, sevs, stats, out: Path) -> list[Path]:
             else:
                 lo = max(float(np.min(finite)), 1e-4) if len(finite) else 1e-3
                 hi = max(float(np.max(finite)), lo * 10) if len(finite) else 1.0
-                im = ax.imshow(g, norm=LogNorm(lo, hi), cmap="viridis_r", aspect="auto")
+                im = ax.imshow(g, norm=log_norm(lo, hi), cmap="viridis_r", aspect="auto")
             for i in range(g.shape[0]):
                 for j in range(g.shape[1]):
                     if np.isfinite(g[i, j]):

@@ -1,9 +1,9 @@
 """The report of a campaign with a plant axis (identification errors): what the flights of each
 controller did on each plant, set against the plant's faulted hover trim.
 
-In: the campaign (`trq_lab.campaign.Campaign`: its controllers, success bar and targets) and its
-rows (`campaign.rows_of`: the flight's inputs, with the drawn `plant_*` values, the metrics and
-the envelope columns `env_feasible`, `env_min_margin_pct`). Out: Markdown lines for report.md,
+In: the campaign (`trq_lab.campaign.spec.Campaign`: its controllers, success bar and
+targets) and its rows (`campaign.rows_of`: the flight's inputs, with the drawn `plant_*` values,
+the metrics and the envelope columns `env_feasible`, `env_min_margin_pct`). Out: Markdown lines for report.md,
 the figures beside it, and a JSON-able summary (the campaign's metrics.json). Pure functions of
 the rows but for the figures; numpy only (the rank correlation is written here, no scipy).
 
@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from trq_lab.reporting.fmt import fmt
-from trq_lab.reporting.plot import LogNorm, plt
+from trq_lab.reporting.plot import log_norm, pyplot
 
 NO_TRIM = "no trim"
 
@@ -363,6 +363,7 @@ def plant_figures(campaign, rows, ctrls, keys, top, margin_pct, out: Path) -> li
     """margin.png (RMSE after the fault against the trim's smallest throttle margin, per
     controller), rmse_dist.png (the RMSE distribution per controller), params.png (the median
     RMSE over the two most telling parameters, per controller)."""
+    plt = pyplot()
     made = []
     bar = campaign.success_rmse_m
     t = campaign.targets
@@ -448,7 +449,7 @@ def plant_figures(campaign, rows, ctrls, keys, top, margin_pct, out: Path) -> li
                         g[i, j] = float(np.median(cell))
             shown = np.where(np.isinf(g), crash_y, g)
             im = ax.imshow(shown, origin="lower", aspect="auto", cmap="viridis_r",
-                           norm=LogNorm(lo, crash_y),
+                           norm=log_norm(lo, crash_y),
                            extent=(ex[0], ex[-1], ey[0], ey[-1]))
             for i in range(nb):
                 for j in range(nb):

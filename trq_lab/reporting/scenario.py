@@ -19,7 +19,7 @@ from sil_vehicle.faultscript import load_script
 
 from trq_lab import metrics as metrics_mod
 from trq_lab.reporting.fmt import METRIC_COLUMNS, fmt, table_head, table_row
-from trq_lab.reporting.plot import plt
+from trq_lab.reporting.plot import pyplot
 
 def table(results: list[dict]) -> str:
     """The metrics table of a scenario's flights (every column of METRIC_COLUMNS)."""
@@ -124,6 +124,7 @@ def markdown(scenario, results: list[dict], failures: list[str], figures: list[P
 
 
 def figures(scenario, runs, out: Path) -> list[Path]:
+    plt = pyplot()
     data = []
     for r in runs:
         try:

@@ -59,7 +59,8 @@ def test_child_paths_resolve_against_the_child(tmp_path):
 
 def test_path_keys_come_from_the_schema():
     assert loader.path_keys(schema.ControllerFile) == ("vehicle", "observer.file")
-    assert loader.path_keys(schema.SimFile) == ("vehicle",)
+    assert loader.path_keys(schema.SimFile) == ("vehicle", "sensing")
+    assert loader.name_keys(schema.SimFile) == ("sensing",)     # a bare name stays a name
     assert loader.path_keys(schema.VehicleFile) == ()
 
 

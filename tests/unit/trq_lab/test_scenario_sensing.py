@@ -1,0 +1,68 @@
+"""A scenario's sensing profile (trq_lab.scenario): the `sensing:` key (optional: the sim
+file's), checked at load, handed to each vehicle it starts as `--sensing`."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import trq_params
+import yaml
+
+from trq_lab import scenario as sc
+from trq_params import ConfigError
+
+
+def scenario_file(folder: Path, **keys) -> Path:
+    data = yaml.safe_load(trq_params.builtin("scenarios", "smoke").read_text())
+    data["faults"] = str(trq_params.builtin("faults", "motor1_smoke"))
+    data.update(keys)
+    path = folder / "scenario.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+def command(scenario: sc.Scenario, tmp_path: Path) -> list[str]:
+    run = sc.Run("trq_nmpc_eso", 0, tmp_path)
+    return sc.vehicle_command(scenario, run, False, tmp_path / "sim.yaml",
+                              tmp_path / "trq.yaml", [], 1234)
+
+
+def test_left_out_the_vehicle_keeps_the_sim_files(tmp_path):
+    s = sc.load_scenario(scenario_file(tmp_path))
+    assert s.sensing is None and "--sensing" not in command(s, tmp_path)
+
+
+def test_a_name_goes_to_each_vehicle(tmp_path):
+    s = sc.load_scenario(scenario_file(tmp_path, sensing="mocap"))
+    assert s.sensing == "mocap"
+    cmd = command(s, tmp_path)
+    assert cmd[cmd.index("--sensing") + 1] == "mocap"
+
+
+def test_a_relative_path_is_the_scenario_files(tmp_path):
+    (tmp_path / "mine.yaml").write_text(yaml.safe_dump(
+        {"extends": "builtin:sensing/rtk", "name": "mine"}))
+    s = sc.load_scenario(scenario_file(tmp_path, sensing="mine.yaml"))
+    assert s.sensing == str(tmp_path / "mine.yaml")
+
+
+def test_an_unknown_name_fails_at_load(tmp_path):
+    path = scenario_file(tmp_path, sensing="sonar")
+    with pytest.raises(ConfigError) as err:
+        sc.load_scenario(path)
+    assert str(path) in str(err.value) and "key 'sensing'" in str(err.value)
+    assert "'sonar'" in str(err.value)
+
+
+def test_the_command_line_option_is_checked_before_any_flight(tmp_path, capsys):
+    assert sc.main(["smoke", "--out", str(tmp_path), "--sensing", "sonar"]) == 2
+    assert "--sensing" in capsys.readouterr().err and not (tmp_path / "metrics.json").exists()
+
+
+def test_the_in_process_vehicle_gets_it_too():
+    from trq_lab.harness import sim_params
+    from trq_params import builtin
+    vehicle = builtin("vehicle", "trq")
+    assert sim_params(vehicle, 100, seed=1, sensing="mocap").sensing.name == "mocap"
+    assert sim_params(vehicle, 100, seed=1).sensing.name == "truth"
