@@ -127,12 +127,13 @@ class VehicleFile(Strict):
 # simulation
 # --------------------------------------------------------------------------------------------
 
-# Telemetry streams the vehicle can send, by MAVLink message name. The last two are the raw
-# sensors of a sensing profile (sil_vehicle/PROTOCOL.md): sent only when the profile carries the
-# sensor, 0 (off) when a file leaves them out.
+# Telemetry streams the vehicle can send, by MAVLink message name. HIGHRES_IMU and ATT_POS_MOCAP
+# are the raw sensors of a sensing profile, ESTIMATOR_STATUS its estimator's health
+# (sil_vehicle/PROTOCOL.md): sent only when the profile carries them, 0 (off) when a file leaves
+# them out.
 STREAMS = ("HEARTBEAT", "SYS_STATUS", "ODOMETRY", "ATTITUDE", "LOCAL_POSITION_NED",
            "SERVO_OUTPUT_RAW", "ACTUATOR_OUTPUT_STATUS", "GLOBAL_POSITION_INT", "GPS_RAW_INT",
-           "HOME_POSITION", "HIGHRES_IMU", "ATT_POS_MOCAP")
+           "HOME_POSITION", "HIGHRES_IMU", "ATT_POS_MOCAP", "ESTIMATOR_STATUS")
 
 _RATE = Int(0, 10_000)      # then checked against physics_rate_hz by SimFile
 
@@ -150,6 +151,7 @@ class StreamRates(Strict):
     HOME_POSITION: _RATE
     HIGHRES_IMU: _RATE = 0
     ATT_POS_MOCAP: _RATE = 0
+    ESTIMATOR_STATUS: _RATE = 0
 
 
 class Telemetry(Strict):

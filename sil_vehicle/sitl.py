@@ -22,6 +22,8 @@ import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
 from sil_vehicle.config import STREAMS, SimParams
+from sil_vehicle.estimator.eskf import Eskf
+from sil_vehicle.estimator.params import EstimatorParams
 from sil_vehicle.faultscript import Event, ParamAction
 from sil_vehicle.frames import euler_to_quat, quat_to_dcm, quat_to_euler
 from sil_vehicle.mavlink import codec
@@ -65,6 +67,11 @@ class Outgoing:
 # latest sample arrived by the row's time, with that sample's time of validity
 SOURCE_LOG_COLUMNS = {name: (f"{name}_t_us",) + tuple(f"{name}_pos_{a}_m" for a in "ned")
                       for name in ("mocap", "gnss")}
+# under a sensing profile: what the vehicle reports (its estimator's estimate), beside the truth
+ESTIMATE_LOG_COLUMNS = (tuple(f"est_pos_{a}_m" for a in "ned")
+                        + tuple(f"est_vel_{a}_m_s" for a in "ned")
+                        + ("est_roll_rad", "est_pitch_rad", "est_yaw_rad", "est_aligned",
+                           "est_position_valid"))
 
 LOG_COLUMNS = (
     ["t_us"] + [f"pos_{a}_m" for a in "ned"] + [f"vel_{a}_m_s" for a in "ned"]
@@ -129,6 +136,7 @@ class Sitl:
         # sensors: none under truth (no suite, no draw, no message)
         profile = sim.sensing if sim.senses else None
         self.suite: SensorSuite | None = None
+        self.estimator: Eskf | None = None          # the autopilot's filter on the readings
         self.readings: list[Reading] = []          # the latest tick's, in the suite's order
         self.latest: dict[str, Reading] = {}       # each sensor's newest reading arrived
         has = set() if profile is None else {
@@ -136,13 +144,16 @@ class Sitl:
         # streams the tick loop never sends (not carried, or sent at a reading's arrival)
         self._not_periodic = frozenset(
             {"ATT_POS_MOCAP"} | ({"HIGHRES_IMU"} if "imu" not in has else set())
-            | ({"GPS_RAW_INT"} if profile is not None else set()))
+            | ({"GPS_RAW_INT"} if profile is not None else set())
+            | ({"ESTIMATOR_STATUS"} if profile is None else set()))
         self._on_arrival = {ON_ARRIVAL[n]: n for n in ON_ARRIVAL if n in has}
         self._arrival_sent: dict[tuple[str, str], int] = {}     # (link, stream) -> arrival_us
         self._imu_sent: dict[str, dict[str, int]] = {link: {} for link in LINKS}
         self._sources = tuple(n for n in ("mocap", "gnss") if n in has)
         self.log_columns = list(LOG_COLUMNS) + [c for n in self._sources
                                                 for c in SOURCE_LOG_COLUMNS[n]]
+        if profile is not None:
+            self.log_columns += ESTIMATE_LOG_COLUMNS
         if profile is not None:
             self.suite = SensorSuite(profile,
                                      np.random.default_rng([sim.seed, SENSOR_SEED_KEY]),
@@ -151,6 +162,8 @@ class Sitl:
             self._gravity = sim.vehicle.gravity_m_s2
             self._sensed_vel = self.vehicle.state.x[3:6]    # at rest before the first tick
             self.readings = self._sense(self.vehicle.state)
+            self.estimator = Eskf(EstimatorParams.from_profile(profile))
+            self.estimator.step(self.t_us, self.readings)
 
     # --- time ------------------------------------------------------------------------------
     @property
@@ -169,8 +182,9 @@ class Sitl:
         self.tick += 1
         self._measured = None
         if self.suite is not None:
-            # the estimator's seam: the tick's readings, before the log and the telemetry
+            # the tick's readings into the estimator, before the log and the telemetry
             self.readings = self._sense(state)
+            self.estimator.step(state.t_us, self.readings)
         if state.crashed and not self._was_crashed:
             self._was_crashed = True
             self.vehicle.force_disarm()
@@ -338,6 +352,11 @@ class Sitl:
 
     # --- telemetry -------------------------------------------------------------------------
     def measured(self) -> Measured:
+        """What the vehicle reports of its state this tick: under a sensing profile its
+        estimator's estimate (with its covariances), under `truth` the true state plus the sim
+        file's white noise."""
+        if self._measured is None and self.estimator is not None:
+            self._measured = codec.measured_of(self.estimator.output())
         if self._measured is None:
             s, sim = self.vehicle.state, self.sim
             n = self._noise_rng.standard_normal(12)
@@ -358,6 +377,8 @@ class Sitl:
         nor one whose sensor has not reported yet."""
         if stream == "HIGHRES_IMU":
             return "HIGHRES_IMU" not in self._not_periodic and "imu" in self.latest
+        if stream == "ESTIMATOR_STATUS":
+            return self.estimator is not None
         if stream in self._on_arrival:
             return self._on_arrival[stream] in self.latest
         return stream not in self._not_periodic
@@ -367,6 +388,8 @@ class Sitl:
         marks as updated). Raw sensors' messages: only when `available`."""
         if stream == "HIGHRES_IMU":
             return self._highres_imu(link)
+        if stream == "ESTIMATOR_STATUS":
+            return codec.estimator_status(self.estimator.output())
         if stream in self._on_arrival:
             return self._sensor_message(stream, self.latest[self._on_arrival[stream]])
         s = self.vehicle.state
@@ -399,6 +422,13 @@ class Sitl:
         if stream == "GPS_RAW_INT":
             return codec.gps_raw_int(m, self.home)
         raise KeyError(stream)
+
+    def estimator_ready(self) -> bool:
+        """No estimator (truth), or one with its attitude aligned and a valid position."""
+        if self.estimator is None:
+            return True
+        e = self.estimator.output()
+        return e.attitude_aligned and e.position_valid and not e.diverged
 
     def announce(self, severity: int, text: str) -> list[Outgoing]:
         msg = codec.statustext(severity, text)
@@ -505,6 +535,12 @@ class Sitl:
             if not arm and msg.param2 == FORCE_DISARM_MAGIC:
                 self.vehicle.force_disarm()
                 reason = None
+            elif arm and not self.estimator_ready():
+                # PX4's preflight check: no arming before the estimator has its attitude and a
+                # position; the companion retries (MAV_RESULT_TEMPORARILY_REJECTED)
+                return [self._ack(link, msg, mavlink.MAV_RESULT_TEMPORARILY_REJECTED, sender)] \
+                    + self.announce(mavlink.MAV_SEVERITY_WARNING,
+                                    "arming denied: estimator not ready")
             else:
                 reason = self.vehicle.set_armed(arm)
                 if arm and reason is None:
@@ -655,7 +691,7 @@ class Sitl:
     # --- log -------------------------------------------------------------------------------
     def log_row(self) -> tuple:
         """A row of `log_columns`: the truth, then (with a position source) its latest
-        sample (NaN before the first)."""
+        sample (NaN before the first), then (under a sensing profile) the estimate."""
         s = self.vehicle.state
         t_s = s.t_us * 1e-6
         cmd = self.vehicle.command
@@ -664,6 +700,11 @@ class Sitl:
             r = self.latest.get(name)
             extra += ((r.t_us, *(float(v) for v in r.pos_ned_m)) if r is not None
                       else (math.nan,) * 4)
+        if self.estimator is not None:
+            e = self.estimator.output()
+            extra += (tuple(float(v) for v in e.pos_ned_m) + tuple(float(v) for v in e.vel_ned_m_s)
+                      + tuple(quat_to_euler(*e.quat_wxyz))
+                      + (int(e.attitude_aligned), int(e.position_valid)))
         return ((s.t_us,) + s.x[0:10] + tuple(quat_to_euler(*s.x[6:10])) + s.x[10:13]
                 + tuple(cmd.throttle_pct) + tuple(cmd.tilt_rad) + s.motor_pct + s.tilt_rad
                 + tuple(m.factor(t_s) for m in self.vehicle.faults.motors)

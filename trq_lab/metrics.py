@@ -49,6 +49,10 @@ class RunMetrics:
     recovery_s: float | None
     solve_ms_p50: float
     solve_ms_p99: float
+    # the vehicle's estimator against the truth, over the controlled flight (None under the
+    # `truth` sensing profile, whose flight.csv has no estimate)
+    est_rmse_pos_m: float | None = None
+    est_rmse_att_deg: float | None = None
 
     def as_dict(self) -> dict:
         return {k: (None if isinstance(v, float) and not math.isfinite(v) else v)
@@ -133,6 +137,16 @@ def compute(controller: str, vehicle: str, truth: dict[str, np.ndarray],
             recovery = 0.0 if len(over) == 0 else float((t_us[over[-1]] - fault_onset_us) * 1e-6)
     solve = steps["solve_ms"][np.isfinite(steps["solve_ms"])]
     flight_end = crash_us if crash_us is not None else (int(stamps[-1]) if len(stamps) else 0)
+    est_pos = est_att = None
+    if "est_pos_n_m" in truth and len(stamps):
+        rows = (truth["t_us"] >= stamps[0]) & (truth["t_us"] <= flight_end)
+        d_pos = np.stack([truth[f"est_pos_{a}_m"][rows] - truth[f"pos_{a}_m"][rows]
+                          for a in "ned"], axis=1)
+        d_att = np.stack([wrap_deg(np.degrees(truth[f"est_{a}_rad"][rows]
+                                              - truth[f"{a}_rad"][rows]))
+                          for a in ("roll", "pitch", "yaw")], axis=1)
+        est_pos = rms(np.linalg.norm(d_pos, axis=1))
+        est_att = rms(np.linalg.norm(d_att, axis=1))
     return RunMetrics(
         controller=controller, vehicle=vehicle, crashed=crash_us is not None,
         flight_s=float((flight_end - (int(stamps[0]) if len(stamps) else 0)) * 1e-6),
@@ -142,7 +156,8 @@ def compute(controller: str, vehicle: str, truth: dict[str, np.ndarray],
         max_yaw_err_deg=float(np.abs(yaw_err).max()) if len(yaw_err) else math.nan,
         recovery_s=recovery,
         solve_ms_p50=float(np.percentile(solve, 50)) if len(solve) else math.nan,
-        solve_ms_p99=float(np.percentile(solve, 99)) if len(solve) else math.nan)
+        solve_ms_p99=float(np.percentile(solve, 99)) if len(solve) else math.nan,
+        est_rmse_pos_m=est_pos, est_rmse_att_deg=est_att)
 
 
 def true_disturbance(truth: dict[str, np.ndarray], vehicle_params) -> np.ndarray:

@@ -57,6 +57,10 @@ ACK_TIMEOUT_VEHICLE_US = 300_000   # a command's ACK missing this long in vehicl
 # tries of a command (arming, disarming) before giving up, enough for a lossy link (measured:
 # docs/decisions/2026-12-02-figures-from-comments.md)
 COMMAND_TRIES = 6
+# arming temporarily rejected (the vehicle's estimator not ready): try again this often, for at
+# most this long, in vehicle time
+ARM_RETRY_US = 200_000
+ARM_WAIT_US = 10_000_000
 LAND_DETECT_S = 0.2                # on the ground and still this long while landing: landed
 IDLE = ActuatorCommand((0.0,) * 4, (0.0,) * 4)   # motors at idle, tilts centred
 
@@ -256,6 +260,31 @@ class OffboardFlight:
                 return fut.result()
         raise FlightError(f"no COMMAND_ACK for command {command_id} after {retries} tries")
 
+    async def _arm(self) -> bool:
+        """Arm; while the vehicle answers MAV_RESULT_TEMPORARILY_REJECTED (an autopilot's
+        preflight check: its estimator not aligned yet) try again every ARM_RETRY_US of vehicle
+        time, answering its states with IDLE meanwhile, for at most ARM_WAIT_US. Returns whether
+        it had to wait; FlightError if arming is refused or never allowed."""
+        start = self.odometry.stamp_us if self.odometry is not None else 0
+        waited = False
+        while True:
+            result = await self._command(wire.arm_command(True),
+                                         mavlink.MAV_CMD_COMPONENT_ARM_DISARM, hold=IDLE)
+            if result == mavlink.MAV_RESULT_ACCEPTED:
+                return waited
+            now = self.odometry.stamp_us if self.odometry is not None else start
+            if result != mavlink.MAV_RESULT_TEMPORARILY_REJECTED or now - start >= ARM_WAIT_US:
+                raise FlightError(f"arming refused (MAV_RESULT {result})")
+            if not waited:
+                log.info("arming not allowed yet (the vehicle's preflight check): retrying")
+            waited = True
+            end = now + ARM_RETRY_US
+            while True:
+                odo = await self._next_odometry()
+                self._answer(odo.stamp_us, IDLE)
+                if odo.stamp_us >= end:
+                    break
+
     def _answer(self, stamp_us: int, cmd: ActuatorCommand) -> None:
         c0 = self.cpu_ns()
         self._last_target = wire.actuator_target(stamp_us, cmd, self.tilt_limit)
@@ -294,13 +323,14 @@ class OffboardFlight:
         if airborne:
             log.info("taking over a flying vehicle at %.2f m", -first.state.pos_ned_m[2])
         elif not wire.is_armed(self.heartbeat):
-            result = await self._command(wire.arm_command(True),
-                                         mavlink.MAV_CMD_COMPONENT_ARM_DISARM, hold=IDLE)
-            if result != mavlink.MAV_RESULT_ACCEPTED:
-                raise FlightError(f"arming refused (MAV_RESULT {result})")
+            waited = await self._arm()
             # the plan's clock starts with the first state after arming (which may have
             # taken a few control periods, or retries, of vehicle time on a lossy link)
             first = await self._next_odometry()
+            if waited:
+                # the vehicle's estimator was not ready at the first state: the ground is
+                # where it puts the vehicle now that it is
+                ground_z = first.state.pos_ned_m[2]
         t0 = first.stamp_us
         reference = self.make_reference(first.state, airborne)
         self.controller.reset(0.0, first.state)

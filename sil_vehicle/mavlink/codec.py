@@ -12,6 +12,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Iterable
 
+import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
 from sil_vehicle.frames import ned_to_geodetic, quat_to_euler
@@ -147,6 +148,12 @@ class Measured:
     vel_ned_m_s: tuple[float, float, float]
     quat_wxyz: tuple[float, float, float, float]
     rates_frd_rad_s: tuple[float, float, float]
+    # an estimator's (ODOMETRY's fields: the upper triangles, row-major, of the pose covariance
+    # (x, y, z, roll, pitch, yaw) and of the velocity covariance (vx, vy, vz, p, q, r)); None:
+    # the truth-plus-noise stream, which states none
+    pose_covariance: tuple[float, ...] | None = None
+    velocity_covariance: tuple[float, ...] | None = None
+    quality_pct: int = 100                     # ODOMETRY's quality: -1 failed, 0 unknown
 
 
 def heartbeat(armed: bool, crashed: bool, flying: bool, custom_mode: int = 0,
@@ -174,10 +181,14 @@ def sys_status(load_permille: int, drop_rate_permille: int, errors_comm: int,
 def odometry(m: Measured) -> mavlink.MAVLink_message:
     """Pose in LOCAL_NED; child frame LOCAL_NED, so the velocity is NED too; rates are body FRD."""
     nan21 = [math.nan] * 21
+    estimated = m.pose_covariance is not None
     return mavlink.MAVLink_odometry_message(
         m.t_us, mavlink.MAV_FRAME_LOCAL_NED, mavlink.MAV_FRAME_LOCAL_NED, *m.pos_ned_m,
-        list(m.quat_wxyz), *m.vel_ned_m_s, *m.rates_frd_rad_s, nan21, nan21, 0,
-        mavlink.MAV_ESTIMATOR_TYPE_NAIVE, 100)
+        list(m.quat_wxyz), *m.vel_ned_m_s, *m.rates_frd_rad_s,
+        list(m.pose_covariance) if estimated else nan21,
+        list(m.velocity_covariance) if m.velocity_covariance is not None else nan21, 0,
+        mavlink.MAV_ESTIMATOR_TYPE_AUTOPILOT if estimated else mavlink.MAV_ESTIMATOR_TYPE_NAIVE,
+        m.quality_pct)
 
 
 def attitude(m: Measured) -> mavlink.MAVLink_message:
@@ -335,3 +346,48 @@ def autopilot_version() -> mavlink.MAVLink_message:
 
 def mission_count(target_system: int, target_component: int) -> mavlink.MAVLink_message:
     return mavlink.MAVLink_mission_count_message(target_system, target_component, 0)
+
+
+def _upper(c: np.ndarray) -> tuple[float, ...]:
+    """The upper triangle of a 6x6 matrix, row-major: ODOMETRY's 21 covariance fields."""
+    return tuple(float(c[i, j]) for i in range(6) for j in range(i, 6))
+
+
+def measured_of(e) -> Measured:
+    """What the vehicle reports from its estimator's Estimate (sil_vehicle.estimator.eskf):
+    the output predictor's pose, velocity and bias-corrected rates, ODOMETRY's pose covariance
+    in (x, y, z, roll, pitch, yaw), its velocity covariance (NED velocity, then the rates'
+    variances on the angular diagonal, the rest unknown: NaN), and the quality: 100 with a
+    valid position, -1 diverged, 0 otherwise."""
+    vel = np.full((6, 6), math.nan)
+    vel[:3, :3] = e.vel_cov_ned_m2_s2
+    for i in range(3):
+        vel[3 + i, 3 + i] = e.rates_var_frd_rad2_s2[i]
+    quality = -1 if e.diverged else (100 if e.position_valid and e.attitude_aligned else 0)
+    return Measured(e.t_us, tuple(float(v) for v in e.pos_ned_m),
+                    tuple(float(v) for v in e.vel_ned_m_s),
+                    tuple(float(v) for v in e.quat_wxyz),
+                    tuple(float(v) for v in e.rates_frd_rad_s),
+                    _upper(e.pose_cov_rpy()), _upper(vel), quality)
+
+
+def estimator_status(e) -> mavlink.MAVLink_message:
+    """ESTIMATOR_STATUS of an Estimate: EKF2's test ratios as they are (NaN: no such
+    measurement yet), the horizontal and vertical position accuracy (1 sigma, m), and the flags
+    (attitude; horizontal and vertical velocity and position, relative and absolute, while a
+    position source is fused; none of them, and the accelerometer error flag, once diverged)."""
+    flags = 0
+    if not e.diverged:
+        if e.attitude_aligned:
+            flags |= mavlink.ESTIMATOR_ATTITUDE
+        if e.position_valid:
+            flags |= (mavlink.ESTIMATOR_VELOCITY_HORIZ | mavlink.ESTIMATOR_VELOCITY_VERT
+                      | mavlink.ESTIMATOR_POS_HORIZ_REL | mavlink.ESTIMATOR_POS_HORIZ_ABS
+                      | mavlink.ESTIMATOR_POS_VERT_ABS | mavlink.ESTIMATOR_PRED_POS_HORIZ_REL
+                      | mavlink.ESTIMATOR_PRED_POS_HORIZ_ABS)
+    else:
+        flags |= mavlink.ESTIMATOR_ACCEL_ERROR
+    var = e.pos_var_ned_m2
+    return mavlink.MAVLink_estimator_status_message(
+        e.t_us, flags, e.vel_ratio, e.pos_horiz_ratio, e.pos_vert_ratio, e.mag_ratio,
+        math.nan, math.nan, math.sqrt(float(var[0]) + float(var[1])), math.sqrt(float(var[2])))

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from sil_vehicle.config import sensing_profile
 from sil_vehicle.daemon import VehicleDaemon
-from sil_vehicle.sitl import LOG_COLUMNS
+from sil_vehicle.sitl import ESTIMATE_LOG_COLUMNS, LOG_COLUMNS
 from trq_wire.logfile import read_header
 
 
@@ -30,7 +30,9 @@ def test_a_position_source_adds_its_columns(sim, tmp_path):
     meta, columns = header(tmp_path / "flight.csv")
     assert meta["sensing"].endswith("rtk.yaml")
     assert columns == list(LOG_COLUMNS) + ["gnss_t_us", "gnss_pos_n_m", "gnss_pos_e_m",
-                                           "gnss_pos_d_m"]
+                                           "gnss_pos_d_m"] + list(ESTIMATE_LOG_COLUMNS)
     rows = (tmp_path / "flight.csv").read_text().splitlines()
-    last = rows[-1].split(",")
-    assert len(last) == len(columns) and last[-4] == "0"    # the fix of t = 0, arrived at 110 ms
+    last = dict(zip(columns, rows[-1].split(",")))
+    assert len(last) == len(columns) and last["gnss_t_us"] == "0"   # the fix of t = 0 (110 ms)
+    assert last["est_aligned"] in ("0", "1") and float(last["est_pos_d_m"]) == float(
+        last["est_pos_d_m"])                                        # the estimate, a number

@@ -21,7 +21,7 @@ from sil_vehicle.mavlink.codec import Codec
 from sil_vehicle.sensors.gnss import GnssReading
 from sil_vehicle.sensors.imu import ImuReading
 from sil_vehicle.sensors.mocap import MocapReading
-from sil_vehicle.sitl import LOG_COLUMNS, Sitl
+from sil_vehicle.sitl import ESTIMATE_LOG_COLUMNS, LOG_COLUMNS, Sitl
 from sil_vehicle.vehicle import ActuatorCommand
 
 _CLIENT = mavlink.MAVLink(None, srcSystem=255, srcComponent=190)
@@ -67,8 +67,20 @@ def of(sent, kind, link="gcs"):
     return [(t, o.msg) for t, o in sent if o.msg.get_type() == kind and o.link == link]
 
 
+def until_ready(*sitls: Sitl) -> None:
+    """Step them together, at rest, until each one's estimator allows arming."""
+    for _ in range(5000):
+        if all(s.estimator_ready() for s in sitls):
+            return
+        for s in sitls:
+            s.step()
+    raise AssertionError("the estimator never became ready")
+
+
 def fly(s: Sitl, throttle_pct=80.0, tilt_rad=0.2) -> None:
+    until_ready(s)
     s.handle("gcs", command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1.0))
+    assert s.vehicle.armed
     s.vehicle.command = ActuatorCommand((throttle_pct,) * 4, (tilt_rad, -tilt_rad, 0.1, 0.0))
     s._last_target_us = 10**12          # no failsafe: the test commands the vehicle itself
 
@@ -90,16 +102,20 @@ def test_truth_builds_no_suite_and_sends_no_raw_sensor(sim):
 
 
 def test_sensors_leave_the_flight_and_the_other_generators_alone(sim):
-    """The suite has its own generator: the plant (gusts on) and the state stream's noise
-    are the same with and without sensors."""
+    """The suite has its own generator: the plant (gusts on) is the same with and without
+    sensors; with them, what the vehicle reports is its estimator's estimate (with its
+    covariances), without them the state stream of truth plus noise."""
     windy = dict(gusts_enabled=True, wind_speed_m_s=5.0, seed=7)
     a, b = Sitl(sim.with_changes(clock_mode="realtime", **windy)), sitl(sim, "rtk", **windy)
+    until_ready(a, b)
     for s in (a, b):
         fly(s)
     for _ in range(300):
         a.step(), b.step()
         assert a.state == b.state
-    assert a.measured() == b.measured()
+    assert a.measured().pose_covariance is None
+    assert repr(b.measured()) == repr(codec.measured_of(b.estimator.output()))   # NaNs alike
+    assert b.measured().pose_covariance is not None
 
 
 # --- the tick's readings ------------------------------------------------------------------
@@ -227,13 +243,18 @@ def test_gps_raw_int_of_the_rtk_receiver_at_its_arrival(sim):
     gnss = s.suite.params["gnss"]
     home = (sim.home_lat_deg, sim.home_lon_deg, sim.home_alt_m)
     arrived, sent = [], []
+    t0 = s.t_us
     for _ in range(1500):
         out = s.step()
         arrived += [r for r in s.readings if isinstance(r, GnssReading)]
         sent += [(s.t_us, o.msg, arrived[-1]) for o in out
                  if o.link == "gcs" and o.msg.get_type() == "GPS_RAW_INT"]
-    assert len(arrived) == 14                      # 10 Hz, the first (t = 0) at 110 ms
-    assert len(sent) == 7                          # the ground station's 5 Hz at most
+    # 10 Hz, each 110 ms after its time of validity (the ticks after fly()'s wait for the
+    # estimator); the ground station's 5 Hz at most: every other one
+    expected = [t for t in range(t0 + 1000, t0 + 1_500_001, 1000)
+                if t >= gnss.delay_us and (t - gnss.delay_us) % gnss.period_us == 0]
+    assert [r.arrival_us for r in arrived] == expected and len(expected) >= 14
+    assert len(sent) == (len(expected) + 1) // 2
     for t, m, r in sent:
         assert t == r.arrival_us == m.time_usec + gnss.delay_us and m.time_usec == r.t_us
         assert m.fix_type == mavlink.GPS_FIX_TYPE_RTK_FIXED == 6
@@ -272,17 +293,19 @@ def test_the_log_keeps_the_position_sources_latest_sample(sim, exact):
     rows = []
     s = Sitl(sim.with_changes(sensing=exact, clock_mode="realtime"), log_sink=rows.append)
     assert s.log_columns == list(LOG_COLUMNS) + ["mocap_t_us", "mocap_pos_n_m",
-                                                 "mocap_pos_e_m", "mocap_pos_d_m"]
+                                                 "mocap_pos_e_m", "mocap_pos_d_m"] \
+        + list(ESTIMATE_LOG_COLUMNS)
     first = s.log_row()
-    assert len(first) == len(s.log_columns) and all(math.isnan(v) for v in first[-4:])
+    src = slice(len(LOG_COLUMNS), len(LOG_COLUMNS) + 4)
+    assert len(first) == len(s.log_columns) and all(math.isnan(v) for v in first[src])
     fly(s)
     run(s, 500)
     assert all(len(r) == len(s.log_columns) for r in rows)
     t_us, *_ = rows[-1]
     latency = exact.mocap.latency_ticks * sim.dt_us
-    assert rows[-1][-4] == t_us - latency - (t_us - latency) % 10_000
+    assert rows[-1][src.start] == t_us - latency - (t_us - latency) % 10_000
     rtk = Sitl(sim.with_changes(sensing=sensing_profile("rtk", 1000, "t")))
-    assert rtk.log_columns[-4:] == ["gnss_t_us", "gnss_pos_n_m", "gnss_pos_e_m", "gnss_pos_d_m"]
+    assert rtk.log_columns[src] == ["gnss_t_us", "gnss_pos_n_m", "gnss_pos_e_m", "gnss_pos_d_m"]
 
 
 def test_the_specific_force_is_the_sensors_own_formula(sim, exact):
@@ -296,3 +319,55 @@ def test_the_specific_force_is_the_sensors_own_formula(sim, exact):
         a = (np.array(s.state.x[3:6]) - v0) / (sim.dt_us * 1e-6)
         expected = specific_force_frd(np.array(s.state.x[6:10]), a, sim.vehicle.gravity_m_s2)
         assert np.allclose(s.latest["imu"].accel_frd_m_s2, expected, rtol=0, atol=1e-9)
+
+
+# --- the estimator: what the vehicle reports ---------------------------------------------------
+
+def test_arming_waits_for_the_estimator(sim):
+    """PX4's preflight check: before the estimator has its attitude and a position, arming is
+    temporarily rejected (the companion retries) and a STATUSTEXT says why; then accepted."""
+    s = sitl(sim, "mocap")
+    assert not s.estimator_ready()
+    out = s.handle("gcs", command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1.0))
+    acks = [o.msg for o in out if o.msg.get_type() == "COMMAND_ACK"]
+    texts = [o.msg.text for o in out if o.msg.get_type() == "STATUSTEXT"]
+    assert acks[0].result == mavlink.MAV_RESULT_TEMPORARILY_REJECTED and not s.vehicle.armed
+    assert any("estimator not ready" in t for t in texts)
+    until_ready(s)
+    out = s.handle("gcs", command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1.0))
+    acks = [o.msg for o in out if o.msg.get_type() == "COMMAND_ACK"]
+    assert acks[0].result == mavlink.MAV_RESULT_ACCEPTED and s.vehicle.armed
+    assert Sitl(sim.with_changes(clock_mode="realtime")).estimator_ready()    # truth: no check
+
+
+def test_odometry_carries_the_estimate_and_its_covariances(sim):
+    s = sitl(sim, "mocap")
+    fly(s)
+    sent = run(s, 400)
+    odo = of(sent, "ODOMETRY", link="offboard")[-1][1]
+    e = s.estimator.output()
+    assert odo.estimator_type == mavlink.MAV_ESTIMATOR_TYPE_AUTOPILOT and odo.quality == 100
+    # the pose's variances on the diagonal of the upper triangle (x, y, z, roll, pitch, yaw)
+    diag = [odo.pose_covariance[i] for i in (0, 6, 11, 15, 18, 20)]
+    assert all(0.0 < v < 1e-4 for v in diag[:3]) and all(0.0 < v < 1e-3 for v in diag[3:])
+    assert all(0.0 < odo.velocity_covariance[i] for i in (0, 6, 11))
+    # it is the estimate (near the truth: millimetres), not the truth itself
+    pos = np.array([odo.x, odo.y, odo.z])
+    truth = np.array(s.state.x[0:3])
+    assert 0.0 < np.max(np.abs(pos - truth)) < 0.01
+    assert np.allclose(pos, e.pos_ned_m, atol=0.05)
+    # the ground station's ESTIMATOR_STATUS: aligned, position valid, its accuracies
+    status = of(sent, "ESTIMATOR_STATUS")
+    assert len(status) == 2                                    # 5 Hz over 0.4 s
+    st = status[-1][1]
+    assert st.flags & mavlink.ESTIMATOR_ATTITUDE and st.flags & mavlink.ESTIMATOR_POS_HORIZ_ABS
+    assert 0.0 < st.pos_horiz_accuracy < 0.01 and 0.0 < st.pos_vert_accuracy < 0.01
+
+
+def test_truth_reports_truth_plus_noise_and_no_estimator_status(sim):
+    s = Sitl(sim.with_changes(clock_mode="realtime"))
+    sent = run(s, 400)
+    assert s.estimator is None and not of(sent, "ESTIMATOR_STATUS")
+    odo = of(sent, "ODOMETRY", link="offboard")[-1][1]
+    assert odo.estimator_type == mavlink.MAV_ESTIMATOR_TYPE_NAIVE
+    assert all(math.isnan(v) for v in odo.pose_covariance)
