@@ -385,20 +385,18 @@ class Eskf:
                          self.x[0:3].tolist())
 
     def _fuse_reading(self, aid: Aid, r) -> None:
-        if aid == Aid.MOCAP_POS:
+        if aid in (Aid.MOCAP_POS, Aid.GNSS_POS):
+            # a position source: the first one places the filter; then its position, and the
+            # mocap's attitude or the receiver's velocity
             if not self._pos_init:
                 self._reset_position(r, r.t_us)
                 return
-            if not self._fuse(Aid.MOCAP_POS, r.t_us, r.pos_ned_m):
+            if not self._fuse(aid, r.t_us, r.pos_ned_m):
                 self._reset_if_lost(r)
-            self._fuse(Aid.MOCAP_ATT, r.t_us, r.quat_wxyz)
-        elif aid == Aid.GNSS_POS:
-            if not self._pos_init:
-                self._reset_position(r, r.t_us)
-                return
-            if not self._fuse(Aid.GNSS_POS, r.t_us, r.pos_ned_m):
-                self._reset_if_lost(r)
-            self._fuse(Aid.GNSS_VEL, r.t_us, r.vel_ned_m_s)
+            if aid == Aid.MOCAP_POS:
+                self._fuse(Aid.MOCAP_ATT, r.t_us, r.quat_wxyz)
+            else:
+                self._fuse(Aid.GNSS_VEL, r.t_us, r.vel_ned_m_s)
         elif aid == Aid.BARO:
             if not self._pos_init:
                 return                  # the offset is taken against a known height

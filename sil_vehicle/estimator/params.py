@@ -98,21 +98,11 @@ class EstimatorParams:
     def imu_period_us(self) -> int:
         return 1_000_000 // self.imu_rate_hz
 
-    @property
-    def has_mocap(self) -> bool:
-        return self.mocap_pos_noise_m is not None
-
-    @property
-    def has_gnss(self) -> bool:
-        return self.gnss_pos_noise_ne_m is not None
-
-    @property
-    def has_baro(self) -> bool:
-        return self.baro_noise_m is not None
-
-    @property
-    def has_mag(self) -> bool:
-        return self.mag_noise_gauss is not None
+    # which sensors the filter fuses: those whose noise figure is set
+    has_mocap = property(lambda self: self.mocap_pos_noise_m is not None)
+    has_gnss = property(lambda self: self.gnss_pos_noise_ne_m is not None)
+    has_baro = property(lambda self: self.baro_noise_m is not None)
+    has_mag = property(lambda self: self.mag_noise_gauss is not None)
 
     @classmethod
     def from_profile(cls, profile: SensingProfile, **overrides) -> EstimatorParams:
