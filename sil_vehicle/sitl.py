@@ -199,7 +199,7 @@ class Sitl:
         m = quat_to_dcm(*x[6:10])
         f = (m[0][0] * an + m[1][0] * ae + m[2][0] * ad, m[0][1] * an + m[1][1] * ae
              + m[2][1] * ad, m[0][2] * an + m[1][2] * ae + m[2][2] * ad)
-        truth = Truth.of(state.t_us, x[0:3], v, x[6:10], x[10:13], f, state.motor_pct)
+        truth = Truth(state.t_us, x[0:3], v, x[6:10], x[10:13], f, state.motor_pct)
         readings = self.suite.sample(state.t_us, truth)
         for r in readings:
             self.latest[SENSOR_OF[type(r)]] = r

@@ -16,6 +16,15 @@ Kalibr / PX4 (gazebo imu plugin) continuous-time model with the bias as a pure r
 
 `initial` draws the turn-on biases once from the injected generator; `step` is a pure function
 of (params, state, truth, noise) returning the next state and the reading.
+
+The IMU samples every physics tick, so its step is split for speed, the arithmetic unchanged
+(the same floating-point operations in the same order, so the same readings bit for bit):
+`noise_block` turns the standard normals of K samples (one (K, 18) draw, the same stream as K
+draws of 18) into what each sample adds, with NumPy over the whole block: the bias it sees (the
+random walk, a sequential `np.add.accumulate`), its scaled white noise and its vibration
+normals; `measure` then makes one reading from the tick's truth in plain floats (NumPy costs
+more per call than the arithmetic on 3-vectors). `step` is the two for one sample; the sensor
+suite calls them per block and per tick.
 """
 
 from __future__ import annotations
@@ -27,7 +36,8 @@ import numpy as np
 from sil_vehicle.sensors.noise import random_walk_std, white_std
 from sil_vehicle.sensors.truth import Truth
 
-__all__ = ["ImuParams", "ImuState", "ImuReading", "NOISE", "initial", "draw", "step"]
+__all__ = ["ImuParams", "ImuState", "ImuReading", "NOISE", "initial", "draw", "step",
+           "noise_block", "measure", "mean_throttle"]
 
 NOISE = 18      # standard normals per sample: w_g, w_a, w_vg, w_va, w_bg, w_ba (3 each)
 
@@ -91,14 +101,52 @@ def draw(rng: np.random.Generator) -> np.ndarray:
     return rng.standard_normal(NOISE)
 
 
-def step(p: ImuParams, s: ImuState, truth: Truth, w: np.ndarray) -> tuple[ImuState, ImuReading]:
-    n = truth.motor_pct.size
-    z = float(truth.motor_pct.sum()) / (100.0 * n) if n else 0.0
+def noise_block(p: ImuParams, s: ImuState,
+                w: np.ndarray) -> tuple[list[list[float]], ImuState]:
+    """What each of K samples adds, from their standard normals `w` (K, NOISE) and the state
+    before the first: per sample the list [bg (3), ba (3), sigma_g w_g (3), sigma_a w_a (3),
+    w_vg (3), w_va (3)]; and the state after the K-th."""
+    k = len(w)
+    steps = np.empty((k + 1, 6))
+    steps[0, :3], steps[0, 3:] = s.gyro_bias_frd_rad_s, s.accel_bias_frd_m_s2
+    steps[1:, :3] = p.gyro_bias_step_rad_s * w[:, 12:15]
+    steps[1:, 3:] = p.accel_bias_step_m_s2 * w[:, 15:18]
+    bias = np.add.accumulate(steps, axis=0)         # b[j] = b[j-1] + step_j, in order
+    rows = np.concatenate((bias[:k], p.gyro_white_rad_s * w[:, 0:3],
+                           p.accel_white_m_s2 * w[:, 3:6], w[:, 6:12]), axis=1)
+    return rows.tolist(), ImuState(bias[k, :3].copy(), bias[k, 3:].copy())
+
+
+def mean_throttle(motor_pct) -> float:
+    """The mean motor output as a fraction of full: the sum in NumPy's order (for fewer than 8
+    motors its reduction adds from the first in turn; from 8 on it is NumPy's own)."""
+    n = len(motor_pct)
+    if not n:
+        return 0.0
+    if n < 8:
+        total = motor_pct[0]
+        for i in range(1, n):
+            total += motor_pct[i]
+    else:
+        total = np.add.reduce(np.asarray(motor_pct, float))
+    return float(total) / (100.0 * n)
+
+
+def measure(p: ImuParams, truth: Truth, row: list[float]) -> ImuReading:
+    """The reading at `truth` from one sample's row of `noise_block`."""
+    z = mean_throttle(truth.motors)
     z2 = z * z
-    gyro = (truth.rates_frd_rad_s + s.gyro_bias_frd_rad_s + p.gyro_white_rad_s * w[0:3]
-            + p.gyro_vibration_rad_s * z2 * w[6:9])
-    accel = (truth.specific_force_frd_m_s2 + s.accel_bias_frd_m_s2 + p.accel_white_m_s2 * w[3:6]
-             + p.accel_vibration_m_s2 * z2 * w[9:12])
-    nxt = ImuState(s.gyro_bias_frd_rad_s + p.gyro_bias_step_rad_s * w[12:15],
-                   s.accel_bias_frd_m_s2 + p.accel_bias_step_m_s2 * w[15:18])
-    return nxt, ImuReading(truth.t_us, gyro, accel)
+    cg, ca = p.gyro_vibration_rad_s * z2, p.accel_vibration_m_s2 * z2
+    r, f = truth.rates, truth.force
+    return ImuReading(truth.t_us,
+                      np.array((r[0] + row[0] + row[6] + cg * row[12],
+                                r[1] + row[1] + row[7] + cg * row[13],
+                                r[2] + row[2] + row[8] + cg * row[14])),
+                      np.array((f[0] + row[3] + row[9] + ca * row[15],
+                                f[1] + row[4] + row[10] + ca * row[16],
+                                f[2] + row[5] + row[11] + ca * row[17])))
+
+
+def step(p: ImuParams, s: ImuState, truth: Truth, w: np.ndarray) -> tuple[ImuState, ImuReading]:
+    rows, nxt = noise_block(p, s, np.asarray(w, float).reshape(1, NOISE))
+    return nxt, measure(p, truth, rows[0])

@@ -78,6 +78,6 @@ def draw(rng: np.random.Generator) -> np.ndarray:
 
 
 def step(p: MagParams, s: MagState, truth: Truth, w: np.ndarray) -> tuple[MagState, MagReading]:
-    m = rotate_to_body(truth.quat_wxyz, p.field_ned_gauss) + s.bias_frd_gauss \
+    m = rotate_to_body(truth.quat, p.field_ned_gauss) + s.bias_frd_gauss \
         + p.white_gauss * w[0:3]
     return MagState(s.bias_frd_gauss + p.bias_step_gauss * w[3:6]), MagReading(truth.t_us, m)

@@ -80,7 +80,7 @@ def sample(p: MocapParams, s: MocapState, truth: Truth, w: np.ndarray) -> MocapS
         return s
     reading = MocapReading(truth.t_us, truth.t_us + p.latency_us,
                            truth.pos_ned_m + p.position_noise_m * w[0:3],
-                           perturb_quat(truth.quat_wxyz, p.attitude_noise_rad * w[3:6]))
+                           perturb_quat(truth.quat, p.attitude_noise_rad * w[3:6]))
     return MocapState(delay.push(s.pending, reading, p.capacity))
 
 
