@@ -52,6 +52,7 @@ SENSOR_OF = {imu.ImuReading: "imu", baro.BaroReading: "baro", mag.MagReading: "m
              gnss.GnssReading: "gnss", mocap.MocapReading: "mocap"}
 # the raw-sensor messages sent at a reading's arrival (at most at the link's rate)
 ON_ARRIVAL = {"gnss": "GPS_RAW_INT", "mocap": "ATT_POS_MOCAP"}
+ARRIVING = frozenset(cls for cls, name in SENSOR_OF.items() if name in ON_ARRIVAL)
 
 
 @dataclass(frozen=True)
@@ -317,7 +318,11 @@ class Sitl:
     def _due_streams(self, everything: bool = False) -> list[Outgoing]:
         """Streams whose period divides the current tick (or one of each enabled stream), and
         the raw sensors' messages of the readings that arrived at this tick."""
-        out = self._arrivals() if self._on_arrival and self.readings else []
+        # the suite lists the delayed sensors' readings last: none arrived unless the last
+        # reading is one (most ticks hold the IMU's alone)
+        readings = self.readings
+        out = (self._arrivals() if self._on_arrival and readings
+               and type(readings[-1]) in ARRIVING else [])
         if not everything and self.tick % self._period_gcd():
             return out                  # most ticks: nothing is due (cheap test first)
         skip = self._not_periodic
