@@ -125,8 +125,8 @@ def mean_throttle(motor_pct) -> float:
         return 0.0
     if n < 8:
         total = motor_pct[0]
-        for i in range(1, n):
-            total += motor_pct[i]
+        for m in motor_pct[1:]:
+            total += m
     else:
         total = np.add.reduce(np.asarray(motor_pct, float))
     return float(total) / (100.0 * n)
@@ -134,17 +134,17 @@ def mean_throttle(motor_pct) -> float:
 
 def measure(p: ImuParams, truth: Truth, row: list[float]) -> ImuReading:
     """The reading at `truth` from one sample's row of `noise_block`."""
+    bg0, bg1, bg2, ba0, ba1, ba2, ng0, ng1, ng2, na0, na1, na2, vg0, vg1, vg2, va0, va1, va2 = row
+    r0, r1, r2 = truth.rates
+    f0, f1, f2 = truth.force
     z = mean_throttle(truth.motors)
     z2 = z * z
     cg, ca = p.gyro_vibration_rad_s * z2, p.accel_vibration_m_s2 * z2
-    r, f = truth.rates, truth.force
     return ImuReading(truth.t_us,
-                      np.array((r[0] + row[0] + row[6] + cg * row[12],
-                                r[1] + row[1] + row[7] + cg * row[13],
-                                r[2] + row[2] + row[8] + cg * row[14])),
-                      np.array((f[0] + row[3] + row[9] + ca * row[15],
-                                f[1] + row[4] + row[10] + ca * row[16],
-                                f[2] + row[5] + row[11] + ca * row[17])))
+                      np.array((r0 + bg0 + ng0 + cg * vg0, r1 + bg1 + ng1 + cg * vg1,
+                                r2 + bg2 + ng2 + cg * vg2)),
+                      np.array((f0 + ba0 + na0 + ca * va0, f1 + ba1 + na1 + ca * va1,
+                                f2 + ba2 + na2 + ca * va2)))
 
 
 def step(p: ImuParams, s: ImuState, truth: Truth, w: np.ndarray) -> tuple[ImuState, ImuReading]:

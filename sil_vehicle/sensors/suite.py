@@ -94,36 +94,38 @@ class _Slot:
 class _Imu:
     """The IMU: a block of samples' noise (`imu.noise_block`) consumed one row per sample."""
 
-    __slots__ = ("params", "_rng", "_k", "_w", "_rows", "_i", "_after")
+    __slots__ = ("params", "_rng", "_k", "_w", "_rows", "_after")
 
     def __init__(self, params: imu.ImuParams, rng: np.random.Generator) -> None:
         self.params, self._rng, self._k = params, rng, max(1, params.rate_hz)
         self._after = imu.initial(params, rng)         # the state after the block
         self._w = np.empty((0, imu.NOISE))             # the block's standard normals
-        self._rows: list[list[float]] = []
-        self._i = 0                                    # the next sample's row
+        self._rows: list[list[float]] = []             # its rows still to use, the next last
+
+    def _fill(self, s: imu.ImuState, w: np.ndarray) -> list[list[float]]:
+        self._w = w
+        rows, self._after = imu.noise_block(self.params, s, w)
+        rows.reverse()
+        self._rows = rows
+        return rows
 
     def step(self, truth: Truth) -> imu.ImuReading:
-        if self._i == len(self._rows):
-            self._w = self._rng.standard_normal((self._k, imu.NOISE))
-            self._rows, self._after = imu.noise_block(self.params, self._after, self._w)
-            self._i = 0
-        self._i += 1
-        return imu.measure(self.params, truth, self._rows[self._i - 1])
+        rows = self._rows or self._fill(self._after,
+                                        self._rng.standard_normal((self._k, imu.NOISE)))
+        return imu.measure(self.params, truth, rows.pop())
 
     @property
     def state(self) -> imu.ImuState:
         """The state before the next sample."""
-        if self._i == len(self._rows):
+        if not self._rows:
             return self._after
-        row = self._rows[self._i]
+        row = self._rows[-1]
         return imu.ImuState(np.array(row[0:3]), np.array(row[3:6]))
 
     @state.setter
     def state(self, s: imu.ImuState) -> None:
-        self._w = self._w[self._i:]                    # the block's remaining normals, from s
-        self._rows, self._after = imu.noise_block(self.params, s, self._w)
-        self._i = 0
+        # the block's remaining normals, from s on
+        self._fill(s, self._w[len(self._w) - len(self._rows):])
 
 
 class _States(MutableMapping):
