@@ -23,13 +23,15 @@ The IMU samples every physics tick, so its step is split for speed, the arithmet
 draws of 18) into what each sample adds, with NumPy over the whole block: the bias it sees (the
 random walk, a sequential `np.add.accumulate`), its scaled white noise and its vibration
 normals; `measure` then makes one reading from the tick's truth in plain floats (NumPy costs
-more per call than the arithmetic on 3-vectors). `step` is the two for one sample; the sensor
+more per call than the arithmetic on 3-vectors), and the reading keeps them as floats (`gyro`,
+`accel`; the arrays `gyro_frd_rad_s`, `accel_frd_m_s2` are built when read). `step` is the two for one sample; the sensor
 suite calls them per block and per tick.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Sequence
 
 import numpy as np
 
@@ -82,13 +84,24 @@ class ImuState:
 
 @dataclass(frozen=True)
 class ImuReading:
+    """One IMU sample. Its vectors are held as the floats the model computes (a reading is
+    built every physics tick, and a consumer at that rate wants floats); the arrays are built on
+    access."""
     t_us: int                           # time of validity (no delay: also its arrival)
-    gyro_frd_rad_s: np.ndarray          # (3,)
-    accel_frd_m_s2: np.ndarray          # (3,) specific force
+    gyro: Sequence[float]               # (3,) body FRD rates, rad/s
+    accel: Sequence[float]              # (3,) specific force, body FRD, m/s^2
 
     @property
     def arrival_us(self) -> int:
         return self.t_us
+
+    @property
+    def gyro_frd_rad_s(self) -> np.ndarray:     # (3,), a new array per access
+        return np.array(self.gyro, dtype=float)
+
+    @property
+    def accel_frd_m_s2(self) -> np.ndarray:     # (3,), a new array per access
+        return np.array(self.accel, dtype=float)
 
 
 def initial(params: ImuParams, rng: np.random.Generator) -> ImuState:
@@ -141,10 +154,10 @@ def measure(p: ImuParams, truth: Truth, row: list[float]) -> ImuReading:
     z2 = z * z
     cg, ca = p.gyro_vibration_rad_s * z2, p.accel_vibration_m_s2 * z2
     return ImuReading(truth.t_us,
-                      np.array((r0 + bg0 + ng0 + cg * vg0, r1 + bg1 + ng1 + cg * vg1,
-                                r2 + bg2 + ng2 + cg * vg2)),
-                      np.array((f0 + ba0 + na0 + ca * va0, f1 + ba1 + na1 + ca * va1,
-                                f2 + ba2 + na2 + ca * va2)))
+                      (r0 + bg0 + ng0 + cg * vg0, r1 + bg1 + ng1 + cg * vg1,
+                       r2 + bg2 + ng2 + cg * vg2),
+                      (f0 + ba0 + na0 + ca * va0, f1 + ba1 + na1 + ca * va1,
+                       f2 + ba2 + na2 + ca * va2))
 
 
 def step(p: ImuParams, s: ImuState, truth: Truth, w: np.ndarray) -> tuple[ImuState, ImuReading]:
