@@ -24,8 +24,8 @@ draws of 18) into what each sample adds, with NumPy over the whole block: the bi
 random walk, a sequential `np.add.accumulate`), its scaled white noise and its vibration
 normals; `measure` then makes one reading from the tick's truth in plain floats (NumPy costs
 more per call than the arithmetic on 3-vectors), and the reading keeps them as floats (`gyro`,
-`accel`; the arrays `gyro_frd_rad_s`, `accel_frd_m_s2` are built when read). `step` is the two for one sample; the sensor
-suite calls them per block and per tick.
+`accel`; the arrays `gyro_frd_rad_s`, `accel_frd_m_s2` are built when read). `step` is the two
+for one sample; the sensor suite calls them per block and per tick.
 """
 
 from __future__ import annotations
@@ -132,17 +132,17 @@ def noise_block(p: ImuParams, s: ImuState,
 
 def mean_throttle(motor_pct) -> float:
     """The mean motor output as a fraction of full: the sum in NumPy's order (for fewer than 8
-    motors its reduction adds from the first in turn; from 8 on it is NumPy's own)."""
+    motors its reduction adds to 0.0 each in turn; from 8 on it is NumPy's own)."""
     n = len(motor_pct)
-    if not n:
-        return 0.0
-    if n < 8:
-        total = motor_pct[0]
-        for m in motor_pct[1:]:
-            total += m
-    else:
-        total = np.add.reduce(np.asarray(motor_pct, float))
-    return float(total) / (100.0 * n)
+    if n == 4:                      # the quad-tilt-rotor's, every tick: the loop below unrolled
+        m0, m1, m2, m3 = motor_pct
+        return float(0.0 + m0 + m1 + m2 + m3) / 400.0
+    if n >= 8:
+        return float(np.add.reduce(np.asarray(motor_pct, float))) / (100.0 * n)
+    total = 0.0
+    for m in motor_pct:
+        total += m
+    return float(total) / (100.0 * n) if n else 0.0
 
 
 def measure(p: ImuParams, truth: Truth, row: list[float]) -> ImuReading:

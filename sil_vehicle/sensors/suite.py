@@ -183,8 +183,10 @@ class SensorSuite:
         if t_us != truth.t_us or t_us % self._dt_us:
             raise ValueError(f"sample: t_us {t_us} must be a physics tick (a multiple of "
                              f"{self._dt_us} us) and equal truth.t_us ({truth.t_us})")
-        out: list[Reading] = [step(truth) for period, step in self._immediate
-                              if not t_us % period]
+        out: list[Reading] = []
+        for period, step in self._immediate:
+            if not t_us % period:
+                out.append(step(truth))
         for period, slot in self._delayed:
             if not t_us % period:
                 slot.sample(truth)
