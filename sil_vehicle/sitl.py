@@ -23,7 +23,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from sil_vehicle.config import STREAMS, SimParams
 from sil_vehicle.faultscript import Event, ParamAction
-from sil_vehicle.frames import euler_to_quat, quat_to_dcm, quat_to_euler
+from sil_vehicle.frames import euler_to_quat, quat_to_euler
 from sil_vehicle.mavlink import codec
 from sil_vehicle.mavlink.codec import Measured, RxCounters
 from sil_vehicle.failsafe import FailsafeLander

@@ -30,8 +30,8 @@ for one sample; the sensor suite calls them per block and per tick.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Sequence
 
 import numpy as np
 

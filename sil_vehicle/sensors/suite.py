@@ -54,7 +54,7 @@ _PER_SAMPLE = frozenset({"mocap"})      # draws that mix normals and uniforms: n
 class _Normals:
     """A sensor's standard normals, `n` per sample, drawn `k` samples at a time."""
 
-    __slots__ = ("_rng", "_n", "_k", "_w", "_i")
+    __slots__ = ("_i", "_k", "_n", "_rng", "_w")
 
     def __init__(self, rng: np.random.Generator, n: int, k: int) -> None:
         self._rng, self._n, self._k = rng, n, k
@@ -71,7 +71,7 @@ class _Normals:
 class _Slot:
     """A sensor other than the IMU: its frozen state, stepped by its module at its rate."""
 
-    __slots__ = ("module", "params", "state", "draw")
+    __slots__ = ("draw", "module", "params", "state")
 
     def __init__(self, name: str, module: Any, params: Any, rng: np.random.Generator) -> None:
         self.module, self.params = module, params
@@ -94,7 +94,7 @@ class _Slot:
 class _Imu:
     """The IMU: a block of samples' noise (`imu.noise_block`) consumed one row per sample."""
 
-    __slots__ = ("params", "_rng", "_k", "_w", "_rows", "_after")
+    __slots__ = ("_after", "_k", "_rng", "_rows", "_w", "params")
 
     def __init__(self, params: imu.ImuParams, rng: np.random.Generator) -> None:
         self.params, self._rng, self._k = params, rng, max(1, params.rate_hz)

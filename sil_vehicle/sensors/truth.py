@@ -10,7 +10,8 @@ time (for the models that do array arithmetic at a sensor's own rate, and for te
 
 from __future__ import annotations
 
-from typing import NamedTuple, Sequence
+from collections.abc import Sequence
+from typing import NamedTuple
 
 import numpy as np
 

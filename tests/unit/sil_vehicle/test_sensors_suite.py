@@ -200,3 +200,20 @@ def test_an_assigned_imu_state_holds_from_the_next_sample():
         (r, *_), truth = suite.sample(k * DT_US, moving(k * DT_US)), moving(k * DT_US)
         s, expected = imu.step(prof.imu, s, truth, imu.draw(rng))
         assert r == expected
+
+
+def test_an_imu_state_assigned_before_the_first_sample_is_its_start():
+    """A test's way to fix the biases (states["imu"] set on a fresh suite): the readings are the
+    one-sample model's from that state with the IMU's own stream after its turn-on draw."""
+    bias = imu.ImuState(np.array((0.012, -0.02, 0.015)), np.array((0.25, -0.3, 0.2)))
+    prof = load_sensing("mocap", 1000)
+    suite = SensorSuite(prof, np.random.default_rng(6))
+    suite.states["imu"] = bias
+    rng = np.random.default_rng(6).spawn(5)[0]
+    imu.initial(prof.imu, rng)
+    s = bias
+    for k in range(1200):
+        truth = moving(k * DT_US)
+        (r, *_), (s, expected) = suite.sample(k * DT_US, truth), imu.step(prof.imu, s, truth,
+                                                                           imu.draw(rng))
+        assert r == expected
