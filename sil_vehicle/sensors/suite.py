@@ -49,6 +49,7 @@ Reading = Union[imu.ImuReading, baro.BaroReading, mag.MagReading, gnss.GnssReadi
 _IMMEDIATE = (("imu", imu), ("baro", baro), ("mag", mag))
 _DELAYED = (("gnss", gnss), ("mocap", mocap))
 _PER_SAMPLE = frozenset({"mocap"})      # draws that mix normals and uniforms: not in blocks
+_NEVER = float("inf")                   # no reading in a delay line
 
 
 class _Normals:
@@ -69,15 +70,17 @@ class _Normals:
 
 
 class _Slot:
-    """A sensor other than the IMU: its frozen state, stepped by its module at its rate."""
+    """A sensor other than the IMU: its frozen state, stepped by its module at its rate; for a
+    delayed sensor, `due_us` the arrival time of the first reading in its line."""
 
-    __slots__ = ("draw", "module", "params", "state")
+    __slots__ = ("draw", "due_us", "module", "params", "state")
 
     def __init__(self, name: str, module: Any, params: Any, rng: np.random.Generator) -> None:
         self.module, self.params = module, params
         self.state = module.initial(params, rng)
         self.draw = ((lambda: module.draw(rng)) if name in _PER_SAMPLE
                      else _Normals(rng, module.NOISE, max(1, params.rate_hz)))
+        self.due_us = _NEVER
 
     def step(self, truth: Truth) -> Reading:
         self.state, reading = self.module.step(self.params, self.state, truth, self.draw())
@@ -85,10 +88,20 @@ class _Slot:
 
     def sample(self, truth: Truth) -> None:
         self.state = self.module.sample(self.params, self.state, truth, self.draw())
+        self._due()
 
     def release(self, t_us: int) -> tuple[Reading, ...]:
         self.state, arrived = self.module.release(self.state, t_us)
+        self._due()
         return arrived
+
+    def _due(self) -> None:
+        pending = getattr(self.state, "pending", ())
+        self.due_us = pending[0].arrival_us if pending else _NEVER
+
+    def set_state(self, s: Any) -> None:
+        self.state = s
+        self._due()
 
 
 class _Imu:
@@ -122,8 +135,7 @@ class _Imu:
         row = self._rows[-1]
         return imu.ImuState(np.array(row[0:3]), np.array(row[3:6]))
 
-    @state.setter
-    def state(self, s: imu.ImuState) -> None:
+    def set_state(self, s: imu.ImuState) -> None:
         # the block's remaining normals, from s on
         self._fill(s, self._w[len(self._w) - len(self._rows):])
 
@@ -138,7 +150,7 @@ class _States(MutableMapping):
         return self._slots[name].state
 
     def __setitem__(self, name: str, state: Any) -> None:
-        self._slots[name].state = state
+        self._slots[name].set_state(state)
 
     def __delitem__(self, name: str) -> None:
         raise TypeError("a sensor's state cannot be removed")
@@ -190,7 +202,6 @@ class SensorSuite:
         for period, slot in self._delayed:
             if not t_us % period:
                 slot.sample(truth)
-            pending = slot.state.pending
-            if pending and pending[0].arrival_us <= t_us:
+            if slot.due_us <= t_us:
                 out.extend(slot.release(t_us))
         return out

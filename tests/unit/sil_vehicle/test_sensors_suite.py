@@ -217,3 +217,15 @@ def test_an_imu_state_assigned_before_the_first_sample_is_its_start():
         (r, *_), (s, expected) = suite.sample(k * DT_US, truth), imu.step(prof.imu, s, truth,
                                                                            imu.draw(rng))
         assert r == expected
+
+
+def test_an_assigned_delay_line_is_released_when_due():
+    """states["mocap"] set with a reading in flight: it arrives at its arrival time."""
+    suite = SensorSuite(load_sensing("mocap", 1000), np.random.default_rng(8))
+    for k in range(5):
+        suite.sample(k * DT_US, moving(k * DT_US))
+    flying = mocap.MocapReading(4_000, 7_000, np.zeros(3), np.array((1.0, 0.0, 0.0, 0.0)))
+    suite.states["mocap"] = mocap.MocapState((flying,))
+    got = {k: [r for r in suite.sample(k * DT_US, moving(k * DT_US))
+               if isinstance(r, mocap.MocapReading)] for k in range(5, 9)}
+    assert got == {5: [], 6: [], 7: [flying], 8: []}
