@@ -25,7 +25,7 @@ from sil_vehicle.config import STREAMS, SimParams
 from sil_vehicle.estimator.eskf import Eskf
 from sil_vehicle.estimator.params import EstimatorParams
 from sil_vehicle.faultscript import Event, ParamAction
-from sil_vehicle.frames import euler_to_quat, quat_to_dcm, quat_to_euler
+from sil_vehicle.frames import euler_to_quat, quat_to_euler
 from sil_vehicle.mavlink import codec
 from sil_vehicle.mavlink.codec import Measured, RxCounters
 from sil_vehicle.failsafe import FailsafeLander
@@ -54,6 +54,7 @@ SENSOR_OF = {imu.ImuReading: "imu", baro.BaroReading: "baro", mag.MagReading: "m
              gnss.GnssReading: "gnss", mocap.MocapReading: "mocap"}
 # the raw-sensor messages sent at a reading's arrival (at most at the link's rate)
 ON_ARRIVAL = {"gnss": "GPS_RAW_INT", "mocap": "ATT_POS_MOCAP"}
+ARRIVING = frozenset(cls for cls, name in SENSOR_OF.items() if name in ON_ARRIVAL)
 
 
 @dataclass(frozen=True)
@@ -207,16 +208,24 @@ class Sitl:
         v0, v = self._sensed_vel, x[3:6]
         self._sensed_vel = v
         dt = self._dt_s
-        # (a - g) in NED, then R^T of it (sensors.truth.specific_force_frd, in plain floats)
+        # (a - g) in NED, then R^T of it (sensors.truth.specific_force_frd, in plain floats;
+        # R's entries spelled as frames.quat_to_dcm spells them, inline: this runs every tick)
         an, ae, ad = ((v[0] - v0[0]) / dt, (v[1] - v0[1]) / dt,
                       (v[2] - v0[2]) / dt - self._gravity)
-        m = quat_to_dcm(*x[6:10])
-        f = (m[0][0] * an + m[1][0] * ae + m[2][0] * ad, m[0][1] * an + m[1][1] * ae
-             + m[2][1] * ad, m[0][2] * an + m[1][2] * ae + m[2][2] * ad)
-        truth = Truth.of(state.t_us, x[0:3], v, x[6:10], x[10:13], f, state.motor_pct)
-        readings = self.suite.sample(state.t_us, truth)
+        q = x[6:10]
+        qw, qx, qy, qz = q
+        f = ((1 - 2 * (qy * qy + qz * qz)) * an + 2 * (qx * qy + qw * qz) * ae
+             + 2 * (qx * qz - qw * qy) * ad,
+             2 * (qx * qy - qw * qz) * an + (1 - 2 * (qx * qx + qz * qz)) * ae
+             + 2 * (qy * qz + qw * qx) * ad,
+             2 * (qx * qz + qw * qy) * an + 2 * (qy * qz - qw * qx) * ae
+             + (1 - 2 * (qx * qx + qy * qy)) * ad)
+        t_us = state.t_us
+        readings = self.suite.sample(t_us, Truth(t_us, x[0:3], v, q, x[10:13], f,
+                                                 state.motor_pct))
+        latest = self.latest
         for r in readings:
-            self.latest[SENSOR_OF[type(r)]] = r
+            latest[SENSOR_OF[type(r)]] = r
         return readings
 
     def _arrivals(self) -> list[Outgoing]:
@@ -323,7 +332,11 @@ class Sitl:
     def _due_streams(self, everything: bool = False) -> list[Outgoing]:
         """Streams whose period divides the current tick (or one of each enabled stream), and
         the raw sensors' messages of the readings that arrived at this tick."""
-        out = self._arrivals() if self._on_arrival and self.readings else []
+        # the suite lists the delayed sensors' readings last: none arrived unless the last
+        # reading is one (most ticks hold the IMU's alone)
+        readings = self.readings
+        out = (self._arrivals() if self._on_arrival and readings
+               and type(readings[-1]) in ARRIVING else [])
         if not everything and self.tick % self._period_gcd():
             return out                  # most ticks: nothing is due (cheap test first)
         skip = self._not_periodic

@@ -250,7 +250,7 @@ def highres_imu(imu, baro, mag, fields_updated: int) -> mavlink.MAVLink_message:
     fields 0): acceleration m/s^2 (specific force) and rates rad/s body FRD, field gauss body
     FRD, pressure hPa, pressure altitude m AMSL, temperature degC; `time_usec` the IMU sample's
     time; `fields_updated` the HIGHRES_IMU_UPDATED bits of what is new in this message."""
-    acc, gyro = imu.accel_frd_m_s2, imu.gyro_frd_rad_s
+    acc, gyro = imu.accel, imu.gyro
     m = mag.field_frd_gauss if mag is not None else (0.0, 0.0, 0.0)
     p_hpa, alt, temp = ((baro.pressure_pa / PA_PER_HPA, baro.pressure_alt_m, baro.temperature_degc)
                         if baro is not None else (0.0, 0.0, 0.0))

@@ -83,7 +83,7 @@ def draw(rng: np.random.Generator) -> np.ndarray:
 
 def step(p: BaroParams, s: BaroState, truth: Truth,
          w: np.ndarray) -> tuple[BaroState, BaroReading]:
-    h = p.home_alt_m - float(truth.pos_ned_m[2]) + s.drift_m + p.noise_m * float(w[0])
+    h = p.home_alt_m - truth.pos[2] + s.drift_m + p.noise_m * float(w[0])
     a, b = p.drift_ab
     return (BaroState(a * s.drift_m + b * float(w[1])),
             BaroReading(truth.t_us, isa_pressure_pa(h), h, isa_temperature_degc(h)))

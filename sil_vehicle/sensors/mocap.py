@@ -9,6 +9,10 @@ Model (k the sample index, w.[k] independent standard normals, u[k] uniform on [
 
 A dropped sample produces no reading (the estimator sees a gap, as with a lost marker set); the
 noise is drawn for it all the same, so a dropout never shifts the random stream.
+
+The arithmetic is in plain floats where NumPy's per-call cost outweighs it (the same operations
+in the same order: the same readings bit for bit); `draw` fills one array in the stream's order
+(six normals, then the uniform).
 """
 
 from __future__ import annotations
@@ -68,19 +72,31 @@ def initial(params: MocapParams, rng: np.random.Generator) -> MocapState:
 
 
 def draw(rng: np.random.Generator) -> np.ndarray:
-    return np.concatenate((rng.standard_normal(6), rng.random(1)))
+    w = np.empty(NOISE)
+    rng.standard_normal(out=w[:6])
+    w[6] = rng.random()
+    return w
 
 
 def dropped(p: MocapParams, t_us: int, u: float) -> bool:
-    return u < p.dropout_probability or any(a <= t_us < b for a, b in p.dropout_windows_us)
+    if u < p.dropout_probability:
+        return True
+    for a, b in p.dropout_windows_us:
+        if a <= t_us < b:
+            return True
+    return False
 
 
 def sample(p: MocapParams, s: MocapState, truth: Truth, w: np.ndarray) -> MocapState:
-    if dropped(p, truth.t_us, float(w[6])):
+    t_us = truth.t_us
+    if dropped(p, t_us, float(w[6])):
         return s
-    reading = MocapReading(truth.t_us, truth.t_us + p.latency_us,
-                           truth.pos_ned_m + p.position_noise_m * w[0:3],
-                           perturb_quat(truth.quat_wxyz, p.attitude_noise_rad * w[3:6]))
+    sigma = p.position_noise_m
+    n, e, d = truth.pos
+    w0, w1, w2 = w[0:3].tolist()
+    reading = MocapReading(t_us, t_us + p.latency_us,
+                           np.array((n + sigma * w0, e + sigma * w1, d + sigma * w2)),
+                           perturb_quat(truth.quat, p.attitude_noise_rad * w[3:6]))
     return MocapState(delay.push(s.pending, reading, p.capacity))
 
 

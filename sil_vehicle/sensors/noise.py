@@ -46,15 +46,19 @@ def rotate_to_body(quat_wxyz: np.ndarray, v_ned: np.ndarray) -> np.ndarray:
     return np.array(quat_to_dcm(*quat_wxyz)).T @ v_ned
 
 
-def perturb_quat(quat_wxyz: np.ndarray, angle_frd_rad: np.ndarray) -> np.ndarray:
+def perturb_quat(quat_wxyz, angle_frd_rad: np.ndarray) -> np.ndarray:
     """q * exp(angle / 2): the attitude turned by the small body-frame rotation vector
-    `angle_frd_rad` (the attitude error of a pose sensor), normalised."""
-    theta = float(np.linalg.norm(angle_frd_rad))
+    `angle_frd_rad` (the attitude error of a pose sensor), normalised. The norms are
+    np.linalg.norm's own computation (sqrt of the vector's dot with itself), spelled out to
+    spare its overhead; the rest in plain floats."""
+    a = np.asarray(angle_frd_rad, dtype=float)
+    theta = math.sqrt(a.dot(a))
     if theta == 0.0:
         return np.array(quat_wxyz, dtype=float)
     s = math.sin(theta / 2) / theta
-    dw, dx, dy, dz = math.cos(theta / 2), *(s * angle_frd_rad)
+    ax, ay, az = a.tolist()
+    dw, dx, dy, dz = math.cos(theta / 2), s * ax, s * ay, s * az
     w, x, y, z = quat_wxyz
     q = np.array((w * dw - x * dx - y * dy - z * dz, w * dx + x * dw + y * dz - z * dy,
                   w * dy - x * dz + y * dw + z * dx, w * dz + x * dy - y * dx + z * dw))
-    return q / np.linalg.norm(q)
+    return q / math.sqrt(q.dot(q))

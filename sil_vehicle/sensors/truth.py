@@ -1,12 +1,17 @@
-"""What the plant knows at a tick, as the sensors read it: a small frozen record.
+"""What the plant knows at a tick, as the sensors read it: a small immutable record.
 
-The vehicle builds one per physics tick (the next step wires it); the sensor models never see
-the vehicle itself. Arrays are float64, shapes in the comments.
+The vehicle builds one per physics tick (`Sitl._sense`); the sensor models never see the vehicle
+itself. The record holds plain tuples of floats (`pos`, `vel`, `quat`, `rates`, `force`,
+`motors`): building it is the vehicle's per-tick cost, so it converts nothing, and the models
+read their floats from it directly. The same quantities as float64 arrays, under the names the
+readings use (`pos_ned_m`, ..., shapes in the comments), are built on access, a new array each
+time (for the models that do array arithmetic at a sensor's own rate, and for tests).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Sequence
+from typing import NamedTuple
 
 import numpy as np
 
@@ -17,24 +22,27 @@ __all__ = ["Truth", "specific_force_frd", "STANDARD_GRAVITY_M_S2"]
 STANDARD_GRAVITY_M_S2 = 9.80665
 
 
-@dataclass(frozen=True)
-class Truth:
+def _floats(seq) -> tuple[float, ...]:
+    return tuple(np.asarray(seq, float).tolist())
+
+
+class Truth(NamedTuple):
     t_us: int
-    pos_ned_m: np.ndarray                 # (3,)
-    vel_ned_m_s: np.ndarray               # (3,)
-    quat_wxyz: np.ndarray                 # (4,) body FRD -> world NED, scalar first
-    rates_frd_rad_s: np.ndarray           # (3,)
-    specific_force_frd_m_s2: np.ndarray   # (3,) what an accelerometer reads: (a - g) in body
-    motor_pct: np.ndarray                 # (n_motors,) throttle the motors produce, 0..100
+    pos: tuple[float, ...]        # (3,) NED position, m
+    vel: tuple[float, ...]        # (3,) NED velocity, m/s
+    quat: tuple[float, ...]       # (4,) body FRD -> world NED, scalar first
+    rates: tuple[float, ...]      # (3,) body FRD rates, rad/s
+    force: tuple[float, ...]      # (3,) what an accelerometer reads: (a - g) in body FRD, m/s^2
+    motors: tuple[float, ...]     # (n_motors,) throttle the motors produce, 0..100 %
 
     @classmethod
-    def of(cls, t_us: int, pos_ned_m, vel_ned_m_s, quat_wxyz, rates_frd_rad_s,
-           specific_force_frd_m_s2, motor_pct) -> "Truth":
-        """From any sequences (tuples of the vehicle's state), as float arrays."""
-        f = np.asarray
-        return cls(int(t_us), f(pos_ned_m, float), f(vel_ned_m_s, float), f(quat_wxyz, float),
-                   f(rates_frd_rad_s, float), f(specific_force_frd_m_s2, float),
-                   f(motor_pct, float))
+    def of(cls, t_us: int, pos_ned_m: Sequence[float], vel_ned_m_s: Sequence[float],
+           quat_wxyz: Sequence[float], rates_frd_rad_s: Sequence[float],
+           specific_force_frd_m_s2: Sequence[float], motor_pct: Sequence[float]) -> "Truth":
+        """From any sequences (arrays, tuples of the vehicle's state), as tuples of floats."""
+        f = _floats
+        return cls(int(t_us), f(pos_ned_m), f(vel_ned_m_s), f(quat_wxyz), f(rates_frd_rad_s),
+                   f(specific_force_frd_m_s2), f(motor_pct))
 
     @classmethod
     def at_rest(cls, t_us: int = 0, gravity_m_s2: float = STANDARD_GRAVITY_M_S2,
@@ -43,6 +51,31 @@ class Truth:
         q = np.asarray(quat_wxyz, float)
         return cls.of(t_us, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), q, (0.0, 0.0, 0.0),
                       specific_force_frd(q, np.zeros(3), gravity_m_s2), motor_pct)
+
+    # the same as float64 arrays (a new one per access)
+    @property
+    def pos_ned_m(self) -> np.ndarray:                  # (3,)
+        return np.array(self.pos)
+
+    @property
+    def vel_ned_m_s(self) -> np.ndarray:                # (3,)
+        return np.array(self.vel)
+
+    @property
+    def quat_wxyz(self) -> np.ndarray:                  # (4,)
+        return np.array(self.quat)
+
+    @property
+    def rates_frd_rad_s(self) -> np.ndarray:            # (3,)
+        return np.array(self.rates)
+
+    @property
+    def specific_force_frd_m_s2(self) -> np.ndarray:    # (3,)
+        return np.array(self.force)
+
+    @property
+    def motor_pct(self) -> np.ndarray:                  # (n_motors,)
+        return np.array(self.motors, dtype=float)
 
 
 def specific_force_frd(quat_wxyz: np.ndarray, accel_ned_m_s2: np.ndarray,

@@ -245,3 +245,93 @@ def test_the_package_map_names_every_module():
     named = {line.split()[0] for line in pkg.__doc__.splitlines()
              if line.startswith("    ") and not line.startswith("     ")}
     assert modules == named
+
+
+def test_a_block_of_normals_is_the_stream_of_one_draw_per_sample():
+    """What the suite's blocks rely on: a (K, n) draw gives the numbers of K draws of n, in
+    order, and leaves the generator where they would."""
+    for n in (imu.NOISE, baro.NOISE, mag.NOISE, gnss.NOISE):
+        a, b = np.random.default_rng(21), np.random.default_rng(21)
+        block = a.standard_normal((300, n))
+        assert block.tobytes() == np.array([b.standard_normal(n) for _ in range(300)]).tobytes()
+        assert a.standard_normal() == b.standard_normal()
+
+
+def test_mocap_draw_is_six_normals_then_a_uniform():
+    a, b = np.random.default_rng(22), np.random.default_rng(22)
+    for _ in range(200):
+        assert mocap.draw(a).tobytes() == np.concatenate(
+            (b.standard_normal(6), b.random(1))).tobytes()
+
+
+def test_mean_throttle_sums_in_numpy_s_order():
+    """imu.mean_throttle against NumPy's sum of the motor array (what the model was written
+    with), bit for bit, for 0 to 12 motors over wide-ranging values and signed zeros."""
+    rng = np.random.default_rng(23)
+    for n in range(13):
+        for _ in range(2000):
+            m = tuple((rng.random(n) * 10.0 ** rng.uniform(-3, 3, n)).tolist())
+            arr = np.asarray(m, float)
+            expected = float(arr.sum()) / (100.0 * n) if n else 0.0
+            assert imu.mean_throttle(m) == expected
+    for m in ((-0.0,) * 4, (-0.0, 0.0, -0.0, -0.0), (-0.0,) * 3):
+        expected = float(np.asarray(m).sum()) / (100.0 * len(m))
+        assert math.copysign(1.0, imu.mean_throttle(m)) == math.copysign(1.0, expected)
+
+
+def test_imu_noise_block_equals_one_step_per_sample():
+    """imu.noise_block's whole-block arithmetic (the bias walk by np.add.accumulate) against
+    the model's equations one sample at a time in NumPy, bit for bit."""
+    p = load_sensing("gnss", 1000).imu
+    rng = np.random.default_rng(24)
+    s0 = imu.initial(p, rng)
+    w = rng.standard_normal((500, imu.NOISE))
+    rows, after = imu.noise_block(p, s0, w)
+    bg, ba = s0.gyro_bias_frd_rad_s, s0.accel_bias_frd_m_s2
+    for k in range(500):
+        expected = np.concatenate((bg, ba, p.gyro_white_rad_s * w[k, 0:3],
+                                   p.accel_white_m_s2 * w[k, 3:6], w[k, 6:12]))
+        assert np.array(rows[k]).tobytes() == expected.tobytes()
+        bg = bg + p.gyro_bias_step_rad_s * w[k, 12:15]
+        ba = ba + p.accel_bias_step_m_s2 * w[k, 15:18]
+    assert after.gyro_bias_frd_rad_s.tobytes() == bg.tobytes()
+    assert after.accel_bias_frd_m_s2.tobytes() == ba.tobytes()
+
+
+def test_imu_measure_is_the_model_s_sum_in_numpy():
+    """measure's plain floats against the model's equation evaluated on arrays, bit for bit."""
+    p = load_sensing("gnss", 1000).imu
+    rng = np.random.default_rng(25)
+    s = imu.initial(p, rng)
+    for k in range(300):
+        w = imu.draw(rng)
+        q = rng.standard_normal(4)
+        truth = Truth.of(k * 1000, rng.standard_normal(3), rng.standard_normal(3),
+                         q / np.linalg.norm(q), rng.standard_normal(3),
+                         rng.standard_normal(3) * 10, rng.random(4) * 100)
+        s_next, r = imu.step(p, s, truth, w)
+        z = float(truth.motor_pct.sum()) / 400.0
+        gyro = (truth.rates_frd_rad_s + s.gyro_bias_frd_rad_s + p.gyro_white_rad_s * w[0:3]
+                + p.gyro_vibration_rad_s * (z * z) * w[6:9])
+        accel = (truth.specific_force_frd_m_s2 + s.accel_bias_frd_m_s2
+                 + p.accel_white_m_s2 * w[3:6] + p.accel_vibration_m_s2 * (z * z) * w[9:12])
+        assert r.gyro_frd_rad_s.tobytes() == gyro.tobytes()
+        assert r.accel_frd_m_s2.tobytes() == accel.tobytes()
+        s = s_next
+
+
+def test_perturb_quat_is_the_norm_formulation():
+    """noise.perturb_quat's spelled-out norms against np.linalg.norm, bit for bit."""
+    rng = np.random.default_rng(26)
+    for _ in range(2000):
+        q = rng.standard_normal(4)
+        q = q / np.linalg.norm(q)
+        angle = 2e-3 * rng.standard_normal(3)
+        theta = float(np.linalg.norm(angle))
+        s = math.sin(theta / 2) / theta
+        dw, dx, dy, dz = math.cos(theta / 2), *(s * angle)
+        w, x, y, z = q
+        e = np.array((w * dw - x * dx - y * dy - z * dz, w * dx + x * dw + y * dz - z * dy,
+                      w * dy - x * dz + y * dw + z * dx, w * dz + x * dy - y * dx + z * dw))
+        e = e / np.linalg.norm(e)
+        assert noise.perturb_quat(tuple(q.tolist()), angle).tobytes() == e.tobytes()

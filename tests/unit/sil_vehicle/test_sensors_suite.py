@@ -132,3 +132,100 @@ def test_a_sensor_s_noise_does_not_depend_on_the_others():
     def imu_bytes(profile):
         return [r for r in as_bytes(fly(profile, 5, 200)) if r[1].startswith("ImuReading")]
     assert imu_bytes("rtk") == imu_bytes("mocap")
+
+
+def per_sample(profile: str, seed: int, ticks: int, **kw):
+    """The suite's contract spelled out with the models' one-sample functions: each sensor's
+    child generator, one `draw` per sample, `step` / `sample` / `release` per tick. The suite
+    draws its noise in blocks and precomputes the IMU's; this is what it must equal."""
+    prof = load_sensing(profile, 1000)
+    home = kw.get("home_alt_m", 0.0)
+    names = ("imu", "baro", "mag", "gnss", "mocap")
+    rngs = dict(zip(names, np.random.default_rng(seed).spawn(5)))
+    mods = dict(zip(names, (imu, baro, mag, gnss, mocap)))
+    params = {n: getattr(prof, n) for n in names if getattr(prof, n) is not None}
+    if "baro" in params:
+        params["baro"] = replace(params["baro"], home_alt_m=home)
+    states = {n: mods[n].initial(params[n], rngs[n]) for n in names if n in params}
+    flight = []
+    for k in range(ticks):
+        t, truth, out = k * DT_US, moving(k * DT_US), []
+        for n in ("imu", "baro", "mag"):
+            if n in params and t % params[n].period_us == 0:
+                states[n], r = mods[n].step(params[n], states[n], truth, mods[n].draw(rngs[n]))
+                out.append(r)
+        for n in ("gnss", "mocap"):
+            if n in params:
+                if t % params[n].period_us == 0:
+                    states[n] = mods[n].sample(params[n], states[n], truth,
+                                               mods[n].draw(rngs[n]))
+                states[n], arrived = mods[n].release(states[n], t)
+                out.extend(arrived)
+        flight.append((t, out))
+    return flight, states
+
+
+def state_bytes(states) -> dict[str, list[bytes]]:
+    return {n: [np.asarray(getattr(s, f.name), dtype=float).tobytes() for f in fields(s)
+                if f.name != "pending"] for n, s in states.items()}
+
+
+@pytest.mark.parametrize("profile", ["mocap", "rtk", "gnss"])
+def test_blocks_equal_one_draw_per_sample_bit_for_bit(profile):
+    """2500 ticks (the IMU's noise crosses two block boundaries): every reading and the final
+    state of every sensor as the one-sample functions give them."""
+    ticks = 2500
+    expected, states = per_sample(profile, 11, ticks, home_alt_m=30.0)
+    suite = SensorSuite(load_sensing(profile, 1000), np.random.default_rng(11), home_alt_m=30.0)
+    got = [(k * DT_US, suite.sample(k * DT_US, moving(k * DT_US))) for k in range(ticks)]
+    assert as_bytes(got) == as_bytes(expected) and len(as_bytes(got)) > ticks
+    assert state_bytes(dict(suite.states)) == state_bytes(states)
+
+
+def test_an_assigned_imu_state_holds_from_the_next_sample():
+    """Assigning suite.states["imu"] mid-block: the next readings continue from it, with the
+    noise the block had left (as if the state had been set between one-sample steps)."""
+    bias = imu.ImuState(np.array((0.01, -0.02, 0.03)), np.array((0.2, -0.1, 0.05)))
+    suite = SensorSuite(load_sensing("mocap", 1000), np.random.default_rng(4))
+    prof = load_sensing("mocap", 1000)
+    rng = np.random.default_rng(4).spawn(5)[0]
+    s = imu.initial(prof.imu, rng)
+    for k in range(300):
+        suite.sample(k * DT_US, moving(k * DT_US))
+        s, _ = imu.step(prof.imu, s, moving(k * DT_US), imu.draw(rng))
+    suite.states["imu"] = bias
+    assert np.array_equal(suite.states["imu"].gyro_bias_frd_rad_s, bias.gyro_bias_frd_rad_s)
+    s = bias
+    for k in range(300, 1500):
+        (r, *_), truth = suite.sample(k * DT_US, moving(k * DT_US)), moving(k * DT_US)
+        s, expected = imu.step(prof.imu, s, truth, imu.draw(rng))
+        assert r == expected
+
+
+def test_an_imu_state_assigned_before_the_first_sample_is_its_start():
+    """A test's way to fix the biases (states["imu"] set on a fresh suite): the readings are the
+    one-sample model's from that state with the IMU's own stream after its turn-on draw."""
+    bias = imu.ImuState(np.array((0.012, -0.02, 0.015)), np.array((0.25, -0.3, 0.2)))
+    prof = load_sensing("mocap", 1000)
+    suite = SensorSuite(prof, np.random.default_rng(6))
+    suite.states["imu"] = bias
+    rng = np.random.default_rng(6).spawn(5)[0]
+    imu.initial(prof.imu, rng)
+    s = bias
+    for k in range(1200):
+        truth = moving(k * DT_US)
+        (r, *_), (s, expected) = suite.sample(k * DT_US, truth), imu.step(prof.imu, s, truth,
+                                                                           imu.draw(rng))
+        assert r == expected
+
+
+def test_an_assigned_delay_line_is_released_when_due():
+    """states["mocap"] set with a reading in flight: it arrives at its arrival time."""
+    suite = SensorSuite(load_sensing("mocap", 1000), np.random.default_rng(8))
+    for k in range(5):
+        suite.sample(k * DT_US, moving(k * DT_US))
+    flying = mocap.MocapReading(4_000, 7_000, np.zeros(3), np.array((1.0, 0.0, 0.0, 0.0)))
+    suite.states["mocap"] = mocap.MocapState((flying,))
+    got = {k: [r for r in suite.sample(k * DT_US, moving(k * DT_US))
+               if isinstance(r, mocap.MocapReading)] for k in range(5, 9)}
+    assert got == {5: [], 6: [], 7: [flying], 8: []}
