@@ -247,7 +247,7 @@ class Eskf:
             self._update(*buf.popleft())
 
     def _imu(self, r: ImuReading) -> None:
-        g, f = r.gyro_frd_rad_s.tolist(), r.accel_frd_m_s2.tolist()
+        g, f = [float(v) for v in r.gyro], [float(v) for v in r.accel]
         self._gyro = g
         t = r.t_us
         if not self.aligned:
