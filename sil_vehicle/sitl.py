@@ -22,7 +22,7 @@ import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
 from sil_vehicle.config import STREAMS, SimParams
-from sil_vehicle.estimator.eskf import Eskf
+from sil_vehicle.estimator.eskf import Eskf, Estimate
 from sil_vehicle.estimator.params import EstimatorParams
 from sil_vehicle.faultscript import Event, ParamAction
 from sil_vehicle.frames import euler_to_quat, quat_to_euler
@@ -138,6 +138,7 @@ class Sitl:
         profile = sim.sensing if sim.senses else None
         self.suite: SensorSuite | None = None
         self.estimator: Eskf | None = None          # the autopilot's filter on the readings
+        self._estimate: Estimate | None = None     # its output at this tick, once made
         self.readings: list[Reading] = []          # the latest tick's, in the suite's order
         self.latest: dict[str, Reading] = {}       # each sensor's newest reading arrived
         has = set() if profile is None else {
@@ -186,6 +187,7 @@ class Sitl:
             # the tick's readings into the estimator, before the log and the telemetry
             self.readings = self._sense(state)
             self.estimator.step(state.t_us, self.readings)
+            self._estimate = None
         if state.crashed and not self._was_crashed:
             self._was_crashed = True
             self.vehicle.force_disarm()
@@ -369,7 +371,7 @@ class Sitl:
         estimator's estimate (with its covariances), under `truth` the true state plus the sim
         file's white noise."""
         if self._measured is None and self.estimator is not None:
-            self._measured = codec.measured_of(self.estimator.output())
+            self._measured = codec.measured_of(self.estimate())
         if self._measured is None:
             s, sim = self.vehicle.state, self.sim
             n = self._noise_rng.standard_normal(12)
@@ -402,7 +404,7 @@ class Sitl:
         if stream == "HIGHRES_IMU":
             return self._highres_imu(link)
         if stream == "ESTIMATOR_STATUS":
-            return codec.estimator_status(self.estimator.output())
+            return codec.estimator_status(self.estimate())
         if stream in self._on_arrival:
             return self._sensor_message(stream, self.latest[self._on_arrival[stream]])
         s = self.vehicle.state
@@ -436,11 +438,18 @@ class Sitl:
             return codec.gps_raw_int(m, self.home)
         raise KeyError(stream)
 
+    def estimate(self) -> Estimate:
+        """The estimator's output at this tick, made once a tick (telemetry, the log and the
+        arming check read the same one)."""
+        if self._estimate is None:
+            self._estimate = self.estimator.output()
+        return self._estimate
+
     def estimator_ready(self) -> bool:
         """No estimator (truth), or one with its attitude aligned and a valid position."""
         if self.estimator is None:
             return True
-        e = self.estimator.output()
+        e = self.estimate()
         return e.attitude_aligned and e.position_valid and not e.diverged
 
     def announce(self, severity: int, text: str) -> list[Outgoing]:
@@ -714,7 +723,7 @@ class Sitl:
             extra += ((r.t_us, *(float(v) for v in r.pos_ned_m)) if r is not None
                       else (math.nan,) * 4)
         if self.estimator is not None:
-            e = self.estimator.output()
+            e = self.estimate()
             extra += (tuple(float(v) for v in e.pos_ned_m) + tuple(float(v) for v in e.vel_ned_m_s)
                       + tuple(quat_to_euler(*e.quat_wxyz))
                       + (int(e.attitude_aligned), int(e.position_valid)))
