@@ -103,7 +103,11 @@ class FlightSummary:
     errors: list[str] = field(default_factory=list)
 
     def line(self) -> str:
-        return (f"{self.controller}: {self.flight_s:.1f} s, {self.steps} steps, position RMSE "
+        """One line of what the controller saw: its errors are its state estimate (what the
+        vehicle reported) against its reference over the whole flight, take-off and landing
+        included, not the truth (the lab's metrics measure that)."""
+        return (f"{self.controller}: {self.flight_s:.1f} s, {self.steps} steps, as seen (estimate "
+                f"against reference, landing included): position RMSE "
                 f"{self.rmse_pos_m:.3f} m (max {self.max_pos_err_m:.3f} m), yaw RMSE "
                 f"{self.rmse_yaw_deg:.2f} deg, solve p50 {self.solve_ms_p50:.1f} ms p99 "
                 f"{self.solve_ms_p99:.1f} ms, {self.fallbacks} fallbacks, "
