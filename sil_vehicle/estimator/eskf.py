@@ -36,16 +36,28 @@ Initialisation. The first `align_us` of IMU (and magnetometer) readings are aver
 vehicle at rest: the attitude from the motion capture's latest pose when the profile has one,
 else tilt from the mean specific force and heading from the mean magnetic field and the
 profile's declination. The position (and from GNSS the velocity) is reset to the first position
-measurement fused after t_align, the jump applied to the output predictor too; the barometer's
-offset is taken from the first barometer reading after that. The filter starts at t_align (a
-filter-period boundary): what it computes never depends on the horizon, only when it does.
+measurement fused after t_align, the jump applied to the output predictor too. The filter starts
+at t_align (a filter-period boundary): what it computes never depends on the horizon, only when
+it does.
+
+Height reference (params.height_ref, EKF2_HGT_REF). "mocap" or "gnss": the position reset sets
+the height too, and the barometer's offset is taken from the first barometer reading after it.
+"baro" (EKF2's default; a plain receiver's height is metres off and wanders): at t_align the
+height is init_pos_d_m (the vehicle at rest at the origin) and the offset the mean pressure
+altitude over the alignment taken against it; a position reset (the first GNSS fix, a source
+rejected too long) moves the horizontal position only, and sets the receiver's height error
+state to what it reads against the height, as EKF2 initialises its GNSS height bias estimate.
+The GNSS height is then fused with its own variance through that error state (bn_d, the
+receiver's Gauss-Markov error): an aid whose slow error is modelled, which can move the height
+only as far as its figures against the barometer's allow; it never resets it. EKF2 fuses GNSS
+height beside a baro reference too (EKF2_GPS_CTRL's VPOS bit, through a bias estimator).
 
 Health: attitude aligned (after the initialisation); position valid (a position measurement
 fused within `no_aid_timeout_us` of the filter's time; a position source rejected by its gate
-for longer than that resets the position to it, as EKF2 does); diverged (a state or variance not
-finite, a variance above `max_var` or below zero; checked after each filter period and
-latched). The variances the Estimate carries are the filter's, at the delayed horizon (EKF2
-reports the same).
+for longer than that resets the position to it, as EKF2 does; horizontally only when the
+barometer keeps the height); diverged (a state or variance not finite, a variance above
+`max_var` or below zero; checked after each filter period and latched). The variances the
+Estimate carries are the filter's, at the delayed horizon (EKF2 reports the same).
 """
 
 from __future__ import annotations
@@ -199,6 +211,7 @@ class Eskf:
         self.aligned = False
         self._pos_init = False
         self._baro_init = False
+        self._baro_ref = p.height_ref == "baro"
         # health and diagnostics
         self._now = -1
         self._gyro = (0.0, 0.0, 0.0)
@@ -309,6 +322,8 @@ class Eskf:
         self.x, self.P = x, P
         self.t_filter_us = t = self._t_align
         self.aligned = True
+        if self._baro_ref:
+            self._init_height(t)
         for buf in self._meas:
             while buf and buf[0].t_us <= t:
                 buf.popleft()
@@ -321,24 +336,35 @@ class Eskf:
         the output predictor too (EKF2's resetHorizontalPositionTo and its output reset)."""
         old_p, old_v = self.x[0:3].copy(), self.x[3:6].copy()
         is_gnss = isinstance(r, GnssReading)
-        self.x[0:3] = r.pos_ned_m - (self.x[16:19] if is_gnss else 0.0)
-        self.P[0:3, :] = 0.0
-        self.P[:, 0:3] = 0.0
+        # the axes reset: all three, or the horizontal ones when the barometer keeps the height
+        n = 2 if self._baro_ref else 3
+        ax, bn = slice(0, n), slice(15, 15 + n)
+        self.x[ax] = r.pos_ned_m[:n] - (self.x[16:16 + n] if is_gnss else 0.0)
+        self.P[ax, :] = 0.0
+        self.P[:, ax] = 0.0
         if is_gnss:
             # p = z - bn: the receiver's error is the position's, anticorrelated
-            p_bn = self.P[15:18, 15:18].copy()
-            self.P[0:3, 0:3] = np.diag(self._r[Aid.GNSS_POS]) + p_bn
-            self.P[0:3, 15:18] = -p_bn
-            self.P[15:18, 0:3] = -p_bn
+            p_bn = self.P[bn, bn].copy()
+            self.P[ax, ax] = np.diag(self._r[Aid.GNSS_POS][:n]) + p_bn
+            self.P[ax, bn] = -p_bn
+            self.P[bn, ax] = -p_bn
+            if self._baro_ref:
+                # the height stays; the receiver's height error is taken as what it reads
+                # against it (EKF2 sets its GNSS height bias estimate so): bn_d = z_d - p_d
+                self.x[18] = r.pos_ned_m[2] - self.x[2]
+                self.P[17, :] = -self.P[2, :]
+                self.P[:, 17] = -self.P[:, 2]
+                self.P[17, 17] = self.P[2, 2] + self._r[Aid.GNSS_POS][2]
         else:
-            self.P[0:3, 0:3] = np.diag(self._r[Aid.MOCAP_POS])
+            self.P[ax, ax] = np.diag(self._r[Aid.MOCAP_POS][:n])
         if is_gnss:
             self.x[3:6] = r.vel_ned_m_s
             self.P[3:6, :] = 0.0
             self.P[:, 3:6] = 0.0
             self.P[3:6, 3:6] = np.diag(self._r[Aid.GNSS_VEL])
         self._pos_init = True
-        self._baro_init = False         # its offset is taken again against the new height
+        if not self._baro_ref:
+            self._baro_init = False     # its offset is taken again against the new height
         self._last_pos_fuse_us = t_us
         self.out.shift(self.x[3:6] - old_v, self.x[0:3] - old_p)
 
@@ -354,12 +380,30 @@ class Eskf:
     def _init_baro(self, r: BaroReading) -> None:
         """bb = z + p_d: its error is the height's plus the reading's noise, and correlates
         with the other states as the height does."""
-        self.x[19] = r.pressure_alt_m + self.x[2]
+        self._set_baro_offset(r.pressure_alt_m, self._r[Aid.BARO][0])
+
+    def _set_baro_offset(self, alt_m: float, var_m2: float) -> None:
+        self.x[19] = alt_m + self.x[2]
         P = self.P
         P[18, :] = P[2, :]
         P[:, 18] = P[:, 2]
-        P[18, 18] = P[2, 2] + self._r[Aid.BARO][0]
+        P[18, 18] = P[2, 2] + var_m2
         self._baro_init = True
+
+    def _init_height(self, t_us: int) -> None:
+        """The barometer as the height reference (EKF2_HGT_REF baro): the height is the
+        vehicle's at alignment, init_pos_d_m, known to the barometer's noise (EKF2's height
+        reset to the baro), and the offset is the mean pressure altitude over the alignment
+        (the vehicle at rest) taken against it. Without a reading yet, the first one after
+        alignment gives the offset."""
+        p = self.params
+        self.x[2] = p.init_pos_d_m
+        self.P[2, :] = 0.0
+        self.P[:, 2] = 0.0
+        self.P[2, 2] = self._r[Aid.BARO][0]
+        alts = [r.pressure_alt_m for r in self._meas[Aid.BARO] if r.t_us <= t_us]
+        if alts:
+            self._set_baro_offset(sum(alts) / len(alts), self._r[Aid.BARO][0] / len(alts))
 
     # ---------------------------------------------------------------- the delayed horizon
 
@@ -398,7 +442,7 @@ class Eskf:
             else:
                 self._fuse(Aid.GNSS_VEL, r.t_us, r.vel_ned_m_s)
         elif aid == Aid.BARO:
-            if not self._pos_init:
+            if not (self._pos_init or self._baro_ref):
                 return                  # the offset is taken against a known height
             if not self._baro_init:
                 self._init_baro(r)

@@ -14,7 +14,8 @@ deviations are per sample. Gates are in standard deviations, as EKF2's EKF2_*_GA
 (defaults: EKF2_GPS_P_GATE = EKF2_GPS_V_GATE = EKF2_EVP_GATE = EKF2_BARO_GATE = 5,
 EKF2_MAG_GATE = 3; EKF2 has no gate for a whole vision attitude, the motion capture's takes
 the position's 5); the output predictor's time constants are EKF2_TAU_VEL and EKF2_TAU_POS
-(0.25 s); EKF2_NOAID_TOUT (5 s) is the position-valid timeout.
+(0.25 s); EKF2_NOAID_TOUT (5 s) is the position-valid timeout. `height_ref` is EKF2_HGT_REF
+(sil_vehicle.estimator.eskf: "Height reference").
 
 The delay horizon is the longest delay of the profile's delayed sensors (GNSS, motion capture)
 rounded up to whole filter periods; it is at most DELAY_BUFFER_MS (trq_params.schema), which
@@ -78,6 +79,15 @@ class EstimatorParams:
     no_aid_timeout_us: int = 5_000_000
     init_pos_var_m2: float = 100.0          # before the first position measurement
     init_vel_var_m2_s2: float = 0.25
+    # the height reference (EKF2_HGT_REF): the source whose datum the local frame's down axis
+    # keeps. "baro": the height starts at init_pos_d_m at alignment and the barometer's offset
+    # is taken against it there; the GNSS height is fused as an aid through its own error state
+    # and never resets the height. "gnss" / "mocap": the height is reset to the source's with
+    # the position and the barometer's offset taken against it. from_profile: mocap when the
+    # profile has motion capture, gnss when the receiver's height error is below the
+    # barometer's drift (an RTK receiver), baro otherwise; None: that rule.
+    height_ref: str | None = None
+    init_pos_d_m: float = 0.0               # the height at alignment: on the ground at the origin
     gravity_m_s2: float = STANDARD_GRAVITY_M_S2
     max_var: float = 1.0e6                  # a variance beyond this (or not finite): diverged
 
@@ -93,6 +103,20 @@ class EstimatorParams:
             raise ValueError(f"align_us {self.align_us}: whole filter periods")
         if self.mocap_pos_noise_m is None and self.gnss_pos_noise_ne_m is None:
             raise ValueError("no position source (motion capture or GNSS): the filter needs one")
+        if self.height_ref is None:
+            object.__setattr__(self, "height_ref", self._default_height_ref())
+        has = {"baro": self.has_baro, "gnss": self.has_gnss, "mocap": self.has_mocap}
+        if not has.get(self.height_ref, False):
+            raise ValueError(f"height_ref {self.height_ref!r}: one of the fused sources "
+                             f"{[k for k, v in has.items() if v]}")
+
+    def _default_height_ref(self) -> str:
+        if self.has_mocap:
+            return "mocap"
+        gnss_d = math.hypot(self.gnss_markov_d_m, self.gnss_pos_noise_d_m or 0.0)
+        if self.has_baro and not (self.has_gnss and gnss_d < self.baro_drift_sigma_m):
+            return "baro"
+        return "gnss" if self.has_gnss else "baro"
 
     @property
     def imu_period_us(self) -> int:

@@ -107,6 +107,9 @@ BIAS_A = (0.25, -0.3, 0.2)
 def run(prof, readings, every_us: int = 10_000, **overrides):
     """Step a fresh filter through `readings`; every `every_us` after alignment: (t_us, the
     output, the filter state (t_d, x, P))."""
+    # the trajectory starts in the air, not on the ground at the origin: a barometer-referenced
+    # height starts where it is (the motion capture and an RTK receiver give their own)
+    overrides.setdefault("init_pos_d_m", truth_at(0).pos_ned_m[2])
     est = Eskf(EstimatorParams.from_profile(prof, **overrides))
     out = []
     for t, rs in readings:
@@ -150,6 +153,35 @@ def test_errors_against_truth_and_own_variances(profile):
     last = out[-1][1]
     assert last.attitude_aligned and last.position_valid and not last.diverged
     assert sum(last.rejected) <= 0.02 * sum(last.fused)
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_gnss_height_is_the_barometers(seed):
+    """Under `gnss` the barometer is the height reference (EKF2_HGT_REF baro): the height error
+    against truth stays within what the barometer's noise and drift allow over the flight (3
+    sigma of the offset's error at alignment plus the drift's change), where the receiver's own
+    height error is metres; the horizontal is the same as with the GNSS as the height
+    reference (the former behaviour), and the GNSS height never resets the height."""
+    prof, readings = flight("gnss", seed=seed)
+    b = prof.baro
+    bound = 3 * math.sqrt(b.noise_m ** 2 + 2 * b.drift_sigma_m ** 2 * FLIGHT_S / b.drift_tau_s)
+    assert bound < 1.0
+    est, out = run(prof, readings)
+    _, by_gnss = run(prof, readings, height_ref="gnss")
+    assert est.params.height_ref == "baro"
+    err = np.array([e.pos_ned_m - truth_at(t).pos_ned_m for t, e, _ in out])
+    err_gnss = np.array([e.pos_ned_m - truth_at(t).pos_ned_m for t, e, _ in by_gnss])
+    rx = np.array([r.pos_ned_m[2] - truth_at(r.t_us).pos_ned_m[2]
+                   for _, rs in readings for r in rs if isinstance(r, GnssReading)])
+    assert np.abs(err[:, 2]).max() < bound
+    assert np.abs(err[:, 2]).max() < 0.5 * np.sqrt(np.mean(rx ** 2))
+    np.testing.assert_allclose(err[:, :2], err_gnss[:, :2], atol=1e-3)
+    last = out[-1][1]
+    assert last.fused[Aid.GNSS_POS] > 60 and last.fused[Aid.BARO] > 600
+    assert last.pos_resets == 0 and not last.diverged
+    if seed == 2:
+        # a receiver metres off in height: the former datum was, this one is not
+        assert np.abs(err_gnss[:, 2]).max() > 3 * bound
 
 
 def test_constant_biases_are_recovered():

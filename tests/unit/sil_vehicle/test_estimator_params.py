@@ -40,3 +40,16 @@ def test_overrides_and_refusals():
         EstimatorParams.from_profile(prof, horizon_us=15_000)
     with pytest.raises(ValueError, match="no position source"):
         EstimatorParams.from_profile(prof, mocap_pos_noise_m=None)
+
+
+@pytest.mark.parametrize("name, ref", [("mocap", "mocap"), ("rtk", "gnss"), ("gnss", "baro")])
+def test_height_reference_by_profile(name, ref):
+    """The motion capture's height where there is one, an RTK receiver's (centimetres, below
+    the barometer's drift), else the barometer's (EKF2_HGT_REF's default)."""
+    prof = load_sensing(name, 1000)
+    assert EstimatorParams.from_profile(prof).height_ref == ref
+    assert EstimatorParams.from_profile(prof, height_ref="baro").height_ref == "baro"
+    with pytest.raises(ValueError, match="height_ref"):
+        EstimatorParams.from_profile(prof, height_ref="radar")
+    with pytest.raises(ValueError, match="height_ref"):
+        EstimatorParams.from_profile(prof, height_ref="baro", baro_noise_m=None)
