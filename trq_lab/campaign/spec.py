@@ -27,8 +27,8 @@ from trq_params.schema import (AXES, AXIS_MODELS, CampaignFile, CampaignGrid, Pl
                                SensingAxis, Strict)
 
 from trq_lab.harness import SIM_DEFAULT
-from trq_lab.scenario import check_sensing
 from trq_lab.overlays import controller_file, perturbed_vehicle, vehicle_data
+from trq_lab.scenario import check_sensing
 
 PARAMS = trq_params.DIR
 
