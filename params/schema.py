@@ -617,7 +617,7 @@ class ScenarioFile(Strict):
 # campaign (trq_lab.campaign: the axes' keys are checked by trq_lab.campaign.spec)
 # --------------------------------------------------------------------------------------------
 
-AXES = ("fault", "wind", "trajectory", "link", "plant")
+AXES = ("fault", "wind", "trajectory", "link", "plant", "sensing")
 CONTROLLER_MODELS = ("nominal", "plant")
 
 
@@ -638,11 +638,20 @@ class Plant(Strict):
     idle_offset_pct: Num(-20.0, 20.0) = 0.0
 
 
+class SensingAxis(Strict):
+    """A campaign's sensing profile (params/sensing): what the sim file's `sensing` holds, a
+    built-in name or a path; loaded against the physics rate by trq_lab.campaign.spec. A grid or
+    a sample may write the profile, or a list of them, as the axis itself (`sensing: [truth,
+    mocap]`)."""
+    profile: NameOrPath = "truth"
+
+
 # the models whose keys (dotted, `leaf_types`) each axis sets: a fault is a motor or a servo
 # event, a wind a wind event's, a trajectory a controller's reference, a link the offboard link's
-# impairment, a plant the simulated airframe's factors
+# impairment, a plant the simulated airframe's factors, a sensing the vehicle's sensing profile
 AXIS_MODELS = {"fault": (MotorEvent, ServoEvent), "wind": (EventWind,),
-               "trajectory": (ReferenceFile,), "link": (Impair,), "plant": (Plant,)}
+               "trajectory": (ReferenceFile,), "link": (Impair,), "plant": (Plant,),
+               "sensing": (SensingAxis,)}
 
 
 class CampaignGrid(Strict):
@@ -652,6 +661,7 @@ class CampaignGrid(Strict):
     trajectory: Any = None
     link: Any = None
     plant: Any = None
+    sensing: Any = None
 
 
 class CampaignSample(CampaignGrid):

@@ -255,6 +255,35 @@ def test_link_axis_impairs_the_offboard_link(tmp_path):
         load_campaign(linked)
 
 
+def test_sensing_smoke_flies_each_flight_under_its_profile(tmp_path):
+    """sensing_smoke: one hover under truth, one under mocap (the controller gets the vehicle's
+    estimate); flights.csv says which, the truth flight keeps the id it has without the axis,
+    and the report's tables are per profile."""
+    import csv
+
+    path = PARAMS / "campaigns" / "sensing_smoke.yaml"
+    out = tmp_path / "out"
+    r = run_campaign(path, "--out", out, "--workers", "1", "--no-figures")
+    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
+    with open(out / "flights.csv") as f:
+        rows = {row["sensing"]: row for row in csv.DictReader(f)}
+    assert set(rows) == {"truth", "mocap"}
+    for row in rows.values():
+        assert row["status"] == "done" and row["crashed"] == "False", row
+        assert row["success"] == "True", row
+    assert rows["truth"]["seed"] == rows["mocap"]["seed"]
+    assert rows["truth"]["est_rmse_pos_m"] == ""              # no estimator under truth
+    assert 0.0 < float(rows["mocap"]["est_rmse_pos_m"]) < 0.05
+    plain = tmp_path / "plain.yaml"
+    plain.write_text(path.read_text().replace("  sensing: [truth, mocap]\n", ""))
+    assert [f["id"] for f in load_campaign(plain).flights] == [rows["truth"]["id"]]
+    rec = json.loads((out / "flights" / f"{rows['mocap']['id']}.json").read_text())
+    assert rec["spec"]["sensing"] == "mocap"
+    report = (out / "report.md").read_text()
+    assert "| mocap | trq_nmpc_eso | 1 | 100% |" in report
+    assert "## `trq_nmpc_eso` under `mocap`" in report
+
+
 # --- the in-process flight against the daemons over UDP ---------------------------------------
 
 def _udp_lockstep_flight(daemons, out: Path, scenario) -> None:

@@ -1,5 +1,5 @@
 """Fault campaigns at scale: a grid and/or a seeded random sample of flights over fault, wind,
-trajectory, link, plant and controller, flown on Dask (a LocalCluster by
+trajectory, link, plant, sensing and controller, flown on Dask (a LocalCluster by
 default, or an existing cluster).
 
     trq-campaign smoke --out out/campaign_smoke --workers 2
@@ -54,7 +54,12 @@ clean link, the airframe file as it is. In `sample` a number may also be {normal
 An axis's keys are the dotted paths of the schema it sets (trq_params.schema.AXIS_MODELS: the
 same names, types and ranges): a fault is a fault script's motor or servo event, a wind a wind
 event's wind, a trajectory a controller's reference, a link the offboard link's impairment, a
-plant trq_params.schema.Plant.
+plant trq_params.schema.Plant, a sensing the vehicle's sensing profile
+(trq_params.schema.SensingAxis: `profile`, a built-in name or a path beside the campaign file;
+written as the axis itself, `sensing: [truth, mocap]`, it is that key). Every spec carries its
+`sensing` (truth by default, which stays out of the id: campaigns without the axis keep their
+ids); a profile enters the id and the parameter digest, not the seed. flights.csv has a sensing
+column; a campaign that varies it gets its report's tables per profile.
 Fault keys: at_s and either motor (1..4) with effectiveness, or time_varying.a, time_varying.b,
 time_varying.w, time_varying.phi (e = a - b sin(w t + phi)), or stopped: true; or servo (1..4)
 with stuck_deg. Wind keys: speed_m_s, direction_deg (from, clockwise from north), gusts,

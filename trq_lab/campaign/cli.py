@@ -28,7 +28,7 @@ import trq_params
 from trq_params import ConfigError
 
 from trq_lab.campaign.flight import run_flight
-from trq_lab.campaign.spec import Campaign, load_campaign
+from trq_lab.campaign.spec import SENSING_DEFAULT, Campaign, load_campaign
 from trq_lab.campaign.store import flight_inputs, load_results, rows_of, write_csv, write_json
 from trq_lab.reporting.campaign import wind_label, write_report
 
@@ -159,7 +159,8 @@ SWITCHES = {
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(
         prog="trq-campaign", description="Fault campaigns at scale: a grid and/or a seeded "
-        "random sample of flights over fault, wind, trajectory, link, plant and controller, "
+        "random sample of flights over fault, wind, trajectory, link, plant, sensing and "
+        "controller, "
         "flown on Dask (resumable).")
     ap.add_argument("campaign", help="a built-in campaign by name (" + ", ".join(
         trq_params.names("campaigns")) + ") or a campaign YAML by path")
@@ -188,6 +189,8 @@ def main(argv: list[str] | None = None) -> int:
             plant = "" if "plant" not in s else " plant " + ",".join(
                 f"{k}={v:g}" for k, v in sorted(s["plant"].items())) + (
                 " (model: the plant)" if s.get("controller_model") == "plant" else "")
+            if r["sensing"] != SENSING_DEFAULT:
+                plant += f" sensing {r['sensing']}"
             print(f"{s['id']} {s['controller']:14s} fault {r['fault_kind']} {r['severity']:g} "
                   f"wind {wind_label(r)} traj {r['traj_kind']} seed {s['seed']}{plant}")
         print(f"campaign: {campaign.name}: {len(campaign.flights)} flights")

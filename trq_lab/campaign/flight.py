@@ -24,7 +24,7 @@ from trq_offboard.controller import Controller
 from trq_lab import harness as inprocess
 from trq_lab import scenario as run_scenario
 from trq_lab.analysis import envelope
-from trq_lab.campaign.spec import fault_event
+from trq_lab.campaign.spec import fault_event, identity
 from trq_lab.overlays import write_controller_overlay, write_vehicle_overlay
 
 def worst_effectiveness(fault: dict) -> float:
@@ -51,9 +51,10 @@ def severity(fault: dict | None) -> tuple[str, float]:
 
 
 def plant_id(spec: dict) -> str:
-    """What the flights of one plant share (all but the controller): a short hash, so that a
-    table or a figure can pair the controllers' flights on the same plant."""
-    keep = {k: v for k, v in spec.items() if k not in ("id", "controller", "params_digest")}
+    """What the flights of one plant share (all but the controller; the sensing profile too,
+    kept out at its default as in the flight's id): a short hash, so that a table or a figure
+    can pair the controllers' flights on the same plant."""
+    keep = {k: v for k, v in identity(spec).items() if k not in ("controller", "params_digest")}
     return hashlib.sha256(json.dumps(keep, sort_keys=True).encode()).hexdigest()[:8]
 
 
@@ -129,7 +130,8 @@ def run_flight(spec: dict, log_dir: str | None = None) -> dict:
                                        wind_speed_m_s=w["speed_m_s"],
                                        wind_from_deg=w["direction_deg"], gusts=w["gusts"],
                                        gust_sigma_m_s=w.get("gust_sigma_m_s"),
-                                       offboard_impair=link or None)
+                                       offboard_impair=link or None,
+                                       sensing=spec.get("sensing"))
             vp = sim.vehicle
             event = fault_event(spec["fault"], f"flight {spec['id']}", "fault",
                                  (math.degrees(vp.tilt_min_rad), math.degrees(vp.tilt_max_rad)))

@@ -23,10 +23,12 @@ from sil_vehicle.faultscript import parse_event
 from trq_offboard.config import load_controller
 from trq_params import ConfigError, schema
 from trq_params.loader import Num, Vec, chain, leaf_types, range_of, read_yaml, validate
-from trq_params.schema import AXES, AXIS_MODELS, CampaignFile, CampaignGrid, Plant, Strict
+from trq_params.schema import (AXES, AXIS_MODELS, CampaignFile, CampaignGrid, Plant,
+                               SensingAxis, Strict)
 
 from trq_lab.harness import SIM_DEFAULT
 from trq_lab.overlays import controller_file, perturbed_vehicle, vehicle_data
+from trq_lab.scenario import check_sensing
 
 PARAMS = trq_params.DIR
 
@@ -64,10 +66,12 @@ def _axis_keys(models) -> dict[str, AxisKey]:
 
 
 AXIS_KEYS = {axis: _axis_keys(models) for axis, models in AXIS_MODELS.items()}
-FAULT_KEYS, WIND_KEYS, TRAJECTORY_KEYS, LINK_KEYS, PLANT_KEYS = (AXIS_KEYS[a] for a in AXES)
+FAULT_KEYS, WIND_KEYS, TRAJECTORY_KEYS, LINK_KEYS, PLANT_KEYS, SENSING_KEYS = (
+    AXIS_KEYS[a] for a in AXES)
 MOTOR_KEYS, SERVO_KEYS = (set(leaf_types(m)) - {"at_s"} for m in AXIS_MODELS["fault"])
 PLANT_NEUTRAL = Plant().model_dump()
 WIND_DEFAULT = {"speed_m_s": 0.0, "direction_deg": 0.0, "gusts": False}
+SENSING_DEFAULT = SensingAxis().profile  # a spec's sensing when the campaign names none
 SAMPLE_DIGITS = 4            # sampled numbers are rounded: readable tables, stable ids
 
 
@@ -85,6 +89,7 @@ class Campaign:
     flights: tuple[dict, ...]          # flight specs (JSON-able), controllers included
     targets: Any = None                # trq_params.schema.CampaignTargets or None
     has_plant: bool = False            # a plant axis: every spec has "plant"
+    sensings: tuple[str, ...] = (SENSING_DEFAULT,)     # the profiles its flights fly under
 
 
 def _axis_models(axis: str):
@@ -302,16 +307,48 @@ def _check_plant(plant: dict, vehicles: dict[str, str], file, where: str) -> Non
                               f"which the airframe stays valid: {exc}") from None
 
 
+def identity(spec: dict) -> dict:
+    """What a flight's id hashes: its spec without the id, and without its sensing when that is
+    the default (truth), so that a campaign without the axis keeps the ids it always had."""
+    return {k: v for k, v in spec.items()
+            if k != "id" and not (k == "sensing" and v == SENSING_DEFAULT)}
+
+
 def flight_id(spec: dict) -> str:
-    text = json.dumps({k: v for k, v in spec.items() if k != "id"}, sort_keys=True)
+    text = json.dumps(identity(spec), sort_keys=True)
     return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def _sensing_shorthand(raw: Any) -> Any:
+    """The sensing axis written as a profile or a list of profiles: its `profile` key."""
+    if isinstance(raw, str) or (isinstance(raw, list) and raw
+                                and not any(isinstance(x, dict) for x in raw)):
+        return {"profile": raw}
+    return raw
+
+
+def _sensing(point: dict | None, file: Path, where: str) -> str:
+    """The profile of a sensing point as a flight gets it (a built-in name, or a path made
+    absolute against the campaign file's folder), loaded once against the physics rate: a
+    ConfigError naming the file, the key and the value."""
+    value = (point or {}).get("profile", SENSING_DEFAULT)
+    if not trq_params.is_name(value):
+        value = str(file.parent / value)
+    return check_sensing(value, str(file), where)
+
+
+def sensing_digest(profile: str) -> str:
+    """A digest of a sensing profile's files (the file and the files it extends)."""
+    return _file_digest(chain(trq_params.resolve("sensing", profile)))
 
 
 
 
 def _axes(section: CampaignGrid) -> dict[str, Any]:
     """The axes a grid or sample names (an axis written as null is named, and then fails)."""
-    return {axis: getattr(section, axis) for axis in AXES if axis in section.model_fields_set}
+    return {axis: (_sensing_shorthand(getattr(section, axis)) if axis == "sensing"
+                   else getattr(section, axis))
+            for axis in AXES if axis in section.model_fields_set}
 
 
 def load_campaign(path: Path) -> Campaign:
@@ -333,6 +370,15 @@ def load_campaign(path: Path) -> Campaign:
     if top.grid is not None:
         for plant in {json.dumps(c[4], sort_keys=True): c[4] for c in cells}.values():
             _check_plant(plant, vehicles, path, "grid.plant")
+    profiles: dict[str, str] = {}         # a sensing point -> its profile, each loaded once
+
+    def profile_of(point: dict | None, where: str) -> str:
+        key = json.dumps(point, sort_keys=True)
+        if key not in profiles:
+            profiles[key] = _sensing(point, path, where)
+        return profiles[key]
+
+    cells = [(*c[:5], profile_of(c[5], "grid.sensing")) for c in cells]
     if top.sample is not None:
         dists = {axis: _axis_values(raw, path, f"sample.{axis}", axis, sampling=True)
                  for axis, raw in _axes(top.sample).items()}
@@ -345,7 +391,7 @@ def load_campaign(path: Path) -> Campaign:
                 raise ConfigError(f"{exc} (a sampled fault must be valid whatever is "
                                   "drawn)") from exc
             _check_plant(point[4], vehicles, path, f"sample.plant (draw {k})")
-            cells.append(point)
+            cells.append((*point[:5], profile_of(point[5], "sample.sensing")))
     name, description, seed, controllers = top.name, top.description, top.seed, top.controllers
     success, threshold, timeout, repeats = (top.success_rmse_m, top.recovery_threshold_m,
                                             top.timeout_s, top.repeats)
@@ -353,7 +399,7 @@ def load_campaign(path: Path) -> Campaign:
         [top.controller_model]
     flights = []
     seen = set()
-    for fault, wind, traj, link, plant in cells:
+    for fault, wind, traj, link, plant, sensing in cells:
         wind = {**WIND_DEFAULT, **(wind or {})}
         for r in range(repeats):
             cell = {"fault": fault, "wind": wind, "trajectory": traj or {}, "repeat": r}
@@ -361,20 +407,25 @@ def load_campaign(path: Path) -> Campaign:
                 cell["link"] = link
             text = json.dumps({"campaign_seed": seed, **cell}, sort_keys=True)
             fseed = int(hashlib.sha256(text.encode()).hexdigest()[:8], 16) % 2**31
-            # the plant is not in the seed: every plant of a cell meets the same noise and
-            # gusts (common random numbers), so what differs between plants is the plant's
+            # neither the plant nor the sensing profile is in the seed: every plant and every
+            # profile of a cell meets the same seeds (common random numbers)
             for model in models:
                 extra: dict[str, Any] = {"plant": plant} if has_plant else {}
                 if model != "nominal":
                     extra["controller_model"] = model
                 for c in controllers:
-                    spec = {"controller": c, **cell, **extra, "seed": fseed,
-                            "timeout_s": timeout, "recovery_threshold_m": threshold,
-                            "params_digest": digests[c]}
+                    digest = digests[c]
+                    if sensing != SENSING_DEFAULT:      # the profile's files are read too
+                        digest = hashlib.sha256((digest + sensing_digest(sensing)).encode()
+                                                ).hexdigest()[:16]
+                    spec = {"controller": c, **cell, **extra, "sensing": sensing,
+                            "seed": fseed, "timeout_s": timeout,
+                            "recovery_threshold_m": threshold, "params_digest": digest}
                     spec["id"] = flight_id(spec)
                     if spec["id"] in seen:
                         continue                  # the same flight listed twice: fly it once
                     seen.add(spec["id"])
                     flights.append(spec)
+    sensings = tuple(dict.fromkeys(f["sensing"] for f in flights))
     return Campaign(name, path, description, seed, tuple(controllers), success, threshold,
-                    timeout, repeats, tuple(flights), top.targets, has_plant)
+                    timeout, repeats, tuple(flights), top.targets, has_plant, sensings)

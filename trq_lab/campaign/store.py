@@ -14,7 +14,7 @@ from pathlib import Path
 
 from trq_lab.campaign.flight import plant_id, severity
 from trq_lab.campaign.spec import (FAULT_KEYS, LINK_KEYS, PLANT_KEYS, PLANT_NEUTRAL,
-                                   TRAJECTORY_KEYS, WIND_KEYS, Campaign)
+                                   SENSING_DEFAULT, TRAJECTORY_KEYS, WIND_KEYS, Campaign)
 
 def write_json(path: Path, doc: dict) -> None:
     tmp = path.with_suffix(".json.tmp")
@@ -26,8 +26,8 @@ def flight_inputs(spec: dict) -> dict:
     """The flat input columns of a flight's row."""
     fault = spec["fault"] or {}
     kind, sev = severity(spec["fault"])
-    row = {"id": spec["id"], "controller": spec["controller"], "fault_kind": kind,
-           "severity": sev}
+    row = {"id": spec["id"], "controller": spec["controller"],
+           "sensing": spec.get("sensing", SENSING_DEFAULT), "fault_kind": kind, "severity": sev}
     for key in FAULT_KEYS:
         row[f"fault_{key}"] = fault.get(key)
     for key in WIND_KEYS:
@@ -64,7 +64,7 @@ def load_results(out: Path) -> dict[str, dict]:
 METRIC_KEYS = ("vehicle", "crashed", "flight_s", "rmse_pos_m", "max_pos_err_m",
                "rmse_pos_after_fault_m", "rmse_vert_after_fault_m", "max_sink_after_fault_m",
                "rmse_yaw_deg", "max_yaw_err_deg", "recovery_s",
-               "solve_ms_p50", "solve_ms_p99")
+               "solve_ms_p50", "solve_ms_p99", "est_rmse_pos_m", "est_rmse_att_deg")
 
 
 def is_success(record: dict, threshold_m: float) -> bool:

@@ -121,8 +121,12 @@ def coping_limit(campaign, winds, sevs, stats, controller, wind) -> str:
     return "none" if last is None else last[1].replace("motor loss ", "")
 
 
-def heatmaps(campaign: Campaign, winds, sevs, stats, out: Path) -> list[Path]:
+def heatmaps(campaign: Campaign, winds, sevs, stats, out: Path, sensing: str = ""
+             ) -> list[Path]:
+    """success.png and rmse.png; of one sensing profile's flights (`sensing`, its label):
+    success_<label>.png and rmse_<label>.png."""
     plt = pyplot()
+    under = f" under {sensing}" if sensing else ""
     made = []
     ctrls = list(campaign.controllers)
     for what, fname, title in (("rate", "success.png", "success rate"),
@@ -162,14 +166,93 @@ def heatmaps(campaign: Campaign, winds, sevs, stats, out: Path) -> list[Path]:
             ax.set_yticklabels([w[1] for w in winds], fontsize=7)
         axes[0][0].set_ylabel("wind", fontsize=8)
         fig.colorbar(im, ax=axes[0].tolist(), shrink=0.85)
-        fig.suptitle(f"{campaign.name}: {title} (success: not crashed, RMSE after fault < "
+        fig.suptitle(f"{campaign.name}{under}: {title} (success: not crashed, RMSE after fault < "
                      f"{campaign.success_rmse_m:g} m)" if what == "rate" else
-                     f"{campaign.name}: {title}", fontsize=9, y=1.04)
-        path = out / fname
+                     f"{campaign.name}{under}: {title}", fontsize=9, y=1.04)
+        path = out / (fname.replace(".png", f"_{sensing}.png") if sensing else fname)
         fig.savefig(path, dpi=110, bbox_inches="tight")
         plt.close(fig)
         made.append(path)
     return made
+
+
+def sensing_label(profile: str) -> str:
+    """A sensing profile as the report names it: a built-in name, or a file's stem."""
+    return Path(profile).stem if profile else ""
+
+
+def _controller_summary(campaign: Campaign, rows: list[dict]) -> dict:
+    out = {}
+    for c in campaign.controllers:
+        rs = [r for r in rows if r["controller"] == c]
+        rm = [v for r in rs if not r["crashed"] and (v := _rmse_of(r)) is not None]
+        if rs:
+            out[c] = {"flights": len(rs), "success_rate": sum(r["success"] for r in rs) / len(rs),
+                      "crashed": sum(bool(r["crashed"]) for r in rs),
+                      "rmse_median_m": float(statistics.median(rm)) if rm else None}
+    return out
+
+
+def _cell_sections(campaign: Campaign, rows: list[dict], out: Path, figures: bool,
+                   sensing: str = "") -> list[str]:
+    """Per controller, the success rate and the median RMSE per wind and fault severity, where
+    each controller stops coping, and the heat maps: of the flights under one sensing profile
+    (`sensing`, its label) when the campaign varies it."""
+    lines: list[str] = []
+    under = f" under `{sensing}`" if sensing else ""
+    winds, sevs, stats = summarise(campaign, rows)
+    if campaign.has_plant and len(winds) * len(sevs) == 1:
+        figures = False                  # one cell: the cell tables and heat maps say nothing
+        stats = {}
+    head = "| wind | " + " | ".join(s[1] for s in sevs) + " |"
+    rule = "|---|" + "---|" * len(sevs)
+    for c in campaign.controllers:
+        if not any(k[0] == c for k in stats):
+            continue
+        lines += [f"## `{c}`" + under, "", "Success rate (successful / flown) and, below, "
+                  "the median position RMSE after the fault (m) of the flights that did not "
+                  "crash, per wind (rows) and fault severity (columns).", "", head, rule]
+        for w in winds:
+            cellv = []
+            for s in sevs:
+                st = stats.get((c, w, s))
+                cellv.append("" if st is None else f"{st['rate']:.0%} ({st['ok']}/{st['n']})")
+            lines.append(f"| {w[1]} | " + " | ".join(cellv) + " |")
+        lines += ["", head, rule]
+        for w in winds:
+            cellv = []
+            for s in sevs:
+                st = stats.get((c, w, s))
+                cellv.append("" if st is None else fmt(st["rmse_median"]))
+            lines.append(f"| {w[1]} | " + " | ".join(cellv) + " |")
+        lines.append("")
+    if stats and any(s[0][0] == "motor" for s in sevs):
+        lines += ["## Where each controller stops coping" + under, "",
+                  "The largest loss of motor effectiveness up to which every flight (every motor, "
+                  "every smaller loss) succeeded.", "",
+                  "| wind | " + " | ".join(campaign.controllers) + " |",
+                  "|---|" + "---|" * len(campaign.controllers)]
+        for w in winds:
+            lines.append(f"| {w[1]} | " + " | ".join(
+                coping_limit(campaign, winds, sevs, stats, c, w) for c in campaign.controllers)
+                + " |")
+        lines.append("")
+        first = campaign.controllers[0]
+        worse = []
+        for (c, w, s), st in stats.items():
+            if c == first:
+                continue
+            mine = stats.get((first, w, s))
+            if mine is not None and mine["rate"] < st["rate"]:
+                worse.append(f"{w[1]}, {s[1]}: `{first}` {mine['rate']:.0%} < `{c}` "
+                             f"{st['rate']:.0%}")
+        lines += [f"`{first}` copes at least as often as every other controller in every cell."
+                  if not worse else f"Cells where `{first}` succeeds less often than another "
+                  "controller:", ""] + [f"- {x}" for x in sorted(worse)] + [""]
+    if figures:
+        for p in heatmaps(campaign, winds, sevs, stats, out, sensing):
+            lines += [f"![{p.stem}]({p.name})", ""]
+    return lines
 
 
 def write_report(campaign: Campaign, rows: list[dict], out: Path, run_info: dict | None = None,
@@ -193,86 +276,42 @@ def write_report(campaign: Campaign, rows: list[dict], out: Path, run_info: dict
         (out / "report.md").write_text("\n".join(lines) + "\n")
         write_json(out / "metrics.json", summary)
         return out / "report.md"
-    winds, sevs, stats = summarise(campaign, rows)
-    lines += ["## Success rate per controller", "",
-              "| controller | flights | success | crashed | failed | median RMSE after fault m |",
-              "|---|---|---|---|---|---|"]
-    for c in campaign.controllers:
-        rs = [r for r in rows if r["controller"] == c]
-        if not rs:
-            continue
-        rm = sorted(v for r in rs if not r["crashed"] and (v := _rmse_of(r)) is not None)
-        lines.append(f"| {c} | {len(rs)} | {sum(r['success'] for r in rs) / len(rs):.0%} | "
-                     f"{sum(bool(r['crashed']) for r in rs)} | "
-                     f"{sum(r['status'] == 'failed' for r in rs)} | "
-                     f"{fmt(statistics.median(rm) if rm else None)} |")
+    varied = len(campaign.sensings) > 1
+    groups = [(p, [r for r in rows if r["sensing"] == p]) for p in campaign.sensings]
+    lines += ["## Success rate per controller" + (" and sensing profile" if varied else ""), "",
+              ("| sensing " if varied else "") + "| controller | flights | success | crashed | "
+              "failed | median RMSE after fault m |" + (" median estimate error m |" if varied
+                                                       else ""),
+              ("|---" if varied else "") + "|---|---|---|---|---|---|" + ("---|" if varied
+                                                                          else "")]
+    for p, prs in (groups if varied else [("", rows)]):
+        for c in campaign.controllers:
+            rs = [r for r in prs if r["controller"] == c]
+            if not rs:
+                continue
+            rm = sorted(v for r in rs if not r["crashed"] and (v := _rmse_of(r)) is not None)
+            est = [r["est_rmse_pos_m"] for r in rs if r.get("est_rmse_pos_m") is not None]
+            lines.append((f"| {sensing_label(p)} " if varied else "")
+                         + f"| {c} | {len(rs)} | {sum(r['success'] for r in rs) / len(rs):.0%} | "
+                         f"{sum(bool(r['crashed']) for r in rs)} | "
+                         f"{sum(r['status'] == 'failed' for r in rs)} | "
+                         f"{fmt(statistics.median(rm) if rm else None)} |"
+                         + (f" {fmt(statistics.median(est) if est else None)} |" if varied
+                            else ""))
     lines.append("")
     if campaign.has_plant:
         plant_lines, plant_summary = plant_campaign.report(campaign, rows, out, figures)
         lines += plant_lines
         summary.update(plant_summary)
     else:
-        summary["controllers"] = {}
-        for c in campaign.controllers:
-            rs = [r for r in rows if r["controller"] == c]
-            rm = [v for r in rs if not r["crashed"] and (v := _rmse_of(r)) is not None]
-            if rs:
-                summary["controllers"][c] = {
-                    "flights": len(rs), "success_rate": sum(r["success"] for r in rs) / len(rs),
-                    "crashed": sum(bool(r["crashed"]) for r in rs),
-                    "rmse_median_m": float(statistics.median(rm)) if rm else None}
+        summary["controllers"] = _controller_summary(campaign, rows)
+    if varied:
+        summary["sensing"] = {sensing_label(p): _controller_summary(campaign, prs)
+                              for p, prs in groups}
     write_json(out / "metrics.json", summary)
-    if campaign.has_plant and len(winds) * len(sevs) == 1:
-        figures = False                  # one cell: the cell tables and heat maps say nothing
-        stats = {}
-    head = "| wind | " + " | ".join(s[1] for s in sevs) + " |"
-    rule = "|---|" + "---|" * len(sevs)
-    for c in campaign.controllers:
-        if not any(k[0] == c for k in stats):
-            continue
-        lines += [f"## `{c}`", "", "Success rate (successful / flown) and, below, the median "
-                  "position RMSE after the fault (m) of the flights that did not crash, per wind "
-                  "(rows) and fault severity (columns).", "", head, rule]
-        for w in winds:
-            cellv = []
-            for s in sevs:
-                st = stats.get((c, w, s))
-                cellv.append("" if st is None else f"{st['rate']:.0%} ({st['ok']}/{st['n']})")
-            lines.append(f"| {w[1]} | " + " | ".join(cellv) + " |")
-        lines += ["", head, rule]
-        for w in winds:
-            cellv = []
-            for s in sevs:
-                st = stats.get((c, w, s))
-                cellv.append("" if st is None else fmt(st["rmse_median"]))
-            lines.append(f"| {w[1]} | " + " | ".join(cellv) + " |")
-        lines.append("")
-    if stats and any(s[0][0] == "motor" for s in sevs):
-        lines += ["## Where each controller stops coping", "",
-                  "The largest loss of motor effectiveness up to which every flight (every motor, "
-                  "every smaller loss) succeeded.", "",
-                  "| wind | " + " | ".join(campaign.controllers) + " |",
-                  "|---|" + "---|" * len(campaign.controllers)]
-        for w in winds:
-            lines.append(f"| {w[1]} | " + " | ".join(
-                coping_limit(campaign, winds, sevs, stats, c, w) for c in campaign.controllers)
-                + " |")
-        lines.append("")
-        first = campaign.controllers[0]
-        worse = []
-        for (c, w, s), st in stats.items():
-            if c == first:
-                continue
-            mine = stats.get((first, w, s))
-            if mine is not None and mine["rate"] < st["rate"]:
-                worse.append(f"{w[1]}, {s[1]}: `{first}` {mine['rate']:.0%} < `{c}` "
-                             f"{st['rate']:.0%}")
-        lines += [f"`{first}` copes at least as often as every other controller in every cell."
-                  if not worse else f"Cells where `{first}` succeeds less often than another "
-                  "controller:", ""] + [f"- {x}" for x in sorted(worse)] + [""]
-    if figures:
-        for p in heatmaps(campaign, winds, sevs, stats, out):
-            lines += [f"![{p.stem}]({p.name})", ""]
+    for p, prs in (groups if varied else [("", rows)]):
+        if prs:
+            lines += _cell_sections(campaign, prs, out, figures, sensing_label(p))
     if failed:
         lines += ["## Failed flights", ""]
         for r in failed[:20]:

@@ -122,13 +122,14 @@ def test_the_controllers_model_can_be_the_plant(tmp_path):
 
 
 def test_campaigns_without_a_plant_axis_keep_their_specs(tmp_path):
-    """No plant axis: no 'plant' key, the ids and seeds as before; `plant: {}` flies the same
-    cells with the same seeds (its ids differ: the spec says a plant was asked for)."""
+    """No plant axis: no 'plant' key, the ids and seeds as before (the spec's sensing, truth,
+    is not in the id); `plant: {}` flies the same cells with the same seeds (its ids differ:
+    the spec says a plant was asked for)."""
     plan = load_campaign(SMOKE)
     assert not plan.has_plant
     assert all(set(f) == {"controller", "fault", "wind", "trajectory", "repeat", "seed",
-                          "timeout_s", "recovery_threshold_m", "params_digest", "id"}
-               for f in plan.flights)
+                          "sensing", "timeout_s", "recovery_threshold_m", "params_digest", "id"}
+               and f["sensing"] == "truth" for f in plan.flights)
     path = tmp_path / "with_plant.yaml"
     path.write_text(SMOKE.read_text() + "  plant: {}\n")
     with_plant = load_campaign(path)
