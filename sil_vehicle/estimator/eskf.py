@@ -97,6 +97,9 @@ _FUSE = {Aid.MOCAP_POS: "fuse_mocap_pos", Aid.MOCAP_ATT: "fuse_mocap_att",
          Aid.GNSS_POS: "fuse_gnss_pos", Aid.GNSS_VEL: "fuse_gnss_vel", Aid.BARO: "fuse_baro",
          Aid.MAG: "fuse_mag"}
 _NAID = len(Aid)
+# the measurement buffer each kind of reading waits in until the delayed horizon reaches it
+_BUFFER_OF = {MocapReading: Aid.MOCAP_POS, GnssReading: Aid.GNSS_POS, BaroReading: Aid.BARO,
+              MagReading: Aid.MAG}
 _POSE = np.array((0, 1, 2, 6, 7, 8))     # dp, dtheta in the error state
 
 
@@ -164,6 +167,9 @@ class Eskf:
 
     def __init__(self, params: EstimatorParams, *, compiled: bool = True) -> None:
         self.params = p = params
+        # which measurements the filter takes (the others are dropped on arrival)
+        self._fused = {Aid.MOCAP_POS: p.has_mocap, Aid.GNSS_POS: p.has_gnss, Aid.BARO: p.has_baro,
+                       Aid.MAG: p.has_mag}
         self._f, self.how = load(d.functions(p.gravity_m_s2), compiled)
         self._dt_f = p.filter_period_us * 1e-6
         self._dt_imu = p.imu_period_us * 1e-6
@@ -232,24 +238,18 @@ class Eskf:
         if t_us <= self._now:
             raise ValueError(f"step: t_us {t_us} after {self._now} expected (one call per tick)")
         self._now = t_us
+        fused = self._fused
         for r in readings:
             if isinstance(r, ImuReading):
                 self._imu(r)
-            elif isinstance(r, MocapReading):
-                if self.params.has_mocap:
-                    self._meas[Aid.MOCAP_POS].append(r)
-            elif isinstance(r, GnssReading):
-                if self.params.has_gnss:
-                    self._meas[Aid.GNSS_POS].append(r)
-            elif isinstance(r, BaroReading):
-                if self.params.has_baro:
-                    self._meas[Aid.BARO].append(r)
-            elif isinstance(r, MagReading):
-                if self.params.has_mag:
-                    self._meas[Aid.MAG].append(r)
-                    if not self.aligned:
-                        self._sum_m += r.field_frd_gauss
-                        self._n_m += 1
+                continue
+            aid = _BUFFER_OF[type(r)]          # a position, height or field measurement
+            if not fused[aid]:
+                continue
+            self._meas[aid].append(r)
+            if aid == Aid.MAG and not self.aligned:
+                self._sum_m += r.field_frd_gauss
+                self._n_m += 1
         if not self.aligned:
             if self._t_first is not None and t_us >= self._t_align and self._n_f:
                 self._align()
