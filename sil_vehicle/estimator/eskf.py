@@ -167,9 +167,6 @@ class Eskf:
 
     def __init__(self, params: EstimatorParams, *, compiled: bool = True) -> None:
         self.params = p = params
-        # which measurements the filter takes (the others are dropped on arrival)
-        self._fused = {Aid.MOCAP_POS: p.has_mocap, Aid.GNSS_POS: p.has_gnss, Aid.BARO: p.has_baro,
-                       Aid.MAG: p.has_mag}
         self._f, self.how = load(d.functions(p.gravity_m_s2), compiled)
         self._dt_f = p.filter_period_us * 1e-6
         self._dt_imu = p.imu_period_us * 1e-6
@@ -238,7 +235,9 @@ class Eskf:
         if t_us <= self._now:
             raise ValueError(f"step: t_us {t_us} after {self._now} expected (one call per tick)")
         self._now = t_us
-        fused = self._fused
+        p = self.params              # which measurements it takes (the others dropped on arrival)
+        fused = {Aid.MOCAP_POS: p.has_mocap, Aid.GNSS_POS: p.has_gnss, Aid.BARO: p.has_baro,
+                 Aid.MAG: p.has_mag}
         for r in readings:
             if isinstance(r, ImuReading):
                 self._imu(r)
