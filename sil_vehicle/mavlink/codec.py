@@ -388,6 +388,13 @@ def estimator_status(e) -> mavlink.MAVLink_message:
     else:
         flags |= mavlink.ESTIMATOR_ACCEL_ERROR
     var = e.pos_var_ned_m2
+    horiz, vert = float(var[0]) + float(var[1]), float(var[2])
     return mavlink.MAVLink_estimator_status_message(
         e.t_us, flags, e.vel_ratio, e.pos_horiz_ratio, e.pos_vert_ratio, e.mag_ratio,
-        math.nan, math.nan, math.sqrt(float(var[0]) + float(var[1])), math.sqrt(float(var[2])))
+        math.nan, math.nan, _std(horiz), _std(vert))
+
+
+def _std(variance: float) -> float:
+    """A variance's square root; NaN (unknown) for a negative or non-finite one, which only a
+    diverging filter gives."""
+    return math.sqrt(variance) if variance >= 0.0 and math.isfinite(variance) else math.nan

@@ -371,3 +371,16 @@ def test_truth_reports_truth_plus_noise_and_no_estimator_status(sim):
     odo = of(sent, "ODOMETRY", link="offboard")[-1][1]
     assert odo.estimator_type == mavlink.MAV_ESTIMATOR_TYPE_NAIVE
     assert all(math.isnan(v) for v in odo.pose_covariance)
+
+
+def test_estimator_status_of_a_diverged_filter_does_not_raise(sim):
+    """A diverging filter's variances may go negative: ESTIMATOR_STATUS says unknown (NaN)
+    rather than failing the vehicle's tick (a campaign flight under gnss met it)."""
+    import dataclasses
+    s = sitl(sim, "mocap")
+    run(s, 50)
+    e = dataclasses.replace(s.estimator.output(), pos_var_ned_m2=np.array([-1e-3, 0.0, -2.0]),
+                            diverged=True)
+    st = codec.estimator_status(e)
+    assert math.isnan(st.pos_vert_accuracy) and math.isnan(st.pos_horiz_accuracy)
+    assert st.flags & mavlink.ESTIMATOR_ACCEL_ERROR
