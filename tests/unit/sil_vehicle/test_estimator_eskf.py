@@ -22,6 +22,10 @@ from sil_vehicle.sensors.profile import load_sensing
 from sil_vehicle.sensors.suite import SensorSuite
 from sil_vehicle.sensors.truth import STANDARD_GRAVITY_M_S2, Truth, specific_force_frd
 
+# the filter flown along whole trajectories under every profile: the full suite's, not the
+# fast tier's (pytest -m "not slow")
+pytestmark = pytest.mark.slow
+
 HOVER_S = 2.0
 # errors are judged once the filter has converged: at rest the accelerometer's bias, the tilt
 # and (through the magnetometer's mostly vertical field) the heading cannot be told apart; the
