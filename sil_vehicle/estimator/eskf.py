@@ -221,6 +221,9 @@ class Eskf:
         self._last_pos_fuse_us: int | None = None
         self.innovations: list[Innovation | None] = [None] * _NAID
         self._fused = [0] * _NAID
+        # which measurements it takes (the others are dropped on arrival)
+        self._takes = {Aid.MOCAP_POS: p.has_mocap, Aid.GNSS_POS: p.has_gnss, Aid.BARO: p.has_baro,
+                       Aid.MAG: p.has_mag}
         self._rejected = [0] * _NAID
         self._stale = 0                 # measurements older than the horizon when they came
         self._pos_resets = 0            # position resets after a lost position source
@@ -235,15 +238,13 @@ class Eskf:
         if t_us <= self._now:
             raise ValueError(f"step: t_us {t_us} after {self._now} expected (one call per tick)")
         self._now = t_us
-        p = self.params              # which measurements it takes (the others dropped on arrival)
-        fused = {Aid.MOCAP_POS: p.has_mocap, Aid.GNSS_POS: p.has_gnss, Aid.BARO: p.has_baro,
-                 Aid.MAG: p.has_mag}
+        takes = self._takes
         for r in readings:
             if isinstance(r, ImuReading):
                 self._imu(r)
                 continue
             aid = _BUFFER_OF[type(r)]          # a position, height or field measurement
-            if not fused[aid]:
+            if not takes[aid]:
                 continue
             self._meas[aid].append(r)
             if aid == Aid.MAG and not self.aligned:
