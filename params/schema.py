@@ -6,7 +6,7 @@ One model per kind of file, read by `trq_params.loader.load(path, Model)`:
     SimFile          params/sim/*.yaml       (sil_vehicle)
     ControllerFile   params/controller/*.yaml, the controllers (trq_offboard)
     EsoFile          params/controller/eso*.yaml, the observer's gains (trq_offboard)
-    MotorEvent, ServoEvent, WindEvent, ClearEvent
+    MotorEvent, ServoEvent, WindEvent, SensorEvent, ClearEvent
                      an event of params/faults/*.yaml (sil_vehicle.faultscript)
     ScenarioFile     params/scenarios/*.yaml (trq_lab.scenario)
     CampaignFile     params/campaigns/*.yaml (trq_lab.campaign)
@@ -30,7 +30,7 @@ from trq_params.loader import (Choice, Flag, Int, Invalid, Items, NameOrPath, Nu
                                Text, Vec, expect)
 
 __all__ = ["Strict", "VehicleFile", "SimFile", "ControllerFile", "EsoFile", "MotorEvent",
-           "ServoEvent", "WindEvent", "ClearEvent", "ScenarioFile", "CampaignFile",
+           "ServoEvent", "WindEvent", "SensorEvent", "ClearEvent", "ScenarioFile", "CampaignFile",
            "SensingFile", "STREAMS", "HPIPM_OPTIONS", "DELAY_BUFFER_MS", "parse_endpoint",
            "throttle_curve"]
 
@@ -525,6 +525,19 @@ class WindEvent(_Event):
     def _acts(self) -> "WindEvent":
         if not self.wind.model_fields_set:
             raise Invalid("wind", {}, "speed_m_s, direction_deg, gusts or gust_sigma_m_s")
+        return self
+
+
+class SensorEvent(_Event):
+    # MAV_CMD_INJECT_FAILURE's sensor units and types (sil_vehicle.sensors.faults)
+    sensor: Choice("gyro", "accel", "mag", "baro", "gnss", "mocap")
+    failure: Choice("ok", "off", "stuck", "garbage", "wrong")
+    size: Optional[Num(-1e4, 1e4)] = None   # wrong: the error, in the unit's SI unit (or deg)
+
+    @model_validator(mode="after")
+    def _size(self) -> "SensorEvent":
+        if self.size is not None and self.failure != "wrong":
+            raise Invalid("size", self.size, "no size unless failure is wrong")
         return self
 
 

@@ -6,14 +6,17 @@
       - {at_s: 20.0, motor: 2, stopped: true}        # stopped: false restores it
       - {at_s: 25.0, servo: 3, stuck_deg: 10.0}       # stuck_deg: null frees it
       - {at_s: 30.0, wind: {speed_m_s: 8.0, direction_deg: 90.0, gusts: true}}
-      - {at_s: 40.0, clear: true}                     # every motor and servo healthy
+      - {at_s: 32.0, sensor: mocap, failure: off}     # ok|off|stuck|garbage|wrong
+      - {at_s: 33.0, sensor: gnss, failure: wrong, size: 5.0}   # metres north
+      - {at_s: 40.0, clear: true}                     # every motor, servo and sensor healthy
 
 Each event becomes MAVLink actions: parameter sets (`SIM_*`, PROTOCOL.md) or
 MAV_CMD_INJECT_FAILURE commands, so a script means the same thing whether the vehicle plays it
 itself (deterministic, `--faults FILE`) or `trq-inject-fault` sends it over the wire.
 Each event is validated by `trq_params.loader` against its kind's schema (`trq_params.schema`:
-MotorEvent, ServoEvent, WindEvent, ClearEvent; the first of motor, servo, wind, clear it holds
-decides): errors name the file, the event index, the key, the value and what was expected.
+MotorEvent, ServoEvent, WindEvent, SensorEvent, ClearEvent; the first of motor, servo, wind,
+sensor, clear it holds decides): errors name the file, the event index, the key, the value and
+what was expected.
 """
 
 from __future__ import annotations
@@ -23,7 +26,9 @@ from pathlib import Path
 from typing import Any
 
 from trq_params.loader import ConfigError, read_yaml, validate
-from trq_params.schema import ClearEvent, MotorEvent, ServoEvent, WindEvent
+from trq_params.schema import ClearEvent, MotorEvent, SensorEvent, ServoEvent, WindEvent
+
+from sil_vehicle.sensors import faults as sensor_faults
 
 MOTOR = 101          # FAILURE_UNIT_SYSTEM_MOTOR
 SERVO = 102          # FAILURE_UNIT_SYSTEM_SERVO
@@ -38,10 +43,10 @@ class ParamAction:
 
 @dataclass(frozen=True)
 class InjectAction:
-    unit: int            # MOTOR or SERVO
-    kind: int            # TYPE_OK, TYPE_OFF, TYPE_STUCK
-    instance: int        # 1..4
-    angle_deg: float = float("nan")
+    unit: int            # MOTOR, SERVO or a sensor unit (sil_vehicle.sensors.faults.UNITS)
+    kind: int            # FAILURE_TYPE: TYPE_OK, TYPE_OFF, TYPE_STUCK, ...
+    instance: int        # 1..4 (a sensor: 1)
+    param4: float = float("nan")     # a servo's stuck angle (deg); a sensor's WRONG size
 
 
 Action = ParamAction | InjectAction
@@ -56,7 +61,7 @@ class Event:
 
 # an event's kind is the first of these keys it has
 _KINDS = (("motor", MotorEvent), ("servo", ServoEvent), ("wind", WindEvent),
-          ("clear", ClearEvent))
+          ("sensor", SensorEvent), ("clear", ClearEvent))
 
 
 def parse_event(event: Any, tilt_range_deg: tuple[float, float] = (-90.0, 90.0), *,
@@ -66,7 +71,8 @@ def parse_event(event: Any, tilt_range_deg: tuple[float, float] = (-90.0, 90.0),
         raise ConfigError(f"{file}: key '{key}': got {event!r}, expected a mapping")
     model = next((m for k, m in _KINDS if k in event), None)
     if model is None:
-        raise ConfigError(f"{file}: key '{key}': an event needs one of motor, servo, wind, clear")
+        raise ConfigError(f"{file}: key '{key}': an event needs one of motor, servo, wind, "
+                          "sensor, clear")
     ev = validate(model, event, file, prefix=key, context=tuple(tilt_range_deg))
     actions: list[Action] = []
     text = []
@@ -106,10 +112,18 @@ def parse_event(event: Any, tilt_range_deg: tuple[float, float] = (-90.0, 90.0),
             text.append(f"gusts {'on' if w.gusts else 'off'}")
         if w.gust_sigma_m_s is not None:
             actions.append(ParamAction("SIM_GUST_SIG", w.gust_sigma_m_s))
+    elif isinstance(ev, SensorEvent):
+        size = float("nan") if ev.size is None else float(ev.size)
+        actions.append(InjectAction(sensor_faults.UNIT_OF[ev.sensor],
+                                    sensor_faults.KIND_OF[ev.failure], 1, size))
+        text.append(f"{ev.sensor} {ev.failure}" + (f" by {size:g}" if ev.size is not None
+                                                    else ""))
     else:
         for n in range(1, 5):
             actions += [ParamAction(f"SIM_MOT{n}_EFF", 1.0), ParamAction(f"SIM_MOT{n}_TVB", 0.0),
                         InjectAction(MOTOR, TYPE_OK, n), InjectAction(SERVO, TYPE_OK, n)]
+        # every sensor unit healthy: a unit the profile does not carry has nothing to clear
+        actions += [InjectAction(unit, TYPE_OK, 0) for unit in sensor_faults.UNITS]
         text.append("all faults cleared")
     return Event(int(round(ev.at_s * 1e6)), tuple(actions), ", ".join(text))
 

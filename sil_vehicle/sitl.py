@@ -32,6 +32,8 @@ from sil_vehicle.failsafe import FailsafeLander
 from sil_vehicle.impair import Impairment
 from sil_vehicle.mavlink.params import Param, ParamTable
 from sil_vehicle.sensors import baro, gnss, imu, mag, mocap
+from sil_vehicle.sensors import faults as sensor_faults
+from sil_vehicle.sensors.faults import SensorFaults
 from sil_vehicle.sensors.suite import Reading, SensorSuite
 from sil_vehicle.sensors.truth import Truth
 from sil_vehicle.vehicle import ActuatorCommand, Vehicle, VehicleState
@@ -49,6 +51,10 @@ _MSG_IDS = {name: getattr(mavlink, f"MAVLINK_MSG_ID_{name}") for name in STREAMS
 _MSG_NAMES = {v: k for k, v in _MSG_IDS.items()}
 
 SENSOR_SEED_KEY = 33            # the sensors' generator: default_rng([seed, SENSOR_SEED_KEY])
+SENSOR_FAULT_SEED_KEY = 34      # the sensor faults' (garbage) generator, apart from the sensors'
+# no IMU reading for this long: the attitude estimate is lost (a choice: ten filter periods;
+# PX4's sensors module flags a silent IMU within a comparable time)
+IMU_TIMEOUT_US = 100_000
 # each reading type's sensor, as the suite and the profile name them
 SENSOR_OF = {imu.ImuReading: "imu", baro.BaroReading: "baro", mag.MagReading: "mag",
              gnss.GnssReading: "gnss", mocap.MocapReading: "mocap"}
@@ -72,7 +78,9 @@ SOURCE_LOG_COLUMNS = {name: (f"{name}_t_us",) + tuple(f"{name}_pos_{a}_m" for a 
 ESTIMATE_LOG_COLUMNS = (tuple(f"est_pos_{a}_m" for a in "ned")
                         + tuple(f"est_vel_{a}_m_s" for a in "ned")
                         + ("est_roll_rad", "est_pitch_rad", "est_yaw_rad", "est_aligned",
-                           "est_position_valid"))
+                           "est_position_valid", "sensor_fault_mask", "nav_failure"))
+# flight.csv's nav_failure: what the vehicle lost (Sitl._navigation)
+NAV_FAILURES = {"": 0, "position": 1, "attitude": 2}
 
 LOG_COLUMNS = (
     ["t_us"] + [f"pos_{a}_m" for a in "ned"] + [f"vel_{a}_m_s" for a in "ned"]
@@ -138,6 +146,8 @@ class Sitl:
         profile = sim.sensing if sim.senses else None
         self.suite: SensorSuite | None = None
         self.estimator: Eskf | None = None          # the autopilot's filter on the readings
+        self.sensor_faults: SensorFaults | None = None     # injected sensor faults
+        self.nav_failure = ""                      # "position" or "attitude" once one was lost
         self._estimate: Estimate | None = None     # its output at this tick, once made
         self.readings: list[Reading] = []          # the latest tick's, in the suite's order
         self.latest: dict[str, Reading] = {}       # each sensor's newest reading arrived
@@ -157,6 +167,8 @@ class Sitl:
         if profile is not None:
             self.log_columns += ESTIMATE_LOG_COLUMNS
         if profile is not None:
+            self.sensor_faults = SensorFaults(
+                np.random.default_rng([sim.seed, SENSOR_FAULT_SEED_KEY]))
             self.suite = SensorSuite(profile,
                                      np.random.default_rng([sim.seed, SENSOR_SEED_KEY]),
                                      home_alt_m=sim.home_alt_m)
@@ -225,6 +237,8 @@ class Sitl:
         t_us = state.t_us
         readings = self.suite.sample(t_us, Truth(t_us, x[0:3], v, q, x[10:13], f,
                                                  state.motor_pct))
+        if self.sensor_faults.active:
+            readings = self.sensor_faults.apply(readings)
         latest = self.latest
         for r in readings:
             latest[SENSOR_OF[type(r)]] = r
@@ -303,13 +317,17 @@ class Sitl:
             self.lander.active = False
             return []
         out: list[Outgoing] = []
+        if self.estimator is not None and not s.landed:
+            out += self._navigation(s)
+            if not v.armed:
+                return out
         if self.mode == MODE_OFFBOARD:
             silence_us = s.t_us - self._last_target_us
             if s.landed or silence_us <= self._bridge_after_us:
                 self.lander.active = False
                 return []
             if not self.lander.active:
-                self.lander.engage(s)
+                self.lander.engage(self._nav_state(s))
                 self.bridges += 1
             if silence_us > self.offboard_loss_s * 1e6:
                 self.mode = MODE_AUTO_LAND
@@ -320,8 +338,46 @@ class Sitl:
             v.force_disarm()
             self.lander.active = False
             return self.announce(mavlink.MAV_SEVERITY_WARNING, "failsafe: landed, disarmed")
-        v.command = self.lander.update(s, self.sim.dt_us * 1e-6)
+        v.command = self.lander.update(self._nav_state(s), self.sim.dt_us * 1e-6)
         return out
+
+    def _navigation(self, s: VehicleState) -> list[Outgoing]:
+        """The estimator's health in flight, as an autopilot's failsafe reads it. No attitude
+        (the IMU silent for IMU_TIMEOUT_US, or the filter diverged): nothing can fly the
+        vehicle, so it terminates the flight (PX4's mode fallback ends there when even Descend
+        cannot run) and says so. No position (no position aid fused for the estimator's
+        no-aid timeout) while offboard: the companion's commands assume one, so the vehicle
+        takes over, holding attitude and height on its estimate, then descends and lands
+        (PX4's Descend, reported as AUTO.LAND), and says so."""
+        imu_r = self.latest.get("imu")
+        silent = imu_r is None or s.t_us - imu_r.t_us > IMU_TIMEOUT_US
+        if silent or self.estimator.diverged:
+            self.nav_failure = "attitude"
+            self.vehicle.force_disarm()
+            self.lander.active = False
+            why = "IMU silent" if silent else "estimator diverged"
+            return self.announce(mavlink.MAV_SEVERITY_EMERGENCY,
+                                 f"no attitude ({why}): flight termination")
+        if self.mode == MODE_OFFBOARD and not self.estimator.position_valid():
+            self.nav_failure = "position"
+            self.mode = MODE_AUTO_LAND
+            self.failsafes += 1
+            if not self.lander.active:
+                self.lander.engage(self._nav_state(s))
+            return self.announce(mavlink.MAV_SEVERITY_CRITICAL,
+                                 "position estimate lost: failsafe, descending")
+        return []
+
+    def _nav_state(self, s: VehicleState) -> VehicleState:
+        """What the vehicle's own controller flies on: under a sensing profile its estimate
+        (position, velocity, attitude, rates), under `truth` the plant's state."""
+        if self.estimator is None:
+            return s
+        e = self.estimate()
+        x = (tuple(float(c) for c in e.pos_ned_m) + tuple(float(c) for c in e.vel_ned_m_s)
+             + tuple(float(c) for c in e.quat_wxyz) + tuple(float(c) for c in e.rates_frd_rad_s))
+        return VehicleState(s.t_us, x + tuple(s.x[13:]), s.motor_pct, s.tilt_rad,
+                            s.wind_ned_m_s, s.armed, s.landed, s.crashed, s.crash_reason)
 
     def telemetry_due(self, everything: bool = False, resend: bool = False) -> list[Outgoing]:
         """The telemetry due now (or one of each enabled stream), through the link: what the
@@ -616,7 +672,7 @@ class Sitl:
         sub = int(msg.param3) if math.isfinite(msg.param3) else -1
         if main == 6:
             fresh = self.t_us - self._last_target_us <= self.offboard_loss_s * 1e6
-            if not fresh:
+            if not fresh or not self.estimator_ready():
                 return [self._ack(link, msg, mavlink.MAV_RESULT_TEMPORARILY_REJECTED, sender)]
             changed = self.mode != MODE_OFFBOARD
             self.mode = MODE_OFFBOARD
@@ -637,18 +693,25 @@ class Sitl:
         result = self.inject(msg.param1, msg.param2, msg.param3, msg.param4)
         out = [self._ack(link, msg, result, sender)]
         if result == mavlink.MAV_RESULT_ACCEPTED:
-            out += self.announce(mavlink.MAV_SEVERITY_WARNING,
-                                 f"faults: {self.vehicle.faults.describe()}")
+            # (STATUSTEXT holds 50 characters: the kind of fault injected alone)
+            text = (f"sensor faults: {self.sensor_faults.describe()}"
+                    if msg.param1 in sensor_faults.UNITS and self.sensor_faults is not None
+                    else f"faults: {self.vehicle.faults.describe()}")
+            out += self.announce(mavlink.MAV_SEVERITY_WARNING, text)
         return out
 
-    def inject(self, unit: float, kind: float, instance: float, angle_deg: float) -> int:
+    def inject(self, unit: float, kind: float, instance: float, param4: float) -> int:
         """MAV_CMD_INJECT_FAILURE: unit motor (101) / servo (102), type OK (0), OFF (1, motors),
-        STUCK (2, servos), instance 1..4 (0 = all), angle_deg the stuck angle (NaN: where it
-        is). Returns the MAV_RESULT; nothing changes unless it is ACCEPTED."""
+        STUCK (2, servos), instance 1..4 (0 = all), param4 the stuck angle in degrees (NaN:
+        where it is); or a sensor unit (`inject_sensor`). Returns the MAV_RESULT; nothing
+        changes unless it is ACCEPTED."""
         denied = mavlink.MAV_RESULT_DENIED
         if not all(math.isfinite(v) for v in (unit, kind, instance)) or not 0 <= instance <= 4 \
                 or instance != int(instance):
             return denied
+        if unit in sensor_faults.UNITS:
+            return self.inject_sensor(int(unit), kind, int(instance), param4)
+        angle_deg = param4
         instances = range(4) if instance == 0 else [int(instance) - 1]
         faults = self.vehicle.faults
         if unit == mavlink.FAILURE_UNIT_SYSTEM_MOTOR and kind in (mavlink.FAILURE_TYPE_OK,
@@ -673,6 +736,25 @@ class Sitl:
         self.vehicle.faults = faults
         return mavlink.MAV_RESULT_ACCEPTED
 
+    def inject_sensor(self, unit: int, kind: float, instance: int, size: float) -> int:
+        """A sensor unit of MAV_CMD_INJECT_FAILURE (sil_vehicle.sensors.faults): type OK, OFF,
+        STUCK, GARBAGE or WRONG (size: param4, NaN for the default), instance 0 or 1 (each
+        sensor has one). OK on a sensor the profile does not carry is accepted (it is healthy);
+        any other type on one is DENIED, as is an instance above 1 or a size not finite."""
+        name = sensor_faults.UNITS[unit]
+        sensor = sensor_faults.SENSOR[name]
+        if kind not in sensor_faults.KIND_NAMES or kind != int(kind):
+            return mavlink.MAV_RESULT_UNSUPPORTED
+        kind = int(kind)
+        carried = self.suite is not None and sensor in self.suite.sensors
+        if kind == sensor_faults.OK and not carried:
+            return mavlink.MAV_RESULT_ACCEPTED
+        if not carried or instance > 1 or (math.isinf(size)):
+            return mavlink.MAV_RESULT_DENIED
+        self.sensor_faults.set(name, kind, size if kind == sensor_faults.WRONG else math.nan,
+                               self.latest.get(sensor))
+        return mavlink.MAV_RESULT_ACCEPTED
+
     # --- fault scripts played by the vehicle itself (deterministic timing) ----------------
     def schedule(self, events: Iterable[Event]) -> None:
         self._events = sorted(self._events + list(events), key=lambda e: e.at_us)
@@ -686,7 +768,7 @@ class Sitl:
                     _, error = self.params.set(action.name, action.value)
                 else:
                     result = self.inject(action.unit, action.kind, action.instance,
-                                         action.angle_deg)
+                                         action.param4)
                     error = None if result == mavlink.MAV_RESULT_ACCEPTED else f"result {result}"
                 if error:
                     out += self.announce(mavlink.MAV_SEVERITY_ERROR, f"script: {error}")
@@ -726,7 +808,9 @@ class Sitl:
             e = self.estimate()
             extra += (tuple(float(v) for v in e.pos_ned_m) + tuple(float(v) for v in e.vel_ned_m_s)
                       + tuple(quat_to_euler(*e.quat_wxyz))
-                      + (int(e.attitude_aligned), int(e.position_valid)))
+                      + (int(e.attitude_aligned), int(e.position_valid),
+                         sum(1 << sensor_faults.UNIT_OF[u] for u in self.sensor_faults.active),
+                         NAV_FAILURES[self.nav_failure]))
         return ((s.t_us,) + s.x[0:10] + tuple(quat_to_euler(*s.x[6:10])) + s.x[10:13]
                 + tuple(cmd.throttle_pct) + tuple(cmd.tilt_rad) + s.motor_pct + s.tilt_rad
                 + tuple(m.factor(t_s) for m in self.vehicle.faults.motors)

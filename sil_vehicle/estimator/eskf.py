@@ -476,6 +476,11 @@ class Eskf:
         return bool(not (np.isfinite(self.x).all() and np.isfinite(self.P).all())
                     or (diag < 0.0).any() or (diag > self.params.max_var).any())
 
+    @property
+    def diverged(self) -> bool:
+        """Latched once a filter period ended with a state or variance out of bounds."""
+        return self._diverged
+
     def position_valid(self) -> bool:
         last = self._last_pos_fuse_us
         return bool(self._pos_init and last is not None

@@ -16,4 +16,5 @@ truth, noise samples), the suite the only thing that holds state.
     mocap     pose only, with latency, noise and dropouts
     profile   sensing profiles from YAML into the models' frozen records (load_sensing)
     suite     SensorSuite: the profile's sensors sampled at their rates, readings due per tick
+    faults    SensorFaults: injected sensor failures (off, stuck, garbage, wrong) on the readings
 """

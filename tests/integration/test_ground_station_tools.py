@@ -94,6 +94,15 @@ def test_bad_instance_is_a_usage_error(vehicle, tmp_path):
     assert "instance '5'" in r.stderr and "1..4" in r.stderr
 
 
+def test_a_sensor_fault_under_truth_is_denied(vehicle, tmp_path):
+    # the daemon flies the default sim file's `truth` profile: no sensor to fail
+    r = inject(vehicle, "sensor", "mocap", "off", cwd=tmp_path)
+    assert r.returncode == 1
+    assert "FAILED" in r.stderr and "DENIED" in r.stderr
+    r = inject(vehicle, "sensor", "mocap", "ok", cwd=tmp_path)     # healthy: nothing to clear
+    assert r.returncode == 0, r.stderr
+
+
 def test_wind_with_gusts(vehicle, tmp_path):
     r = inject(vehicle, "wind", "8", "90", "--gusts", "on", cwd=tmp_path)
     assert r.returncode == 0, r.stderr

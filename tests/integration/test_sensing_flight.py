@@ -48,3 +48,28 @@ def test_a_mocap_flight_flies_on_the_estimate_and_logs_the_pose(tmp_path):
     for a in "ned":
         err = mocap[f"est_pos_{a}_m"][armed] - mocap[f"pos_{a}_m"][armed]
         assert np.max(np.abs(err)) < 0.01, a
+
+
+def test_the_motion_capture_lost_in_flight_the_vehicle_descends_on_its_estimate(tmp_path):
+    """A sensor fault in a closed-loop flight: the motion capture off for good at 1.5 s. The
+    estimator dead-reckons for its no-aid timeout, then the vehicle takes over (position lost:
+    AUTO.LAND on its estimate), lands and disarms without a crash; flight.csv says when."""
+    from sil_vehicle.faultscript import parse_event
+    from sil_vehicle.sitl import NAV_FAILURES
+    hover = dict(REFERENCE, duration_s=30.0)
+    cfg = load_controller(harness.prepare_controller("trq_nmpc_eso", hover, tmp_path))
+    sim = harness.sim_params(cfg.vehicle.file, cfg.control_rate_hz, seed=3, sensing="mocap")
+    lost = parse_event({"at_s": 1.5, "sensor": "mocap", "failure": "off"})
+    res = harness.fly_inprocess(cfg, sim, (lost,), out_dir=tmp_path / "lost", timeout_s=25.0)
+    _, log = read_csv(res.flight_csv)
+    t = log["t_us"] * 1e-6
+    assert not log["crashed"].any()
+    failed = log["nav_failure"] == NAV_FAILURES["position"]
+    assert failed.any()
+    first = t[failed][0]
+    timeout_s = 5.0                                    # the estimator's no-aid timeout
+    assert 1.5 + timeout_s <= first <= 1.5 + timeout_s + 0.2
+    assert np.all(log["sensor_fault_mask"][t > 1.6] == 1 << 6)     # FAILURE_UNIT_SENSOR_VIO
+    # it came down and disarmed on its own, level all the way
+    assert log["armed"][-1] == 0 and log["landed"][-1] == 1
+    assert np.max(np.abs(log["roll_rad"][failed])) < 0.3

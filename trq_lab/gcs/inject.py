@@ -8,7 +8,12 @@
     trq-inject-fault servo 2 stuck 10       tilt servo 2 stuck at 10 deg ("here": where it is)
     trq-inject-fault servo 2 free
     trq-inject-fault wind 8 [DIR_DEG] [--gusts on|off] [--sigma S]
-    trq-inject-fault clear                  every motor and servo healthy
+    trq-inject-fault sensor mocap off       the motion capture stops (MAV_CMD_INJECT_FAILURE,
+                                            unit VIO); sensors gyro accel mag baro gnss mocap,
+                                            failures ok off stuck garbage
+    trq-inject-fault sensor gnss wrong 5    GNSS positions 5 m north of the truth (wrong SIZE:
+                                            the error in the unit's SI unit, or degrees for mag)
+    trq-inject-fault clear                  every motor, servo and sensor healthy
     trq-inject-fault script params/faults/motor1_50.yaml   timed events, in vehicle time
 
 Each action waits for the vehicle's acknowledgement (COMMAND_ACK ACCEPTED, or the PARAM_VALUE
@@ -39,6 +44,7 @@ from sil_vehicle.faultscript import (
     ParamAction,
     load_script,
 )
+from sil_vehicle.sensors import faults as sensor_faults
 from trq_lab.gcs.client import MavClient, NoAnswer, gcs_parser
 from trq_wire.signing import SigningKeyError, load_key
 
@@ -75,6 +81,22 @@ def actions_from_args(args: argparse.Namespace) -> tuple[tuple, str]:
             angle = _number(args.values, 1, "stuck ANGLE_DEG", -90.0, 90.0)[0]
             return (InjectAction(SERVO, TYPE_STUCK, n, angle),), f"servo {n} stuck at {angle:g} deg"
         raise SystemExit2(f"servo: unknown action {args.action!r} (stuck, free)")
+    if args.what == "sensor":
+        name = args.n
+        if name not in sensor_faults.UNIT_OF:
+            raise SystemExit2(f"sensor {name!r}: expected one of "
+                              f"{', '.join(sensor_faults.UNIT_OF)}")
+        kind = sensor_faults.KIND_OF.get(args.action)
+        if kind is None:
+            raise SystemExit2(f"sensor {name}: unknown failure {args.action!r} "
+                              f"({', '.join(sensor_faults.KIND_OF)})")
+        size = float("nan")
+        if kind == sensor_faults.WRONG and args.values:
+            size = _number(args.values, 1, f"sensor {name} wrong SIZE", -1e4, 1e4)[0]
+        elif args.values:
+            raise SystemExit2(f"sensor {name} {args.action}: takes no value, got {args.values}")
+        text = f"sensor {name} {args.action}" + ("" if size != size else f" by {size:g}")
+        return (InjectAction(sensor_faults.UNIT_OF[name], kind, 1, size),), text
     raise SystemExit2(f"unknown target {args.what!r}")
 
 
@@ -108,7 +130,7 @@ def apply(client: MavClient, actions) -> None:
             client.param_set(action.name, action.value)
         else:
             result = client.command(mavlink.MAV_CMD_INJECT_FAILURE, action.unit, action.kind,
-                                    action.instance, action.angle_deg)
+                                    action.instance, action.param4)
             if result != mavlink.MAV_RESULT_ACCEPTED:
                 name = mavlink.enums["MAV_RESULT"][result].name if result in \
                     mavlink.enums["MAV_RESULT"] else str(result)
@@ -137,11 +159,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--timeout", type=float, default=5.0, help="seconds to wait for the vehicle")
     p.add_argument("--signing-key-file", type=Path, default=None,
                    help="sign the commands (MAVLink 2 signing, 64 hex characters)")
-    p.add_argument("what", choices=("motor", "servo", "wind", "clear", "script"))
-    p.add_argument("n", nargs="?", help="motor or servo number 1..4; wind speed m/s; script: "
-                                        "a built-in name (motor1_50, tour, ...) or a path")
+    p.add_argument("what", choices=("motor", "servo", "wind", "sensor", "clear", "script"))
+    p.add_argument("n", nargs="?", help="motor or servo number 1..4; wind speed m/s; sensor: "
+                                        "gyro|accel|mag|baro|gnss|mocap; script: a built-in "
+                                        "name (motor1_50, tour, ...) or a path")
     p.add_argument("action", nargs="?", help="motor: off|on|eff|tv; servo: stuck|free; "
-                                             "wind: direction deg")
+                                             "wind: direction deg; sensor: "
+                                             "ok|off|stuck|garbage|wrong")
     p.add_argument("values", nargs="*")
     p.add_argument("--gusts", choices=("on", "off"), default=None)
     p.add_argument("--sigma", type=float, default=None, help="gust intensity m/s")

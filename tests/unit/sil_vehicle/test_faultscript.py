@@ -14,6 +14,7 @@ from conftest import PARAMS
 from sil_vehicle.faultscript import (MOTOR, SERVO, TYPE_OFF, TYPE_OK, TYPE_STUCK, InjectAction,
                                      ParamAction, load_script)
 from sil_vehicle.config import ConfigError     # the loader's, re-exported
+from sil_vehicle.sensors import faults as sensor_faults
 
 FAULT_FILES = sorted((PARAMS / "faults").glob("*.yaml"))
 
@@ -75,10 +76,39 @@ def test_tour_script_covers_every_kind():
     assert events[4].actions == (InjectAction(MOTOR, TYPE_OK, 4),)
     (free,) = events[5].actions
     assert (free.unit, free.kind, free.instance) == (SERVO, TYPE_OK, 3)
-    assert len(events[6].actions) == 16
+    clear = events[6].actions
+    assert len(clear) == 16 + len(sensor_faults.UNITS)
+    assert {(a.unit, a.kind, a.instance) for a in clear[16:]} == {
+        (unit, TYPE_OK, 0) for unit in sensor_faults.UNITS}
 
 
 # --- each kind of event -----------------------------------------------------------------------
+
+def test_sensor_event(tmp_path):
+    e = one_event(tmp_path, "{at_s: 3, sensor: mocap, failure: off}")
+    (a,) = e.actions
+    assert (a.unit, a.kind, a.instance) == (6, sensor_faults.OFF, 1) and math.isnan(a.param4)
+    assert e.text == "mocap off"
+    e = one_event(tmp_path, "{at_s: 3, sensor: gnss, failure: wrong, size: 5}")
+    (a,) = e.actions
+    assert (a.unit, a.kind, a.instance, a.param4) == (4, sensor_faults.WRONG, 1, 5.0)
+    assert e.text == "gnss wrong by 5"
+    (a,) = one_event(tmp_path, "{at_s: 3, sensor: gyro, failure: garbage}").actions
+    assert (a.unit, a.kind) == (0, sensor_faults.GARBAGE) and math.isnan(a.param4)
+
+
+@pytest.mark.parametrize("text, words", [
+    ("{at_s: 1, sensor: lidar, failure: off}", ("sensor", "lidar")),
+    ("{at_s: 1, sensor: baro, failure: melted}", ("failure", "melted")),
+    ("{at_s: 1, sensor: baro, failure: off, size: 2}", ("size", "2")),
+    ("{at_s: 1, sensor: baro}", ("failure",)),
+])
+def test_bad_sensor_event_names_key_and_value(tmp_path, text, words):
+    with pytest.raises(ConfigError) as err:
+        one_event(tmp_path, text)
+    for w in words:
+        assert w in str(err.value)
+
 
 def test_protocol_constants():
     # MAV_CMD_INJECT_FAILURE units and types of PROTOCOL.md
@@ -104,7 +134,7 @@ def test_time_varying_with_and_without_phase(tmp_path):
 def test_stopped_true_and_false(tmp_path):
     e = one_event(tmp_path, "{at_s: 2, motor: 1, stopped: true}")
     assert e.actions == (InjectAction(MOTOR, TYPE_OFF, 1),)
-    assert math.isnan(e.actions[0].angle_deg)
+    assert math.isnan(e.actions[0].param4)
     e = one_event(tmp_path, "{at_s: 2, motor: 1, stopped: false}")
     assert e.actions == (InjectAction(MOTOR, TYPE_OK, 1),)
 
@@ -114,7 +144,7 @@ def test_servo_stuck_and_freed(tmp_path):
     assert e.actions == (InjectAction(SERVO, TYPE_STUCK, 2, -12.5),)
     e = one_event(tmp_path, "{at_s: 1, servo: 4, stuck_deg: 7}")     # an int angle is a float
     (a,) = e.actions
-    assert a.angle_deg == 7.0 and isinstance(a.angle_deg, float)
+    assert a.param4 == 7.0 and isinstance(a.param4, float)
     e = one_event(tmp_path, "{at_s: 1, servo: 2, stuck_deg: null}")
     (a,) = e.actions
     assert (a.unit, a.kind, a.instance) == (SERVO, TYPE_OK, 2)
@@ -131,7 +161,7 @@ def test_wind(tmp_path):
 
 def test_clear(tmp_path):
     e = one_event(tmp_path, "{at_s: 10, clear: true}")
-    assert len(e.actions) == 16
+    assert len(e.actions) == 16 + len(sensor_faults.UNITS)
     for n in range(1, 5):
         assert ParamAction(f"SIM_MOT{n}_EFF", 1.0) in e.actions
         assert ParamAction(f"SIM_MOT{n}_TVB", 0.0) in e.actions
@@ -216,14 +246,14 @@ def test_off_key_beside_another_unknown_key(tmp_path):
 def test_stuck_angle_outside_the_tilt_range(tmp_path):
     path = write(tmp_path, "events: [{at_s: 1, servo: 3, stuck_deg: 45}]\n", name="tilt.yaml")
     (event,) = load_script(path)                      # inside the default +-90
-    assert event.actions[0].angle_deg == 45.0
+    assert event.actions[0].param4 == 45.0
     with pytest.raises(ConfigError) as info:
         load_script(path, (-30.0, 30.0))
     assert "tilt.yaml" in str(info.value) and "events[0].stuck_deg" in str(info.value)
     assert "45" in str(info.value)
     (event,) = load_script(write(tmp_path, "events: [{at_s: 1, servo: 3, stuck_deg: -30}]\n"),
                            (-30.0, 30.0))             # the limit itself is in range
-    assert event.actions[0].angle_deg == -30.0
+    assert event.actions[0].param4 == -30.0
 
 
 @pytest.mark.parametrize("text", ["events: []\n", "events: {at_s: 1, motor: 1, stopped: true}\n",

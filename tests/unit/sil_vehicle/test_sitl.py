@@ -228,7 +228,9 @@ def test_servo_stuck(sitl):
     (mavlink.FAILURE_UNIT_SYSTEM_MOTOR, mavlink.FAILURE_TYPE_STUCK, 1, 0.0,
      mavlink.MAV_RESULT_UNSUPPORTED),                            # motors do not stick
     (mavlink.FAILURE_UNIT_SENSOR_GPS, mavlink.FAILURE_TYPE_OFF, 1, 0.0,
-     mavlink.MAV_RESULT_UNSUPPORTED),
+     mavlink.MAV_RESULT_DENIED),                                 # truth: no sensor to fail
+    (mavlink.FAILURE_UNIT_SENSOR_OPTICAL_FLOW, mavlink.FAILURE_TYPE_OFF, 1, 0.0,
+     mavlink.MAV_RESULT_UNSUPPORTED),                            # no such sensor here
 ])
 def test_inject_refused(sitl, p1, p2, p3, p4, result):
     faults = sitl.vehicle.faults
