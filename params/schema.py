@@ -599,7 +599,7 @@ class ScenarioFile(Strict):
     controllers: list[Text]
     offboard_link: Optional[ScenarioLink] = None
     # the vehicle's sensing profile (params/sensing): a built-in name or a path; null (or left
-    # out): the sim file's
+    # out): mocap (trq_lab.scenario.SENSING_DEFAULT)
     sensing: Optional[NameOrPath] = None
     recovery_threshold_m: Num(0.001, 100.0)
     timeout_s: Num(1.0, 36000.0)

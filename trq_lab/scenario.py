@@ -74,6 +74,11 @@ class Scenario:
                                     # absolute path); None: the sim file's
 
 
+# a scenario's sensing profile when its file names none: what the prototype sees indoors (a
+# motion capture through the autopilot's estimator), never the truth (issue 33)
+SENSING_DEFAULT = "mocap"
+
+
 def _physics_rate_hz() -> int:
     """The physics rate of the sim file every flight of a scenario extends."""
     from trq_params.loader import load
@@ -108,10 +113,9 @@ def load_scenario(path: Path) -> Scenario:
                   else (path.parent / sc.faults).resolve())
         load_script(faults)     # fail now, with the script's own message, if it is bad
     impair = sc.offboard_link.model_dump(exclude_none=True) if sc.offboard_link else {}
-    sensing = None
-    if sc.sensing is not None:
-        value = sc.sensing if trq_params.is_name(sc.sensing) else str(path.parent / sc.sensing)
-        sensing = check_sensing(value, str(path), "sensing")
+    named = SENSING_DEFAULT if sc.sensing is None else sc.sensing
+    value = named if trq_params.is_name(named) else str(path.parent / named)
+    sensing = check_sensing(value, str(path), "sensing")
     targets = {c: t.model_dump(exclude_none=True) for c, t in sc.targets.items()}
     better = tuple((b.better, b.worse, b.metric) for b in sc.better)
     return Scenario(sc.name, path, sc.description, sc.seed, sc.wind.speed_m_s,

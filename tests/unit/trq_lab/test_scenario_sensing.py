@@ -1,5 +1,5 @@
-"""A scenario's sensing profile (trq_lab.scenario): the `sensing:` key (optional: the sim
-file's), checked at load, handed to each vehicle it starts as `--sensing`."""
+"""A scenario's sensing profile (trq_lab.scenario): the `sensing:` key (optional: mocap, never
+the truth), checked at load, handed to each vehicle it starts as `--sensing`."""
 
 from __future__ import annotations
 
@@ -28,9 +28,23 @@ def command(scenario: sc.Scenario, tmp_path: Path) -> list[str]:
                               tmp_path / "trq.yaml", [], 1234)
 
 
-def test_left_out_the_vehicle_keeps_the_sim_files(tmp_path):
+def test_left_out_a_scenario_flies_mocap(tmp_path):
     s = sc.load_scenario(scenario_file(tmp_path))
-    assert s.sensing is None and "--sensing" not in command(s, tmp_path)
+    assert s.sensing == sc.SENSING_DEFAULT == "mocap"
+    cmd = command(s, tmp_path)
+    assert cmd[cmd.index("--sensing") + 1] == "mocap"
+
+
+def test_truth_only_when_named(tmp_path):
+    s = sc.load_scenario(scenario_file(tmp_path, sensing="truth"))
+    cmd = command(s, tmp_path)
+    assert cmd[cmd.index("--sensing") + 1] == "truth"
+
+
+@pytest.mark.parametrize("path", sorted(Path(trq_params.builtin("scenarios", "smoke")).parent
+                                        .glob("*.yaml")), ids=lambda p: p.stem)
+def test_no_built_in_scenario_flies_the_truth(path):
+    assert sc.load_scenario(path).sensing != "truth"
 
 
 def test_a_name_goes_to_each_vehicle(tmp_path):
