@@ -35,7 +35,7 @@ from sil_vehicle.sensors import baro, gnss, imu, mag, mocap
 from sil_vehicle.sensors import faults as sensor_faults
 from sil_vehicle.sensors.faults import SensorFaults
 from sil_vehicle.sensors.suite import Reading, SensorSuite
-from sil_vehicle.sensors.truth import Truth
+from sil_vehicle.sensors.truth import Truth, imu_truth
 from sil_vehicle.vehicle import ActuatorCommand, Vehicle, VehicleState
 
 LINKS = ("gcs", "offboard")
@@ -175,6 +175,7 @@ class Sitl:
             self._dt_s = sim.dt_us * 1e-6
             self._gravity = sim.vehicle.gravity_m_s2
             self._sensed_vel = self.vehicle.state.x[3:6]    # at rest before the first tick
+            self._sensed_q = self.vehicle.state.x[6:10]
             self.readings = self._sense(self.vehicle.state)
             self.estimator = Eskf(EstimatorParams.from_profile(profile))
             self.estimator.step(self.t_us, self.readings)
@@ -215,28 +216,16 @@ class Sitl:
     def _sense(self, state: VehicleState) -> list[Reading]:
         """The sensors at this tick: the readings that arrive now (each with its time of
         validity), kept as the latest of each sensor. The truth they read: the tick's state,
-        and the specific force from the mean acceleration over the tick, a = (v_k - v_k-1) / dt
-        in NED (what an integrating accelerometer measures), f = R^T (a - g). An estimator
-        takes the readings from here (`readings`, `latest`)."""
+        and the rates and specific force an integrating IMU reads over the tick, from the
+        attitude's and the velocity's change (sensors.truth.imu_truth). An estimator takes the
+        readings from here (`readings`, `latest`)."""
         x = state.x
         v0, v = self._sensed_vel, x[3:6]
-        self._sensed_vel = v
-        dt = self._dt_s
-        # (a - g) in NED, then R^T of it (sensors.truth.specific_force_frd, in plain floats;
-        # R's entries spelled as frames.quat_to_dcm spells them, inline: this runs every tick)
-        an, ae, ad = ((v[0] - v0[0]) / dt, (v[1] - v0[1]) / dt,
-                      (v[2] - v0[2]) / dt - self._gravity)
-        q = x[6:10]
-        qw, qx, qy, qz = q
-        f = ((1 - 2 * (qy * qy + qz * qz)) * an + 2 * (qx * qy + qw * qz) * ae
-             + 2 * (qx * qz - qw * qy) * ad,
-             2 * (qx * qy - qw * qz) * an + (1 - 2 * (qx * qx + qz * qz)) * ae
-             + 2 * (qy * qz + qw * qx) * ad,
-             2 * (qx * qz + qw * qy) * an + 2 * (qy * qz - qw * qx) * ae
-             + (1 - 2 * (qx * qx + qy * qy)) * ad)
+        q0, q = self._sensed_q, x[6:10]
+        self._sensed_vel, self._sensed_q = v, q
+        rates, f = imu_truth(q0, q, v0, v, self._dt_s, self._gravity)
         t_us = state.t_us
-        readings = self.suite.sample(t_us, Truth(t_us, x[0:3], v, q, x[10:13], f,
-                                                 state.motor_pct))
+        readings = self.suite.sample(t_us, Truth(t_us, x[0:3], v, q, rates, f, state.motor_pct))
         if self.sensor_faults.active:
             readings = self.sensor_faults.apply(readings)
         latest = self.latest

@@ -10,6 +10,7 @@ time (for the models that do array arithmetic at a sensor's own rate, and for te
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from typing import NamedTuple
 
@@ -17,7 +18,7 @@ import numpy as np
 
 from sil_vehicle.sensors.noise import rotate_to_body
 
-__all__ = ["Truth", "specific_force_frd", "STANDARD_GRAVITY_M_S2"]
+__all__ = ["Truth", "specific_force_frd", "imu_truth", "STANDARD_GRAVITY_M_S2"]
 
 STANDARD_GRAVITY_M_S2 = 9.80665
 
@@ -84,3 +85,47 @@ def specific_force_frd(quat_wxyz: np.ndarray, accel_ned_m_s2: np.ndarray,
     (0, 0, -gravity) in FRD."""
     g = np.array((0.0, 0.0, gravity_m_s2))
     return rotate_to_body(np.asarray(quat_wxyz, float), np.asarray(accel_ned_m_s2, float) - g)
+
+
+
+def imu_truth(q0: Sequence[float], q1: Sequence[float], v0: Sequence[float],
+              v1: Sequence[float], dt_s: float, gravity_m_s2: float
+              ) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+    """(rates, specific force) in body FRD that an integrating IMU reads over a tick in which the
+    attitude (body FRD -> NED, scalar first) went from q0 to q1 and the NED velocity from v0 to
+    v1. The rates: the rotation vector of q0^* q1 (the tick's delta angle) over dt. The specific
+    force: the mean acceleration over the tick less gravity, a - g with a = (v1 - v0) / dt,
+    rotated into the body frame at the tick's middle attitude q0 exp(delta / 2), where an
+    integrating accelerometer's delta velocity sits (and where the estimator's sculling
+    correction expects it). Every change of attitude and velocity reaches the IMU this way, the
+    plant's touchdown (which stops and levels the vehicle within one tick) included. Plain
+    floats: this runs every physics tick."""
+    aw, ax, ay, az = q0
+    bw, bx, by, bz = q1
+    w = aw * bw + ax * bx + ay * by + az * bz          # q0^* q1
+    x = aw * bx - ax * bw - ay * bz + az * by
+    y = aw * by + ax * bz - ay * bw - az * bx
+    z = aw * bz - ax * by + ay * bx - az * bw
+    if w < 0.0:                                       # the shorter way round
+        w, x, y, z = -w, -x, -y, -z
+    n = math.sqrt(x * x + y * y + z * z)
+    half = math.atan2(n, w)                           # half the tick's rotation angle
+    k = 2.0 * half / n if n > 1e-9 else 2.0 / w       # rotation vector = k (x, y, z)
+    rates = (k * x / dt_s, k * y / dt_s, k * z / dt_s)
+    # the middle attitude: q0 times the quarter-angle rotation about the same axis
+    c, sn = math.cos(0.5 * half), (math.sin(0.5 * half) / n if n > 1e-9 else 0.25 * k)
+    hx, hy, hz = sn * x, sn * y, sn * z
+    qw = aw * c - ax * hx - ay * hy - az * hz
+    qx = aw * hx + ax * c + ay * hz - az * hy
+    qy = aw * hy - ax * hz + ay * c + az * hx
+    qz = aw * hz + ax * hy - ay * hx + az * c
+    an, ae = (v1[0] - v0[0]) / dt_s, (v1[1] - v0[1]) / dt_s
+    ad = (v1[2] - v0[2]) / dt_s - gravity_m_s2
+    # R^T (a - g), R's entries spelled as frames.quat_to_dcm spells them
+    force = ((1 - 2 * (qy * qy + qz * qz)) * an + 2 * (qx * qy + qw * qz) * ae
+             + 2 * (qx * qz - qw * qy) * ad,
+             2 * (qx * qy - qw * qz) * an + (1 - 2 * (qx * qx + qz * qz)) * ae
+             + 2 * (qy * qz + qw * qx) * ad,
+             2 * (qx * qz + qw * qy) * an + 2 * (qy * qz - qw * qx) * ae
+             + (1 - 2 * (qx * qx + qy * qy)) * ad)
+    return rates, force

@@ -21,6 +21,7 @@ from sil_vehicle.mavlink.codec import Codec
 from sil_vehicle.sensors.gnss import GnssReading
 from sil_vehicle.sensors.imu import ImuReading
 from sil_vehicle.sensors.mocap import MocapReading
+from sil_vehicle.sensors.truth import imu_truth
 from sil_vehicle.sitl import ESTIMATE_LOG_COLUMNS, LOG_COLUMNS, Sitl
 from sil_vehicle.vehicle import ActuatorCommand
 
@@ -163,11 +164,19 @@ def test_the_specific_force_is_the_acceleration_less_gravity_in_flight(sim, exac
                 rb.drag_N_s2_m2)
         a = 0.5 * (np.array(derivative(before.x, *args)[3:6])
                    + np.array(derivative(after.x, *args)[3:6]))
-        r = np.array(quat_to_dcm(*after.x[6:10]))
+        # rotated at the tick's middle attitude (sensors.truth.imu_truth): the slerp midpoint,
+        # which for two unit quaternions in one hemisphere is their normalised sum
+        mid = np.array(before.x[6:10]) + after.x[6:10]
+        r = np.array(quat_to_dcm(*(mid / np.linalg.norm(mid))))
         expected = r.T @ (a - (0.0, 0.0, vp.gravity_m_s2))
         got = s.latest["imu"].accel_frd_m_s2
         worst = max(worst, float(np.max(np.abs(got - expected))))
-        assert np.allclose(s.latest["imu"].gyro_frd_rad_s, after.x[10:13], atol=1e-12)
+        # the gyro: the attitude's change over the tick, near the rates' trapezoid mean
+        assert np.allclose(s.latest["imu"].gyro_frd_rad_s,
+                           imu_truth(before.x[6:10], after.x[6:10], before.x[3:6],
+                                     after.x[3:6], 1e-3, vp.gravity_m_s2)[0], atol=1e-12)
+        assert np.allclose(s.latest["imu"].gyro_frd_rad_s,
+                           0.5 * (np.array(before.x[10:13]) + after.x[10:13]), atol=2e-3)
     assert s.state.pos_ned_m[2] < -0.05 and not s.state.landed         # it flew
     assert worst < 1e-3
 
@@ -309,15 +318,17 @@ def test_the_log_keeps_the_position_sources_latest_sample(sim, exact):
 
 
 def test_the_specific_force_is_the_sensors_own_formula(sim, exact):
-    """Sitl._sense's plain-float R^T (a - g) against sensors.truth.specific_force_frd."""
+    """Sitl._sense's plain-float R^T (a - g), at the tick's middle attitude, against
+    sensors.truth.specific_force_frd on the slerp midpoint (the normalised sum)."""
     from sil_vehicle.sensors.truth import specific_force_frd
     s = sitl(sim, exact)
     fly(s, tilt_rad=0.4)
     for _ in range(300):
-        v0 = np.array(s.state.x[3:6])
+        v0, q0 = np.array(s.state.x[3:6]), np.array(s.state.x[6:10])
         s.step()
         a = (np.array(s.state.x[3:6]) - v0) / (sim.dt_us * 1e-6)
-        expected = specific_force_frd(np.array(s.state.x[6:10]), a, sim.vehicle.gravity_m_s2)
+        mid = q0 + s.state.x[6:10]
+        expected = specific_force_frd(mid / np.linalg.norm(mid), a, sim.vehicle.gravity_m_s2)
         assert np.allclose(s.latest["imu"].accel_frd_m_s2, expected, rtol=0, atol=1e-9)
 
 
