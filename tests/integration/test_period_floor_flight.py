@@ -56,3 +56,14 @@ def test_a_replay_flown_beyond_its_recording_stops_at_its_end(tmp_path):
     assert floor["controller_rc"] == 1            # ReplayDiverged: a FlightError, exit 1
     _, c = metrics.read_csv(tmp_path / "floor" / "controller.csv")
     assert len(c["t_s"]) == n
+
+
+def test_the_benchs_flight_under_a_sensing_profile(tmp_path):
+    """trq-bench-nmpc --daemons --sensing: the vehicle carries the profile (its estimator's
+    estimate in the log), and the controller flies on it."""
+    run = fly_daemons(SECONDS, "trq_nmpc_eso", tmp_path / "mocap", sensing="mocap")
+    assert run["vehicle_rc"] == 0
+    _, truth = metrics.read_csv(tmp_path / "mocap" / "flight.csv")
+    assert "est_pos_n_m" in truth and "mocap_pos_n_m" in truth
+    _, steps = metrics.read_csv(tmp_path / "mocap" / "controller.csv")
+    assert len(steps["t_s"]) > 50                     # armed once the estimator was ready

@@ -365,6 +365,9 @@ def main(argv=None) -> int:
                          "control period measured from outside, its parts from its log, the "
                          "vehicle's CPU per period and the closed loop's real-time factor "
                          "(trq_lab/bench/period.py)")
+    ap.add_argument("--sensing", default="mocap", metavar="NAME|PATH",
+                    help="the vehicle's sensing profile in --daemons (default: mocap, as the "
+                         "scenarios fly; truth: the near-truth stream, no estimator)")
     ap.add_argument("--anchor", choices=("acados",), default=None,
                     help="also step acados' real-time iteration (the same OCP, built from our "
                          "model, weights and bounds) through the flights of rti-gn (Gauss-Newton) "
@@ -410,7 +413,7 @@ def main(argv=None) -> int:
     for k in range(args.repeat):
         if args.daemons:      # interleaved with the modes, as they are with each other
             from trq_lab.bench.period import daemons_period
-            d = daemons_period(controller=args.controller)
+            d = daemons_period(controller=args.controller, sensing=args.sensing)
             daemon_runs.append(d)
             print(f"  daemons{f' (run {k + 1})' if args.repeat > 1 else ''}: controller "
                   f"{d['controller_cpu_ms']:.2f} ms CPU a period from outside, vehicle "
@@ -448,8 +451,8 @@ def main(argv=None) -> int:
     daemons = _daemons_summary(daemon_runs) if daemon_runs else None
     if daemons is not None:
         from trq_lab.bench.period import parts_table
-        print(f"\nthe whole period over both daemons in lockstep (median of {len(daemon_runs)} "
-              "run(s)):")
+        print(f"\nthe whole period over both daemons in lockstep, sensing {args.sensing} (median "
+              f"of {len(daemon_runs)} run(s)):")
         print(parts_table(daemons))
         print(f"controller CPU per period / the solver's own step (feedback wall + preparation "
               f"CPU, same flights): {daemons['ratio_to_solver']:.2f}; closed loop "

@@ -76,17 +76,18 @@ def _listening(port: int, proc: subprocess.Popen, timeout_s: float) -> None:
 
 def fly_daemons(seconds: float, controller: str, log_dir: Path,
                 python: str = sys.executable,
-                controller_cmd: list[str] | None = None) -> dict:
+                controller_cmd: list[str] | None = None, sensing: str | None = None) -> dict:
     """One lockstep flight of both daemons for `seconds` of vehicle time: CPU s of each
     process, the vehicle's wall time (start to exit) and both exit codes. `controller_cmd`: the
     command that starts the controller daemon, before its options (default
     `python -m trq_offboard`; another program taking trq-offboard's options, e.g.
-    trq_lab/bench/period_floor.py's replay)."""
+    trq_lab/bench/period_floor.py's replay). `sensing`: the vehicle's sensing profile (its
+    --sensing; None: the sim file's)."""
     pv, pc, pg, pt = _free_ports(4)
     vcmd = [python, "-m", "sil_vehicle", "--duration", f"{seconds:g}", "--mode", "lockstep",
             "--offboard-bind", f"127.0.0.1:{pv}", "--offboard-target", f"127.0.0.1:{pc}",
             "--gcs-bind", f"127.0.0.1:{pg}", "--gcs-target", f"127.0.0.1:{pt}",
-            "--log-dir", str(log_dir)]
+            "--log-dir", str(log_dir)] + (["--sensing", sensing] if sensing else [])
     ccmd = list(controller_cmd or [python, "-m", "trq_offboard"])
     ccmd += ["--controller", controller, "--connect", f"udpin:127.0.0.1:{pc}",
              "--log-dir", str(log_dir)]
@@ -136,15 +137,18 @@ def cpu_parts(csv_path: Path, lo_s: float, hi_s: float) -> dict:
 def daemons_period(short_s: float = 5.0, long_s: float = 35.0,
                    controller: str = "trq_nmpc_eso", control_rate_hz: int = 100,
                    controller_cmd: list[str] | None = None,
-                   log_root: Path | None = None) -> dict:
+                   log_root: Path | None = None, sensing: str | None = None) -> dict:
     """The two flights and what follows from them (see the module docstring).
     `controller_cmd`: fly_daemons'. `log_root`: the flights' logs go to its `short/` and
-    `long/` and stay (default: a temporary directory, removed)."""
+    `long/` and stay (default: a temporary directory, removed). `sensing`: the vehicle's
+    sensing profile (fly_daemons')."""
     with contextlib.ExitStack() as stack:
         root = Path(log_root) if log_root is not None else Path(
             stack.enter_context(tempfile.TemporaryDirectory(prefix="trq-bench-period-")))
-        short = fly_daemons(short_s, controller, root / "short", controller_cmd=controller_cmd)
-        long_ = fly_daemons(long_s, controller, root / "long", controller_cmd=controller_cmd)
+        short = fly_daemons(short_s, controller, root / "short", controller_cmd=controller_cmd,
+                            sensing=sensing)
+        long_ = fly_daemons(long_s, controller, root / "long", controller_cmd=controller_cmd,
+                            sensing=sensing)
         parts = cpu_parts(root / "long" / "controller.csv", short_s, long_s)
     periods = (long_s - short_s) * control_rate_hz
     dwall = long_["wall_s"] - short["wall_s"]
