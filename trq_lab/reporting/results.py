@@ -241,7 +241,7 @@ def profiles_table(paths: list[Path], base: Path | None = None) -> str:
     """One scenario flown under each sensing profile (its metrics.json's "sensing"), a row per
     profile: per controller the position RMSE after the fault, the maximum yaw error, the
     estimator's own position RMSE (its estimate against the truth; none under `truth`) and the
-    fault's diagnosis time, a crash said so."""
+    fault's diagnosis time, a crash said so; the first header cell says what a cell holds."""
     docs = [(p, load_metrics(p)) for p in paths]
     for path, doc in docs:
         if not isinstance(doc.get("sensing"), str):
@@ -254,7 +254,9 @@ def profiles_table(paths: list[Path], base: Path | None = None) -> str:
         for run in _ordered(doc["runs"]):
             if run["controller"] not in controllers:
                 controllers.append(run["controller"])
-    head = ["sensing"] + [f"`{c}`" for c in controllers]
+    head = [("sensing; each cell: pos RMSE after fault m / max yaw err deg / estimate pos RMSE m "
+             "(the estimator's own error; none under `truth`: no estimator) / diagnosis s (none "
+             "without an effectiveness observer, or crashed)")] + [f"`{c}`" for c in controllers]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for path, doc in docs:
         by = {r["controller"]: r for r in doc["runs"]}
@@ -268,15 +270,10 @@ def profiles_table(paths: list[Path], base: Path | None = None) -> str:
             else:
                 cells.append(" / ".join((fmt(r.get("rmse_pos_after_fault_m"), "{:.4f}"),
                                          fmt(r.get("max_yaw_err_deg"), "{:.2f}"),
-                                         fmt(r.get("est_rmse_pos_m"), "{:.4f}"),
+                                         fmt(r.get("est_rmse_pos_m"), "{:.4g}"),
                                          fmt(r.get("diagnosis_s"), "{:.2f}")))
                              + (" (crashed)" if r.get("crashed") else ""))
         lines.append("| " + " | ".join(cells) + " |")
-    sources = sorted({_shown(p.parent.parent, base) for p, _ in docs})
-    lines += ["", "Each cell: pos RMSE after fault m / max yaw err deg / estimate pos RMSE m "
-              "(the estimator's own error; none under `truth`: no estimator) / diagnosis s (none "
-              "without an effectiveness observer, or crashed). Source: "
-              + ", ".join(f"`{s}/`" for s in sources) + "."]
     return "\n".join(lines)
 
 
