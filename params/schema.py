@@ -566,6 +566,7 @@ class ScenarioTargets(Strict):
     max_yaw_err_deg: Optional[Num(0.0, 1e6)] = None
     rmse_yaw_deg: Optional[Num(0.0, 1e6)] = None
     recovery_s: Optional[Num(0.0, 1e6)] = None
+    diagnosis_s: Optional[Num(0.0, 1e6)] = None
 
 
 class ScenarioBetter(Strict):
