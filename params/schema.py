@@ -30,9 +30,9 @@ from trq_params.loader import (Choice, Flag, Int, Invalid, Items, NameOrPath, Nu
                                Text, Vec, expect)
 
 __all__ = ["Strict", "VehicleFile", "SimFile", "ControllerFile", "EsoFile", "MotorEvent",
-           "ServoEvent", "WindEvent", "SensorEvent", "ClearEvent", "ScenarioFile", "CampaignFile",
-           "SensingFile", "STREAMS", "HPIPM_OPTIONS", "DELAY_BUFFER_MS", "parse_endpoint",
-           "throttle_curve"]
+           "ServoEvent", "WindEvent", "SensorEvent", "ClearEvent", "ScenarioFile",
+           "CampaignFile", "FlightTarget", "FLIGHT_METRICS", "SensingFile", "STREAMS",
+           "HPIPM_OPTIONS", "DELAY_BUFFER_MS", "parse_endpoint", "throttle_curve"]
 
 
 class Strict(BaseModel):
@@ -579,6 +579,7 @@ class ScenarioTargets(Strict):
     max_yaw_err_deg: Optional[Num(0.0, 1e6)] = None
     rmse_yaw_deg: Optional[Num(0.0, 1e6)] = None
     recovery_s: Optional[Num(0.0, 1e6)] = None
+    diagnosis_s: Optional[Num(0.0, 1e6)] = None
 
 
 class ScenarioBetter(Strict):
@@ -701,6 +702,29 @@ class CampaignTargets(Strict):
     better: list[CampaignPaired] = []
 
 
+# The metrics of a campaign's flight (trq_lab.metrics.RunMetrics; flights.csv's columns after
+# the flight's inputs) a flight target may bound: the numbers, and `crashed` (0 or 1)
+FLIGHT_METRICS = ("crashed", "flight_s", "rmse_pos_m", "max_pos_err_m", "rmse_pos_after_fault_m",
+                  "rmse_vert_after_fault_m", "max_sink_after_fault_m", "rmse_yaw_deg",
+                  "max_yaw_err_deg", "recovery_s", "solve_ms_p50", "solve_ms_p99",
+                  "est_rmse_pos_m", "est_rmse_att_deg", "diagnosis_s")
+
+
+class FlightTarget(Strict):
+    """A target on the distribution of a campaign's flights: among the flights of `controller`
+    (only those flown under the sensing profile `sensing` when it is given), at least `share`
+    have `metric` <= `max`, or, with `per`, `metric` <= `max` times the same flight's `per`
+    (`rmse_pos_after_fault_m` within 1.5x its `est_rmse_pos_m`). A flight that failed, or whose
+    metric (or `per`) is missing, does not meet it; nor does a crashed one, except on `crashed`
+    itself (`metric: crashed, max: 0`: no crash)."""
+    controller: Text
+    metric: Choice(*FLIGHT_METRICS)
+    max: Num(0.0, 1e9)
+    per: Optional[Choice(*FLIGHT_METRICS)] = None
+    share: Num(0.0, 1.0) = 1.0
+    sensing: Optional[NameOrPath] = None
+
+
 class CampaignFile(Strict):
     """A campaign file (params/campaigns/*.yaml); the axes are checked key by key afterwards."""
     name: Text
@@ -713,6 +737,7 @@ class CampaignFile(Strict):
     repeats: Int(1, 1000) = 1
     controller_model: Any = "nominal"
     targets: CampaignTargets | None = None
+    flight_targets: list[FlightTarget] = []
     grid: CampaignGrid | None = None
     sample: CampaignSample | None = None
 
@@ -740,6 +765,10 @@ class CampaignFile(Strict):
                 if name not in self.controllers:
                     raise Invalid(key, name, "one of the campaign's controllers ("
                                   + ", ".join(self.controllers) + ")")
+        for i, ft in enumerate(self.flight_targets):
+            if ft.controller not in self.controllers:
+                raise Invalid(f"flight_targets[{i}].controller", ft.controller, "one of the "
+                              "campaign's controllers (" + ", ".join(self.controllers) + ")")
         return self
 
 # --------------------------------------------------------------------------------------------

@@ -17,6 +17,12 @@ the crash, whichever comes first:
     rmse_yaw_deg, max_yaw_err_deg  yaw error, wrapped to +-180 deg
     recovery_s                     from the onset to the last time the position error exceeded
                                    the recovery threshold (0 if it never did; None if crashed)
+    diagnosis_s                    from the onset to the last time the controller's estimated
+                                   effectiveness of a faulted motor (eff_motorN) was more than
+                                   DIAGNOSIS_BAND from the true one (motorN_factor): see
+                                   `diagnosis_time`; over the steps before the landing (None
+                                   without a faulted motor, without an effectiveness observer,
+                                   or if crashed)
     solve_ms_p50, solve_ms_p99     controller solve time per step
 """
 
@@ -31,6 +37,9 @@ import numpy as np
 from trq_wire.logfile import read_header
 
 GROUND_DOWN_M = 0.0
+# how close the controller's estimated effectiveness of a faulted motor must come to the true
+# factor for the fault to count as diagnosed (issue 33: MOT1_EFF within 0.1 of the true value)
+DIAGNOSIS_BAND = 0.1
 
 
 @dataclass(frozen=True)
@@ -53,6 +62,7 @@ class RunMetrics:
     # `truth` sensing profile, whose flight.csv has no estimate)
     est_rmse_pos_m: float | None = None
     est_rmse_att_deg: float | None = None
+    diagnosis_s: float | None = None
 
     def as_dict(self) -> dict:
         return {k: (None if isinstance(v, float) and not math.isfinite(v) else v)
@@ -112,6 +122,36 @@ def samples(truth: dict[str, np.ndarray], steps: dict[str, np.ndarray]) -> Sampl
     return Samples(stamps[keep], rows, keep, pos, ref, crash_us)
 
 
+def diagnosis_time(t_us: np.ndarray, eff: np.ndarray, true_factor: np.ndarray,
+                   fault_onset_us: int, band: float = DIAGNOSIS_BAND) -> float | None:
+    """Seconds from the fault onset to the diagnosis of the faulted motor(s), defined like
+    recovery_s: the last step from the onset on at which the estimate of a faulted motor was
+    outside `band` of the true factor (or not finite), so a diagnosis that wanders off again
+    does not count until it is back for good; 0 if it never was outside; the time of the last
+    step if it is outside at the end.
+
+    t_us (n,) the controller's steps; eff (n, 4) the controller's estimated effectiveness at
+    them (eff_motor1..4); true_factor (n, 4) the true factors at the same stamps. A motor is
+    faulted when its true factor differs from 1 at a step from the onset on. None when no motor
+    is faulted, when no step is at or after the onset, or when the controller has no
+    effectiveness observer: its log then holds exactly 1 (StepInfo's default) or NaN (a step
+    without a solve) for every motor at every step."""
+    t_us = np.asarray(t_us, dtype=np.int64)
+    eff = np.asarray(eff, dtype=float)
+    true_factor = np.asarray(true_factor, dtype=float)
+    sel = t_us >= fault_onset_us
+    finite = eff[np.isfinite(eff)]
+    if not sel.any() or np.all(finite == 1.0):
+        return None
+    faulted = np.flatnonzero(np.any(true_factor[sel] != 1.0, axis=0))
+    if len(faulted) == 0:
+        return None
+    e, f = eff[:, faulted], true_factor[:, faulted]
+    outside = np.any(~np.isfinite(e) | (np.abs(e - f) > band), axis=1)
+    over = np.flatnonzero(sel & outside)
+    return 0.0 if len(over) == 0 else float((t_us[over[-1]] - fault_onset_us) * 1e-6)
+
+
 def compute(controller: str, vehicle: str, truth: dict[str, np.ndarray],
             steps: dict[str, np.ndarray], fault_onset_us: int | None,
             recovery_threshold_m: float = 0.1) -> RunMetrics:
@@ -157,7 +197,34 @@ def compute(controller: str, vehicle: str, truth: dict[str, np.ndarray],
         recovery_s=recovery,
         solve_ms_p50=float(np.percentile(solve, 50)) if len(solve) else math.nan,
         solve_ms_p99=float(np.percentile(solve, 99)) if len(solve) else math.nan,
-        est_rmse_pos_m=est_pos, est_rmse_att_deg=est_att)
+        est_rmse_pos_m=est_pos, est_rmse_att_deg=est_att,
+        diagnosis_s=_diagnosis(sm, truth, steps, fault_onset_us))
+
+
+def _diagnosis(sm: Samples, truth: dict[str, np.ndarray], steps: dict[str, np.ndarray],
+               fault_onset_us: int | None) -> float | None:
+    """diagnosis_s over the kept steps before the landing (None if crashed, without a fault or
+    without the columns): the true factors interpolated at the controller's stamps. The
+    touchdown puts the ground's reaction into the observer's disturbance, which the
+    effectiveness observer reads as a motor's deficit: from the reference's landing phase on
+    ("land"; the vehicle's `landed` too) the estimate says nothing of the diagnosis."""
+    if (fault_onset_us is None or sm.crash_us is not None or "eff_motor1" not in steps
+            or "motor1_factor" not in truth):
+        return None
+    airborne = np.ones(len(sm.rows), dtype=bool)
+    if "landed" in truth:
+        airborne &= truth["landed"][sm.rows] < 0.5
+    if "phase" in steps:
+        phase = steps["phase"][sm.keep]
+        landing = np.flatnonzero(phase == "land")
+        if len(landing):
+            airborne[landing[0]:] = False
+    t_us = sm.t_us[airborne]
+    t_truth = truth["t_us"].astype(np.int64)
+    true_factor = np.column_stack([np.interp(t_us, t_truth, truth[f"motor{i}_factor"])
+                                   for i in range(1, 5)])
+    eff = np.column_stack([steps[f"eff_motor{i}"][sm.keep][airborne] for i in range(1, 5)])
+    return diagnosis_time(t_us, eff, true_factor, fault_onset_us)
 
 
 def true_disturbance(truth: dict[str, np.ndarray], vehicle_params) -> np.ndarray:

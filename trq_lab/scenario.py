@@ -86,6 +86,16 @@ def _physics_rate_hz() -> int:
     return load(trq_params.builtin("sim", "default"), SimFile).physics_rate_hz
 
 
+def sensing_flown(scenario: Scenario) -> str:
+    """The sensing profile a scenario's vehicles carry: its own (or --sensing's), else the sim
+    file's that every flight extends (a built-in name, or an absolute path)."""
+    if scenario.sensing is not None:
+        return scenario.sensing
+    from trq_params.loader import load
+    from trq_params.schema import SimFile
+    return load(trq_params.builtin("sim", "default"), SimFile).sensing
+
+
 def check_sensing(value: str, where: str, key: str) -> str:
     """A sensing profile given to a scenario, as the vehicle will get it (a name, or a path made
     absolute), loaded once to fail early: a ConfigError naming `where`, `key` and `value`."""
@@ -524,14 +534,14 @@ def main(argv: list[str] | None = None) -> int:
         print(f"  {r.controller}: {r.status}, {r.t_s:.1f} s simulated in {r.wall_s:.1f} s wall. "
               f"{r.summary}")
     results, failures = evaluate(scenario, runs)
-    doc = {"scenario": scenario.name, "runs": results}
+    doc = {"scenario": scenario.name, "sensing": sensing_flown(scenario), "runs": results}
     (args.out / "metrics.json").write_text(json.dumps(doc, indent=2) + "\n")
     figures = [] if args.no_figures else report.figures(scenario, runs, args.out)
     envelopes = envelope_of(scenario, runs)
     doc["envelope"] = envelopes
     (args.out / "metrics.json").write_text(json.dumps(doc, indent=2) + "\n")
     text = report.markdown(scenario, results, failures, figures, envelopes,
-                           report.period_rows(runs))
+                           report.period_rows(runs), sensing=doc["sensing"])
     (args.out / "report.md").write_text(text)
     print()
     print(report.table(results))

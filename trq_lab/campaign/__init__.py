@@ -76,6 +76,12 @@ not its seed: the plants of a cell meet the same noise and gusts. `controller_mo
 `targets` (optional): {controller, min_margin_pct, rmse_after_fault_m, share, better: [{worse,
 share}]}, judged in the report
 (trq_lab.reporting.plant_campaign).
+`flight_targets` (optional, any campaign): a list of {controller, metric, max, per, share,
+sensing}: among the flights of `controller` (under the profile `sensing` only, when given), at
+least `share` (default 1) have `metric` (one of flights.csv's metrics,
+trq_params.schema.FLIGHT_METRICS) <= `max` (times the flight's own `per`, when given), judged in
+the report (trq_lab.reporting.campaign); a failed flight, or a crashed one on any metric but
+`crashed`, does not meet it.
 Trajectory keys: those of the controller file's `reference` (kind, altitude_m,
 climb_speed_m_s, hold_s, duration_s, ramp_s, radius_m, period_s, helix_climb_m, step_ned_m, land);
 their types are checked when the campaign is read, their values and combinations (ramp_s at most

@@ -90,6 +90,8 @@ class Campaign:
     targets: Any = None                # trq_params.schema.CampaignTargets or None
     has_plant: bool = False            # a plant axis: every spec has "plant"
     sensings: tuple[str, ...] = (SENSING_DEFAULT,)     # the profiles its flights fly under
+    # trq_params.schema.FlightTarget each, its `sensing` as the flights carry it (None: all)
+    flight_targets: tuple = ()
 
 
 def _axis_models(axis: str):
@@ -428,4 +430,23 @@ def load_campaign(path: Path) -> Campaign:
                     flights.append(spec)
     sensings = tuple(dict.fromkeys(f["sensing"] for f in flights))
     return Campaign(name, path, description, seed, tuple(controllers), success, threshold,
-                    timeout, repeats, tuple(flights), top.targets, has_plant, sensings)
+                    timeout, repeats, tuple(flights), top.targets, has_plant, sensings,
+                    _flight_targets(top.flight_targets, sensings, path))
+
+
+def _flight_targets(targets, sensings: tuple[str, ...], file: Path) -> tuple:
+    """The flight targets with their sensing profile as the flights carry it (a built-in name,
+    or a path made absolute against the campaign file's folder): one the campaign flies, else a
+    ConfigError naming the file, the key and the value."""
+    out = []
+    for i, t in enumerate(targets):
+        if t.sensing is not None:
+            where = f"flight_targets[{i}].sensing"
+            profile = _sensing({"profile": t.sensing}, file, where)
+            if profile not in sensings:
+                raise ConfigError(f"{file}: key '{where}': got {t.sensing!r}, expected one of "
+                                  "the profiles the campaign flies (" + ", ".join(sensings)
+                                  + ")")
+            t = t.model_copy(update={"sensing": profile})
+        out.append(t)
+    return tuple(out)

@@ -12,6 +12,8 @@ import json
 import os
 from pathlib import Path
 
+from trq_params.schema import FLIGHT_METRICS
+
 from trq_lab.campaign.flight import plant_id, severity
 from trq_lab.campaign.spec import (FAULT_KEYS, LINK_KEYS, PLANT_KEYS, PLANT_NEUTRAL,
                                    SENSING_DEFAULT, TRAJECTORY_KEYS, WIND_KEYS, Campaign)
@@ -61,10 +63,8 @@ def load_results(out: Path) -> dict[str, dict]:
     return results
 
 
-METRIC_KEYS = ("vehicle", "crashed", "flight_s", "rmse_pos_m", "max_pos_err_m",
-               "rmse_pos_after_fault_m", "rmse_vert_after_fault_m", "max_sink_after_fault_m",
-               "rmse_yaw_deg", "max_yaw_err_deg", "recovery_s",
-               "solve_ms_p50", "solve_ms_p99", "est_rmse_pos_m", "est_rmse_att_deg")
+# a flight's metrics columns: its airframe, then every metric a flight target may bound
+METRIC_KEYS = ("vehicle", *FLIGHT_METRICS)
 
 
 def is_success(record: dict, threshold_m: float) -> bool:

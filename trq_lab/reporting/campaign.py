@@ -1,6 +1,7 @@
-"""A campaign's report: success rate and position RMSE per controller against fault severity
-and wind (tables and heat maps), where each controller stops coping, and the summary that
-trq-results reads (metrics.json).
+"""A campaign's report: success rate, position RMSE and diagnosis time per controller against
+fault severity and wind (tables and heat maps), where each controller stops coping, the flight
+targets (`flight_targets`: a bar on one metric of one controller's flights, under one sensing
+profile or all), and the summary that trq-results reads (metrics.json).
 
 In: a campaign (`trq_lab.campaign.spec.Campaign`) and the rows of its flights
 (`trq_lab.campaign.store.rows_of`). Out: report.md, success.png, rmse.png and metrics.json in the
@@ -181,6 +182,12 @@ def sensing_label(profile: str) -> str:
     return Path(profile).stem if profile else ""
 
 
+def _median(rows: list[dict], key: str) -> float | None:
+    """The median of `key` over the rows that have it (None if none has)."""
+    values = [r[key] for r in rows if r.get(key) is not None]
+    return float(statistics.median(values)) if values else None
+
+
 def _controller_summary(campaign: Campaign, rows: list[dict]) -> dict:
     out = {}
     for c in campaign.controllers:
@@ -189,8 +196,75 @@ def _controller_summary(campaign: Campaign, rows: list[dict]) -> dict:
         if rs:
             out[c] = {"flights": len(rs), "success_rate": sum(r["success"] for r in rs) / len(rs),
                       "crashed": sum(bool(r["crashed"]) for r in rs),
-                      "rmse_median_m": float(statistics.median(rm)) if rm else None}
+                      "rmse_median_m": float(statistics.median(rm)) if rm else None,
+                      "diagnosis_median_s": _median(rs, "diagnosis_s")}
     return out
+
+
+def meets(r: dict, target) -> bool:
+    """Whether one flight's row meets a flight target (trq_params.schema.FlightTarget): not
+    failed, not crashed (unless the target is on `crashed` itself), its metric (and `per`)
+    known, metric <= max (times `per`)."""
+    if r.get("status") == "failed":
+        return False
+    value = r.get(target.metric)
+    if value is None or (target.metric != "crashed" and r.get("crashed")):
+        return False
+    bar = target.max
+    if target.per is not None:
+        per = r.get(target.per)
+        if per is None:
+            return False
+        bar *= float(per)
+    return float(value) <= bar
+
+
+def target_text(t) -> str:
+    """A flight target as the report writes it: who, under which profile, what bar."""
+    under = f" under `{sensing_label(t.sensing)}`" if t.sensing is not None else ""
+    bar = f"{t.max:g} x {t.per}" if t.per is not None else f"{t.max:g}"
+    return f"`{t.controller}`{under}: {t.metric} <= {bar} on >= {t.share:.0%} of its flights"
+
+
+def judge_flight_targets(campaign: Campaign, rows: list[dict]
+                         ) -> tuple[list[str], list[str], list[str], list[dict]]:
+    """The campaign's flight targets judged on its rows: (report lines, failures, headline
+    parts, one summary per target)."""
+    if not campaign.flight_targets:
+        return [], [], [], []
+    lines = ["## Flight targets", "",
+             "Each target over the flights of one controller (under one sensing profile when it "
+             "names one): the share of them that meet the bar (a failed flight, or a crashed one "
+             "unless the target is on `crashed`, does not), and the median of the metric.", ""]
+    failures, headline, summary = [], [], []
+    for t in campaign.flight_targets:
+        rs = [r for r in rows if r["controller"] == t.controller
+              and (t.sensing is None or r["sensing"] == t.sensing)]
+        ok = sum(meets(r, t) for r in rs)
+        share = ok / len(rs) if rs else None
+        met = share is not None and share >= t.share
+        values = [float(r[t.metric]) for r in rs if r.get(t.metric) is not None]
+        median = float(statistics.median(values)) if values else None
+        ratios = [float(r[t.metric]) / r[t.per] for r in rs if t.per is not None
+                  and r.get(t.metric) is not None and r.get(t.per)]
+        extra = (f", median ratio {statistics.median(ratios):.3g}" if ratios else "")
+        verdict = "met" if met else "missed" if rs else "not judged: no such flight"
+        lines.append(f"- {target_text(t)}: {ok} of {len(rs)} "
+                     f"({fmt(share, '{:.0%}')}; median {fmt(median, '{:.4g}')}{extra}): "
+                     f"**{verdict}**.")
+        short = (f"{t.controller}{' ' + sensing_label(t.sensing) if t.sensing else ''} "
+                 f"{t.metric} <= {t.max:g}{' x ' + t.per if t.per else ''}: {ok}/{len(rs)}")
+        headline.append(f"{short} {'met' if met else 'missed'}")
+        if not met:
+            failures.append(f"{short} (target >= {t.share:.0%})")
+        summary.append({"controller": t.controller, "sensing": t.sensing and
+                        sensing_label(t.sensing), "metric": t.metric, "max": t.max,
+                        "per": t.per, "share_target": t.share, "flights": len(rs), "met_by": ok,
+                        "share": share, "median": median, "met": met})
+    lines.append("")
+    if failures:
+        lines += ["**Missed:**", ""] + [f"- {f}" for f in failures] + [""]
+    return lines, failures, headline, summary
 
 
 def _cell_sections(campaign: Campaign, rows: list[dict], out: Path, figures: bool,
@@ -281,9 +355,9 @@ def write_report(campaign: Campaign, rows: list[dict], out: Path, run_info: dict
     lines += ["## Success rate per controller" + (" and sensing profile" if varied else ""), "",
               ("| sensing " if varied else "") + "| controller | flights | success | crashed | "
               "failed | median RMSE after fault m |" + (" median estimate error m |" if varied
-                                                       else ""),
+                                                       else "") + " median diagnosis s |",
               ("|---" if varied else "") + "|---|---|---|---|---|---|" + ("---|" if varied
-                                                                          else "")]
+                                                                          else "") + "---|"]
     for p, prs in (groups if varied else [("", rows)]):
         for c in campaign.controllers:
             rs = [r for r in prs if r["controller"] == c]
@@ -297,7 +371,7 @@ def write_report(campaign: Campaign, rows: list[dict], out: Path, run_info: dict
                          f"{sum(r['status'] == 'failed' for r in rs)} | "
                          f"{fmt(statistics.median(rm) if rm else None)} |"
                          + (f" {fmt(statistics.median(est) if est else None)} |" if varied
-                            else ""))
+                            else "") + f" {fmt(_median(rs, 'diagnosis_s'), '{:.2f}')} |")
     lines.append("")
     if campaign.has_plant:
         plant_lines, plant_summary = plant_campaign.report(campaign, rows, out, figures)
@@ -308,6 +382,14 @@ def write_report(campaign: Campaign, rows: list[dict], out: Path, run_info: dict
     if varied:
         summary["sensing"] = {sensing_label(p): _controller_summary(campaign, prs)
                               for p, prs in groups}
+    target_lines, failures, headline, judged = judge_flight_targets(campaign, rows)
+    if judged:
+        lines += target_lines
+        summary["flight_targets"] = judged
+        # beside the plant targets' (trq-results reads both keys)
+        summary["failures"] = summary.get("failures", []) + failures
+        summary["headline"] = "; ".join(([summary["headline"]] if summary.get("headline")
+                                         else []) + headline)
     write_json(out / "metrics.json", summary)
     for p, prs in (groups if varied else [("", rows)]):
         if prs:

@@ -33,8 +33,10 @@ METRIC_COLUMNS = (
     ("rmse_vert_after_fault_m", "of it vertical m", "{:.3f}"),
     ("max_sink_after_fault_m", "max sink after fault m", "{:.3f}"),
     ("rmse_yaw_deg", "yaw RMSE deg", "{:.2f}"), ("max_yaw_err_deg", "max yaw err deg", "{:.2f}"),
-    ("recovery_s", "recovery s", "{:.2f}"), ("solve_ms_p50", "solve p50 ms", "{:.1f}"),
-    ("solve_ms_p99", "solve p99 ms", "{:.1f}"))
+    ("est_rmse_pos_m", "estimate pos RMSE m", "{:.4f}"),
+    ("est_rmse_att_deg", "estimate att RMSE deg", "{:.2f}"),
+    ("recovery_s", "recovery s", "{:.2f}"), ("diagnosis_s", "diagnosis s", "{:.2f}"),
+    ("solve_ms_p50", "solve p50 ms", "{:.1f}"), ("solve_ms_p99", "solve p99 ms", "{:.1f}"))
 
 
 def columns(keys: tuple[str, ...], formats: dict[str, str] | None = None) -> tuple:

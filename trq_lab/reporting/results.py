@@ -6,12 +6,16 @@ Contract. In: result directories, one per scenario, each holding the ``metrics.j
 ``report.md`` written beside it. Out: the blocks of a Markdown file between markers
 
     <!-- results:paper_fault50 begin -->  ...  <!-- results:paper_fault50 end -->
+    <!-- results:profiles paper_fault50 begin -->  ...  <!-- results:profiles paper_fault50 end -->
     <!-- results:scenarios begin -->      ...  <!-- results:scenarios end -->
     <!-- results:campaigns begin -->      ...  <!-- results:campaigns end -->
 
 rewritten in place: the first is the full table of one scenario (any scenario name works), the
-second one row per scenario found under the results directory (other than those with a block of
-their own), the third one row per campaign found there: the ``metrics.json`` that ``trq-campaign``
+second one scenario flown under each sensing profile, a row per profile (the result directories
+``sensing/<scenario>-<profile>/`` of ``trq-scenario <scenario> --sensing <profile>``, the profile
+as their ``metrics.json`` records it), the third
+one row per scenario found under the results directory (other than those with a block of
+their own), the fourth one row per campaign found there: the ``metrics.json`` that ``trq-campaign``
 writes (``{"campaign": ..., "flights": ..., "controllers": {NAME: {"success_rate": ...,
 "rmse_median_m": ...}}, "plants": ..., "failures": [...]}``; a campaign's is told from a
 scenario's by its "campaign" key). Whether a scenario's targets were met is taken from
@@ -37,8 +41,8 @@ from pathlib import Path
 
 from trq_lab.reporting.fmt import columns, fmt, table_head, table_row
 
-__all__ = ["ResultsError", "campaigns_table", "main", "render_block", "scenario_table",
-           "scenarios_table", "update_text"]
+__all__ = ["ResultsError", "campaigns_table", "main", "profiles_table", "render_block",
+           "scenario_table", "scenarios_table", "update_text"]
 
 # The faults of the shipped scenarios, as the scenarios table names them (metrics.json does not
 # name its fault; a "fault" key in it, when present, wins).
@@ -60,7 +64,13 @@ COLUMNS = columns(("controller", "vehicle", "crashed", "flight_s", "rmse_pos_m",
 
 SCENARIOS_BLOCK = "scenarios"
 CAMPAIGNS_BLOCK = "campaigns"
-_MARK = re.compile(r"<!-- results:([A-Za-z0-9_.-]+) (begin|end) -->")
+PROFILES_BLOCK = "profiles"          # "profiles SCENARIO": one scenario per sensing profile
+SENSING_DIR = "sensing"              # where its result directories live, SCENARIO-PROFILE each
+# the profiles' row order (others follow by name)
+PROFILES = ("truth", "mocap", "rtk", "gnss")
+# a block's name: one word, or a kind and its argument ("profiles paper_fault50")
+_NAME = r"[A-Za-z0-9_.-]+(?: [A-Za-z0-9_.-]+)?"
+_MARK = re.compile(r"<!-- results:(" + _NAME + r") (begin|end) -->")
 
 
 class ResultsError(Exception):
@@ -227,6 +237,52 @@ def scenarios_table(paths: list[Path], base: Path | None = None) -> str:
     return "\n".join(lines)
 
 
+def profiles_table(paths: list[Path], base: Path | None = None) -> str:
+    """One scenario flown under each sensing profile (its metrics.json's "sensing"), a row per
+    profile: per controller the position RMSE after the fault, the maximum yaw error, the
+    estimator's own position RMSE (its estimate against the truth; none under `truth`) and the
+    fault's diagnosis time, a crash said so; the first header cell says what a cell holds."""
+    docs = [(p, load_metrics(p)) for p in paths]
+    for path, doc in docs:
+        if not isinstance(doc.get("sensing"), str):
+            raise ResultsError(f"{path}: no 'sensing' (the profile flown, which trq-scenario "
+                               "records in metrics.json)")
+    rank = {p: i for i, p in enumerate(PROFILES)}
+    docs.sort(key=lambda d: (rank.get(_profile(d[1]), len(rank)), _profile(d[1])))
+    controllers: list[str] = []
+    for _, doc in docs:
+        for run in _ordered(doc["runs"]):
+            if run["controller"] not in controllers:
+                controllers.append(run["controller"])
+    head = [("sensing; each cell: pos RMSE after fault m / max yaw err deg / estimate pos RMSE m "
+             "(the estimator's own error; none under `truth`: no estimator) / diagnosis s (none "
+             "without an effectiveness observer, or crashed)")] + [f"`{c}`" for c in controllers]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for path, doc in docs:
+        by = {r["controller"]: r for r in doc["runs"]}
+        cells = [f"`{_profile(doc)}`"]
+        for c in controllers:
+            r = by.get(c)
+            if r is None:
+                cells.append("not flown")
+            elif "error" in r:
+                cells.append("no usable logs")
+            else:
+                cells.append(" / ".join((fmt(r.get("rmse_pos_after_fault_m"), "{:.4f}"),
+                                         fmt(r.get("max_yaw_err_deg"), "{:.2f}"),
+                                         fmt(r.get("est_rmse_pos_m"), "{:.4g}"),
+                                         fmt(r.get("diagnosis_s"), "{:.2f}")))
+                             + (" (crashed)" if r.get("crashed") else ""))
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def _profile(doc: dict) -> str:
+    """The profile a scenario's metrics.json records: a built-in name, or a file's stem."""
+    value = doc["sensing"]
+    return Path(value).stem if "/" in value or value.endswith((".yaml", ".yml")) else value
+
+
 def blocks_in(text: str, source: str) -> list[str]:
     """The names of the marked blocks, in order; unbalanced markers are an error."""
     names: list[str] = []
@@ -251,6 +307,14 @@ def blocks_in(text: str, source: str) -> list[str]:
 def render_block(name: str, results_dir: Path, own_blocks: list[str],
                  base: Path | None = None) -> str:
     """The generated text of block ``name`` (without its markers)."""
+    if name.startswith(PROFILES_BLOCK + " "):
+        scenario = name.split(" ", 1)[1]
+        where = results_dir / SENSING_DIR
+        paths = sorted(where.glob(f"{scenario}-*/metrics.json"))
+        if not paths:
+            raise ResultsError(f"{where}: no {scenario}-<profile>/metrics.json for the block "
+                               f"'results:{name}'")
+        return profiles_table(paths, base)
     if name == CAMPAIGNS_BLOCK:
         paths = sorted(p for p in results_dir.glob("*/metrics.json") if is_campaign(p))
         if not paths:
@@ -289,7 +353,9 @@ def main(argv: list[str] | None = None) -> int:
         description="Regenerate the README's results tables (the blocks between "
                     "'<!-- results:NAME begin -->' and '<!-- results:NAME end -->') from "
                     "result files: RESULTS/<scenario>/metrics.json as trq-scenario writes it. "
-                    "Block NAME is that scenario's full table; block 'scenarios' has one row "
+                    "Block NAME is that scenario's full table; block 'profiles NAME' that "
+                    "scenario per sensing profile (RESULTS/sensing/NAME-<profile>/"
+                    "metrics.json); block 'scenarios' has one row "
                     "per other scenario found; block 'campaigns' one row per campaign "
                     "(RESULTS/<campaign>/metrics.json as trq-campaign writes it).")
     parser.add_argument("--readme", type=Path, default=Path("README.md"),

@@ -14,6 +14,7 @@ import math
 from pathlib import Path
 
 import numpy as np
+import trq_params
 from sil_vehicle.config import load_vehicle
 from sil_vehicle.faultscript import load_script
 
@@ -92,9 +93,27 @@ def envelope_text(envelopes: list[dict]) -> list[str]:
     return lines + [""]
 
 
+def sensing_text(sensing: str | None, results: list[dict]) -> str:
+    """What the controllers saw, under the sensing profile flown (its name or path; None: not
+    recorded): the estimate (the estimator's own error in the table) or near-truth."""
+    if sensing is None:
+        return "Sensing profile: not recorded."
+    name = f"`{Path(sensing).stem if not trq_params.is_name(sensing) else sensing}`"
+    if any(r.get("est_rmse_pos_m") is not None for r in results):
+        return (f"Sensing profile {name}: the controllers flew on the vehicle's estimate (its "
+                "sensors fused by its estimator). The errors are the truth against the "
+                "reference; the estimate columns are the estimator's own error, its estimate "
+                "against the truth.")
+    return (f"Sensing profile {name}: no estimator; the controllers saw near-truth (the true "
+            "state plus the sim file's white noise), so the estimate columns are empty.")
+
+
 def markdown(scenario, results: list[dict], failures: list[str], figures: list[Path],
              envelopes: list[dict] | None = None,
-             periods: list[tuple[str, dict[str, float], str]] | None = None) -> str:
+             periods: list[tuple[str, dict[str, float], str]] | None = None,
+             sensing: str | None = None) -> str:
+    """The scenario's report.md: its settings, the sensing profile flown (`sensing`) and what
+    the controllers saw, the metrics table, the targets, the envelope, the period, figures."""
     lines = [f"# Scenario `{scenario.name}`", "", scenario.description, "",
              f"Seed {scenario.seed}; wind {scenario.wind_speed_m_s:g} m/s from "
              f"{scenario.wind_from_deg:g} deg{' with gusts' if scenario.gusts else ''}; faults: "
@@ -102,7 +121,8 @@ def markdown(scenario, results: list[dict], failures: list[str], figures: list[P
              f"{scenario.reference.get('kind', 'from the controller files')}; recovery threshold "
              f"{scenario.recovery_threshold_m:g} m."
              + (f" Offboard link impaired: {scenario.offboard_impair}."
-                if scenario.offboard_impair else ""), "", table(results), ""]
+                if scenario.offboard_impair else ""), "", sensing_text(sensing, results), "",
+             table(results), ""]
     if scenario.targets or scenario.better:
         lines += ["## Targets", ""]
         for name, targets in scenario.targets.items():

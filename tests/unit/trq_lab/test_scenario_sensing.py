@@ -1,5 +1,6 @@
 """A scenario's sensing profile (trq_lab.scenario): the `sensing:` key (optional: mocap, never
-the truth), checked at load, handed to each vehicle it starts as `--sensing`."""
+the truth), checked at load, handed to each vehicle it starts as `--sensing`, recorded as the
+profile flown; the diagnosis time as a scenario target."""
 
 from __future__ import annotations
 
@@ -80,3 +81,16 @@ def test_the_in_process_vehicle_gets_it_too():
     vehicle = builtin("vehicle", "trq")
     assert sim_params(vehicle, 100, seed=1, sensing="mocap").sensing.name == "mocap"
     assert sim_params(vehicle, 100, seed=1).sensing.name == "truth"
+
+
+def test_the_profile_flown_is_the_scenarios_or_the_default(tmp_path):
+    assert sc.sensing_flown(sc.load_scenario(scenario_file(tmp_path))) == "mocap"
+    assert sc.sensing_flown(sc.load_scenario(scenario_file(tmp_path, sensing="rtk"))) == "rtk"
+
+
+def test_the_diagnosis_time_is_a_scenario_target(tmp_path):
+    s = sc.load_scenario(scenario_file(tmp_path, targets={"trq_nmpc_eso": {"diagnosis_s": 2.0}}))
+    assert s.targets["trq_nmpc_eso"]["diagnosis_s"] == 2.0
+    path = scenario_file(tmp_path, targets={"trq_nmpc_eso": {"diagnosis_s": -1.0}})
+    with pytest.raises(ConfigError, match=r"targets.trq_nmpc_eso.diagnosis_s"):
+        sc.load_scenario(path)
