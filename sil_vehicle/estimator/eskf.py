@@ -72,7 +72,7 @@ import numpy as np
 from sil_vehicle.estimator import derivation as d
 from sil_vehicle.estimator.codegen import load
 from sil_vehicle.estimator.params import EstimatorParams
-from sil_vehicle.estimator.predictor import OutputPredictor
+from sil_vehicle.estimator.predictor import OutputPredictor, native_predictor
 from sil_vehicle.frames import euler_to_quat, quat_to_dcm, quat_to_euler
 from sil_vehicle.sensors.baro import BaroReading
 from sil_vehicle.sensors.gnss import GnssReading
@@ -169,7 +169,7 @@ class Eskf:
         self.params = p = params
         self._f, self.how = load(d.functions(p.gravity_m_s2), compiled)
         self._dt_f = p.filter_period_us * 1e-6
-        self._dt_imu = p.imu_period_us * 1e-6
+        self._period_us = p.filter_period_us
         a = math.exp(-self._dt_f / p.gnss_markov_tau_s)
         self._a_gnss = a
         self._qd = np.array((
@@ -194,17 +194,17 @@ class Eskf:
         capacity = p.horizon_us // p.filter_period_us + 2
         self._imu_buf: deque = deque()          # (t_end_us, dA (3,), dV (3,))
         self._meas: list[deque] = [deque() for _ in range(_NAID)]
-        self.out = OutputPredictor(gravity_m_s2=p.gravity_m_s2, imu_period_us=p.imu_period_us,
-                                   filter_period_us=p.filter_period_us, tau_vel_s=p.tau_vel_s,
-                                   tau_pos_s=p.tau_pos_s, capacity=capacity)
+        # the output predictor, which also sums the IMU samples over each filter period: in C
+        # when `compiled` (the same numbers as the Python reference, bit for bit)
+        self.out = (native_predictor if compiled else OutputPredictor)(
+            gravity_m_s2=p.gravity_m_s2, imu_period_us=p.imu_period_us,
+            filter_period_us=p.filter_period_us, tau_vel_s=p.tau_vel_s, tau_pos_s=p.tau_pos_s,
+            capacity=capacity)
         # the filter
         self.x = np.zeros(d.NX)
         self.x[6] = 1.0
         self.P = np.zeros((d.NDX, d.NDX))
         self.t_filter_us = 0
-        # the downsampler (floats)
-        self._dA = [0.0, 0.0, 0.0]
-        self._dV = [0.0, 0.0, 0.0]
         # alignment
         self._t_first: int | None = None
         self._t_align = 0
@@ -260,7 +260,7 @@ class Eskf:
             self._update(*buf.popleft())
 
     def _imu(self, r: ImuReading) -> None:
-        g, f = [float(v) for v in r.gyro], [float(v) for v in r.accel]
+        g = r.gyro
         self._gyro = g
         t = r.t_us
         if not self.aligned:
@@ -269,26 +269,14 @@ class Eskf:
                 self._t_first = t
                 self._t_align = -(-(t + self.params.align_us) // period) * period
             if t <= self._t_align:
-                self._sum_f += f
+                self._sum_f += [float(v) for v in r.accel]
                 self._n_f += 1
             return
-        self.out.propagate(t, g, f, self._bg, self._ba)
-        dt = self._dt_imu
-        ax, ay, az = (g[0] * dt, g[1] * dt, g[2] * dt)
-        vx, vy, vz = (f[0] * dt, f[1] * dt, f[2] * dt)
-        A, V = self._dA, self._dV
-        # sculling: dv rotated into the start-of-period frame by the angle turned to mid-sample
-        rx, ry, rz = A[0] + 0.5 * ax, A[1] + 0.5 * ay, A[2] + 0.5 * az
-        V[0] += vx + ry * vz - rz * vy
-        V[1] += vy + rz * vx - rx * vz
-        V[2] += vz + rx * vy - ry * vx
-        A[0] += ax
-        A[1] += ay
-        A[2] += az
-        if t % self.params.filter_period_us == 0:
-            self._imu_buf.append((t, np.array(A), np.array(V)))
-            self._dA, self._dV = [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]
-            self.out.record()
+        out = self.out
+        out.sample(t, g, r.accel)         # the output state forward, and the period's sums
+        if t % self._period_us == 0:
+            self._imu_buf.append((t, *out.take_sums()))
+            out.record()
 
     # ---------------------------------------------------------------- initialisation
 
@@ -327,9 +315,8 @@ class Eskf:
         for buf in self._meas:
             while buf and buf[0].t_us <= t:
                 buf.popleft()
-        self._dA, self._dV = [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]
         self._imu_buf.clear()
-        self.out.reset(t, self.x[6:10], self.x[3:6], self.x[0:3])
+        self.out.reset(t, self.x[6:10], self.x[3:6], self.x[0:3])      # its sums zero too
 
     def _reset_position(self, r, t_us: int) -> None:
         """Position (and, from GNSS, velocity) set to the measurement's; applied as a jump to
@@ -425,6 +412,7 @@ class Eskf:
         self._diverged = self._diverged or self._check_divergence()
         self._bg = tuple(self.x[10:13].tolist())
         self._ba = tuple(self.x[13:16].tolist())
+        self.out.set_biases(self._bg, self._ba)
         self.out.correct(t_end, self.x[6:10].tolist(), self.x[3:6].tolist(),
                          self.x[0:3].tolist())
 
