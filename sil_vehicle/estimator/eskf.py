@@ -101,6 +101,7 @@ _NAID = len(Aid)
 _BUFFER_OF = {MocapReading: Aid.MOCAP_POS, GnssReading: Aid.GNSS_POS, BaroReading: Aid.BARO,
               MagReading: Aid.MAG}
 _POSE = np.array((0, 1, 2, 6, 7, 8))     # dp, dtheta in the error state
+_POSE_ROWS, _POSE_COLS = _POSE[:, None], _POSE[None, :]     # P's pose block: np.ix_(_POSE, _POSE)
 
 
 @dataclass(frozen=True)
@@ -460,9 +461,16 @@ class Eskf:
     # ---------------------------------------------------------------- outputs
 
     def _check_divergence(self) -> bool:
-        diag = np.diag(self.P)
-        return bool(not (np.isfinite(self.x).all() and np.isfinite(self.P).all())
-                    or (diag < 0.0).any() or (diag > self.params.max_var).any())
+        """A state or variance not finite, a variance below zero or above max_var. Finite sums
+        mean finite entries (an inf or a nan makes the sum so); only a non-finite sum (a
+        non-finite entry, or finite ones whose sum overflows) is looked at entry by entry."""
+        x, P = self.x, self.P
+        finite = (math.isfinite(P.sum()) and math.isfinite(x.sum())
+                  or bool(np.isfinite(x).all() and np.isfinite(P).all()))
+        if not finite:
+            return True
+        diag = P.diagonal()
+        return bool(diag.min() < 0.0 or diag.max() > self.params.max_var)
 
     def position_valid(self) -> bool:
         last = self._last_pos_fuse_us
@@ -471,7 +479,8 @@ class Eskf:
 
     def output(self) -> Estimate:
         """The estimate at the last tick (before alignment: the initial state, not aligned)."""
-        o, x, diag = self.out, self.x, np.diag(self.P)
+        o, x, P = self.out, self.x, self.P
+        diag = P.diagonal()
         g = self._gyro
         bg = self._bg
         return Estimate(
@@ -483,19 +492,26 @@ class Eskf:
             tuple(i.test_ratio if i is not None else math.nan for i in self.innovations),
             tuple(self._fused), tuple(self._rejected), self._stale, self._pos_resets,
             o.tracking_error,
-            self.P[np.ix_(_POSE, _POSE)], self.P[3:6, 3:6].copy(),
+            P[_POSE_ROWS, _POSE_COLS], P[3:6, 3:6].copy(),
             self._gyro_var + diag[9:12], *self._status_ratios())
 
     def _status_ratios(self) -> tuple[float, float, float, float]:
+        """EKF2's four: the largest of the last axis ratios of the kinds each takes (nan: none
+        yet). A kind's ratio over all its axes is its test ratio (the same maximum), over one
+        axis that axis's ratio; only the horizontal pair takes a maximum here."""
         inn = self.innovations
 
-        def worst(*parts) -> float:
-            vals = [float(inn[a].axis_ratios[sl].max()) for a, sl in parts if inn[a] is not None]
+        def worst(vals) -> float:
             return max(vals) if vals else math.nan
-        h, v, a = slice(0, 2), slice(2, 3), slice(0, 3)
-        return (worst((Aid.GNSS_VEL, a)), worst((Aid.MOCAP_POS, h), (Aid.GNSS_POS, h)),
-                worst((Aid.MOCAP_POS, v), (Aid.GNSS_POS, v), (Aid.BARO, a)),
-                worst((Aid.MAG, a)))
+
+        def whole(aid) -> list[float]:
+            i = inn[aid]
+            return [] if i is None else [i.test_ratio]
+        pos = [i for i in (inn[Aid.MOCAP_POS], inn[Aid.GNSS_POS]) if i is not None]
+        return (worst(whole(Aid.GNSS_VEL)),
+                worst([float(i.axis_ratios[0:2].max()) for i in pos]),
+                worst([float(i.axis_ratios[2]) for i in pos] + whole(Aid.BARO)),
+                worst(whole(Aid.MAG)))
 
     def filter_state(self) -> tuple[int, np.ndarray, np.ndarray]:
         """(t_us, x, P) at the delayed horizon (copies)."""
