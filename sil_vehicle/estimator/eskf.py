@@ -411,11 +411,11 @@ class Eskf:
                 else:
                     self._stale += 1
         self._diverged = self._diverged or self._check_divergence()
-        self._bg = tuple(self.x[10:13].tolist())
-        self._ba = tuple(self.x[13:16].tolist())
+        x = self.x.tolist()
+        self._bg = tuple(x[10:13])
+        self._ba = tuple(x[13:16])
         self.out.set_biases(self._bg, self._ba)
-        self.out.correct(t_end, self.x[6:10].tolist(), self.x[3:6].tolist(),
-                         self.x[0:3].tolist())
+        self.out.correct(t_end, x[6:10], x[3:6], x[0:3])
 
     def _fuse_reading(self, aid: Aid, r) -> None:
         if aid in (Aid.MOCAP_POS, Aid.GNSS_POS):

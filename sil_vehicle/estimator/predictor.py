@@ -200,37 +200,51 @@ class OutputPredictor:
 
     def correct(self, t_delayed_us: int, q, v, p) -> None:
         """Fit the output track to the filter's state (q, v, p) at t_delayed_us."""
-        while self._record and self._record[0][0] < t_delayed_us:
-            self._record.popleft()
-        if not self._record or self._record[0][0] != t_delayed_us:
+        record = self._record
+        while record and record[0][0] < t_delayed_us:
+            record.popleft()
+        if not record or record[0][0] != t_delayed_us:
             return
-        _, q_o, v_o, p_o = self._record[0]
-        qe = quat_mul((q_o[0], -q_o[1], -q_o[2], -q_o[3]), tuple(q))
-        s = 2.0 if qe[0] >= 0.0 else -2.0
+        _, q_o, v_o, p_o = record[0]
+        # qe = conj(q_o) (x) q (quat_mul inlined)
+        aw, ax, ay, az = q_o[0], -q_o[1], -q_o[2], -q_o[3]
+        bw, bx, by, bz = q
+        qw = aw * bw - ax * bx - ay * by - az * bz
+        qx = aw * bx + ax * bw + ay * bz - az * by
+        qy = aw * by - ax * bz + ay * bw + az * bx
+        qz = aw * bz + ax * by - ay * bx + az * bw
+        s = 2.0 if qw >= 0.0 else -2.0
         gain = 0.5 * self._dt_imu / max((self.t_us - t_delayed_us) * 1e-6, self._dt_f)
-        self._c_ang = (s * qe[1] * gain, s * qe[2] * gain, s * qe[3] * gain)
-        e_v = [v[i] - v_o[i] for i in range(3)]
-        e_p = [p[i] - p_o[i] for i in range(3)]
-        self.tracking_error = (abs(s) * math.sqrt(qe[1] ** 2 + qe[2] ** 2 + qe[3] ** 2),
-                               math.sqrt(sum(e * e for e in e_v)),
-                               math.sqrt(sum(e * e for e in e_p)))
+        self._c_ang = (s * qx * gain, s * qy * gain, s * qz * gain)
+        ev0, ev1, ev2 = v[0] - v_o[0], v[1] - v_o[1], v[2] - v_o[2]
+        ep0, ep1, ep2 = p[0] - p_o[0], p[1] - p_o[1], p[2] - p_o[2]
+        # the sums as sum() adds them (from 0, in order)
+        self.tracking_error = (abs(s) * math.sqrt(qx ** 2 + qy ** 2 + qz ** 2),
+                               math.sqrt(0 + ev0 * ev0 + ev1 * ev1 + ev2 * ev2),
+                               math.sqrt(0 + ep0 * ep0 + ep1 * ep1 + ep2 * ep2))
         kv, kp = self._k_v, self._k_p
-        c_v, c_p = [0.0] * 3, [0.0] * 3
-        for i in range(3):
-            self._i_v[i] += e_v[i]
-            self._i_p[i] += e_p[i]
-            c_v[i] = kv * e_v[i] + 0.1 * kv * kv * self._i_v[i]
-            c_p[i] = kp * e_p[i] + 0.1 * kp * kp * self._i_p[i]
-        self.shift(c_v, c_p)
+        i_v, i_p = self._i_v, self._i_p
+        i_v[0] += ev0
+        i_v[1] += ev1
+        i_v[2] += ev2
+        i_p[0] += ep0
+        i_p[1] += ep1
+        i_p[2] += ep2
+        self.shift((kv * ev0 + 0.1 * kv * kv * i_v[0], kv * ev1 + 0.1 * kv * kv * i_v[1],
+                    kv * ev2 + 0.1 * kv * kv * i_v[2]),
+                   (kp * ep0 + 0.1 * kp * kp * i_p[0], kp * ep1 + 0.1 * kp * kp * i_p[1],
+                    kp * ep2 + 0.1 * kp * kp * i_p[2]))
 
     def shift(self, dv, dp) -> None:
         """Add dv, dp to the current output state and to every recorded one."""
-        def add(a, d):
-            return (a[0] + d[0], a[1] + d[1], a[2] + d[2])
-        self._record = deque(((t, q, add(v, dv), add(p, dp)) for t, q, v, p in self._record),
+        d0, d1, d2 = dv
+        e0, e1, e2 = dp
+        self._record = deque(((t, q, (v[0] + d0, v[1] + d1, v[2] + d2),
+                               (p[0] + e0, p[1] + e1, p[2] + e2)) for t, q, v, p in self._record),
                              maxlen=self._record.maxlen)
-        self.v, self.p = add(self.v, dv), add(self.p, dp)
-
+        v, p = self.v, self.p
+        self.v = (v[0] + d0, v[1] + d1, v[2] + d2)
+        self.p = (p[0] + e0, p[1] + e1, p[2] + e2)
 
 class NativeOutputPredictor(OutputPredictor):
     """The output predictor with `sample` in C (predictor.c) on one ctypes array that holds
