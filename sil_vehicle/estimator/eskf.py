@@ -461,13 +461,10 @@ class Eskf:
     # ---------------------------------------------------------------- outputs
 
     def _check_divergence(self) -> bool:
-        """A state or variance not finite, a variance below zero or above max_var. Finite sums
-        mean finite entries (an inf or a nan makes the sum so); only a non-finite sum (a
-        non-finite entry, or finite ones whose sum overflows) is looked at entry by entry."""
+        """A state or variance not finite, a variance below zero or above max_var (the
+        variances' extremes, taken once all entries are known finite)."""
         x, P = self.x, self.P
-        finite = (math.isfinite(P.sum()) and math.isfinite(x.sum())
-                  or bool(np.isfinite(x).all() and np.isfinite(P).all()))
-        if not finite:
+        if not (np.isfinite(x).all() and np.isfinite(P).all()):
             return True
         diag = P.diagonal()
         return bool(diag.min() < 0.0 or diag.max() > self.params.max_var)
