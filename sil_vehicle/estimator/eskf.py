@@ -445,7 +445,7 @@ class Eskf:
         y, s = y.ravel().copy(), s.ravel().copy()
         gate = self._gate[aid]
         axes = y * y / (gate * gate * s)
-        ratio = float(axes.max())
+        ratio = float(np.maximum.reduce(axes))     # ndarray.max without its Python wrapper
         ok = ratio <= 1.0
         self.innovations[aid] = Innovation(aid, t_us, y, s, ratio, ok, axes)
         if not ok:
