@@ -133,3 +133,16 @@ def test_compiled_sample_equals_the_python_reference_bit_for_bit():
                 o.propagate(k * 1000, g, f, (0.1, 0.0, -0.1), (0.0, 0.2, 0.0))
         assert _state(py) == _state(c), k
     assert any(py.tracking_error) and any(py._c_ang)      # the corrections did act
+
+
+def test_without_a_compiler_the_python_reference_runs(monkeypatch):
+    from sil_vehicle.estimator import predictor as pr
+    monkeypatch.setattr(pr, "find_compiler", lambda: None)
+    pr._library.cache_clear()
+    try:
+        with pytest.warns(RuntimeWarning, match="no C compiler"):
+            o = pr.native_predictor(gravity_m_s2=G, imu_period_us=1000, filter_period_us=10_000,
+                                    tau_vel_s=0.25, tau_pos_s=0.25, capacity=3)
+        assert type(o) is OutputPredictor
+    finally:
+        pr._library.cache_clear()      # the next caller builds (or finds) the library again
