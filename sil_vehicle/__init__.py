@@ -7,7 +7,8 @@ Layers (each importing only the ones above it):
     sensors/            simulated sensors (IMU, barometer, magnetometer, GNSS, motion capture):
                         pure seeded models and the sensing profiles that configure them
     estimator/          the autopilot's estimator: an error-state Kalman filter on EKF2's
-                        delayed horizon with an output predictor (pure; not yet wired in)
+                        delayed horizon with an output predictor (pure; run by sitl under a
+                        sensing profile; its equations and per-sample step compiled and cached)
     config              frozen parameter records from params/*.yaml (trq_params.loader)
     dynamics/           pure physics (rotors, actuators, environment, rigid body; tick.c)
     faults              actuator faults as data (effectiveness, time-varying, off, stuck)

@@ -9,7 +9,9 @@ random numbers; time as integer microseconds.
     params      EstimatorParams: the filter's noise figures, gates and time constants, matched
                 to a sensing profile by default
     predictor   the output predictor: the delayed state carried to `now` at IMU rate, with
-                EKF2's complementary correction
+                EKF2's complementary correction; it sums the IMU samples per filter period too
+    predictor.c  its per-sample step in C (the same numbers as the Python one, bit for bit),
+                 built once with the system's C compiler and cached
     eskf        Eskf: the filter on its delayed horizon (downsampled IMU buffer, measurement
                 buffers, gated Joseph-form fusion, alignment, health) and the Estimate it gives
 

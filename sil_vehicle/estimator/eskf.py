@@ -72,7 +72,7 @@ import numpy as np
 from sil_vehicle.estimator import derivation as d
 from sil_vehicle.estimator.codegen import load
 from sil_vehicle.estimator.params import EstimatorParams
-from sil_vehicle.estimator.predictor import OutputPredictor
+from sil_vehicle.estimator.predictor import OutputPredictor, native_predictor
 from sil_vehicle.frames import euler_to_quat, quat_to_dcm, quat_to_euler
 from sil_vehicle.sensors.baro import BaroReading
 from sil_vehicle.sensors.gnss import GnssReading
@@ -101,6 +101,7 @@ _NAID = len(Aid)
 _BUFFER_OF = {MocapReading: Aid.MOCAP_POS, GnssReading: Aid.GNSS_POS, BaroReading: Aid.BARO,
               MagReading: Aid.MAG}
 _POSE = np.array((0, 1, 2, 6, 7, 8))     # dp, dtheta in the error state
+_POSE_ROWS, _POSE_COLS = _POSE[:, None], _POSE[None, :]     # P's pose block: np.ix_(_POSE, _POSE)
 
 
 @dataclass(frozen=True)
@@ -169,7 +170,7 @@ class Eskf:
         self.params = p = params
         self._f, self.how = load(d.functions(p.gravity_m_s2), compiled)
         self._dt_f = p.filter_period_us * 1e-6
-        self._dt_imu = p.imu_period_us * 1e-6
+        self._period_us = p.filter_period_us
         a = math.exp(-self._dt_f / p.gnss_markov_tau_s)
         self._a_gnss = a
         self._qd = np.array((
@@ -194,17 +195,17 @@ class Eskf:
         capacity = p.horizon_us // p.filter_period_us + 2
         self._imu_buf: deque = deque()          # (t_end_us, dA (3,), dV (3,))
         self._meas: list[deque] = [deque() for _ in range(_NAID)]
-        self.out = OutputPredictor(gravity_m_s2=p.gravity_m_s2, imu_period_us=p.imu_period_us,
-                                   filter_period_us=p.filter_period_us, tau_vel_s=p.tau_vel_s,
-                                   tau_pos_s=p.tau_pos_s, capacity=capacity)
+        # the output predictor, which also sums the IMU samples over each filter period: in C
+        # when `compiled` (the same numbers as the Python reference, bit for bit)
+        self.out = (native_predictor if compiled else OutputPredictor)(
+            gravity_m_s2=p.gravity_m_s2, imu_period_us=p.imu_period_us,
+            filter_period_us=p.filter_period_us, tau_vel_s=p.tau_vel_s, tau_pos_s=p.tau_pos_s,
+            capacity=capacity)
         # the filter
         self.x = np.zeros(d.NX)
         self.x[6] = 1.0
         self.P = np.zeros((d.NDX, d.NDX))
         self.t_filter_us = 0
-        # the downsampler (floats)
-        self._dA = [0.0, 0.0, 0.0]
-        self._dV = [0.0, 0.0, 0.0]
         # alignment
         self._t_first: int | None = None
         self._t_align = 0
@@ -260,7 +261,7 @@ class Eskf:
             self._update(*buf.popleft())
 
     def _imu(self, r: ImuReading) -> None:
-        g, f = [float(v) for v in r.gyro], [float(v) for v in r.accel]
+        g = r.gyro
         self._gyro = g
         t = r.t_us
         if not self.aligned:
@@ -269,26 +270,14 @@ class Eskf:
                 self._t_first = t
                 self._t_align = -(-(t + self.params.align_us) // period) * period
             if t <= self._t_align:
-                self._sum_f += f
+                self._sum_f += [float(v) for v in r.accel]
                 self._n_f += 1
             return
-        self.out.propagate(t, g, f, self._bg, self._ba)
-        dt = self._dt_imu
-        ax, ay, az = (g[0] * dt, g[1] * dt, g[2] * dt)
-        vx, vy, vz = (f[0] * dt, f[1] * dt, f[2] * dt)
-        A, V = self._dA, self._dV
-        # sculling: dv rotated into the start-of-period frame by the angle turned to mid-sample
-        rx, ry, rz = A[0] + 0.5 * ax, A[1] + 0.5 * ay, A[2] + 0.5 * az
-        V[0] += vx + ry * vz - rz * vy
-        V[1] += vy + rz * vx - rx * vz
-        V[2] += vz + rx * vy - ry * vx
-        A[0] += ax
-        A[1] += ay
-        A[2] += az
-        if t % self.params.filter_period_us == 0:
-            self._imu_buf.append((t, np.array(A), np.array(V)))
-            self._dA, self._dV = [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]
-            self.out.record()
+        out = self.out
+        out.sample(t, g, r.accel)         # the output state forward, and the period's sums
+        if t % self._period_us == 0:
+            self._imu_buf.append((t, *out.take_sums()))
+            out.record()
 
     # ---------------------------------------------------------------- initialisation
 
@@ -327,9 +316,8 @@ class Eskf:
         for buf in self._meas:
             while buf and buf[0].t_us <= t:
                 buf.popleft()
-        self._dA, self._dV = [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]
         self._imu_buf.clear()
-        self.out.reset(t, self.x[6:10], self.x[3:6], self.x[0:3])
+        self.out.reset(t, self.x[6:10], self.x[3:6], self.x[0:3])      # its sums zero too
 
     def _reset_position(self, r, t_us: int) -> None:
         """Position (and, from GNSS, velocity) set to the measurement's; applied as a jump to
@@ -423,10 +411,11 @@ class Eskf:
                 else:
                     self._stale += 1
         self._diverged = self._diverged or self._check_divergence()
-        self._bg = tuple(self.x[10:13].tolist())
-        self._ba = tuple(self.x[13:16].tolist())
-        self.out.correct(t_end, self.x[6:10].tolist(), self.x[3:6].tolist(),
-                         self.x[0:3].tolist())
+        x = self.x.tolist()
+        self._bg = tuple(x[10:13])
+        self._ba = tuple(x[13:16])
+        self.out.set_biases(self._bg, self._ba)
+        self.out.correct(t_end, x[6:10], x[3:6], x[0:3])
 
     def _fuse_reading(self, aid: Aid, r) -> None:
         if aid in (Aid.MOCAP_POS, Aid.GNSS_POS):
@@ -456,7 +445,7 @@ class Eskf:
         y, s = y.ravel().copy(), s.ravel().copy()
         gate = self._gate[aid]
         axes = y * y / (gate * gate * s)
-        ratio = float(axes.max())
+        ratio = float(np.maximum.reduce(axes))     # ndarray.max without its Python wrapper
         ok = ratio <= 1.0
         self.innovations[aid] = Innovation(aid, t_us, y, s, ratio, ok, axes)
         if not ok:
@@ -472,9 +461,13 @@ class Eskf:
     # ---------------------------------------------------------------- outputs
 
     def _check_divergence(self) -> bool:
-        diag = np.diag(self.P)
-        return bool(not (np.isfinite(self.x).all() and np.isfinite(self.P).all())
-                    or (diag < 0.0).any() or (diag > self.params.max_var).any())
+        """A state or variance not finite, a variance below zero or above max_var (the
+        variances' extremes, taken once all entries are known finite)."""
+        x, P = self.x, self.P
+        if not (np.isfinite(x).all() and np.isfinite(P).all()):
+            return True
+        diag = P.diagonal()
+        return bool(diag.min() < 0.0 or diag.max() > self.params.max_var)
 
     @property
     def diverged(self) -> bool:
@@ -488,7 +481,8 @@ class Eskf:
 
     def output(self) -> Estimate:
         """The estimate at the last tick (before alignment: the initial state, not aligned)."""
-        o, x, diag = self.out, self.x, np.diag(self.P)
+        o, x, P = self.out, self.x, self.P
+        diag = P.diagonal()
         g = self._gyro
         bg = self._bg
         return Estimate(
@@ -500,19 +494,26 @@ class Eskf:
             tuple(i.test_ratio if i is not None else math.nan for i in self.innovations),
             tuple(self._fused), tuple(self._rejected), self._stale, self._pos_resets,
             o.tracking_error,
-            self.P[np.ix_(_POSE, _POSE)], self.P[3:6, 3:6].copy(),
+            P[_POSE_ROWS, _POSE_COLS], P[3:6, 3:6].copy(),
             self._gyro_var + diag[9:12], *self._status_ratios())
 
     def _status_ratios(self) -> tuple[float, float, float, float]:
+        """EKF2's four: the largest of the last axis ratios of the kinds each takes (nan: none
+        yet). A kind's ratio over all its axes is its test ratio (the same maximum), over one
+        axis that axis's ratio; only the horizontal pair takes a maximum here."""
         inn = self.innovations
 
-        def worst(*parts) -> float:
-            vals = [float(inn[a].axis_ratios[sl].max()) for a, sl in parts if inn[a] is not None]
+        def worst(vals) -> float:
             return max(vals) if vals else math.nan
-        h, v, a = slice(0, 2), slice(2, 3), slice(0, 3)
-        return (worst((Aid.GNSS_VEL, a)), worst((Aid.MOCAP_POS, h), (Aid.GNSS_POS, h)),
-                worst((Aid.MOCAP_POS, v), (Aid.GNSS_POS, v), (Aid.BARO, a)),
-                worst((Aid.MAG, a)))
+
+        def whole(aid) -> list[float]:
+            i = inn[aid]
+            return [] if i is None else [i.test_ratio]
+        pos = [i for i in (inn[Aid.MOCAP_POS], inn[Aid.GNSS_POS]) if i is not None]
+        return (worst(whole(Aid.GNSS_VEL)),
+                worst([float(i.axis_ratios[0:2].max()) for i in pos]),
+                worst([float(i.axis_ratios[2]) for i in pos] + whole(Aid.BARO)),
+                worst(whole(Aid.MAG)))
 
     def filter_state(self) -> tuple[int, np.ndarray, np.ndarray]:
         """(t_us, x, P) at the delayed horizon (copies)."""

@@ -24,14 +24,41 @@ and c_v, c_p are added to every recorded output state and to the current one. A 
 filter's state (the first position measurement) is applied to the output states as a jump.
 
 Plain Python floats: a handful of multiplications per IMU sample, no array allocation.
+
+`sample` is what the estimator calls per IMU sample: `propagate` with the filter's bias
+estimates (`set_biases`), and the sample added to the filter period's delta angle and delta
+velocity (the downsampler's sums, `take_sums` at the period's end; they are kept here so that
+one compiled call does both). `NativeOutputPredictor` runs `sample` as C (predictor.c, built once
+with the system's C compiler and cached like the physics tick, called through ctypes on one
+array that holds the whole state): the same operations in the same order, built without fused
+multiply-add, so the same numbers bit for bit; `native_predictor` gives it, or the Python
+reference when no compiler is found.
 """
 
 from __future__ import annotations
 
+import ctypes
+import hashlib
 import math
+import os
+import warnings
 from collections import deque
+from functools import lru_cache
+from pathlib import Path
 
-__all__ = ["OutputPredictor", "quat_exp", "quat_mul", "rotate"]
+import numpy as np
+
+from trq_wire.cache import build_library, cache_dir, find_compiler
+
+__all__ = ["OutputPredictor", "NativeOutputPredictor", "native_predictor", "quat_exp",
+           "quat_mul", "rotate"]
+
+SOURCE = Path(__file__).with_name("predictor.c")
+# as the physics tick's (sil_vehicle.compiled): no fused multiply-add, never fast-math
+CFLAGS = ("-O2", "-fPIC", "-shared", "-ffp-contract=off", "-fno-fast-math")
+# predictor.c's state array (enum S_*)
+S_DT, S_G, S_Q, S_V, S_P, S_CANG, S_BG, S_BA, S_DA, S_DV, S_GYRO, S_ACCEL, S_SIZE = (
+    0, 1, 2, 6, 9, 12, 15, 18, 21, 24, 27, 30, 33)
 
 
 def quat_mul(a, b) -> tuple[float, float, float, float]:
@@ -81,14 +108,55 @@ class OutputPredictor:
         self._i_v = [0.0, 0.0, 0.0]
         self._i_p = [0.0, 0.0, 0.0]
         self.tracking_error = (0.0, 0.0, 0.0)     # |dtheta| (rad), |e_v|, |e_p| at the last fit
+        self._bg = self._ba = (0.0, 0.0, 0.0)      # the filter's bias estimates (set_biases)
+        self._dA = [0.0, 0.0, 0.0]                  # the filter period's sums (take_sums)
+        self._dV = [0.0, 0.0, 0.0]
 
     def reset(self, t_us: int, q, v, p) -> None:
+        """The output state set to the filter's (at alignment); no record, no correction, the
+        period's sums zero."""
         self.t_us = t_us
         self.q, self.v, self.p = tuple(q), tuple(v), tuple(p)
         self._record.clear()
         self._c_ang = (0.0, 0.0, 0.0)
         self._i_v = [0.0, 0.0, 0.0]
         self._i_p = [0.0, 0.0, 0.0]
+        self._zero_sums()
+
+    def set_biases(self, bg, ba) -> None:
+        """The filter's gyro and accelerometer bias estimates, which `sample` removes."""
+        self._bg, self._ba = tuple(bg), tuple(ba)
+
+    def sample(self, t_us: int, gyro, accel) -> None:
+        """One IMU sample (as `propagate`, with the biases of `set_biases`), added to the
+        period's sums too."""
+        self.propagate(t_us, gyro, accel, self._bg, self._ba)
+        self._sum(gyro, accel)
+
+    def _sum(self, g, f) -> None:
+        """The delta angle and delta velocity over the filter period, the velocity rotated into
+        the frame at the start of the period with the first-order sculling term
+        dV += dv + (dA_acc + dA / 2) x dv."""
+        dt = self._dt_imu
+        ax, ay, az = (g[0] * dt, g[1] * dt, g[2] * dt)
+        vx, vy, vz = (f[0] * dt, f[1] * dt, f[2] * dt)
+        A, V = self._dA, self._dV
+        rx, ry, rz = A[0] + 0.5 * ax, A[1] + 0.5 * ay, A[2] + 0.5 * az
+        V[0] += vx + ry * vz - rz * vy
+        V[1] += vy + rz * vx - rx * vz
+        V[2] += vz + rx * vy - ry * vx
+        A[0] += ax
+        A[1] += ay
+        A[2] += az
+
+    def take_sums(self) -> tuple[np.ndarray, np.ndarray]:
+        """(dA (3,), dV (3,)) of the samples since the last call (or reset), then zeroed."""
+        out = np.array(self._dA), np.array(self._dV)
+        self._zero_sums()
+        return out
+
+    def _zero_sums(self) -> None:
+        self._dA, self._dV = [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]
 
     def propagate(self, t_us: int, gyro, accel, bg, ba) -> None:
         """One IMU sample at t_us: rates `gyro` (rad/s) and specific force `accel` (m/s^2),
@@ -132,33 +200,144 @@ class OutputPredictor:
 
     def correct(self, t_delayed_us: int, q, v, p) -> None:
         """Fit the output track to the filter's state (q, v, p) at t_delayed_us."""
-        while self._record and self._record[0][0] < t_delayed_us:
-            self._record.popleft()
-        if not self._record or self._record[0][0] != t_delayed_us:
+        record = self._record
+        while record and record[0][0] < t_delayed_us:
+            record.popleft()
+        if not record or record[0][0] != t_delayed_us:
             return
-        _, q_o, v_o, p_o = self._record[0]
-        qe = quat_mul((q_o[0], -q_o[1], -q_o[2], -q_o[3]), tuple(q))
-        s = 2.0 if qe[0] >= 0.0 else -2.0
+        _, q_o, v_o, p_o = record[0]
+        # qe = conj(q_o) (x) q (quat_mul inlined)
+        aw, ax, ay, az = q_o[0], -q_o[1], -q_o[2], -q_o[3]
+        bw, bx, by, bz = q
+        qw = aw * bw - ax * bx - ay * by - az * bz
+        qx = aw * bx + ax * bw + ay * bz - az * by
+        qy = aw * by - ax * bz + ay * bw + az * bx
+        qz = aw * bz + ax * by - ay * bx + az * bw
+        s = 2.0 if qw >= 0.0 else -2.0
         gain = 0.5 * self._dt_imu / max((self.t_us - t_delayed_us) * 1e-6, self._dt_f)
-        self._c_ang = (s * qe[1] * gain, s * qe[2] * gain, s * qe[3] * gain)
-        e_v = [v[i] - v_o[i] for i in range(3)]
-        e_p = [p[i] - p_o[i] for i in range(3)]
-        self.tracking_error = (abs(s) * math.sqrt(qe[1] ** 2 + qe[2] ** 2 + qe[3] ** 2),
-                               math.sqrt(sum(e * e for e in e_v)),
-                               math.sqrt(sum(e * e for e in e_p)))
+        self._c_ang = (s * qx * gain, s * qy * gain, s * qz * gain)
+        ev0, ev1, ev2 = v[0] - v_o[0], v[1] - v_o[1], v[2] - v_o[2]
+        ep0, ep1, ep2 = p[0] - p_o[0], p[1] - p_o[1], p[2] - p_o[2]
+        # the sums as sum() adds them (from 0, in order)
+        self.tracking_error = (abs(s) * math.sqrt(qx ** 2 + qy ** 2 + qz ** 2),
+                               math.sqrt(0 + ev0 * ev0 + ev1 * ev1 + ev2 * ev2),
+                               math.sqrt(0 + ep0 * ep0 + ep1 * ep1 + ep2 * ep2))
         kv, kp = self._k_v, self._k_p
-        c_v, c_p = [0.0] * 3, [0.0] * 3
-        for i in range(3):
-            self._i_v[i] += e_v[i]
-            self._i_p[i] += e_p[i]
-            c_v[i] = kv * e_v[i] + 0.1 * kv * kv * self._i_v[i]
-            c_p[i] = kp * e_p[i] + 0.1 * kp * kp * self._i_p[i]
-        self.shift(c_v, c_p)
+        i_v, i_p = self._i_v, self._i_p
+        i_v[0] += ev0
+        i_v[1] += ev1
+        i_v[2] += ev2
+        i_p[0] += ep0
+        i_p[1] += ep1
+        i_p[2] += ep2
+        self.shift((kv * ev0 + 0.1 * kv * kv * i_v[0], kv * ev1 + 0.1 * kv * kv * i_v[1],
+                    kv * ev2 + 0.1 * kv * kv * i_v[2]),
+                   (kp * ep0 + 0.1 * kp * kp * i_p[0], kp * ep1 + 0.1 * kp * kp * i_p[1],
+                    kp * ep2 + 0.1 * kp * kp * i_p[2]))
 
     def shift(self, dv, dp) -> None:
         """Add dv, dp to the current output state and to every recorded one."""
-        def add(a, d):
-            return (a[0] + d[0], a[1] + d[1], a[2] + d[2])
-        self._record = deque(((t, q, add(v, dv), add(p, dp)) for t, q, v, p in self._record),
+        d0, d1, d2 = dv
+        e0, e1, e2 = dp
+        self._record = deque(((t, q, (v[0] + d0, v[1] + d1, v[2] + d2),
+                               (p[0] + e0, p[1] + e1, p[2] + e2)) for t, q, v, p in self._record),
                              maxlen=self._record.maxlen)
-        self.v, self.p = add(self.v, dv), add(self.p, dp)
+        v, p = self.v, self.p
+        self.v = (v[0] + d0, v[1] + d1, v[2] + d2)
+        self.p = (p[0] + e0, p[1] + e1, p[2] + e2)
+
+class NativeOutputPredictor(OutputPredictor):
+    """The output predictor with `sample` in C (predictor.c) on one ctypes array that holds
+    its state; everything else is the Python reference's code, reading and writing the state
+    through the properties below."""
+
+    def __init__(self, lib: ctypes.CDLL, **kw) -> None:
+        self._s = (ctypes.c_double * S_SIZE)()
+        self._c = lib.trq_imu_sample
+        self._c.argtypes = (ctypes.c_double * S_SIZE,)
+        self._c.restype = None
+        super().__init__(**kw)
+        self._s[S_DT] = self._dt_imu
+        self._s[S_G] = self._g
+
+    def sample(self, t_us: int, gyro, accel) -> None:
+        s = self._s
+        s[S_GYRO:S_GYRO + 3] = gyro
+        s[S_ACCEL:S_ACCEL + 3] = accel
+        self._c(s)
+        self.t_us = t_us
+
+    def propagate(self, t_us: int, gyro, accel, bg, ba) -> None:
+        s = self._s
+        kept = s[S_BG:S_DV + 3]                 # the biases set and the sums: as they were
+        s[S_BG:S_BG + 3], s[S_BA:S_BA + 3] = bg, ba
+        self.sample(t_us, gyro, accel)
+        s[S_BG:S_DV + 3] = kept
+
+    def set_biases(self, bg, ba) -> None:
+        self._s[S_BG:S_BG + 3], self._s[S_BA:S_BA + 3] = bg, ba
+
+    def take_sums(self) -> tuple[np.ndarray, np.ndarray]:
+        s = self._s
+        out = np.array(s[S_DA:S_DA + 3]), np.array(s[S_DV:S_DV + 3])
+        self._zero_sums()
+        return out
+
+    def _zero_sums(self) -> None:
+        self._s[S_DA:S_DA + 6] = (0.0,) * 6
+
+    def _get(i: int, n: int):        # noqa: N805 (a property factory, used in the class body)
+        def get(self) -> tuple[float, ...]:
+            return tuple(self._s[i:i + n])
+
+        def put(self, value) -> None:
+            self._s[i:i + n] = value
+        return property(get, put)
+
+    q = _get(S_Q, 4)
+    v = _get(S_V, 3)
+    p = _get(S_P, 3)
+    _c_ang = _get(S_CANG, 3)
+    del _get
+
+
+def _build(cc: str) -> Path:
+    src = SOURCE.read_bytes()
+    h = hashlib.sha256()
+    for part in (os.path.basename(cc).encode(), " ".join(CFLAGS).encode(), src):
+        h.update(part)
+        h.update(b"\0")
+    lib = cache_dir() / f"sil_predictor_{h.hexdigest()[:20]}.so"
+    if lib.exists():
+        return lib
+    error = build_library(cc, list(CFLAGS), src.decode("ascii"), lib, ["-lm"])
+    if error is not None:
+        raise RuntimeError(f"{cc} failed on {SOURCE}: {error}")
+    return lib
+
+
+@lru_cache(maxsize=1)
+def _library() -> ctypes.CDLL | None:
+    cc = find_compiler()
+    if cc is None:
+        warnings.warn("no C compiler found (tried $CC, gcc, cc, clang): the estimator's output "
+                      "predictor runs in Python (the same results, slower)", RuntimeWarning,
+                      stacklevel=3)
+        return None
+    try:
+        lib = ctypes.CDLL(str(_build(cc)))
+        if lib.trq_imu_sample_size() != S_SIZE:
+            raise RuntimeError(f"predictor.c's state has {lib.trq_imu_sample_size()} entries, "
+                               f"predictor.py's {S_SIZE}")
+        return lib
+    except (OSError, RuntimeError) as exc:
+        warnings.warn(f"the compiled output predictor is unavailable ({exc}): it runs in "
+                      "Python", RuntimeWarning, stacklevel=3)
+        return None
+
+
+def native_predictor(**kw) -> OutputPredictor:
+    """A NativeOutputPredictor (the library built and cached on first use), or the Python
+    OutputPredictor with a RuntimeWarning when no C compiler is found or the build fails."""
+    lib = _library()
+    return OutputPredictor(**kw) if lib is None else NativeOutputPredictor(lib, **kw)

@@ -9,6 +9,7 @@ shared with the controller and live in trq_wire.actuators; signing in trq_wire.s
 from __future__ import annotations
 
 import math
+import operator
 from dataclasses import dataclass, field
 from typing import Iterable
 
@@ -348,9 +349,16 @@ def mission_count(target_system: int, target_component: int) -> mavlink.MAVLink_
     return mavlink.MAVLink_mission_count_message(target_system, target_component, 0)
 
 
+_UPPER = operator.itemgetter(*(6 * i + j for i in range(6) for j in range(i, 6)))
+
+
 def _upper(c: np.ndarray) -> tuple[float, ...]:
     """The upper triangle of a 6x6 matrix, row-major: ODOMETRY's 21 covariance fields."""
-    return tuple(float(c[i, j]) for i in range(6) for j in range(i, 6))
+    return _UPPER(np.asarray(c, dtype=float).ravel().tolist())
+
+
+def _floats(a) -> tuple[float, ...]:
+    return tuple(np.asarray(a, dtype=float).tolist())
 
 
 def measured_of(e) -> Measured:
@@ -359,16 +367,18 @@ def measured_of(e) -> Measured:
     in (x, y, z, roll, pitch, yaw), its velocity covariance (NED velocity, then the rates'
     variances on the angular diagonal, the rest unknown: NaN), and the quality: 100 with a
     valid position, -1 diverged, 0 otherwise."""
-    vel = np.full((6, 6), math.nan)
-    vel[:3, :3] = e.vel_cov_ned_m2_s2
-    for i in range(3):
-        vel[3 + i, 3 + i] = e.rates_var_frd_rad2_s2[i]
+    # the velocity covariance's upper triangle: the NED block, then the rates' variances on the
+    # diagonal, NaN elsewhere
+    (v00, v01, v02), (_, v11, v12), (_, _, v22) = np.asarray(e.vel_cov_ned_m2_s2,
+                                                             dtype=float).tolist()
+    r0, r1, r2 = _floats(e.rates_var_frd_rad2_s2)
+    nan = math.nan
+    vel = (v00, v01, v02, nan, nan, nan, v11, v12, nan, nan, nan, v22, nan, nan, nan,
+           r0, nan, nan, r1, nan, r2)
     quality = -1 if e.diverged else (100 if e.position_valid and e.attitude_aligned else 0)
-    return Measured(e.t_us, tuple(float(v) for v in e.pos_ned_m),
-                    tuple(float(v) for v in e.vel_ned_m_s),
-                    tuple(float(v) for v in e.quat_wxyz),
-                    tuple(float(v) for v in e.rates_frd_rad_s),
-                    _upper(e.pose_cov_rpy()), _upper(vel), quality)
+    return Measured(e.t_us, _floats(e.pos_ned_m), _floats(e.vel_ned_m_s),
+                    _floats(e.quat_wxyz), _floats(e.rates_frd_rad_s),
+                    _upper(e.pose_cov_rpy()), vel, quality)
 
 
 def estimator_status(e) -> mavlink.MAVLink_message:

@@ -2,7 +2,7 @@
 """Benchmark of the SIL vehicle: how fast the plant and the daemon run on this machine.
 
     trq-bench-sim [--steps 20000] [--sim-seconds 20] [--sensing NAME|PATH]
-                  [--json out/bench_sim.json]
+                  [--core compiled|python] [--json out/bench_sim.json]
 
 Each figure for both physics cores (`physics_core`: the compiled tick and the Python reference,
 which give bit-identical flights), with their ratio:
@@ -14,7 +14,10 @@ which give bit-identical flights), with their ratio:
     answers every ODOMETRY with a target, control rate 100 Hz: the real-time factor (simulated
     seconds per wall second, from the first ODOMETRY to the last), median of 3 runs; and the
     daemon's CPU time per simulated second (its whole process, start-up included), which is
-    what bounds it when the responder is free.
+    what bounds it when the responder is free; and the same without start-up (from as many
+    runs of STARTUP_SIM_S: the difference of the medians' CPU over the difference of simulated
+    time), a steadier figure on a shared machine, where wall time swings with the other
+    processes.
 (2) and (3) fly the sim file's sensing profile (truth: no sensor) or `--sensing`'s, whose
 sensors then sample every tick: run it with and without to see their cost.
 The target is 20x real time with the default core. Numbers are measured, never estimated.
@@ -47,6 +50,7 @@ from sil_vehicle.sitl import LINKS, Sitl
 from sil_vehicle.vehicle import ActuatorCommand, Vehicle
 
 TARGET_RTF = 20.0
+STARTUP_SIM_S = 2.0     # the short run whose CPU, less its simulated seconds' share, is start-up
 SIM_DEFAULT = PARAMS_DIR / "sim" / "default.yaml"
 VEHICLE = PARAMS_DIR / "vehicle" / "trq.yaml"
 
@@ -209,9 +213,21 @@ def lockstep_run(sim_yaml: Path, sim_seconds: float, log_dir: Path,
     return sim_seconds / wall, cpu / sim_seconds, (responder_cpu1 - responder_cpu0) / sim_seconds
 
 
+def steady_cpu_per_s(cpu_per_s: float, sim_s: float, short_cpu_per_s: float,
+                     short_sim_s: float) -> float:
+    """CPU seconds per simulated second without start-up, from a run of sim_s and a shorter
+    one of short_sim_s (each given as CPU per simulated second): the difference of their CPU
+    over the difference of their simulated time."""
+    if not sim_s > short_sim_s:
+        raise ValueError(f"the long run ({sim_s} s) must be longer than the short one "
+                         f"({short_sim_s} s)")
+    return (cpu_per_s * sim_s - short_cpu_per_s * short_sim_s) / (sim_s - short_sim_s)
+
+
 def bench_lockstep(sim_seconds: float, core: str, runs: int = 3,
-                   sensing: str | None = None) -> tuple[float, float, float]:
-    """Medians of lockstep_run's figures."""
+                   sensing: str | None = None) -> tuple[float, float, float, float | None]:
+    """Medians of lockstep_run's figures, and the daemon's CPU per simulated second without
+    start-up (None when sim_seconds is not longer than STARTUP_SIM_S)."""
     with tempfile.TemporaryDirectory(prefix="bench_sim_") as tmp:
         sim_yaml = Path(tmp) / "bench_100hz.yaml"
         # `vehicle:` absolute: a relative one inherited through `extends:` would be resolved
@@ -222,7 +238,12 @@ def bench_lockstep(sim_seconds: float, core: str, runs: int = 3,
             encoding="utf-8")
         runs_ = [lockstep_run(sim_yaml, sim_seconds, Path(tmp) / f"run{i}", sensing)
                  for i in range(runs)]
-    return tuple(statistics.median(r[i] for r in runs_) for i in range(3))
+        shorts = ([lockstep_run(sim_yaml, STARTUP_SIM_S, Path(tmp) / f"short{i}", sensing)
+                   for i in range(runs)] if sim_seconds > STARTUP_SIM_S else [])
+    rtf, cpu, responder = (statistics.median(r[i] for r in runs_) for i in range(3))
+    steady = (steady_cpu_per_s(cpu, sim_seconds, statistics.median(r[1] for r in shorts),
+                               STARTUP_SIM_S) if shorts else None)
+    return rtf, cpu, responder, steady
 
 
 def machine() -> dict[str, object]:
@@ -241,6 +262,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--sensing", default=None, metavar="NAME|PATH",
                     help="the vehicle's sensing profile in (2) and (3): a built-in name or a "
                          "YAML path (default: the sim file's, truth)")
+    ap.add_argument("--core", choices=("compiled", "python"), default=None,
+                    help="measure this physics core only (default: both, when compiled)")
     ap.add_argument("--json", type=Path, default=None, help="also write the numbers here")
     args = ap.parse_args(argv)
 
@@ -255,12 +278,16 @@ def main(argv: list[str] | None = None) -> int:
     else:
         cores = ["compiled", "python"]
     default = "compiled" if sim.physics_core != "python" and "compiled" in cores else "python"
+    if args.core is not None:
+        if args.core not in cores:
+            ap.error(f"--core {args.core}: not available on this machine (no C compiler)")
+        cores, default = [args.core], args.core
     per_core: dict[str, dict[str, float]] = {}
     for core in cores:
         vehicle_sps = bench_vehicle(args.steps, core)
         sitl_sps, msgs_per_s = bench_sitl(args.steps, core, sensing=args.sensing)
-        rtf, cpu_per_s, responder_per_s = bench_lockstep(args.sim_seconds, core,
-                                                         sensing=args.sensing)
+        rtf, cpu_per_s, responder_per_s, steady_per_s = bench_lockstep(
+            args.sim_seconds, core, sensing=args.sensing)
         per_core[core] = {
             "vehicle_step_per_s": round(vehicle_sps, 1),
             "vehicle_step_rtf_bound": round(vehicle_sps / physics_hz, 2),
@@ -269,6 +296,8 @@ def main(argv: list[str] | None = None) -> int:
             "sitl_step_rtf_bound": round(sitl_sps / physics_hz, 2),
             "lockstep_rtf_100hz": round(rtf, 2),
             "lockstep_daemon_cpu_s_per_sim_s": round(cpu_per_s, 4),
+            "lockstep_daemon_steady_cpu_s_per_sim_s": (round(steady_per_s, 4)
+                                                       if steady_per_s is not None else None),
             "lockstep_responder_cpu_s_per_sim_s": round(responder_per_s, 4),
         }
     rtf = per_core[default]["lockstep_rtf_100hz"]
@@ -281,7 +310,8 @@ def main(argv: list[str] | None = None) -> int:
         "lockstep_sim_seconds": args.sim_seconds,
         "target_rtf": TARGET_RTF,
         "lockstep_rtf_over_target": round(rtf / TARGET_RTF, 2),
-        "runs": {"vehicle": 5, "sitl": 5, "lockstep": 3, "steps": args.steps},
+        "runs": {"vehicle": 5, "sitl": 5, "lockstep": 3, "steps": args.steps,
+                 "lockstep_short_sim_s": STARTUP_SIM_S},
     }
     m = result["machine"]
     print(f"machine: {m['platform']}, {m['processor']}, {m['cpu_count']} CPUs, "
@@ -290,11 +320,14 @@ def main(argv: list[str] | None = None) -> int:
             ("(2) Sitl.step + encoding, steps/s", "sitl_step_with_telemetry_per_s", "{:10.0f}"),
             ("(3) daemon lockstep 100 Hz, x real time", "lockstep_rtf_100hz", "{:10.1f}"),
             ("    daemon CPU ms per simulated s", "lockstep_daemon_cpu_s_per_sim_s", None),
+            ("    the same without start-up", "lockstep_daemon_steady_cpu_s_per_sim_s", None),
             ("    responder CPU ms per simulated s", "lockstep_responder_cpu_s_per_sim_s", None)]
     print(f"{'':42s}" + "".join(f"{c:>12s}" for c in cores)
           + ("       ratio" if len(cores) == 2 else ""))
     for label, key, fmt in rows:
         vals = [per_core[c][key] for c in cores]
+        if any(v is None for v in vals):
+            continue                    # no start-up-free figure (a run as short as its start)
         cells = [f"{1000 * v:12.1f}" if fmt is None else f"  {fmt.format(v)}" for v in vals]
         ratio = ""
         if len(cores) == 2:
