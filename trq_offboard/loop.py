@@ -261,6 +261,12 @@ class OffboardFlight:
                                    return_when=asyncio.FIRST_COMPLETED)
                 waiter.cancel()
             if fut.done():
+                answered = self._answered_stamp
+                if hold is not None and sent_us is not None \
+                        and (answered is None or answered < sent_us):
+                    # the ACK beat our answer to the state the command went with: answer it
+                    # now, so that the next state is the same whichever came first
+                    self._answer(sent_us, hold)
                 return fut.result()
         raise FlightError(f"no COMMAND_ACK for command {command_id} after {retries} tries")
 
@@ -272,22 +278,26 @@ class OffboardFlight:
         start = self.odometry.stamp_us if self.odometry is not None else 0
         waited = False
         while True:
+            # the state this try goes with, not answered yet: the command leaves before its
+            # answer, so in lockstep the vehicle takes it at that state's time, and the times
+            # below are the vehicle's, whatever the wall clock does (a flight replays bit for bit)
+            issued = self.odometry.stamp_us if self.odometry is not None else start
             result = await self._command(wire.arm_command(True),
                                          mavlink.MAV_CMD_COMPONENT_ARM_DISARM, hold=IDLE)
             if result == mavlink.MAV_RESULT_ACCEPTED:
                 return waited
-            now = self.odometry.stamp_us if self.odometry is not None else start
-            if result != mavlink.MAV_RESULT_TEMPORARILY_REJECTED or now - start >= ARM_WAIT_US:
+            if result != mavlink.MAV_RESULT_TEMPORARILY_REJECTED \
+                    or issued - start >= ARM_WAIT_US:
                 raise FlightError(f"arming refused (MAV_RESULT {result})")
             if not waited:
                 log.info("arming not allowed yet (the vehicle's preflight check): retrying")
             waited = True
-            end = now + ARM_RETRY_US
-            while True:
+            end = issued + ARM_RETRY_US
+            while True:         # IDLE up to `end`; the first state at or after it goes unanswered
                 odo = await self._next_odometry()
-                self._answer(odo.stamp_us, IDLE)
                 if odo.stamp_us >= end:
                     break
+                self._answer(odo.stamp_us, IDLE)
 
     def _answer(self, stamp_us: int, cmd: ActuatorCommand) -> None:
         c0 = self.cpu_ns()
