@@ -25,7 +25,7 @@ from typing import Annotated, Any, Optional
 
 from pydantic import (BaseModel, BeforeValidator, ConfigDict, Field, ValidationInfo,
                       field_validator, model_validator)
-from trq_params import exists
+from trq_params import exists, is_name
 from trq_params.loader import (Choice, Flag, Int, Invalid, Items, NameOrPath, Num, PathStr, Range,
                                Text, Vec, expect)
 
@@ -747,7 +747,8 @@ class CampaignFile(Strict):
             raise Invalid("controllers", self.controllers,
                           "a non-empty list of distinct controller names")
         for i, c in enumerate(self.controllers):
-            if not exists("controller", c):
+            # a path is read against the campaign file's folder: trq_lab.campaign checks it
+            if is_name(c) and not exists("controller", c):
                 raise Invalid(f"controllers[{i}]", c, "a built-in controller name or a "
                               "controller YAML path")
         if self.grid is None and self.sample is None:

@@ -356,14 +356,18 @@ def _axes(section: CampaignGrid) -> dict[str, Any]:
 def load_campaign(path: Path) -> Campaign:
     path = Path(path)
     top = validate(CampaignFile, read_yaml(path), path)
+    # a controller given by path is read against the campaign file's folder (as its sensing
+    # profiles are), made absolute so that a flight finds it from any working directory
+    controllers = tuple(c if trq_params.is_name(c) else str((path.parent / c).resolve())
+                        for c in top.controllers)
     digests = {}
-    for i, c in enumerate(top.controllers):
+    for i, c in enumerate(controllers):
         try:
             digests[c] = controller_inputs(c)[1]
         except ConfigError as exc:
             raise ConfigError(f"{path}: key 'controllers[{i}]': {c!r} does not load: "
                               f"{exc}") from exc
-    vehicles = {c: controller_vehicle(c) for c in top.controllers}
+    vehicles = {c: controller_vehicle(c) for c in controllers}
     cells: list[tuple] = []
     if top.grid is not None:
         grid = _axes(top.grid)
@@ -394,7 +398,7 @@ def load_campaign(path: Path) -> Campaign:
                                   "drawn)") from exc
             _check_plant(point[4], vehicles, path, f"sample.plant (draw {k})")
             cells.append((*point[:5], profile_of(point[5], "sample.sensing")))
-    name, description, seed, controllers = top.name, top.description, top.seed, top.controllers
+    name, description, seed = top.name, top.description, top.seed
     success, threshold, timeout, repeats = (top.success_rmse_m, top.recovery_threshold_m,
                                             top.timeout_s, top.repeats)
     models = top.controller_model if isinstance(top.controller_model, list) else \

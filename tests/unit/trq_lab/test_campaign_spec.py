@@ -48,3 +48,18 @@ def test_a_time_varying_fault_is_planned_by_its_dotted_keys(tmp_path):
 def test_the_shipped_campaigns_load():
     for path in sorted((PARAMS / "campaigns").glob("*.yaml")):
         assert load_campaign(path).flights, path
+
+
+def test_a_controller_path_is_read_against_the_campaign_files_folder(tmp_path, monkeypatch):
+    (tmp_path / "mine").mkdir()
+    (tmp_path / "mine" / "fast.yaml").write_text(
+        "extends: builtin:controller/trq_nmpc_eso\nname: fast\n")
+    path = tmp_path / "tv.yaml"
+    path.write_text(TV.replace("[trq_nmpc_eso]", "[trq_nmpc_eso, mine/fast.yaml]"))
+    monkeypatch.chdir(PARAMS)                       # anywhere but the campaign's folder
+    plan = load_campaign(path)
+    assert plan.controllers == ("trq_nmpc_eso", str(tmp_path / "mine" / "fast.yaml"))
+    assert {f["controller"] for f in plan.flights} == set(plan.controllers)
+    path.write_text(TV.replace("[trq_nmpc_eso]", "[trq_nmpc_eso, mine/slow.yaml]"))
+    with pytest.raises(ConfigError, match=r"controllers\[1\].*slow.yaml"):
+        load_campaign(path)
