@@ -134,9 +134,19 @@ class FlightController(Protocol):
 
     def solver_line(self) -> str: ...   # what solves the NMPC, for the log's header
 
-    # optional: `sensor_streams` (dict of MAVLink message name: Hz), the raw sensors the
-    # controller needs (the fused filter's); the loop asks the vehicle for them at start and
-    # hands what arrived to `step` as a fifth argument (records.SensorSamples)
+    # the raw sensors the controller needs (MAVLink message name: Hz; the fused filter's): the
+    # loop asks the vehicle for them at start and, when there are any, hands what arrived to
+    # `step` as a fifth argument (records.SensorSamples)
+    sensor_streams: dict[str, int]
+
+
+def _streams(controller: FlightController) -> dict[str, int]:
+    """The controller's sensor_streams; none from a wrapper that does not pass them on (trq_lab's
+    metered controller predates them: it flies on the autopilot's estimate only)."""
+    try:
+        return dict(controller.sensor_streams)
+    except AttributeError:
+        return {}
 
 
 class OffboardFlight:
@@ -178,7 +188,7 @@ class OffboardFlight:
         self.estimator_report = HealthReport()   # the fused filter's dead reckoning
         # the raw sensors the controller needs (its sensor_streams) and those received since
         # its last step
-        self.streams: dict[str, int] = dict(getattr(controller, "sensor_streams", None) or {})
+        self.streams: dict[str, int] = _streams(controller)
         self._accel: list = []
         self._poses: list = []
         self._errors: list[np.ndarray] = []
