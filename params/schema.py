@@ -357,6 +357,8 @@ class Estimator(Strict):
     # the known input: the model's acceleration plus the observer's disturbance (issue 34's
     # coupling), or the model's alone (a_r then carries the disturbance)
     disturbance_input: Choice("observer", "none") = "observer"
+    # the autopilot's velocity (ODOMETRY) fused as a measurement of v, 1 sigma; 0: not fused
+    autopilot_vel_std_m_s: Num(0.0, 10.0) = 0.0
 
     @model_validator(mode="after")
     def _only_fused(self) -> "Estimator":

@@ -364,7 +364,7 @@ class Controller:
             a_known = self._b0(x, t_s, applied, u_applied, path)[0:3]
             if self.cfg.fused.disturbance_input:
                 a_known = a_known + self._eso_d[0:3]
-            health = f.step(sensors.stamp_us, a_known)
+            health = f.step(sensors.stamp_us, a_known, x[3:6])
         else:
             health = f.health(sensors.stamp_us)
         x[0:6] = f.x[0:6]

@@ -64,6 +64,7 @@ class FusedConfig:
     mocap_rate_hz: int                    # ATT_POS_MOCAP asked of the vehicle
     history: int = 8                      # control periods kept for the delayed pose
     disturbance_input: bool = True        # the observer's d in the known input (else b0 alone)
+    autopilot_vel_std_m_s: float = 0.0    # the autopilot's velocity as a measurement (0: not)
 
 
 def rotation_ned_frd(euler_rad) -> np.ndarray:
@@ -97,6 +98,7 @@ def _transition(dt: float, cfg: FusedConfig) -> tuple[np.ndarray, np.ndarray, np
 N_STATES = 12
 _H_POS = np.hstack([_I3, np.zeros((3, 9))])
 _H_ACC = np.hstack([np.zeros((3, 6)), _I3, _I3])
+_H_VEL = np.hstack([np.zeros((3, 3)), _I3, np.zeros((3, 6))])
 
 
 def _update(x, P, H, z_minus_hx, R):
@@ -186,10 +188,11 @@ class FusedFilter:
         if np.all(np.isfinite(p)):
             self._poses.append((int(t_us), p))
 
-    def step(self, t_us: int, a_known_ned: np.ndarray) -> Health:
+    def step(self, t_us: int, a_known_ned: np.ndarray, vel_ned_m_s=None) -> Health:
         """Advance to t_us (> the last period's end) under the known input a_known (m/s^2 NED,
         held over the period); fuse this period's accelerometer mean and then the poses received
-        at their times of validity."""
+        at their times of validity; with autopilot_vel_std_m_s, `vel_ned_m_s` (the
+        autopilot's velocity now) is fused last as a measurement of v."""
         last = self._periods[-1]
         dt_us = int(t_us) - last.t_us
         if dt_us <= 0:
@@ -206,6 +209,11 @@ class FusedFilter:
         for t_pose, pos in sorted(self._poses, key=lambda s: s[0]):
             self._fuse_pose(min(t_pose, int(t_us)), pos)
         self._poses.clear()
+        std = self.cfg.autopilot_vel_std_m_s
+        if std > 0.0 and vel_ned_m_s is not None:
+            top = self._periods[-1]
+            v = np.asarray(vel_ned_m_s, float)
+            top.x, top.P, _ = _update(top.x, top.P, _H_VEL, v - top.x[3:6], std * std * _I3)
         return self.health(t_us)
 
     def _advance(self, x, P, dt_us: int, a_known, acc):

@@ -36,12 +36,14 @@ def _truth(t):
 
 
 def _fly(n_steps, *, seed=0, model_error=(0.3, -0.2, 0.1), bias_frd=(0.15, -0.1, 0.2),
-         latency_us=10_000, stamp_arrival=False, drop=(), cfg=CFG, poses=True):
+         latency_us=10_000, stamp_arrival=False, drop=(), cfg=CFG, poses=True,
+         vel_noise_m_s=0.0):
     """Run the filter over n_steps periods of the known trajectory: the known input the true
     acceleration less a constant model error (the residual a_r's to find), two accelerometer
     samples a period (biased, noisy, attitude level with a yaw), a pose each period
     `latency_us` after its time of validity (stamped with its arrival instead with
-    stamp_arrival; none in the periods listed in `drop`). Returns (filter, rows of (t_us,
+    stamp_arrival; none in the periods listed in `drop`), the autopilot's velocity (the truth
+    with white noise of vel_noise_m_s). Returns (filter, rows of (t_us,
     error (12), P diagonal (12), health))."""
     rng = np.random.default_rng(seed)
     f = FusedFilter(cfg, G)
@@ -62,8 +64,8 @@ def _fly(n_steps, *, seed=0, model_error=(0.3, -0.2, 0.1), bias_frd=(0.15, -0.1,
             f.add_pose(t_us if stamp_arrival else t_pose, p)
         # the known input over the period: the truth at its middle, less the model's error
         a_known = _truth((t_us - H_US / 2) * 1e-6)[2] - np.asarray(model_error)
-        health = f.step(t_us, a_known)
         p, v, _ = _truth(t_us * 1e-6)
+        health = f.step(t_us, a_known, v + rng.normal(0.0, vel_noise_m_s or 1.0, 3))
         truth = np.concatenate([p, v, np.asarray(model_error), rot @ np.asarray(bias_frd)])
         rows.append((t_us, f.x - truth, np.diag(f.P).copy(), health))
     return f, rows
@@ -149,6 +151,20 @@ def test_a_pose_far_off_is_rejected_by_the_gate():
     assert h.rejected == 1 and h.test_ratio > 1.0 and abs(f.x[0]) < 1e-3
 
 
+def test_the_autopilots_velocity_fused_as_a_measurement():
+    """autopilot_vel_std_m_s > 0: the velocity handed to `step` is fused (a better velocity
+    than the filter's own is taken); 0: it is ignored, whatever it says."""
+    err = {}
+    for std in (0.0, 0.005):
+        cfg = FusedConfig(**{**CFG.__dict__, "autopilot_vel_std_m_s": std})
+        _, rows = _fly(800, cfg=cfg, vel_noise_m_s=0.005)
+        err[std] = np.sqrt(np.mean(np.array([r[1][3:6] for r in rows[300:]]) ** 2))
+    _, ignored = _fly(800, vel_noise_m_s=5.0)         # a wild velocity: not fused by default
+    _, plain = _fly(800)
+    assert np.allclose([r[1] for r in ignored], [r[1] for r in plain], atol=0.0)
+    assert err[0.005] < 0.7 * err[0.0], err
+
+
 # --- the controller file's `estimator` ----------------------------------------------------------
 
 def _controller(tmp_path, name, estimator):
@@ -181,6 +197,8 @@ def test_the_estimator_defaults_to_the_autopilot_and_loads_fused(tmp_path):
     ({"kind": "fused", "history": 1}, r"c\.yaml.*estimator\.history"),
     ({"kind": "fused", "disturbance_input": "eso"}, r"c\.yaml.*estimator\.disturbance_input"),
     ({"kind": "fused", "gain": 1.0}, r"c\.yaml.*estimator\.gain"),
+    ({"kind": "fused", "autopilot_vel_std_m_s": -0.1},
+     r"c\.yaml.*estimator\.autopilot_vel_std_m_s"),
 ])
 def test_estimator_errors_name_file_key_and_value(tmp_path, estimator, match):
     with pytest.raises(ConfigError, match=match):
