@@ -8,9 +8,10 @@ the vehicle's acceleration), advanced once per control period h by `FusedFilter.
 
     process      p' = v,  v' = a_k + a_r + w_v,  a_r' = w_r
                  a_k: the known input, held over the period: the acceleration the controller's
-                 model gives for the commands in effect (the observer's b0) plus the observer's
-                 translational disturbance estimate, so that a fault the observer has seen does
-                 not reach the filter as a surprise; a_r: what both miss (a random walk);
+                 model gives for the commands in effect (the observer's b0) plus, with
+                 `disturbance_input`, the observer's translational disturbance estimate, so
+                 that a fault the observer has seen does not reach the filter as a surprise;
+                 a_r: what both miss (a random walk);
                  w_v, w_r white, of densities `model_acc_density` and `residual_walk_density`;
                  b' = w_b, the accelerometer's bias in NED (a slow random walk of density
                  `accel_bias_walk_density`, `accel_bias_std` at the start: the vehicle flies
@@ -24,7 +25,11 @@ the vehicle's acceleration), advanced once per control period h by `FusedFilter.
                  before that time, predicts to it, fuses the pose and predicts forward again
                  through the kept periods. A pose whose innovation test ratio (its normalised
                  squared innovation over the chi-square gate `pose_gate`) exceeds 1 is
-                 rejected; one older than the history is dropped.
+                 rejected, except after a dropout (a gate would then lock the poses out for
+                 good); one older than the history is dropped.
+    velocity     optional (`autopilot_vel_std_m_s` > 0): the autopilot's velocity, fused as a
+                 measurement of v at the period's end (its IMU-integrated velocity blended with
+                 the model's)
 
 Without a pose for `dropout_s` the filter dead-reckons on the model, the observer's disturbance
 and the accelerometer, and says so (`Health.dead_reckoning`; `HealthReport` turns the changes
