@@ -337,6 +337,39 @@ class Effectiveness(Strict):
     substeps: Int(1, 1000) = 10
 
 
+class Estimator(Strict):
+    """Where the controller's position and velocity come from (trq_offboard/fused.py): the
+    vehicle's ODOMETRY as it is (`autopilot`, the default), or the companion's fused filter on
+    the motion capture pose and the raw IMU, which the controller then asks the vehicle for
+    (`fused`; its parameters below, defaults for the `mocap` profile's sensors)."""
+    kind: Choice("autopilot", "fused") = "autopilot"
+    mocap_std_m: Num(1e-6, 1.0) = 0.0005               # the pose's noise, 1 sigma per axis
+    accel_std_m_s2: Num(1e-4, 100.0) = 0.35            # one accelerometer sample's, per axis
+    model_acc_density_m_s2_rthz: Num(0.0, 100.0) = 0.05    # the model's white error
+    residual_walk_m_s3_rthz: Num(1e-6, 1e3) = 0.5      # a_r's random walk
+    accel_bias_std_m_s2: Num(1e-4, 10.0) = 0.2         # its bias at the start, 1 sigma
+    accel_bias_walk_m_s3_rthz: Num(0.0, 10.0) = 0.01   # its bias's random walk
+    pose_gate: Num(1.0, 1e6) = 25.0                    # chi-square (3 dof) gate on a pose
+    dropout_s: Num(0.0, 10.0) = 0.05                   # no pose this long: dead reckoning
+    imu_rate_hz: Int(1, 200) = 125                     # HIGHRES_IMU asked of the vehicle
+    mocap_rate_hz: Int(1, 1000) = 100                  # ATT_POS_MOCAP asked of the vehicle
+    history: Int(2, 100) = 8                           # control periods kept (delayed pose)
+    # the known input: the model's acceleration plus the observer's disturbance (issue 34's
+    # coupling), or the model's alone (a_r then carries the disturbance)
+    disturbance_input: Choice("observer", "none") = "observer"
+    # the autopilot's velocity (ODOMETRY) fused as a measurement of v, 1 sigma; 0: not fused
+    autopilot_vel_std_m_s: Num(0.0, 10.0) = 0.0
+
+    @model_validator(mode="after")
+    def _only_fused(self) -> "Estimator":
+        if self.kind == "autopilot":
+            extra = sorted(self.model_fields_set - {"kind"})
+            if extra:
+                raise Invalid(f"estimator.{extra[0]}", getattr(self, extra[0]),
+                              "no fused filter parameter with kind autopilot (set kind: fused)")
+        return self
+
+
 class Horizon(Strict):
     steps: Int(2, 200)
     step_s: Num(1e-3, 1.0)
@@ -423,6 +456,7 @@ class ControllerFile(Strict):
     lagged_actuators: _ON_OFF_AUTO = "auto"
     actuator_states: _ON_OFF_AUTO = "auto"
     motor_effectiveness: Optional[Effectiveness] = None
+    estimator: Estimator = Field(default_factory=Estimator)
     control_rate_hz: Int(1, 1000)
     horizon: Horizon
     weights: WeightsFile
@@ -449,6 +483,14 @@ class ControllerFile(Strict):
                           "speed, balance, robust or auto with hessian exact (the exact Hessian "
                           "needs the QP's multipliers, which speed_abs does not compute to "
                           "tolerance)")
+        est = self.estimator
+        if est.kind == "fused" and est.dropout_s * self.control_rate_hz < 1.0 - 1e-9:
+            raise Invalid("estimator.dropout_s", est.dropout_s,
+                          f"at least one control period ({1.0 / self.control_rate_hz:g} s)")
+        if est.kind == "fused" and est.history * est.mocap_rate_hz < self.control_rate_hz:
+            raise Invalid("estimator.history", est.history,
+                          "at least one pose period of control periods (control_rate_hz / "
+                          f"mocap_rate_hz = {self.control_rate_hz / est.mocap_rate_hz:g})")
         r = self.reference
         if 2.0 * r.ramp_s > r.duration_s:
             raise Invalid("reference.ramp_s", r.ramp_s,

@@ -7,6 +7,8 @@ cache) comes from trq_wire.
     model/          the prediction model in CasADi (PredictionModel: dynamics, b0)
     allocation      body wrench <-> throttles and tilts (the hover trim)
     eso             the extended state observer (the disturbance d)
+    fused           the fused filter (estimator: fused): position and velocity from the pose,
+                    the raw IMU and the model with the observer's d
     predictor       the delay predictor: the commands sent, the actuators' walk, the state when
                     the command acts, the observer's b0 under the commands in effect
     effectiveness   the motor effectiveness observer and its composition with the model

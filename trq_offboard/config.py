@@ -26,6 +26,8 @@ from trq_params import loader, schema
 from trq_params.loader import ConfigError
 from trq_params.schema import throttle_curve
 
+from trq_offboard.fused import FusedConfig
+
 __all__ = ["ConfigError", "RotorGeometry", "Curve", "VehicleModel", "EsoChannelGains",
            "EsoConfig", "EffectivenessConfig", "Weights", "SolverConfig", "ReferenceConfig",
            "ControllerConfig", "load_vehicle_model", "load_eso", "load_controller", "PARAMS_DIR"]
@@ -250,6 +252,7 @@ class ControllerConfig:
     actuator_states: str = "auto"         # on | off | auto (on when predicting): the NMPC's
                                           # stage state carries the actuators' lag states
     effectiveness: EffectivenessConfig | None = None   # motor_effectiveness (None: off)
+    fused: FusedConfig | None = None      # estimator kind fused (None: the autopilot's estimate)
 
     @property
     def predicts_delay(self) -> bool:
@@ -304,12 +307,18 @@ def controller_config(c: schema.ControllerFile, file: str) -> ControllerConfig:
     e = c.motor_effectiveness
     effectiveness = None if e is None or e.estimate == "off" else EffectivenessConfig(
         e.bandwidth_rad_s, e.min, e.substeps)
+    f = c.estimator
+    fused = None if f.kind == "autopilot" else FusedConfig(
+        f.mocap_std_m, f.accel_std_m_s2, f.model_acc_density_m_s2_rthz,
+        f.residual_walk_m_s3_rthz, f.accel_bias_std_m_s2, f.accel_bias_walk_m_s3_rthz,
+        f.pose_gate, f.dropout_s, f.imu_rate_hz, f.mocap_rate_hz, f.history,
+        f.disturbance_input == "observer", f.autopilot_vel_std_m_s)
     return ControllerConfig(file, c.name, vehicle, c.observer.kind, eso, c.control_rate_hz,
                             c.horizon.steps, c.horizon.step_s, weights,
                             c.constraints.max_roll_pitch_deg, c.constraints.max_body_rate_rad_s,
                             solver, reference, c.applied_input, c.applied_delay_s,
                             c.delay_compensation, c.lagged_actuators, c.actuator_states,
-                            effectiveness)
+                            effectiveness, fused)
 
 
 def load_controller(path: Path | str) -> ControllerConfig:

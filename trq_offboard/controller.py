@@ -51,6 +51,7 @@ from trq_offboard.allocation import Allocator
 from trq_offboard.config import ControllerConfig, load_controller
 from trq_offboard.effectiveness import MotorEffectiveness, MotorEffectivenessObserver
 from trq_offboard.eso import ExtendedStateObserver
+from trq_offboard.fused import FusedFilter
 from trq_offboard.model import PredictionModel
 from trq_offboard.model.dynamics import NumpyFunction
 from trq_offboard.nmpc.base import Solver
@@ -60,6 +61,8 @@ from trq_offboard.predictor import DelayPredictor
 from trq_offboard.records import (
     ActuatorCommand,
     CommandSource,
+    EstimatorHealth,
+    SensorSamples,
     SolveInfo,
     SolveStatus,
     StateEstimate,
@@ -171,6 +174,22 @@ class Controller:
         self._grid_val: tuple | None = None
         self.clip_count = 0
         self.failures = 0
+        # the fused filter (estimator kind fused): position and velocity from the pose, the IMU
+        # and the model with the observer's d; started at the first step that brings sensors
+        self.fused = (FusedFilter(cfg.fused, vm.gravity_m_s2) if cfg.fused is not None
+                      else None)
+        self._fused_on = False
+        self._eso_d = np.zeros(6)                # the observer's d of the last step
+        self._health: EstimatorHealth | None = None
+
+    @property
+    def sensor_streams(self) -> dict[str, int]:
+        """The raw sensor streams (MAVLink message name: Hz) this controller needs from the
+        vehicle: the fused filter's pose and IMU, none on the autopilot's estimate."""
+        if self.cfg.fused is None:
+            return {}
+        return {"HIGHRES_IMU": self.cfg.fused.imu_rate_hz,
+                "ATT_POS_MOCAP": self.cfg.fused.mocap_rate_hz}
 
     @classmethod
     def from_yaml(cls, path: Path | str) -> "Controller":
@@ -206,20 +225,27 @@ class Controller:
         self.solver.discard()
         self.clip_count = 0
         self.failures = 0
+        self._fused_on = False
+        self._eso_d = np.zeros(6)
+        self._health = None
 
     def _euler_rate(self, x: np.ndarray) -> np.ndarray:
         return np.asarray(self.model.f(x, self._last_u, np.zeros(6))).ravel()[6:9]
 
     # --- one control step -----------------------------------------------------------------------
     def step(self, t_s: float, state: StateEstimate, applied: ActuatorCommand | None,
-             reference: FlightReference) -> tuple[ActuatorCommand, StepInfo]:
+             reference: FlightReference, sensors: SensorSamples | None = None
+             ) -> tuple[ActuatorCommand, StepInfo]:
         """One control period. In: t_s (s, the state's time on the flight's clock), `state` (the
         StateEstimate the command answers: the measured state, or a filter's estimate of it),
         `applied` (the ActuatorCommand the vehicle reports flying since the last step; None:
-        the one this controller returned last), `reference`. Out: the ActuatorCommand to send
+        the one this controller returned last), `reference`, `sensors` (the raw sensors received
+        since the last step, for the fused filter; None: none). Out: the ActuatorCommand to send
         (clipped to the actuators' limits, finite) and its StepInfo. In order:
 
-        1. the state estimate in (a non-finite one: the fallback, `_emergency`);
+        1. the state estimate in (a non-finite one: the fallback, `_emergency`); with the
+           fused filter and sensors, its position and velocity replace the state's (`_fuse`,
+           after the actuators' walk, whose b0 it takes);
         2. the actuators walked through their lags from the last step to when this command
            acts, t_s + delay (`_walk`: one path for the observer and the predictor);
         3. the observer advanced to t_s under the commands in effect: d (`_observe`);
@@ -247,7 +273,10 @@ class Controller:
         t_act = t_s + self.delay_s
         t_prev = self._last_t
         path, y_act, y_now = self._walk(x, t_s, t_act)
+        if self.fused is not None and sensors is not None:
+            self._health = self._fuse(x, t_s, sensors, applied, u_applied, path)
         d, d_obs, out_err = self._observe(x, t_s, applied, u_applied, path)
+        self._eso_d = d_obs
         c1 = clock()
         # 4. the motors' effectiveness
         if self.motors is not None:
@@ -304,13 +333,42 @@ class Controller:
         y = self.eso.measurement(x)
         if t_s > self._last_t:
             dt = t_s - self._last_t         # the true gap: samples can be lost or skipped
-            if self.cfg.applied_input == "outputs" and applied is not None:
-                b0 = self.predictor.b0(x, u_applied)
-            else:
-                b0 = self.predictor.b0_delayed(x, self._last_t, t_s, path)
+            b0 = self._b0(x, t_s, applied, u_applied, path)
             self.eso.update(y, self.eso.b0_of(b0), dt)
         d = self.eso.disturbance(x[6:9])
         return d, d, self.eso.output_error(y)
+
+    def _b0(self, x: np.ndarray, t_s: float, applied: ActuatorCommand | None,
+            u_applied: np.ndarray, path) -> np.ndarray:
+        """The nominal model's accelerations (9) over the last step to t_s under the input that
+        acted: the vehicle's reported outputs, or the commands in effect over the path."""
+        if self.cfg.applied_input == "outputs" and applied is not None:
+            return self.predictor.b0(x, u_applied)
+        return self.predictor.b0_delayed(x, self._last_t, t_s, path)
+
+    def _fuse(self, x: np.ndarray, t_s: float, sensors: SensorSamples,
+              applied: ActuatorCommand | None, u_applied: np.ndarray, path) -> EstimatorHealth:
+        """The fused filter advanced to this state's time on the samples received, its known
+        input the model's acceleration over the period (the observer's b0) plus the observer's
+        translational d of the last step; x's position and velocity replaced (in place: the
+        walk's b0 stays bound to x) by the filter's. Attitude and rates stay the autopilot's."""
+        f = self.fused
+        if not self._fused_on:
+            f.reset(sensors.stamp_us, x[0:3], x[3:6])
+            self._fused_on = True
+        for acc in sensors.accel_frd_m_s2:
+            f.add_imu(acc, x[6:9])
+        for t_us, pos in sensors.poses_ned_m:
+            f.add_pose(t_us, pos)
+        if t_s > self._last_t and sensors.stamp_us > f.t_us:
+            a_known = self._b0(x, t_s, applied, u_applied, path)[0:3]
+            if self.cfg.fused.disturbance_input:
+                a_known = a_known + self._eso_d[0:3]
+            health = f.step(sensors.stamp_us, a_known, x[3:6])
+        else:
+            health = f.health(sensors.stamp_us)
+        x[0:6] = f.x[0:6]
+        return health
 
     def prepare(self, reference: FlightReference) -> None:
         """Preparation phase for the next step (t + one control period): the solver linearises
@@ -429,7 +487,7 @@ class Controller:
         cpu = StepTimes(c1 - c0, c2 - c1, c3 - c2, self.cpu_ns() - c3)
         info = StepInfo(source, info, tuple(d.tolist()), out_err, n_clip,
                         self.clip_count, self.failures, tuple(self._scale[self._nt:].tolist()),
-                        cpu)
+                        cpu, self._health)
         return cmd, info
 
     def _emergency(self, t_s, why, c0) -> tuple[ActuatorCommand, StepInfo]:

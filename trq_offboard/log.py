@@ -13,7 +13,12 @@ the thread that ran it: cpu_observer_ms, cpu_effectiveness_ms, cpu_predictor_ms,
 cpu_feedback_ms (the step's parts), cpu_prepare_ms (the preparation after the command),
 cpu_wire_ms (the state's decode, the target's encode and send), cpu_log_ms (this log's share),
 cpu_period_ms (the whole period, every thread of the process: the parts, the event loop, the
-transport's frame parse)."""
+transport's frame parse).
+
+The state columns (pos_*, vel_*) are the state the controller flew on: the vehicle's estimate,
+or the fused filter's position and velocity (estimator kind fused), whose health follows in
+est_test_ratio (the last pose's innovation test ratio), est_pos_var_m2 (the position's variance)
+and est_dead_reckoning (1 without a pose for the filter's dropout_s); nan without the filter."""
 
 from __future__ import annotations
 
@@ -36,7 +41,8 @@ COLUMNS = (
     + [f"applied_tilt{i}_rad" for i in range(1, 5)]
     + ["solve_ms", "iterations", "status", "source", "output_error", "cost"]
     + [f"eff_motor{i}" for i in range(1, 5)]
-    + [f"cpu_{part}_ms" for part in CPU_PARTS])
+    + [f"cpu_{part}_ms" for part in CPU_PARTS]
+    + ["est_test_ratio", "est_pos_var_m2", "est_dead_reckoning"])
 
 
 def _ms(ns: int) -> float:
@@ -68,7 +74,9 @@ class ControllerLog:
         s, ref, info, c = r.state, r.ref, r.info, r.cpu
         nan4 = (math.nan,) * 4
         applied = r.applied
-        self._log([r.t_s, r.stamp_us, *s.pos_ned_m, *s.vel_ned_m_s, *s.euler_rad,
+        est = info.estimator if info else None
+        pos, vel = (est.pos_ned_m, est.vel_ned_m_s) if est else (s.pos_ned_m, s.vel_ned_m_s)
+        self._log([r.t_s, r.stamp_us, *pos, *vel, *s.euler_rad,
                    *s.rates_frd_rad_s, *ref.pos_ned_m, *ref.vel_ned_m_s, ref.yaw_rad, ref.phase]
                   + list(info.disturbance if info else (math.nan,) * 6)
                   + [*r.cmd.throttle_pct, *r.cmd.tilt_rad]
@@ -82,7 +90,9 @@ class ControllerLog:
                   + ([info.cpu.observer_ns * 1e-6, info.cpu.effectiveness_ns * 1e-6,
                       info.cpu.predictor_ns * 1e-6, info.cpu.feedback_ns * 1e-6] if info
                      else list(nan4))
-                  + [_ms(c.prepare_ns), _ms(c.wire_ns), _ms(c.log_ns), _ms(c.period_ns)])
+                  + [_ms(c.prepare_ns), _ms(c.wire_ns), _ms(c.log_ns), _ms(c.period_ns)]
+                  + ([est.test_ratio, est.pos_var_m2, int(est.dead_reckoning)] if est
+                     else [math.nan] * 3))
 
     def close(self) -> None:
         for r in self._rows:

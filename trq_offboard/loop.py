@@ -34,12 +34,14 @@ import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
 from trq_offboard.diagnosis import Diagnosis
+from trq_offboard.fused import HealthReport
 from trq_offboard.link import wire
 from trq_offboard.link.udp import MavlinkUdp
 from trq_offboard.records import (
     ActuatorCommand,
     PeriodTimes,
     ReferenceSample,
+    SensorSamples,
     StateEstimate,
     StepInfo,
 )
@@ -132,6 +134,20 @@ class FlightController(Protocol):
 
     def solver_line(self) -> str: ...   # what solves the NMPC, for the log's header
 
+    # the raw sensors the controller needs (MAVLink message name: Hz; the fused filter's): the
+    # loop asks the vehicle for them at start and, when there are any, hands what arrived to
+    # `step` as a fifth argument (records.SensorSamples)
+    sensor_streams: dict[str, int]
+
+
+def _streams(controller: FlightController) -> dict[str, int]:
+    """The controller's sensor_streams; none from a wrapper that does not pass them on (trq_lab's
+    metered controller predates them: it flies on the autopilot's estimate only)."""
+    try:
+        return dict(controller.sensor_streams)
+    except AttributeError:
+        return {}
+
 
 class OffboardFlight:
     def __init__(self, link: MavlinkUdp, controller: FlightController,
@@ -169,6 +185,12 @@ class OffboardFlight:
         self._mode_task: asyncio.Future | None = None
         self.summary = FlightSummary(name)
         self.diagnosis = Diagnosis()        # the motors' estimates, for the ground station
+        self.estimator_report = HealthReport()   # the fused filter's dead reckoning
+        # the raw sensors the controller needs (its sensor_streams) and those received since
+        # its last step
+        self.streams: dict[str, int] = _streams(controller)
+        self._accel: list = []
+        self._poses: list = []
         self._errors: list[np.ndarray] = []
         self._yaw_errors: list[float] = []
         self._solve_ms: list[float] = []
@@ -201,6 +223,14 @@ class OffboardFlight:
             if applied is not None:
                 self.applied = applied
                 self._have_output_status |= kind == "ACTUATOR_OUTPUT_STATUS"
+        elif kind == "HIGHRES_IMU" and "HIGHRES_IMU" in self.streams:
+            acc = wire.parse_highres_accel(msg)
+            if acc is not None:
+                self._accel.append(acc)
+        elif kind == "ATT_POS_MOCAP" and "ATT_POS_MOCAP" in self.streams:
+            pose = wire.parse_mocap(msg)
+            if pose is not None:
+                self._poses.append(pose)
         elif kind == "HEARTBEAT":
             self.heartbeat = msg
             self._heartbeat_seen.set()
@@ -270,6 +300,20 @@ class OffboardFlight:
                 return fut.result()
         raise FlightError(f"no COMMAND_ACK for command {command_id} after {retries} tries")
 
+    async def _request_streams(self, hold: bool) -> None:
+        """Ask the vehicle for the controller's sensor streams (MAV_CMD_SET_MESSAGE_INTERVAL):
+        on the ground each is waited for (its states answered with IDLE meanwhile); taking over
+        a flying vehicle, sent without waiting (nothing may hold the control loop up)."""
+        for name, rate_hz in self.streams.items():
+            msg = wire.message_interval(getattr(mavlink, f"MAVLINK_MSG_ID_{name}"), rate_hz)
+            if not hold:
+                self.link.send(msg)
+                continue
+            result = await self._command(msg, mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, hold=IDLE)
+            if result != mavlink.MAV_RESULT_ACCEPTED:
+                log.warning("the vehicle refused %s at %d Hz (MAV_RESULT %s)", name, rate_hz,
+                            result)
+
     async def _arm(self) -> bool:
         """Arm; while the vehicle answers MAV_RESULT_TEMPORARILY_REJECTED (an autopilot's
         preflight check: its estimator not aligned yet) try again every ARM_RETRY_US of vehicle
@@ -334,6 +378,7 @@ class OffboardFlight:
             first.state.pos_ned_m[2] < wire.HOME_GROUND_DOWN_M - TAKEOVER_ALTITUDE_M
         self.summary.took_over = airborne
         ground_z = wire.HOME_GROUND_DOWN_M if airborne else first.state.pos_ned_m[2]
+        await self._request_streams(hold=not airborne)
         if airborne:
             log.info("taking over a flying vehicle at %.2f m", -first.state.pos_ned_m[2])
         elif not wire.is_armed(self.heartbeat):
@@ -374,7 +419,13 @@ class OffboardFlight:
                 down_since = None
             applied = self.applied
             wire_rx, self._wire_ns = self._wire_ns, 0     # this state's decode
-            cmd, info = self.controller.step(t, odo.state, applied, reference)
+            if self.streams:
+                sensors = SensorSamples(odo.stamp_us, tuple(self._accel), tuple(self._poses))
+                self._accel.clear()
+                self._poses.clear()
+                cmd, info = self.controller.step(t, odo.state, applied, reference, sensors)
+            else:
+                cmd, info = self.controller.step(t, odo.state, applied, reference)
             self._answer(odo.stamp_us, cmd)
             # the answer is out, hand the core to whoever it woke (in lockstep the vehicle)
             # before the log and the preparation, which are off the latency path
@@ -431,6 +482,9 @@ class OffboardFlight:
         if info is not None:
             for msg in self.diagnosis.messages(odo.stamp_us, info.effectiveness):
                 self.link.send(msg)
+            if info.estimator is not None:
+                for msg in self.estimator_report.messages(info.estimator):
+                    self.link.send(msg)
             self._solve_ms.append(info.solve.solve_time_s * 1e3)
             if info.source.value != "nmpc":
                 self.summary.fallbacks += 1

@@ -93,6 +93,26 @@ class PeriodTimes:
 
 
 @dataclass(frozen=True)
+class SensorSamples:
+    """The raw sensors the flight loop received since the last step, for the fused filter
+    (trq_offboard/fused.py), with the vehicle's time of the state the step answers."""
+    stamp_us: int                                    # the state's time (ODOMETRY time_usec)
+    accel_frd_m_s2: tuple[Vec3, ...] = ()            # HIGHRES_IMU specific forces, body FRD
+    poses_ned_m: tuple[tuple[int, Vec3], ...] = ()   # ATT_POS_MOCAP: (time of validity us, pos)
+
+
+@dataclass(frozen=True)
+class EstimatorHealth:
+    """The fused filter's health after one period (trq_offboard/fused.py)."""
+    pos_ned_m: Vec3                    # its estimate, which the controller flew on
+    vel_ned_m_s: Vec3
+    test_ratio: float                  # the last pose's innovation test ratio (nan: none yet)
+    pos_var_m2: float                  # the position's variance, trace / 3
+    dead_reckoning: bool               # no pose for the filter's dropout_s
+    rejected: int                      # poses rejected by the gate so far
+
+
+@dataclass(frozen=True)
 class StepInfo:
     source: CommandSource
     solve: SolveInfo
@@ -105,3 +125,4 @@ class StepInfo:
     # the motors' estimated effectiveness (motor_effectiveness; 1 without its observer)
     effectiveness: tuple[float, float, float, float] = (1.0, 1.0, 1.0, 1.0)
     cpu: StepTimes = StepTimes()       # the step's CPU time by part
+    estimator: EstimatorHealth | None = None   # the fused filter's (None: the autopilot's)

@@ -101,6 +101,32 @@ def set_mode_land():
         float(mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED), 4.0, 6.0, 0, 0, 0, 0)
 
 
+def message_interval(msg_id: int, rate_hz: float):
+    """MAV_CMD_SET_MESSAGE_INTERVAL: the vehicle sends message `msg_id` at rate_hz."""
+    return mavlink.MAVLink_command_long_message(
+        VEHICLE_SYSTEM, VEHICLE_COMPONENT, mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, 0,
+        float(msg_id), float(round(1e6 / rate_hz)), 0, 0, 0, 0, 0)
+
+
+ACCEL_UPDATED = (mavlink.HIGHRES_IMU_UPDATED_XACC | mavlink.HIGHRES_IMU_UPDATED_YACC
+                 | mavlink.HIGHRES_IMU_UPDATED_ZACC)
+
+
+def parse_highres_accel(msg) -> tuple[float, float, float] | None:
+    """HIGHRES_IMU's specific force (m/s^2 body FRD) if it carries a new accelerometer sample
+    (fields_updated) with finite values, else None."""
+    if (msg.fields_updated & ACCEL_UPDATED) != ACCEL_UPDATED:
+        return None
+    acc = (msg.xacc, msg.yacc, msg.zacc)
+    return acc if all(math.isfinite(v) for v in acc) else None
+
+
+def parse_mocap(msg) -> tuple[int, tuple[float, float, float]] | None:
+    """ATT_POS_MOCAP's (time of validity us, position m NED), None if not finite."""
+    pos = (msg.x, msg.y, msg.z)
+    return (int(msg.time_usec), pos) if all(math.isfinite(v) for v in pos) else None
+
+
 def is_crashed(heartbeat_msg) -> bool:
     return heartbeat_msg.system_status == mavlink.MAV_STATE_EMERGENCY
 

@@ -1,0 +1,296 @@
+"""The fused filter (issue 34): the companion's own estimate of position and velocity, from the
+motion capture pose, the raw accelerometer and the controller's own model with the observer's
+disturbance as a known input.
+
+A linear Kalman filter in world NED on x = [p (3) m, v (3) m/s, a_r (3) m/s^2, b (3) m/s^2]
+(12 states: issue 34's nine and the accelerometer's bias, which the nine alone would read as
+the vehicle's acceleration), advanced once per control period h by `FusedFilter.step`:
+
+    process      p' = v,  v' = a_k + a_r + w_v,  a_r' = w_r
+                 a_k: the known input, held over the period: the acceleration the controller's
+                 model gives for the commands in effect (the observer's b0) plus, with
+                 `disturbance_input`, the observer's translational disturbance estimate, so
+                 that a fault the observer has seen does not reach the filter as a surprise;
+                 a_r: what both miss (a random walk);
+                 w_v, w_r white, of densities `model_acc_density` and `residual_walk_density`;
+                 b' = w_b, the accelerometer's bias in NED (a slow random walk of density
+                 `accel_bias_walk_density`, `accel_bias_std` at the start: the vehicle flies
+                 near level, so the body bias seen in NED changes only with the yaw)
+    accelerometer  z = R(eta) f_frd + g e_z  measures a_k + a_r + b (each period: the mean of
+                 the samples received, variance accel_std^2 / n); the position fixes what the
+                 total acceleration is, so the slow difference is the sensor's bias
+    position     z = p at the pose's time of validity (ATT_POS_MOCAP's time_usec, about one
+                 control period before it arrives): the filter keeps its last `history` periods
+                 (posterior, known input, accelerometer measurement), goes back to the period
+                 before that time, predicts to it, fuses the pose and predicts forward again
+                 through the kept periods. A pose whose innovation test ratio (its normalised
+                 squared innovation over the chi-square gate `pose_gate`) exceeds 1 is
+                 rejected, except after a dropout (a gate would then lock the poses out for
+                 good); one older than the history is dropped.
+    velocity     optional (`autopilot_vel_std_m_s` > 0): the autopilot's velocity, fused as a
+                 measurement of v at the period's end (its IMU-integrated velocity blended with
+                 the model's)
+
+Without a pose for `dropout_s` the filter dead-reckons on the model, the observer's disturbance
+and the accelerometer, and says so (`Health.dead_reckoning`; `HealthReport` turns the changes
+into STATUSTEXT messages). Its health per period: the last pose's test ratio and the position's
+variance (trace / 3, m^2), for controller.csv.
+
+Pure: integer microseconds of the vehicle's clock in, no clock read, no I/O, no randomness.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from pymavlink.dialects.v20 import common as mavlink
+
+from trq_offboard.records import EstimatorHealth as Health
+
+__all__ = ["FusedConfig", "FusedFilter", "Health", "HealthReport", "rotation_ned_frd"]
+
+_I3 = np.eye(3)
+
+
+@dataclass(frozen=True)
+class FusedConfig:
+    """The fused filter's parameters (controller key `estimator`, kind fused)."""
+    mocap_std_m: float                    # the pose's position noise, 1 sigma per axis
+    accel_std_m_s2: float                 # one accelerometer sample's noise, 1 sigma per axis
+    model_acc_density: float              # w_v: the model's white acceleration error, m/s^2/rtHz
+    residual_walk_density: float          # w_r: a_r's random walk, m/s^3/rtHz
+    accel_bias_std: float                 # b at the start, 1 sigma per axis, m/s^2
+    accel_bias_walk_density: float        # w_b: b's random walk, m/s^3/rtHz
+    pose_gate: float                      # chi-square (3 dof) gate of a pose's innovation
+    dropout_s: float                      # no pose this long: dead reckoning
+    imu_rate_hz: int                      # HIGHRES_IMU asked of the vehicle
+    mocap_rate_hz: int                    # ATT_POS_MOCAP asked of the vehicle
+    history: int = 8                      # control periods kept for the delayed pose
+    disturbance_input: bool = True        # the observer's d in the known input (else b0 alone)
+    autopilot_vel_std_m_s: float = 0.0    # the autopilot's velocity as a measurement (0: not)
+
+
+def rotation_ned_frd(euler_rad) -> np.ndarray:
+    """R taking body FRD vectors to world NED, ZYX Euler angles (roll, pitch, yaw); the NumPy
+    twin of trq_offboard.model.dynamics.rotation_ned_frd."""
+    roll, pitch, yaw = euler_rad
+    cr, sr = math.cos(roll), math.sin(roll)
+    cp, sp = math.cos(pitch), math.sin(pitch)
+    cy, sy = math.cos(yaw), math.sin(yaw)
+    return np.array([[cp * cy, sr * sp * cy - cr * sy, cr * sp * cy + sr * sy],
+                     [cp * sy, sr * sp * sy + cr * cy, cr * sp * sy - sr * cy],
+                     [-sp, sr * cp, cr * cp]])
+
+
+def _transition(dt: float, cfg: FusedConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(F (12x12), G (12x3) of the known input, Q (12x12)) over dt s; per axis the constant-
+    acceleration triple and the bias, the axes independent (Kronecker products with I3)."""
+    f1 = np.array([[1.0, dt, 0.5 * dt * dt], [0.0, 1.0, dt], [0.0, 0.0, 1.0]])
+    g1 = np.array([[0.5 * dt * dt], [dt], [0.0]])
+    qr = cfg.residual_walk_density ** 2
+    qv = cfg.model_acc_density ** 2
+    d2, d3, d4, d5 = dt ** 2, dt ** 3, dt ** 4, dt ** 5
+    q1 = qr * np.array([[d5 / 20, d4 / 8, d3 / 6], [d4 / 8, d3 / 3, d2 / 2], [d3 / 6, d2 / 2, dt]])
+    q1 += qv * np.array([[d3 / 3, d2 / 2, 0.0], [d2 / 2, dt, 0.0], [0.0, 0.0, 0.0]])
+    f4, g4, q4 = np.eye(4), np.zeros((4, 1)), np.zeros((4, 4))
+    f4[0:3, 0:3], g4[0:3], q4[0:3, 0:3] = f1, g1, q1
+    q4[3, 3] = cfg.accel_bias_walk_density ** 2 * dt
+    return np.kron(f4, _I3), np.kron(g4, _I3), np.kron(q4, _I3)
+
+
+N_STATES = 12
+_H_POS = np.hstack([_I3, np.zeros((3, 9))])
+_H_ACC = np.hstack([np.zeros((3, 6)), _I3, _I3])
+_H_VEL = np.hstack([np.zeros((3, 3)), _I3, np.zeros((3, 6))])
+
+
+def _update(x, P, H, z_minus_hx, R):
+    """Kalman update (Joseph form): (x, P, normalised squared innovation)."""
+    S = H @ P @ H.T + R
+    S_inv = np.linalg.inv(S)
+    K = P @ H.T @ S_inv
+    x = x + K @ z_minus_hx
+    A = np.eye(N_STATES) - K @ H
+    P = A @ P @ A.T + K @ R @ K.T
+    return x, 0.5 * (P + P.T), float(z_minus_hx @ S_inv @ z_minus_hx)
+
+
+@dataclass
+class _Period:
+    """One kept control period: its end time, the known input over it, the accelerometer's
+    measurement at its end (mean, variance) or None, and the posterior at its end."""
+    t_us: int
+    a_known: np.ndarray
+    acc: tuple[np.ndarray, float] | None
+    x: np.ndarray
+    P: np.ndarray
+
+
+class FusedFilter:
+    """The filter (module docstring): reset, then per control period `add_imu` / `add_pose`
+    for the samples received and `step` to the period's end."""
+
+    def __init__(self, cfg: FusedConfig, gravity_m_s2: float) -> None:
+        self.cfg = cfg
+        self.g = gravity_m_s2
+        self._trans: dict[int, tuple] = {}
+        self._periods: list[_Period] = []
+        self._imu: list[np.ndarray] = []          # total accelerations (NED) this period
+        self._poses: list[tuple[int, np.ndarray]] = []
+        self.last_pose_us: int | None = None
+        self.test_ratio = math.nan
+        self.rejected = 0
+        self.dropped = 0
+
+    def _f(self, dt_us: int):
+        got = self._trans.get(dt_us)
+        if got is None:
+            got = _transition(dt_us * 1e-6, self.cfg)
+            if len(self._trans) < 64:
+                self._trans[dt_us] = got
+        return got
+
+    def reset(self, t_us: int, pos_ned_m, vel_ned_m_s) -> None:
+        """Start from a position and velocity (the autopilot's), a_r = 0 and b = 0, with the
+        pose's variance on position, generous ones on velocity and a_r, accel_bias_std on b."""
+        cfg = self.cfg
+        x = np.concatenate([np.asarray(pos_ned_m, float), np.asarray(vel_ned_m_s, float),
+                            np.zeros(6)])
+        P = np.diag([cfg.mocap_std_m ** 2] * 3 + [0.1 ** 2] * 3 + [1.0] * 3
+                    + [cfg.accel_bias_std ** 2] * 3)
+        self._periods = [_Period(int(t_us), np.zeros(3), None, x, P)]
+        self._imu.clear()
+        self._poses.clear()
+        self.last_pose_us = int(t_us)
+        self.test_ratio = math.nan
+        self.rejected = 0
+        self.dropped = 0
+
+    @property
+    def t_us(self) -> int:
+        return self._periods[-1].t_us
+
+    @property
+    def x(self) -> np.ndarray:
+        return self._periods[-1].x
+
+    @property
+    def P(self) -> np.ndarray:
+        return self._periods[-1].P
+
+    def add_imu(self, specific_force_frd_m_s2, euler_rad) -> None:
+        """One accelerometer sample (specific force, body FRD) with the attitude it was taken
+        at: kept as a total acceleration in NED for the period's end."""
+        f = np.asarray(specific_force_frd_m_s2, float)
+        if np.all(np.isfinite(f)):
+            self._imu.append(rotation_ned_frd(euler_rad) @ f + np.array([0.0, 0.0, self.g]))
+
+    def add_pose(self, t_us: int, pos_ned_m) -> None:
+        """One motion capture position at its time of validity (fused at the next `step`)."""
+        p = np.asarray(pos_ned_m, float)
+        if np.all(np.isfinite(p)):
+            self._poses.append((int(t_us), p))
+
+    def step(self, t_us: int, a_known_ned: np.ndarray, vel_ned_m_s=None) -> Health:
+        """Advance to t_us (> the last period's end) under the known input a_known (m/s^2 NED,
+        held over the period); fuse this period's accelerometer mean and then the poses received
+        at their times of validity; with autopilot_vel_std_m_s, `vel_ned_m_s` (the
+        autopilot's velocity now) is fused last as a measurement of v."""
+        last = self._periods[-1]
+        dt_us = int(t_us) - last.t_us
+        if dt_us <= 0:
+            return self.health(t_us)
+        a_known = np.asarray(a_known_ned, float).copy()
+        acc = None
+        if self._imu:
+            n = len(self._imu)
+            acc = (np.mean(self._imu, axis=0), self.cfg.accel_std_m_s2 ** 2 / n)
+            self._imu.clear()
+        x, P = self._advance(last.x, last.P, dt_us, a_known, acc)
+        self._periods.append(_Period(int(t_us), a_known, acc, x, P))
+        del self._periods[:-self.cfg.history]
+        for t_pose, pos in sorted(self._poses, key=lambda s: s[0]):
+            self._fuse_pose(min(t_pose, int(t_us)), pos)
+        self._poses.clear()
+        std = self.cfg.autopilot_vel_std_m_s
+        if std > 0.0 and vel_ned_m_s is not None:
+            top = self._periods[-1]
+            v = np.asarray(vel_ned_m_s, float)
+            top.x, top.P, _ = _update(top.x, top.P, _H_VEL, v - top.x[3:6], std * std * _I3)
+        return self.health(t_us)
+
+    def _advance(self, x, P, dt_us: int, a_known, acc):
+        F, G, Q = self._f(dt_us)
+        x = F @ x + G @ a_known
+        P = F @ P @ F.T + Q
+        if acc is not None:
+            z, var = acc
+            x, P, _ = _update(x, P, _H_ACC, z - a_known - x[6:9] - x[9:12], var * _I3)
+        return x, P
+
+    def _fuse_pose(self, t_pose: int, pos: np.ndarray) -> None:
+        """The pose at its time of validity: back to the kept period before it, forward to it,
+        the update, then forward again through the later periods."""
+        periods = self._periods
+        k = len(periods) - 1
+        while k >= 0 and periods[k].t_us > t_pose:
+            k -= 1
+        if k < 0:
+            self.dropped += 1
+            return
+        base = periods[k]
+        x, P = base.x, base.P
+        nxt = periods[k + 1] if k + 1 < len(periods) else None
+        if t_pose > base.t_us:        # forward to the pose under the next period's input
+            F, G, Q = self._f(t_pose - base.t_us)
+            x, P = F @ x + G @ nxt.a_known, F @ P @ F.T + Q
+        r = self.cfg.mocap_std_m ** 2 * _I3
+        innovation = pos - x[0:3]
+        S = P[0:3, 0:3] + r
+        ratio = float(innovation @ np.linalg.solve(S, innovation)) / self.cfg.pose_gate
+        self.test_ratio = ratio
+        # past the gate: rejected, unless the filter has been without a pose for dropout_s
+        # (then the estimate is what is in doubt, and a gate would lock the poses out for good)
+        if ratio > 1.0 and not self.dead_reckoning(t_pose):
+            self.rejected += 1
+            return
+        x, P, _ = _update(x, P, _H_POS, innovation, r)
+        self.last_pose_us = max(self.last_pose_us or t_pose, t_pose)
+        t = t_pose
+        if t_pose == base.t_us:
+            base.x, base.P = x, P
+        for j in range(k + 1, len(periods)):
+            p = periods[j]
+            x, P = self._advance(x, P, p.t_us - t, p.a_known, p.acc)
+            p.x, p.P = x, P
+            t = p.t_us
+
+    def dead_reckoning(self, t_us: int) -> bool:
+        return self.last_pose_us is None or \
+            t_us - self.last_pose_us > round(self.cfg.dropout_s * 1e6)
+
+    def health(self, t_us: int) -> Health:
+        x = self.x
+        return Health(tuple(x[0:3].tolist()), tuple(x[3:6].tolist()), self.test_ratio,
+                      float(np.trace(self.P[0:3, 0:3]) / 3.0), self.dead_reckoning(t_us),
+                      self.rejected)
+
+
+class HealthReport:
+    """The filter's health for the ground station: STATUSTEXT WARNING "fused filter: dead
+    reckoning" when it starts, NOTICE "fused filter: pose back" when it ends (once per change).
+    Pure: the same healths give the same messages."""
+
+    def __init__(self) -> None:
+        self._dead = False
+
+    def messages(self, health: Health) -> list:
+        if health.dead_reckoning == self._dead:
+            return []
+        self._dead = health.dead_reckoning
+        severity, text = ((mavlink.MAV_SEVERITY_WARNING, "fused filter: no pose, dead reckoning")
+                          if self._dead else (mavlink.MAV_SEVERITY_NOTICE,
+                                              "fused filter: pose back"))
+        return [mavlink.MAVLink_statustext_message(severity, text.encode("ascii"))]
