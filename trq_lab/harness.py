@@ -192,6 +192,10 @@ class _MeteredController:
     def last_prepare_cpu_ns(self) -> int:
         return self.inner.last_prepare_cpu_ns
 
+    @property
+    def sensor_streams(self) -> dict[str, int]:
+        return self.inner.sensor_streams
+
     def solver_line(self) -> str:
         return self.inner.solver_line()
 

@@ -141,12 +141,8 @@ class FlightController(Protocol):
 
 
 def _streams(controller: FlightController) -> dict[str, int]:
-    """The controller's sensor_streams; none from a wrapper that does not pass them on (trq_lab's
-    metered controller predates them: it flies on the autopilot's estimate only)."""
-    try:
-        return dict(controller.sensor_streams)
-    except AttributeError:
-        return {}
+    """The controller's sensor_streams (a copy)."""
+    return dict(controller.sensor_streams)
 
 
 class OffboardFlight:

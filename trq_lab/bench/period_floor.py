@@ -211,6 +211,9 @@ class ReplayController:
         self._i = i + 1
         return self._steps[i]
 
+    # the replay needs no raw sensor (the recording's controller had its own, replayed as steps)
+    sensor_streams: dict[str, int] = {}
+
     def solver_line(self) -> str:
         """What 'solves' this controller, for the log's header: the recording."""
         return f"replay of {self.source}"

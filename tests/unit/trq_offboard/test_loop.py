@@ -71,6 +71,8 @@ class FakeController:
     def prepare(self, reference) -> None:
         pass
 
+    sensor_streams: dict[str, int] = {}
+
     def solver_line(self) -> str:
         return "fake"
 
