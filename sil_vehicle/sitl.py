@@ -148,6 +148,7 @@ class Sitl:
         self.estimator: Eskf | None = None          # the autopilot's filter on the readings
         self.sensor_faults: SensorFaults | None = None     # injected sensor faults
         self.nav_failure = ""                      # "position" or "attitude" once one was lost
+        self._had_position = False                 # a valid position seen in flight (to lose)
         self._estimate: Estimate | None = None     # its output at this tick, once made
         self.readings: list[Reading] = []          # the latest tick's, in the suite's order
         self.latest: dict[str, Reading] = {}       # each sensor's newest reading arrived
@@ -337,7 +338,8 @@ class Sitl:
         cannot run) and says so. No position (no position aid fused for the estimator's
         no-aid timeout) while offboard: the companion's commands assume one, so the vehicle
         takes over, holding attitude and height on its estimate, then descends and lands
-        (PX4's Descend, reported as AUTO.LAND), and says so."""
+        (PX4's Descend, reported as AUTO.LAND), and says so; only a position it had is lost
+        (arming asks for one; a vehicle armed past that check is left alone until it has one)."""
         imu_r = self.latest.get("imu")
         silent = imu_r is None or s.t_us - imu_r.t_us > IMU_TIMEOUT_US
         if silent or self.estimator.diverged:
@@ -347,7 +349,13 @@ class Sitl:
             why = "IMU silent" if silent else "estimator diverged"
             return self.announce(mavlink.MAV_SEVERITY_EMERGENCY,
                                  f"no attitude ({why}): flight termination")
-        if self.mode == MODE_OFFBOARD and not self.estimator.position_valid():
+        if not self.estimator.position_valid():
+            if not self._had_position:
+                return []        # armed without one (a bench or a test past the preflight check)
+        else:
+            self._had_position = True
+            return []
+        if self.mode == MODE_OFFBOARD:
             self.nav_failure = "position"
             self.mode = MODE_AUTO_LAND
             self.failsafes += 1

@@ -20,7 +20,8 @@ which give bit-identical flights), with their ratio:
     processes.
 (2) and (3) fly the sim file's sensing profile (truth: no sensor) or `--sensing`'s, whose
 sensors then sample every tick: run it with and without to see their cost.
-The target is 20x real time with the default core. Numbers are measured, never estimated.
+The target is 20x real time with the default core under `truth`, 25x under a sensing profile
+(issue 33: the sensors and the estimator included). Numbers are measured, never estimated.
 """
 
 from __future__ import annotations
@@ -49,7 +50,8 @@ from sil_vehicle.mavlink.codec import Codec
 from sil_vehicle.sitl import LINKS, Sitl
 from sil_vehicle.vehicle import ActuatorCommand, Vehicle
 
-TARGET_RTF = 20.0
+TARGET_RTF = 20.0             # under truth (no sensor)
+TARGET_RTF_SENSING = 25.0     # under a sensing profile (issue 33)
 STARTUP_SIM_S = 2.0     # the short run whose CPU, less its simulated seconds' share, is start-up
 SIM_DEFAULT = PARAMS_DIR / "sim" / "default.yaml"
 VEHICLE = PARAMS_DIR / "vehicle" / "trq.yaml"
@@ -301,6 +303,7 @@ def main(argv: list[str] | None = None) -> int:
             "lockstep_responder_cpu_s_per_sim_s": round(responder_per_s, 4),
         }
     rtf = per_core[default]["lockstep_rtf_100hz"]
+    target = TARGET_RTF if sensing in (None, "truth") else TARGET_RTF_SENSING
     result = {
         "machine": machine(),
         "physics_rate_hz": physics_hz,
@@ -308,8 +311,8 @@ def main(argv: list[str] | None = None) -> int:
         "default_core": default,
         "cores": per_core,
         "lockstep_sim_seconds": args.sim_seconds,
-        "target_rtf": TARGET_RTF,
-        "lockstep_rtf_over_target": round(rtf / TARGET_RTF, 2),
+        "target_rtf": target,
+        "lockstep_rtf_over_target": round(rtf / target, 2),
         "runs": {"vehicle": 5, "sitl": 5, "lockstep": 3, "steps": args.steps,
                  "lockstep_short_sim_s": STARTUP_SIM_S},
     }
@@ -337,8 +340,9 @@ def main(argv: list[str] | None = None) -> int:
     print(f"(1), (2): median of 5 x {args.steps} ticks at {physics_hz} Hz; (3): "
           f"{args.sim_seconds:g} simulated s, median of 3; sensing {sensing}; "
           f"{per_core[cores[0]]['sitl_messages_per_sim_s']:.0f} messages per simulated s")
-    print(f"target: {TARGET_RTF:g}x real time in lockstep with the default core ({default}): "
-          f"{rtf:.1f}x, {rtf / TARGET_RTF:.2f} of it, {'met' if rtf >= TARGET_RTF else 'NOT met'}")
+    print(f"target: {target:g}x real time in lockstep with the default core ({default}), sensing "
+          f"{sensing or 'truth'}: {rtf:.1f}x, {rtf / target:.2f} of it, "
+          f"{'met' if rtf >= target else 'NOT met'}")
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(result, indent=2) + "\n", encoding="utf-8")

@@ -17,3 +17,11 @@ def test_start_up_is_taken_off():
 def test_the_long_run_must_be_longer():
     with pytest.raises(ValueError, match="longer"):
         steady_cpu_per_s(0.1, 2.0, 0.2, 2.0)
+
+
+def test_the_sitl_bench_flies_under_a_sensing_profile():
+    """(2) under mocap measures a flying vehicle (its estimator aligns in the air; the estimate
+    loss failsafe leaves a vehicle armed before it had a position alone), not a crash."""
+    from trq_lab.bench.sim import bench_sitl
+    steps_per_s, msgs_per_s = bench_sitl(20000, "auto", runs=1, sensing="mocap")
+    assert steps_per_s > 0 and msgs_per_s > 0
