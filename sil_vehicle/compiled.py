@@ -20,13 +20,11 @@ hash of the source, compiler and flags, written to a temporary name and renamed 
 from __future__ import annotations
 
 import ctypes
-import hashlib
-import os
 import warnings
 from functools import lru_cache
 from pathlib import Path
 
-from trq_wire.cache import build_library, cache_dir, find_compiler
+from trq_wire.cache import cached_library, find_compiler
 
 __all__ = ["CompiledCore", "load_core", "find_compiler", "CFLAGS", "IMPACT", "ATTITUDE"]
 
@@ -80,18 +78,7 @@ class CompiledCore:
 
 
 def _build(cc: str) -> Path:
-    src = SOURCE.read_bytes()
-    h = hashlib.sha256()
-    for part in (os.path.basename(cc).encode(), " ".join(CFLAGS).encode(), src):
-        h.update(part)
-        h.update(b"\0")
-    lib = cache_dir() / f"sil_tick_{h.hexdigest()[:20]}.so"
-    if lib.exists():
-        return lib
-    error = build_library(cc, list(CFLAGS), src.decode("ascii"), lib, ["-lm"])
-    if error is not None:
-        raise RuntimeError(f"{cc} failed on {SOURCE}: {error}")
-    return lib
+    return cached_library(cc, list(CFLAGS), SOURCE, "sil_tick", ["-lm"])
 
 
 @lru_cache(maxsize=1)

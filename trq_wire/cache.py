@@ -9,13 +9,14 @@ caller's business; this module only says where files live and how they land ther
 
 from __future__ import annotations
 
+import hashlib
 import os
 import shutil
 import subprocess
 import tempfile
 from pathlib import Path
 
-__all__ = ["cache_dir", "find_compiler", "build_library"]
+__all__ = ["cache_dir", "find_compiler", "build_library", "cached_library"]
 
 
 def cache_dir() -> Path:
@@ -53,3 +54,22 @@ def build_library(cc: str, flags: list[str], source: str, lib: Path,
     except OSError as exc:
         return f"{lib.parent}: {exc}"
     return None
+
+
+def cached_library(cc: str, flags: list[str], source_file: Path, prefix: str,
+                   after: list[str]) -> Path:
+    """The shared library of the C file `source_file`, built once per compiler, flags and
+    source (its key: a hash of the three, in the name `PREFIX_KEY.so` in the cache folder) and
+    reused after. RuntimeError naming the file when the build fails."""
+    src = source_file.read_bytes()
+    h = hashlib.sha256()
+    for part in (os.path.basename(cc).encode(), " ".join(flags).encode(), src):
+        h.update(part)
+        h.update(b"\0")
+    lib = cache_dir() / f"{prefix}_{h.hexdigest()[:20]}.so"
+    if lib.exists():
+        return lib
+    error = build_library(cc, list(flags), src.decode("ascii"), lib, after)
+    if error is not None:
+        raise RuntimeError(f"{cc} failed on {source_file}: {error}")
+    return lib

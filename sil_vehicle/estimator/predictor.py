@@ -38,9 +38,7 @@ reference when no compiler is found.
 from __future__ import annotations
 
 import ctypes
-import hashlib
 import math
-import os
 import warnings
 from collections import deque
 from functools import lru_cache
@@ -48,7 +46,7 @@ from pathlib import Path
 
 import numpy as np
 
-from trq_wire.cache import build_library, cache_dir, find_compiler
+from trq_wire.cache import cached_library, find_compiler
 
 __all__ = ["OutputPredictor", "NativeOutputPredictor", "native_predictor", "quat_exp",
            "quat_mul", "rotate"]
@@ -302,18 +300,7 @@ class NativeOutputPredictor(OutputPredictor):
 
 
 def _build(cc: str) -> Path:
-    src = SOURCE.read_bytes()
-    h = hashlib.sha256()
-    for part in (os.path.basename(cc).encode(), " ".join(CFLAGS).encode(), src):
-        h.update(part)
-        h.update(b"\0")
-    lib = cache_dir() / f"sil_predictor_{h.hexdigest()[:20]}.so"
-    if lib.exists():
-        return lib
-    error = build_library(cc, list(CFLAGS), src.decode("ascii"), lib, ["-lm"])
-    if error is not None:
-        raise RuntimeError(f"{cc} failed on {SOURCE}: {error}")
-    return lib
+    return cached_library(cc, list(CFLAGS), SOURCE, "sil_predictor", ["-lm"])
 
 
 @lru_cache(maxsize=1)

@@ -31,7 +31,7 @@ noise). Nothing here runs while no fault is active.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
@@ -59,6 +59,10 @@ WRONG_DEFAULT = {"gyro": 0.1, "accel": 1.0, "mag": 90.0, "baro": 10.0, "gnss": 1
 GARBAGE_RANGE = {"gyro": math.radians(2000.0), "accel": 16 * 9.80665, "mag": 4.0,
                  "baro": 5000.0, "gnss": 1000.0, "mocap": 10.0}
 GNSS_GARBAGE_VEL_M_S = 50.0
+# a reading's sensor (but the IMU's, which two units share), and its dataclass fields
+_NAME = {baro.BaroReading: "baro", mag.MagReading: "mag", gnss.GnssReading: "gnss",
+         mocap.MocapReading: "mocap"}
+_FIELDS = {name: {f.name for f in fields(cls)} for cls, name in _NAME.items()}
 
 
 @dataclass(frozen=True)
@@ -121,40 +125,26 @@ class SensorFaults:
                 return None
             return replace(r, gyro=self._vector(gyro, r.gyro, "gyro"),
                            accel=self._vector(accel, r.accel, "accel"))
-        if isinstance(r, baro.BaroReading):
-            f = active.get("baro")
-            if f is None:
-                return r
-            if f.kind == OFF:
-                return None
-            if f.kind == STUCK:
-                return r if f.held is None else replace(f.held, t_us=r.t_us)
-            alt = (self._uniform(GARBAGE_RANGE["baro"], 1)[0] if f.kind == GARBAGE
-                   else r.pressure_alt_m + f.wrong_size)
-            return baro.BaroReading(r.t_us, baro.isa_pressure_pa(alt), alt,
-                                    baro.isa_temperature_degc(alt))
-        if isinstance(r, mag.MagReading):
-            f = active.get("mag")
-            if f is None:
-                return r
-            if f.kind == OFF:
-                return None
-            if f.kind == STUCK:
-                return r if f.held is None else replace(f.held, t_us=r.t_us)
-            if f.kind == GARBAGE:
-                return replace(r, field_frd_gauss=self._uniform(GARBAGE_RANGE["mag"], 3))
-            c, s = math.cos(math.radians(f.wrong_size)), math.sin(math.radians(f.wrong_size))
-            x, y, z = r.field_frd_gauss
-            return replace(r, field_frd_gauss=np.array((c * x - s * y, s * x + c * y, z)))
-        name = "gnss" if isinstance(r, gnss.GnssReading) else "mocap"
+        name = _NAME[type(r)]
         f = active.get(name)
         if f is None:
             return r
         if f.kind == OFF:
             return None
-        times = {"t_us": r.t_us, "arrival_us": r.arrival_us}
-        if f.kind == STUCK:
+        if f.kind == STUCK:         # the held values, on this reading's times
+            times = {k: getattr(r, k) for k in ("t_us", "arrival_us") if k in _FIELDS[name]}
             return r if f.held is None else replace(f.held, **times)
+        if name == "baro":
+            alt = (self._uniform(GARBAGE_RANGE["baro"], 1)[0] if f.kind == GARBAGE
+                   else r.pressure_alt_m + f.wrong_size)
+            return baro.BaroReading(r.t_us, baro.isa_pressure_pa(alt), alt,
+                                    baro.isa_temperature_degc(alt))
+        if name == "mag":
+            if f.kind == GARBAGE:
+                return replace(r, field_frd_gauss=self._uniform(GARBAGE_RANGE["mag"], 3))
+            c, s = math.cos(math.radians(f.wrong_size)), math.sin(math.radians(f.wrong_size))
+            x, y, z = r.field_frd_gauss
+            return replace(r, field_frd_gauss=np.array((c * x - s * y, s * x + c * y, z)))
         if f.kind == WRONG:
             return replace(r, pos_ned_m=r.pos_ned_m + np.array((f.wrong_size, 0.0, 0.0)))
         pos = self._uniform(GARBAGE_RANGE[name], 3)

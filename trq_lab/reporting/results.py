@@ -222,19 +222,21 @@ def scenarios_table(paths: list[Path], base: Path | None = None) -> str:
         source = report if report.is_file() else path
         cells = [f"[`{name}`]({_shown(source, base)})",
                  str(doc.get("fault", FAULTS.get(name, "-")))]
-        for c in controllers:
-            r = by.get(c)
-            if r is None:
-                cells.append("not flown")
-            elif "error" in r:
-                cells.append("no usable logs")
-            else:
-                cell = (f"{fmt(r.get('rmse_pos_after_fault_m'), '{:.4f}')} / "
-                        f"{fmt(r.get('max_yaw_err_deg'), '{:.2f}')}")
-                cells.append(cell + (" (crashed)" if r.get("crashed") else ""))
+        cells += [_run_cell(by.get(c), (("rmse_pos_after_fault_m", "{:.4f}"),
+                                         ("max_yaw_err_deg", "{:.2f}"))) for c in controllers]
         cells.append(targets_met(path, doc))
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
+
+
+def _run_cell(run: dict | None, figures: tuple[tuple[str, str], ...]) -> str:
+    """A run's figures joined by ' / ' (a crash said so), or why there are none."""
+    if run is None:
+        return "not flown"
+    if "error" in run:
+        return "no usable logs"
+    cell = " / ".join(fmt(run.get(key), spec) for key, spec in figures)
+    return cell + (" (crashed)" if run.get("crashed") else "")
 
 
 def profiles_table(paths: list[Path], base: Path | None = None) -> str:
@@ -261,18 +263,10 @@ def profiles_table(paths: list[Path], base: Path | None = None) -> str:
     for path, doc in docs:
         by = {r["controller"]: r for r in doc["runs"]}
         cells = [f"`{_profile(doc)}`"]
-        for c in controllers:
-            r = by.get(c)
-            if r is None:
-                cells.append("not flown")
-            elif "error" in r:
-                cells.append("no usable logs")
-            else:
-                cells.append(" / ".join((fmt(r.get("rmse_pos_after_fault_m"), "{:.4f}"),
-                                         fmt(r.get("max_yaw_err_deg"), "{:.2f}"),
-                                         fmt(r.get("est_rmse_pos_m"), "{:.4g}"),
-                                         fmt(r.get("diagnosis_s"), "{:.2f}")))
-                             + (" (crashed)" if r.get("crashed") else ""))
+        cells += [_run_cell(by.get(c), (("rmse_pos_after_fault_m", "{:.4f}"),
+                                         ("max_yaw_err_deg", "{:.2f}"),
+                                         ("est_rmse_pos_m", "{:.4g}"),
+                                         ("diagnosis_s", "{:.2f}"))) for c in controllers]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
 

@@ -32,6 +32,9 @@ tail
 
 
 def _write(tmp_path: Path, profiles=("gnss", "truth", "mocap")) -> tuple[Path, Path]:
+    """(README, results folder): the demo scenario, another one, and demo per profile."""
+    md = tmp_path / "README.md"
+    md.write_text(README)
     res = tmp_path / "results"
     (res / "demo").mkdir(parents=True)
     (res / "demo" / "metrics.json").write_text(json.dumps({"scenario": "demo", "runs": [RUN]}))
@@ -47,14 +50,16 @@ def _write(tmp_path: Path, profiles=("gnss", "truth", "mocap")) -> tuple[Path, P
                      max_yaw_err_deg=178.81, diagnosis_s=None, est_rmse_pos_m=est)]
         (d / "metrics.json").write_text(json.dumps({"scenario": "demo", "sensing": p,
                                                     "runs": runs}))
-    md = tmp_path / "README.md"
-    md.write_text(README)
     return md, res
+
+
+def _main(md: Path, res: Path, *more: str) -> int:
+    return results.main(["--readme", str(md), "--results", str(res), *more])
 
 
 def test_the_block_a_row_per_profile(tmp_path):
     md, res = _write(tmp_path)
-    assert results.main(["--readme", str(md), "--results", str(res)]) == 0
+    assert _main(md, res) == 0
     text = md.read_text()
     block = text.split("<!-- results:profiles demo begin -->\n")[1].split(
         "<!-- results:profiles demo end -->")[0]
@@ -72,7 +77,7 @@ def test_the_block_a_row_per_profile(tmp_path):
     scen = text.split("results:scenarios begin")[1]
     assert "`other`" in scen and "sensing" not in scen
     assert "The same per profile:\n\n<!-- results:profiles demo begin -->" in text
-    assert results.main(["--readme", str(md), "--results", str(res), "--check"]) == 0
+    assert _main(md, res, "--check") == 0
 
 
 def test_a_result_without_its_profile_is_named(tmp_path, capsys):
@@ -81,7 +86,7 @@ def test_a_result_without_its_profile_is_named(tmp_path, capsys):
     doc = json.loads(path.read_text())
     del doc["sensing"]
     path.write_text(json.dumps(doc))
-    assert results.main(["--readme", str(md), "--results", str(res)]) == 2
+    assert _main(md, res) == 2
     err = capsys.readouterr().err
     assert str(path) in err and "no 'sensing'" in err
     assert "stale" in md.read_text()                          # nothing written
@@ -89,7 +94,7 @@ def test_a_result_without_its_profile_is_named(tmp_path, capsys):
 
 def test_no_result_for_the_block_is_named(tmp_path, capsys):
     md, res = _write(tmp_path, profiles=())
-    assert results.main(["--readme", str(md), "--results", str(res)]) == 2
+    assert _main(md, res) == 2
     err = capsys.readouterr().err
     assert str(res / "sensing") in err and "results:profiles demo" in err
 
