@@ -15,6 +15,7 @@ import pytest
 
 from sil_vehicle import compiled
 from sil_vehicle.vehicle import ActuatorCommand, Vehicle
+from trq_wire.cache import cache_dir
 
 needs_compiler = pytest.mark.skipif(compiled.load_core() is None,
                                     reason="no C compiler: the compiled tick cannot be built")
@@ -172,5 +173,5 @@ def test_bad_physics_core_names_the_key(tmp_path):
 def test_compiled_tick_is_cached(sim):
     first = compiled.load_core()
     assert first is not None and first.path.exists()
-    assert first.path.parent == compiled.cache_dir()
+    assert first.path.parent == cache_dir()
     assert math.isfinite(first.path.stat().st_size)
