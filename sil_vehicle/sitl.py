@@ -167,7 +167,6 @@ class Sitl:
                                                 for c in SOURCE_LOG_COLUMNS[n]]
         if profile is not None:
             self.log_columns += ESTIMATE_LOG_COLUMNS
-        if profile is not None:
             self.sensor_faults = SensorFaults(
                 np.random.default_rng([sim.seed, SENSOR_FAULT_SEED_KEY]))
             self.suite = SensorSuite(profile,
@@ -349,21 +348,19 @@ class Sitl:
             why = "IMU silent" if silent else "estimator diverged"
             return self.announce(mavlink.MAV_SEVERITY_EMERGENCY,
                                  f"no attitude ({why}): flight termination")
-        if not self.estimator.position_valid():
-            if not self._had_position:
-                return []        # armed without one (a bench or a test past the preflight check)
-        else:
+        if self.estimator.position_valid():
             self._had_position = True
             return []
-        if self.mode == MODE_OFFBOARD:
-            self.nav_failure = "position"
-            self.mode = MODE_AUTO_LAND
-            self.failsafes += 1
-            if not self.lander.active:
-                self.lander.engage(self._nav_state(s))
-            return self.announce(mavlink.MAV_SEVERITY_CRITICAL,
-                                 "position estimate lost: failsafe, descending")
-        return []
+        # never had one (armed past the preflight check: a bench, a test), or not offboard
+        if not self._had_position or self.mode != MODE_OFFBOARD:
+            return []
+        self.nav_failure = "position"
+        self.mode = MODE_AUTO_LAND
+        self.failsafes += 1
+        if not self.lander.active:
+            self.lander.engage(self._nav_state(s))
+        return self.announce(mavlink.MAV_SEVERITY_CRITICAL,
+                             "position estimate lost: failsafe, descending")
 
     def _nav_state(self, s: VehicleState) -> VehicleState:
         """What the vehicle's own controller flies on: under a sensing profile its estimate
@@ -746,7 +743,7 @@ class Sitl:
         carried = self.suite is not None and sensor in self.suite.sensors
         if kind == sensor_faults.OK and not carried:
             return mavlink.MAV_RESULT_ACCEPTED
-        if not carried or instance > 1 or (math.isinf(size)):
+        if not carried or instance > 1 or math.isinf(size):
             return mavlink.MAV_RESULT_DENIED
         self.sensor_faults.set(name, kind, size if kind == sensor_faults.WRONG else math.nan,
                                self.latest.get(sensor))
