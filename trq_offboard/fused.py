@@ -8,9 +8,12 @@ the vehicle's acceleration), advanced once per control period h by `FusedFilter.
 
     process      p' = v,  v' = a_k + a_r + w_v,  a_r' = w_r
                  a_k: the known input, held over the period: the acceleration the controller's
-                 model gives for the commands in effect (the observer's b0) plus, with
-                 `disturbance_input`, the observer's translational disturbance estimate, so
-                 that a fault the observer has seen does not reach the filter as a surprise;
+                 model gives for the commands in effect (the observer's b0) plus, by
+                 `disturbance_input`, the observer's translational disturbance estimate
+                 ("observer"), or only the motors' share of it that the effectiveness
+                 observer explains ("motors": the model flown with the motors' estimated
+                 effectiveness), so that a fault seen does not reach the filter as a surprise,
+                 or nothing ("none");
                  a_r: what both miss (a random walk);
                  w_v, w_r white, of densities `model_acc_density` and `residual_walk_density`;
                  b' = w_b, the accelerometer's bias in NED (a slow random walk of density
@@ -58,7 +61,7 @@ _I3 = np.eye(3)
 class FusedConfig:
     """The fused filter's parameters (controller key `estimator`, kind fused)."""
     mocap_std_m: float                    # the pose's position noise, 1 sigma per axis
-    accel_std_m_s2: float                 # one accelerometer sample's noise, 1 sigma per axis
+    accel_std_m_s2: float                 # one HIGHRES_IMU accelerometer's noise, 1 sigma
     model_acc_density: float              # w_v: the model's white acceleration error, m/s^2/rtHz
     residual_walk_density: float          # w_r: a_r's random walk, m/s^3/rtHz
     accel_bias_std: float                 # b at the start, 1 sigma per axis, m/s^2
@@ -68,7 +71,7 @@ class FusedConfig:
     imu_rate_hz: int                      # HIGHRES_IMU asked of the vehicle
     mocap_rate_hz: int                    # ATT_POS_MOCAP asked of the vehicle
     history: int = 8                      # control periods kept for the delayed pose
-    disturbance_input: bool = True        # the observer's d in the known input (else b0 alone)
+    disturbance_input: str = "observer"   # added to b0: "observer" (its d), "motors", "none"
     autopilot_vel_std_m_s: float = 0.0    # the autopilot's velocity as a measurement (0: not)
 
 
