@@ -198,10 +198,14 @@ def _kernels(cfg: FusedConfig) -> tuple[ca.Function, ca.Function] | None:
     """The period's advance and the pose's fusion as compiled functions (module docstring), or
     None without a C compiler or when a build fails (then the NumPy path runs):
         advance (x, P, dt, a_known, z_acc, var_acc, has_acc) -> (x, P)
-        pose    (x, P, dt, a_known, pos) -> (test ratio, x, P)
-    dt in s (0 in the pose's: at a kept period's end); P dense, CasADi's column-major order;
-    has_acc 0 or 1: without, the predicted (x, P) exactly. Kept per process (one build a
-    configuration); each filter wraps them in its own buffers."""
+        pose    (x, P, dt, a_known, pos, dt_rest, z_acc, var_acc, has_acc)
+                -> (test ratio, x, P, x_next, P_next)
+    dt in s (the pose's 0 at a kept period's end); P dense, CasADi's column-major order;
+    has_acc 0 or 1: without, the predicted (x, P) exactly. The pose lies in the period after
+    (x, P), under its a_known; the pose's kernel also carries its posterior on to that period's
+    end (dt_rest later, with that period's accelerometer): the first step of the re-prediction,
+    most often the only one (a pose one period late), in the same call. Kept per process (one
+    build a configuration); each filter wraps them in its own buffers."""
     from trq_offboard.nmpc.cache import compiled_many, find_compiler
 
     if find_compiler() is None:
@@ -211,14 +215,16 @@ def _kernels(cfg: FusedConfig) -> tuple[ca.Function, ca.Function] | None:
     dt, a, z, var, has = (ca.SX.sym(name, k) for name, k in
                           (("dt", 1), ("a_known", m), ("z_acc", m), ("var_acc", 1),
                            ("has_acc", 1)))
-    pos = ca.SX.sym("pos", _H_POS.shape[0])
+    pos, rest = ca.SX.sym("pos", _H_POS.shape[0]), ca.SX.sym("dt_rest")
     F, G, Q = _transition(dt, cfg, _CASADI)
     xp_, Pp = _predict(x, P, F, G, Q, a)
     xa, Pa = _accel_update(xp_, Pp, a, z, var, _CASADI)
     advance = ca.Function(f"fused_advance_{n}", [x, P, dt, a, z, var, has],
                           [ca.if_else(has, xa, xp_), ca.if_else(has, Pa, Pp)])
     ratio, xu, Pu = _pose_fusion(xp_, Pp, pos, cfg, _CASADI)
-    pose = ca.Function(f"fused_pose_{n}", [x, P, dt, a, pos], [ratio, xu, Pu])
+    x_next, P_next = advance(xu, Pu, rest, a, z, var, has)
+    pose = ca.Function(f"fused_pose_{n}", [x, P, dt, a, pos, rest, z, var, has],
+                       [ratio, xu, Pu, x_next, P_next])
     built = compiled_many([advance, pose])
     if any(how == "interpreted" for _, how in built):
         return None
@@ -247,9 +253,10 @@ class _Kernel:
 
 
 def _matrix(flat: np.ndarray) -> np.ndarray:
-    """A kernel's square matrix output (flat, column-major) as a NumPy array of its own."""
+    """A kernel's square matrix output (flat, column-major) as a NumPy array of its own (in
+    Fortran order: the copy is flat, and the next kernel reads it back flat)."""
     n = math.isqrt(flat.size)
-    return flat.reshape(n, n).T.copy()
+    return flat.copy().reshape(n, n).T
 
 
 @dataclass
@@ -381,20 +388,31 @@ class FusedFilter:
             x, P = _accel_update(x, P, a_known, *acc)
         return x, P
 
-    def _pose(self, x, P, dt_us: int, a_known, pos):
-        """The pose fused dt_us after the prior (x, P): (test ratio, x, P updated)."""
+    def _pose(self, base: _Period, t_pose: int, pos, nxt: _Period | None):
+        """The pose at t_pose fused into the posterior of the kept period `base`, predicted to
+        it under the input of the period after (`nxt`; None: the pose is at the last period's
+        end): (test ratio, x, P updated, and the compiled kernel's posterior carried on to
+        nxt's end, else None)."""
+        x, P, dt_us = base.x, base.P, t_pose - base.t_us
+        a_known = _ZERO3 if nxt is None else nxt.a_known
         fn = self._pose_fn
         if fn is not None:
             args, p_in, res = fn.args, fn.p_in, fn.results
             args[0][:], p_in[:], args[2][0], args[3][:], args[4][:] = \
                 x, P, dt_us * 1e-6, a_known, pos
+            args[5][0] = 0.0 if nxt is None else (nxt.t_us - t_pose) * 1e-6
+            if nxt is None or nxt.acc is None:
+                args[8][0] = 0.0
+            else:
+                args[6][:], args[7][0], args[8][0] = nxt.acc[0], nxt.acc[1], 1.0
             fn.evaluate()
-            return float(res[0][0]), res[1].copy(), _matrix(res[2])
+            ahead = None if nxt is None else (res[3].copy(), _matrix(res[4]))
+            return float(res[0][0]), res[1].copy(), _matrix(res[2]), ahead
         if dt_us > 0:
             F, G, Q = self._f(dt_us)
             x, P = _predict(x, P, F, G, Q, a_known)
         ratio, x, P = _pose_fusion(x, P, pos, self.cfg)
-        return float(ratio), x, P
+        return float(ratio), x, P, None
 
     def _fuse_pose(self, t_pose: int, pos: np.ndarray) -> None:
         """The pose at its time of validity: back to the kept period before it, forward to it,
@@ -408,8 +426,8 @@ class FusedFilter:
             return
         base = periods[k]
         # forward to the pose under the next period's input (none: the pose is at base's end)
-        nxt = periods[k + 1].a_known if k + 1 < len(periods) else _ZERO3
-        ratio, x, P = self._pose(base.x, base.P, t_pose - base.t_us, nxt, pos)
+        nxt = periods[k + 1] if k + 1 < len(periods) else None
+        ratio, x, P, ahead = self._pose(base, t_pose, pos, nxt)
         self.test_ratio = ratio
         # past the gate: rejected, unless the filter has been without a pose for dropout_s
         # (then the estimate is what is in doubt, and a gate would lock the poses out for good)
@@ -422,7 +440,8 @@ class FusedFilter:
             base.x, base.P = x, P
         for j in range(k + 1, len(periods)):
             p = periods[j]
-            x, P = self._advance(x, P, p.t_us - t, p.a_known, p.acc)
+            x, P = (ahead if j == k + 1 and ahead is not None       # the pose kernel's
+                    else self._advance(x, P, p.t_us - t, p.a_known, p.acc))
             p.x, p.P = x, P
             t = p.t_us
 
