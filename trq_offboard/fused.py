@@ -41,10 +41,12 @@ The arithmetic is written once, over an array module (`_NUMPY` or `_CASADI`: `_t
 `codegen` off or no C compiler), and with `codegen` it is built as two CasADi functions, the
 period's advance (predict over dt, then the accelerometer update when there is one: the
 posterior at the period's end, also each step of the re-prediction after a delayed pose) and
-the pose's fusion (predict to its time of validity, innovation, test ratio, Joseph update; the
-gate stays in Python), generated as C and compiled once through nmpc/cache.py with the filter's
-constants baked in as literals and dt an input. Sizes come from N_STATES and the measurement
-matrices. tests/unit/trq_offboard/test_fused_compiled.py holds the two paths equal.
+the pose's fusion (predict to its time of validity, innovation, test ratio, Joseph update, and
+the posterior carried on through the period the pose lies in: the re-prediction's first step,
+for a pose one period late its only one; the gate stays in Python), generated as C and compiled
+once through nmpc/cache.py with the filter's constants baked in as literals and dt an input.
+Sizes come from N_STATES and the measurement matrices.
+tests/unit/trq_offboard/test_fused_compiled.py holds the two paths equal.
 
 Pure: integer microseconds of the vehicle's clock in, no clock read, no I/O, no randomness.
 """
