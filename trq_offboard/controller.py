@@ -176,8 +176,9 @@ class Controller:
         self.failures = 0
         # the fused filter (estimator kind fused): position and velocity from the pose, the IMU
         # and the model with the observer's d; started at the first step that brings sensors
-        self.fused = (FusedFilter(cfg.fused, vm.gravity_m_s2) if cfg.fused is not None
-                      else None)
+        self.fused = (FusedFilter(cfg.fused, vm.gravity_m_s2,
+                                  codegen=cfg.solver.codegen == "auto")
+                      if cfg.fused is not None else None)
         self._fused_on = False
         self._eso_d = np.zeros(6)                # the observer's d of the last step
         self._motor_share = np.zeros(3)          # the motors' share of it (effectiveness)
