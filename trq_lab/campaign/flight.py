@@ -24,7 +24,7 @@ from trq_offboard.controller import Controller
 from trq_lab import harness as inprocess
 from trq_lab import scenario as run_scenario
 from trq_lab.analysis import envelope
-from trq_lab.campaign.spec import fault_event, identity
+from trq_lab.campaign.spec import fault_event, identity, outage_events, outage_window_us
 from trq_lab.overlays import write_controller_overlay, write_vehicle_overlay
 
 def worst_effectiveness(fault: dict) -> float:
@@ -135,7 +135,11 @@ def run_flight(spec: dict, log_dir: str | None = None) -> dict:
             vp = sim.vehicle
             event = fault_event(spec["fault"], f"flight {spec['id']}", "fault",
                                  (math.degrees(vp.tilt_min_rad), math.degrees(vp.tilt_max_rad)))
-            events = (event,) if event is not None else ()
+            # an outage's two sensor events join the fault's script (the vehicle plays them in
+            # time order); the fault's onset stays the onset of the metrics after the fault
+            outage = spec.get("outage")
+            events = ((event,) if event is not None else ()) + outage_events(
+                outage, f"flight {spec['id']}", "outage")
             try:                # the envelope never fails the flight: its error is recorded
                 record["envelope"] = flight_envelope(vp, spec["fault"], w)
             except Exception:
@@ -144,8 +148,9 @@ def run_flight(spec: dict, log_dir: str | None = None) -> dict:
                                           events, out_dir=out,
                                           timeout_s=spec["timeout_s"], name=spec["controller"])
             onset = event.at_us if event is not None else None
-            record["metrics"] = inprocess.flight_metrics(res.out_dir, spec["controller"], onset,
-                                                         spec["recovery_threshold_m"])
+            record["metrics"] = inprocess.flight_metrics(
+                res.out_dir, spec["controller"], onset, spec["recovery_threshold_m"],
+                outage_us=outage_window_us(outage) if outage else None)
             record.update(status=res.status, sim_s=round(res.sim_s, 6), summary=res.summary)
     except Exception:  # recorded, never lost: the campaign goes on
         record["error"] = traceback.format_exc()
