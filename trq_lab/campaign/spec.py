@@ -448,8 +448,12 @@ def load_campaign(path: Path) -> Campaign:
         dists = {axis: _axis_values(raw, path, f"sample.{axis}", axis, sampling=True)
                  for axis, raw in _axes(top.sample).items()}
         rng = np.random.default_rng(top.sample.seed)
+        # the outage draws from its own generator: a sample with the axis draws every other
+        # axis as the same sample without it (its flights pair with and without an outage)
+        rngs = {"outage": np.random.default_rng([top.sample.seed, AXES.index("outage")])}
         for k in range(top.sample.n):
-            point = tuple(_sample_axis(dists.get(axis), axis, rng) for axis in AXES)
+            point = tuple(_sample_axis(dists.get(axis), axis, rngs.get(axis, rng))
+                          for axis in AXES)
             try:
                 fault_event(point[0], path, f"sample.fault (draw {k})")
             except ConfigError as exc:
