@@ -709,9 +709,9 @@ class SensingAxis(Strict):
 class OutageAxis(Strict):
     """A campaign's sensor outage: `sensor` off (MAV_CMD_INJECT_FAILURE's OFF: it delivers
     nothing) from `at_s`, its own readings again (OK) from `at_s + duration_s`, in vehicle time.
-    The two events join the flight's fault script beside its fault; the sensor must be one the
-    flight's sensing profile carries (checked by trq_lab.campaign.spec). A grid or a sample may
-    write `none` for a flight without an outage."""
+    The two events join the flight's fault script beside its fault; a grid flies it under the
+    sensing profiles that carry the sensor (trq_lab.campaign.spec checks that one does). A grid
+    may write `none` for a flight without an outage."""
     sensor: Choice(*SENSOR_UNITS)
     at_s: Num(0.0, 1e6)
     duration_s: Num(0.0, 3600.0, open_lo=True)

@@ -291,16 +291,21 @@ def carried_sensors(profile: str) -> frozenset[str]:
                      if k not in ("name", "description") and getattr(f, k) is not None)
 
 
-def _check_outage(outage: dict | None, profile: str, file, where: str) -> None:
-    """An outage's sensor must be one the flight's sensing profile carries (else the vehicle
-    would refuse the fault and the flight fly without it)."""
-    if outage is None:
+def carries(profile: str, outage: dict | None) -> bool:
+    """Whether a flight under `profile` can have `outage`: none, or its sensor carried (else
+    the vehicle would refuse the fault and the flight fly without it)."""
+    return outage is None or SENSOR_OF_UNIT[outage["sensor"]] in carried_sensors(profile)
+
+
+def _check_outage(outage: dict | None, profiles, file, where: str) -> None:
+    """An outage's sensor must be carried by one of `profiles` (a grid's, or a draw's one)."""
+    if any(carries(p, outage) for p in profiles):
         return
-    carried = carried_sensors(profile)
-    if SENSOR_OF_UNIT[outage["sensor"]] not in carried:
-        raise ConfigError(f"{file}: key '{where}.sensor': got {outage['sensor']!r} under the "
-                          f"sensing profile {Path(profile).stem!r}, expected a sensor it carries "
-                          f"({', '.join(sorted(carried)) or 'none: truth has no sensor'})")
+    carried = {p: carried_sensors(p) for p in profiles}
+    raise ConfigError(f"{file}: key '{where}.sensor': got {outage['sensor']!r}, expected a "
+                      "sensor that the sensing profile carries (" + "; ".join(
+                          f"{Path(p).stem}: {', '.join(sorted(c)) or 'none'}"
+                          for p, c in carried.items()) + ")")
 
 
 def _sample_axis(values: dict | None, axis: str, rng) -> dict | None:
@@ -442,8 +447,12 @@ def load_campaign(path: Path) -> Campaign:
         return profiles[key]
 
     cells = [(*c[:5], profile_of(c[5], "grid.sensing"), c[6]) for c in cells]
-    for c in {json.dumps(c[5:], sort_keys=True): c for c in cells}.values():
-        _check_outage(c[6], c[5], path, "grid.outage")
+    # a grid's outage flies under the profiles that carry its sensor (`sensing: [mocap, rtk]`
+    # with a mocap and a gnss outage: each under its own), and must have one
+    grid_profiles = list(dict.fromkeys(c[5] for c in cells))
+    for outage in {json.dumps(c[6], sort_keys=True): c[6] for c in cells}.values():
+        _check_outage(outage, grid_profiles, path, "grid.outage")
+    cells = [c for c in cells if carries(c[5], c[6])]
     if top.sample is not None:
         dists = {axis: _axis_values(raw, path, f"sample.{axis}", axis, sampling=True)
                  for axis, raw in _axes(top.sample).items()}
@@ -463,7 +472,7 @@ def load_campaign(path: Path) -> Campaign:
             profile = profile_of(point[5], "sample.sensing")
             try:
                 outage_events(point[6], path, "sample.outage")
-                _check_outage(point[6], profile, path, "sample.outage")
+                _check_outage(point[6], [profile], path, "sample.outage")
             except ConfigError as exc:
                 raise ConfigError(f"{exc} (draw {k}: a sampled outage must be valid whatever "
                                   "is drawn)") from exc

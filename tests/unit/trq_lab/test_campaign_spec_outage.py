@@ -2,9 +2,10 @@
 (AXIS_MODELS) as the other axes are; `none` (or the axis left out) keeps a campaign's ids and
 flights; an outage enters the spec and the id but not the seed; its two sensor events (off at
 at_s, ok at at_s + duration_s) join the flight's fault script beside the fault, whose onset stays
-the fault's; a bad outage (unknown sensor, a duration not above 0, a missing or unknown key, a
-sensor the flight's sensing profile does not carry) is refused naming the file, the key and the
-value; flights.csv gains the outage's columns with the axis only."""
+the fault's; a grid's outage flies under the profiles that carry its sensor; a bad outage
+(unknown sensor, a duration not above 0, a missing or unknown key, a sensor no profile carries)
+is refused naming the file, the key and the value; flights.csv gains the outage's columns with
+the axis only."""
 
 from __future__ import annotations
 
@@ -112,7 +113,7 @@ def test_the_window_is_whole_microseconds():
     ("{sensor: mocap, at_s: 2.0, duration_s: 1.0, size: 3}", "grid.outage.size", "unknown"),
     ("[none, {sensor: mocap, at_s: 2.0, duration_s: 1.0}, off]", "grid.outage[2]", "off"),
     # a sensor the profile does not carry: the vehicle would refuse the fault
-    ("{sensor: gnss, at_s: 2.0, duration_s: 1.0}", "grid.outage.sensor", "'mocap'"),
+    ("{sensor: gnss, at_s: 2.0, duration_s: 1.0}", "grid.outage.sensor", "mocap: baro, imu"),
 ])
 def test_a_bad_outage_names_the_file_key_and_value(tmp_path, value, key, words):
     path = tmp_path / "bad.yaml"
@@ -123,9 +124,18 @@ def test_a_bad_outage_names_the_file_key_and_value(tmp_path, value, key, words):
     assert str(path) in msg and f"'{key}" in msg and words in msg, msg
 
 
-def test_an_outage_under_truth_is_refused(tmp_path):
-    with pytest.raises(ConfigError, match=r"'grid.outage.sensor'.*'truth'.*truth has no sensor"):
-        _with(tmp_path, SENSING_SMOKE.read_text() + f"  outage: {MOCAP_1S}\n")
+def test_an_outage_flies_under_the_profiles_that_carry_its_sensor(tmp_path):
+    """A grid's outage flies under each profile that carries its sensor, and not under the
+    others (there it would be the flight without it); one that no profile carries is refused."""
+    both = _with(tmp_path, SENSING_SMOKE.read_text().replace(
+        "  sensing: [truth, mocap]\n", "  sensing: [truth, mocap, rtk]\n")
+        + "  outage: [none, {sensor: mocap, at_s: 2.0, duration_s: 1.0},\n"
+          "           {sensor: gnss, at_s: 2.0, duration_s: 5.0}]\n")
+    assert [(f["sensing"], outage_label(f.get("outage"))) for f in both.flights] == [
+        ("truth", "none"), ("mocap", "none"), ("mocap", "mocap 2-3 s"), ("rtk", "none"),
+        ("rtk", "gnss 2-7 s")]
+    with pytest.raises(ConfigError, match=r"'grid.outage.sensor': got 'mocap'.*\(truth: none\)"):
+        _with(tmp_path, SMOKE.read_text() + f"  outage: {MOCAP_1S}\n")
 
 
 def test_a_sample_draws_an_outage_and_checks_every_draw(tmp_path):
