@@ -572,9 +572,13 @@ class WindEvent(_Event):
         return self
 
 
+# MAV_CMD_INJECT_FAILURE's sensor units (sil_vehicle.sensors.faults)
+SENSOR_UNITS = ("gyro", "accel", "mag", "baro", "gnss", "mocap")
+
+
 class SensorEvent(_Event):
     # MAV_CMD_INJECT_FAILURE's sensor units and types (sil_vehicle.sensors.faults)
-    sensor: Choice("gyro", "accel", "mag", "baro", "gnss", "mocap")
+    sensor: Choice(*SENSOR_UNITS)
     failure: Choice("ok", "off", "stuck", "garbage", "wrong")
     size: Optional[Num(-1e4, 1e4)] = None   # wrong: the error, in the unit's SI unit (or deg)
 
@@ -675,7 +679,7 @@ class ScenarioFile(Strict):
 # campaign (trq_lab.campaign: the axes' keys are checked by trq_lab.campaign.spec)
 # --------------------------------------------------------------------------------------------
 
-AXES = ("fault", "wind", "trajectory", "link", "plant", "sensing")
+AXES = ("fault", "wind", "trajectory", "link", "plant", "sensing", "outage")
 CONTROLLER_MODELS = ("nominal", "plant")
 
 
@@ -704,12 +708,24 @@ class SensingAxis(Strict):
     profile: NameOrPath = "truth"
 
 
+class OutageAxis(Strict):
+    """A campaign's sensor outage: `sensor` off (MAV_CMD_INJECT_FAILURE's OFF: it delivers
+    nothing) from `at_s`, its own readings again (OK) from `at_s + duration_s`, in vehicle time.
+    The two events join the flight's fault script beside its fault; a grid flies it under the
+    sensing profiles that carry the sensor (trq_lab.campaign.spec checks that one does). A grid
+    may write `none` for a flight without an outage."""
+    sensor: Choice(*SENSOR_UNITS)
+    at_s: Num(0.0, 1e6)
+    duration_s: Num(0.0, 3600.0, open_lo=True)
+
+
 # the models whose keys (dotted, `leaf_types`) each axis sets: a fault is a motor or a servo
 # event, a wind a wind event's, a trajectory a controller's reference, a link the offboard link's
-# impairment, a plant the simulated airframe's factors, a sensing the vehicle's sensing profile
+# impairment, a plant the simulated airframe's factors, a sensing the vehicle's sensing profile,
+# an outage a sensor off for a while
 AXIS_MODELS = {"fault": (MotorEvent, ServoEvent), "wind": (EventWind,),
                "trajectory": (ReferenceFile,), "link": (Impair,), "plant": (Plant,),
-               "sensing": (SensingAxis,)}
+               "sensing": (SensingAxis,), "outage": (OutageAxis,)}
 
 
 class CampaignGrid(Strict):
@@ -720,6 +736,7 @@ class CampaignGrid(Strict):
     link: Any = None
     plant: Any = None
     sensing: Any = None
+    outage: Any = None
 
 
 class CampaignSample(CampaignGrid):
@@ -751,22 +768,29 @@ class CampaignTargets(Strict):
 FLIGHT_METRICS = ("crashed", "flight_s", "rmse_pos_m", "max_pos_err_m", "rmse_pos_after_fault_m",
                   "rmse_vert_after_fault_m", "max_sink_after_fault_m", "rmse_yaw_deg",
                   "max_yaw_err_deg", "recovery_s", "solve_ms_p50", "solve_ms_p99",
-                  "est_rmse_pos_m", "est_rmse_att_deg", "diagnosis_s")
+                  "est_rmse_pos_m", "est_rmse_att_deg", "diagnosis_s", "max_pos_err_outage_m")
+# those a flight has only with a sensor outage (a campaign's `outage` axis): flights.csv carries
+# them when the campaign has the axis
+OUTAGE_METRICS = ("max_pos_err_outage_m",)
 
 
 class FlightTarget(Strict):
     """A target on the distribution of a campaign's flights: among the flights of `controller`
-    (only those flown under the sensing profile `sensing` when it is given), at least `share`
-    have `metric` <= `max`, or, with `per`, `metric` <= `max` times the same flight's `per`
-    (`rmse_pos_after_fault_m` within 1.5x its `est_rmse_pos_m`). A flight that failed, or whose
-    metric (or `per`) is missing, does not meet it; nor does a crashed one, except on `crashed`
-    itself (`metric: crashed, max: 0`: no crash)."""
+    (only those flown under the sensing profile `sensing`, and with an outage of the sensor
+    `outage`, when they are given), at least `share` have `metric` <= `max`, or, with `per`,
+    `metric` <= `max` times the same flight's `per` (`rmse_pos_after_fault_m` within 1.5x its
+    `est_rmse_pos_m`). A flight that failed, or whose metric (or `per`) is missing, does not
+    meet it; nor does a crashed one, except on `crashed` itself (`metric: crashed, max: 0`: no
+    crash). A target on an outage's metric (OUTAGE_METRICS) names the outage's sensor
+    (checked by trq_lab.campaign.spec)."""
     controller: Text
     metric: Choice(*FLIGHT_METRICS)
     max: Num(0.0, 1e9)
     per: Optional[Choice(*FLIGHT_METRICS)] = None
     share: Num(0.0, 1.0) = 1.0
     sensing: Optional[NameOrPath] = None
+    # only the flights with an outage of this sensor (`none`: those without an outage)
+    outage: Optional[Choice(*SENSOR_UNITS, "none")] = None
 
 
 class CampaignFile(Strict):
