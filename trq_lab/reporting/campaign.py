@@ -226,6 +226,7 @@ def paired_by_seed(campaign: Campaign, rows: list[dict]) -> tuple[list[str], dic
     where neither crashed; a later diagnosis is the other's diagnosis_s above the first's (or
     missing where the first's is known)."""
     head = campaign.controllers[0]
+    s_col, o_col = len(campaign.sensings) > 1, len(campaign.outages) > 1   # their columns
     by: dict = {}
     for r in rows:
         if r.get("status") != "failed":
@@ -237,9 +238,9 @@ def paired_by_seed(campaign: Campaign, rows: list[dict]) -> tuple[list[str], dic
              f"`{head}`'s (median and range over the pairs where neither crashed); better: "
              "a lower RMSE or flying where the other crashed; a later diagnosis: its "
              "diagnosis_s above the other's.", "",
-             "| sensing | outage | controller | pairs | better | median ratio (range) | "
-             "later diagnosis | it crashed | the other crashed |",
-             "|---|---|---|---|---|---|---|---|---|"]
+             "| sensing " * s_col + "| outage " * o_col + "| controller | pairs | better | "
+             "median ratio (range) | later diagnosis | it crashed | the other crashed |",
+             "|---" * (s_col + o_col) + "|---|---|---|---|---|---|---|"]
     summary: dict = {}
     for p, o, c in ((p, o, c) for p in campaign.sensings for o in campaign.outages
                     for c in campaign.controllers[1:]):
@@ -260,7 +261,8 @@ def paired_by_seed(campaign: Campaign, rows: list[dict]) -> tuple[list[str], dic
         crashed = (sum(bool(a["crashed"]) for a, _ in pairs),
                    sum(bool(b["crashed"]) for _, b in pairs))
         rng = (f" ({min(ratios):.3f}-{max(ratios):.3f})" if ratios else "")
-        lines.append(f"| {sensing_label(p)} | {o} | {c} | {len(pairs)} | {better} | "
+        lines.append(f"| {sensing_label(p)} " * s_col + f"| {o} " * o_col
+                     + f"| {c} | {len(pairs)} | {better} | "
                      f"{fmt(med, '{:.3f}')}{rng} | {later} | {crashed[0]} | {crashed[1]} |")
         name = sensing_label(p) or "-"
         summary.setdefault(name if o == "none" else f"{name} {o}", {})[c] = {
