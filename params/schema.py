@@ -344,9 +344,9 @@ class Estimator(Strict):
     (`fused`; its parameters below, defaults for the `mocap` profile's sensors)."""
     kind: Choice("autopilot", "fused") = "autopilot"
     mocap_std_m: Num(1e-6, 1.0) = 0.0005               # the pose's noise, 1 sigma per axis
-    accel_std_m_s2: Num(1e-4, 100.0) = 0.35            # one HIGHRES_IMU's, per axis
-    model_acc_density_m_s2_rthz: Num(0.0, 100.0) = 0.05    # the model's white error
-    residual_walk_m_s3_rthz: Num(1e-6, 1e3) = 0.5      # a_r's random walk
+    accel_std_m_s2: Num(1e-4, 100.0) = 0.16            # one HIGHRES_IMU's, per axis
+    model_acc_density_m_s2_rthz: Num(0.0, 100.0) = 0.01    # the model's white error
+    residual_walk_m_s3_rthz: Num(1e-6, 1e3) = 1.0      # a_r's random walk
     accel_bias_std_m_s2: Num(1e-4, 10.0) = 0.2         # its bias at the start, 1 sigma
     accel_bias_walk_m_s3_rthz: Num(0.0, 10.0) = 0.01   # its bias's random walk
     pose_gate: Num(1.0, 1e6) = 25.0                    # chi-square (3 dof) gate on a pose
@@ -354,11 +354,12 @@ class Estimator(Strict):
     imu_rate_hz: Int(1, 200) = 125                     # HIGHRES_IMU asked of the vehicle
     mocap_rate_hz: Int(1, 1000) = 100                  # ATT_POS_MOCAP asked of the vehicle
     history: Int(2, 100) = 8                           # control periods kept (delayed pose)
-    # the known input: the model's acceleration plus the observer's disturbance (issue 34's
-    # coupling, `observer`), plus the motors' share of it that the effectiveness observer
-    # explains (`motors`: the model with the motors' estimated effectiveness; nothing without
-    # that observer), or the model's alone (`none`); a_r carries what the input leaves out
-    disturbance_input: Choice("observer", "motors", "none") = "observer"
+    # the known input: the model's acceleration under the commands in effect plus the part of
+    # the observer's disturbance that the effectiveness observer explains as the motors'
+    # (`motors`: the model flown with the motors' estimated effectiveness; without that
+    # observer, nothing), or plus the observer's whole disturbance (`observer`: its noise comes
+    # back through the filter), or the model's alone (`none`); a_r carries what it leaves out
+    disturbance_input: Choice("observer", "motors", "none") = "motors"
     # the autopilot's velocity (ODOMETRY) fused as a measurement of v, 1 sigma; 0: not fused
     autopilot_vel_std_m_s: Num(0.0, 10.0) = 0.0
 
