@@ -794,6 +794,21 @@ class FlightTarget(Strict):
     outage: Optional[Choice(*SENSOR_UNITS, "none")] = None
 
 
+class PairedTarget(Strict):
+    """A target on two controllers' flights paired on the same conditions and seed (issue 34's
+    kind): `controller`'s RMSE after the fault over `against`'s (the campaign's first controller
+    when not given), the median of these ratios at most `max_median_ratio`, over the pairs
+    flown under `sensing` and with an outage of `outage` (`none`: without) when given; with no
+    more crashes than `against`, and, with `no_later_diagnosis`, no pair where it diagnoses the
+    fault later."""
+    controller: Text
+    max_median_ratio: Num(0.0, 100.0)
+    against: Optional[Text] = None
+    sensing: Optional[NameOrPath] = None
+    outage: Optional[Choice(*SENSOR_UNITS, "none")] = None
+    no_later_diagnosis: Flag = True
+
+
 class CampaignFile(Strict):
     """A campaign file (params/campaigns/*.yaml); the axes are checked key by key afterwards."""
     name: Text
@@ -807,6 +822,7 @@ class CampaignFile(Strict):
     controller_model: Any = "nominal"
     targets: CampaignTargets | None = None
     flight_targets: list[FlightTarget] = []
+    paired_targets: list[PairedTarget] = []
     grid: CampaignGrid | None = None
     sample: CampaignSample | None = None
 

@@ -97,6 +97,8 @@ class Campaign:
     flight_targets: tuple = ()
     # the outages its flights fly with (`outage_label`): ("none",) without the axis
     outages: tuple[str, ...] = ("none",)
+    # trq_params.schema.PairedTarget each, its `against` and `sensing` resolved
+    paired_targets: tuple = ()
 
 
 def _axis_models(axis: str):
@@ -517,7 +519,43 @@ def load_campaign(path: Path) -> Campaign:
     outages = tuple(dict.fromkeys(outage_label(f.get("outage")) for f in flights))
     return Campaign(name, path, description, seed, tuple(controllers), success, threshold,
                     timeout, repeats, tuple(flights), top.targets, has_plant, sensings,
-                    _flight_targets(top.flight_targets, sensings, outages, path), outages)
+                    _flight_targets(top.flight_targets, sensings, outages, path), outages,
+                    _paired_targets(top.paired_targets, tuple(controllers), sensings, outages,
+                                    path))
+
+
+def _paired_targets(targets, controllers: tuple[str, ...], sensings: tuple[str, ...],
+                    outages: tuple[str, ...], file: Path) -> tuple:
+    """The paired targets with `against` set (the first controller when not given) and their
+    sensing profile as the flights carry it; a controller, profile or outage the campaign does
+    not fly is a ConfigError naming the file, the key and the value."""
+    out = []
+    flown = {label.split()[0] for label in outages}
+    for i, t in enumerate(targets):
+        key = f"paired_targets[{i}]"
+        for field in ("controller", "against"):
+            value = getattr(t, field)
+            if value is not None and value not in controllers:
+                raise ConfigError(f"{file}: key '{key}.{field}': got {value!r}, expected one "
+                                  "of the campaign's controllers (" + ", ".join(controllers)
+                                  + ")")
+        against = t.against or controllers[0]
+        if against == t.controller:
+            raise ConfigError(f"{file}: key '{key}.against': got {against!r}, expected another "
+                              "controller than the target's own")
+        if t.outage is not None and t.outage not in flown:
+            raise ConfigError(f"{file}: key '{key}.outage': got {t.outage!r}, expected one of "
+                              "the outages the campaign flies (" + ", ".join(sorted(flown)) + ")")
+        update = {"against": against}
+        if t.sensing is not None:
+            profile = _sensing({"profile": t.sensing}, file, f"{key}.sensing")
+            if profile not in sensings:
+                raise ConfigError(f"{file}: key '{key}.sensing': got {t.sensing!r}, expected "
+                                  "one of the profiles the campaign flies ("
+                                  + ", ".join(sensings) + ")")
+            update["sensing"] = profile
+        out.append(t.model_copy(update=update))
+    return tuple(out)
 
 
 def _flight_targets(targets, sensings: tuple[str, ...], outages: tuple[str, ...],

@@ -219,19 +219,55 @@ def _conditions(r: dict) -> tuple:
     return tuple(sorted((k, str(v)) for k, v in r.items() if k.startswith(_CONDITION_PREFIXES)))
 
 
-def paired_by_seed(campaign: Campaign, rows: list[dict]) -> tuple[list[str], dict]:
-    """Each controller against the campaign's first on the same conditions and seed (flight by
-    flight, per sensing profile): (report lines, summary). A pair counts where both flew (not
-    failed); the ratio is RMSE after the fault, the other's over the first's, over the pairs
-    where neither crashed; a later diagnosis is the other's diagnosis_s above the first's (or
-    missing where the first's is known)."""
-    head = campaign.controllers[0]
-    s_col, o_col = len(campaign.sensings) > 1, len(campaign.outages) > 1   # their columns
+def _paired_flights(rows: list[dict]) -> dict:
+    """The flights that did not fail, by (sensing, outage, conditions) and then controller."""
     by: dict = {}
     for r in rows:
         if r.get("status") != "failed":
             by.setdefault((r["sensing"], r.get("outage", "none"), _conditions(r)),
                           {})[r["controller"]] = r
+    return by
+
+
+def _paired_stats(by: dict, c: str, head: str, where) -> dict | None:
+    """`c` against `head` over the pairs of `by` whose (sensing, outage) `where` accepts: pairs,
+    better, the median, smallest and largest ratio of RMSE after the fault (where neither
+    crashed), later diagnoses and crashes; None without a pair."""
+    pairs = [(g[c], g[head]) for (s, o, _), g in by.items() if where(s, o) and c in g
+             and head in g]
+    if not pairs:
+        return None
+    ratios = [_rmse_of(a) / _rmse_of(b) for a, b in pairs
+              if not a["crashed"] and not b["crashed"] and _rmse_of(a) is not None
+              and _rmse_of(b)]
+    better = sum((not a["crashed"] and b["crashed"]) or (
+        not a["crashed"] and _rmse_of(a) is not None and _rmse_of(b) is not None
+        and _rmse_of(a) < _rmse_of(b)) for a, b in pairs)
+    later = sum(b.get("diagnosis_s") is not None and (
+        a.get("diagnosis_s") is None or a["diagnosis_s"] > b["diagnosis_s"]) for a, b in pairs)
+    return {"pairs": len(pairs), "better": better,
+            "median_ratio": float(statistics.median(ratios)) if ratios else None,
+            "min_ratio": min(ratios) if ratios else None,
+            "max_ratio": max(ratios) if ratios else None, "later_diagnosis": later,
+            "crashed": sum(bool(a["crashed"]) for a, _ in pairs),
+            "other_crashed": sum(bool(b["crashed"]) for _, b in pairs)}
+
+
+def _ratio_text(st: dict) -> str:
+    if st["median_ratio"] is None:
+        return "-"
+    return f"{st['median_ratio']:.3f} ({st['min_ratio']:.3f}-{st['max_ratio']:.3f})"
+
+
+def paired_by_seed(campaign: Campaign, rows: list[dict]) -> tuple[list[str], dict]:
+    """Each controller against the campaign's first on the same conditions and seed (flight by
+    flight, per sensing profile and outage): (report lines, summary). A pair counts where both
+    flew (not failed); the ratio is RMSE after the fault, the other's over the first's, over the
+    pairs where neither crashed; a later diagnosis is the other's diagnosis_s above the first's
+    (or missing where the first's is known)."""
+    head = campaign.controllers[0]
+    s_col, o_col = len(campaign.sensings) > 1, len(campaign.outages) > 1   # their columns
+    by = _paired_flights(rows)
     lines = [f"## Paired, flight by flight, against `{head}`", "",
              f"Each flight of a controller against `{head}`'s under the same conditions and "
              "seed. Ratio: RMSE after the fault, the controller's over "
@@ -244,33 +280,64 @@ def paired_by_seed(campaign: Campaign, rows: list[dict]) -> tuple[list[str], dic
     summary: dict = {}
     for p, o, c in ((p, o, c) for p in campaign.sensings for o in campaign.outages
                     for c in campaign.controllers[1:]):
-        pairs = [(g[c], g[head]) for (s, so, _), g in by.items() if (s, so) == (p, o)
-                 and c in g and head in g]
-        if not pairs:
+        st = _paired_stats(by, c, head, lambda s, so: (s, so) == (p, o))
+        if st is None:
             continue
-        ratios = [_rmse_of(a) / _rmse_of(b) for a, b in pairs
-                  if not a["crashed"] and not b["crashed"] and _rmse_of(a) is not None
-                  and _rmse_of(b)]
-        better = sum((not a["crashed"] and b["crashed"]) or (
-            not a["crashed"] and _rmse_of(a) is not None and _rmse_of(b) is not None
-            and _rmse_of(a) < _rmse_of(b)) for a, b in pairs)
-        later = sum(b.get("diagnosis_s") is not None and (
-            a.get("diagnosis_s") is None or a["diagnosis_s"] > b["diagnosis_s"])
-            for a, b in pairs)
-        med = float(statistics.median(ratios)) if ratios else None
-        crashed = (sum(bool(a["crashed"]) for a, _ in pairs),
-                   sum(bool(b["crashed"]) for _, b in pairs))
-        rng = (f" ({min(ratios):.3f}-{max(ratios):.3f})" if ratios else "")
         lines.append(f"| {sensing_label(p)} " * s_col + f"| {o} " * o_col
-                     + f"| {c} | {len(pairs)} | {better} | "
-                     f"{fmt(med, '{:.3f}')}{rng} | {later} | {crashed[0]} | {crashed[1]} |")
+                     + f"| {c} | {st['pairs']} | {st['better']} | {_ratio_text(st)} | "
+                     f"{st['later_diagnosis']} | {st['crashed']} | {st['other_crashed']} |")
         name = sensing_label(p) or "-"
-        summary.setdefault(name if o == "none" else f"{name} {o}", {})[c] = {
-            "pairs": len(pairs), "better": better, "median_ratio": med,
-            "min_ratio": min(ratios) if ratios else None,
-            "max_ratio": max(ratios) if ratios else None, "later_diagnosis": later,
-            "crashed": crashed[0], "other_crashed": crashed[1]}
+        summary.setdefault(name if o == "none" else f"{name} {o}", {})[c] = st
     return (lines + [""] if summary else []), summary
+
+
+def judge_paired_targets(campaign: Campaign, rows: list[dict]
+                         ) -> tuple[list[str], list[str], list[str], list[dict]]:
+    """The campaign's paired targets judged on its rows: (report lines, failures, headline
+    parts, one summary per target). Met: at least one pair, the median ratio at most the bar,
+    no more crashes than the other, and (no_later_diagnosis) no later diagnosis."""
+    if not campaign.paired_targets:
+        return [], [], [], []
+    by = _paired_flights(rows)
+    lines = ["## Paired targets", "",
+             "Each target on a controller's flights paired with another's on the same "
+             "conditions and seed (the table above): the median ratio of RMSE after the fault "
+             "at most the bar, no more crashes, and no later diagnosis when it asks.", ""]
+    failures, headline, summary = [], [], []
+    for t in campaign.paired_targets:
+        def where(s, o, t=t):
+            return ((t.sensing is None or s == t.sensing)
+                    and (t.outage is None or o.split()[0] == t.outage))
+        st = _paired_stats(by, t.controller, t.against, where)
+        under = (f" under `{sensing_label(t.sensing)}`" if t.sensing else "") + (
+            f" with outage `{t.outage}`" if t.outage else "")
+        met = (st is not None and st["median_ratio"] is not None
+               and st["median_ratio"] <= t.max_median_ratio
+               and st["crashed"] <= st["other_crashed"]
+               and not (t.no_later_diagnosis and st["later_diagnosis"]))
+        text = (f"`{t.controller}` against `{t.against}`{under}: median ratio <= "
+                f"{t.max_median_ratio:g}, no more crashes"
+                + (", no later diagnosis" if t.no_later_diagnosis else ""))
+        got = ("no pair" if st is None else
+               f"{_ratio_text(st)} over {st['pairs']} pairs, better on {st['better']}, "
+               f"crashed {st['crashed']} against {st['other_crashed']}, later diagnosis "
+               f"{st['later_diagnosis']}")
+        lines.append(f"- {text}: {got}: **{'met' if met else 'missed'}**.")
+        short = (f"{t.controller} / {t.against}"
+                 f"{' ' + sensing_label(t.sensing) if t.sensing else ''}"
+                 f"{' outage ' + t.outage if t.outage else ''} paired ratio "
+                 f"{fmt(st and st['median_ratio'], '{:.3f}')} <= {t.max_median_ratio:g}")
+        headline.append(f"{short} {'met' if met else 'missed'}")
+        if not met:
+            failures.append(short)
+        summary.append({"controller": t.controller, "against": t.against,
+                        "sensing": t.sensing and sensing_label(t.sensing), "outage": t.outage,
+                        "max_median_ratio": t.max_median_ratio, **(st or {"pairs": 0}),
+                        "met": met})
+    lines.append("")
+    if failures:
+        lines += ["**Missed:**", ""] + [f"- {f}" for f in failures] + [""]
+    return lines, failures, headline, summary
 
 
 def meets(r: dict, target) -> bool:
@@ -487,6 +554,13 @@ def write_report(campaign: Campaign, rows: list[dict], out: Path, run_info: dict
         pair_lines, summary["paired_by_seed"] = paired_by_seed(campaign, rows)
         lines += pair_lines
     target_lines, failures, headline, judged = judge_flight_targets(campaign, rows)
+    p_lines, p_failures, p_headline, p_judged = judge_paired_targets(campaign, rows)
+    if p_judged:
+        lines += p_lines
+        summary["paired_targets"] = p_judged
+        summary["failures"] = summary.get("failures", []) + p_failures
+        summary["headline"] = "; ".join(([summary["headline"]] if summary.get("headline")
+                                         else []) + p_headline)
     if judged:
         lines += target_lines
         summary["flight_targets"] = judged
