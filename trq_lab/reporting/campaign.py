@@ -553,21 +553,16 @@ def write_report(campaign: Campaign, rows: list[dict], out: Path, run_info: dict
     if not campaign.has_plant and len(campaign.controllers) > 1:
         pair_lines, summary["paired_by_seed"] = paired_by_seed(campaign, rows)
         lines += pair_lines
-    target_lines, failures, headline, judged = judge_flight_targets(campaign, rows)
-    p_lines, p_failures, p_headline, p_judged = judge_paired_targets(campaign, rows)
-    if p_judged:
-        lines += p_lines
-        summary["paired_targets"] = p_judged
-        summary["failures"] = summary.get("failures", []) + p_failures
-        summary["headline"] = "; ".join(([summary["headline"]] if summary.get("headline")
-                                         else []) + p_headline)
-    if judged:
-        lines += target_lines
-        summary["flight_targets"] = judged
-        # beside the plant targets' (trq-results reads both keys)
-        summary["failures"] = summary.get("failures", []) + failures
-        summary["headline"] = "; ".join(([summary["headline"]] if summary.get("headline")
-                                         else []) + headline)
+    for key, judge in (("paired_targets", judge_paired_targets),
+                       ("flight_targets", judge_flight_targets)):
+        target_lines, failures, headline, judged = judge(campaign, rows)
+        if judged:
+            lines += target_lines
+            summary[key] = judged
+            # beside the plant targets' (trq-results reads both keys)
+            summary["failures"] = summary.get("failures", []) + failures
+            summary["headline"] = "; ".join(([summary["headline"]] if summary.get("headline")
+                                             else []) + headline)
     write_json(out / "metrics.json", summary)
     for p, o, prs in table:
         if prs:
