@@ -362,6 +362,15 @@ class Estimator(Strict):
     disturbance_input: Choice("observer", "motors", "none") = "motors"
     # the autopilot's velocity (ODOMETRY) fused as a measurement of v, 1 sigma; 0: not fused
     autopilot_vel_std_m_s: Num(0.0, 10.0) = 0.0
+    # the position source: the motion capture pose (ATT_POS_MOCAP) or a GNSS receiver's fix
+    # (GPS_RAW_INT, 3D fix or better, in NED around HOME_POSITION: trq_offboard/link/gnss.py)
+    position_source: Choice("mocap", "gnss") = "mocap"
+    gnss_rate_hz: Int(1, 50) = 10                      # GPS_RAW_INT asked of the vehicle
+    # a fix's noise, 1 sigma horizontal and vertical; 0: the fix's own h_acc / v_acc
+    gnss_std_m: Vec(2, 0.0, 100.0) = (0.0, 0.0)
+    # the oldest fix fused (its time of validity behind the state's time: the receiver's
+    # delay and the wait for the next control period); the history kept covers it
+    gnss_max_age_s: Num(0.0, 2.0) = 0.25
 
     @model_validator(mode="after")
     def _only_fused(self) -> "Estimator":
@@ -370,6 +379,12 @@ class Estimator(Strict):
             if extra:
                 raise Invalid(f"estimator.{extra[0]}", getattr(self, extra[0]),
                               "no fused filter parameter with kind autopilot (set kind: fused)")
+        if self.position_source == "mocap":
+            extra = sorted(k for k in self.model_fields_set if k.startswith("gnss_"))
+            if extra:
+                raise Invalid(f"estimator.{extra[0]}", getattr(self, extra[0]),
+                              "no GNSS parameter with position_source mocap (set "
+                              "position_source: gnss)")
         return self
 
 
@@ -490,7 +505,8 @@ class ControllerFile(Strict):
         if est.kind == "fused" and est.dropout_s * self.control_rate_hz < 1.0 - 1e-9:
             raise Invalid("estimator.dropout_s", est.dropout_s,
                           f"at least one control period ({1.0 / self.control_rate_hz:g} s)")
-        if est.kind == "fused" and est.history * est.mocap_rate_hz < self.control_rate_hz:
+        if est.kind == "fused" and est.position_source == "mocap" \
+                and est.history * est.mocap_rate_hz < self.control_rate_hz:
             raise Invalid("estimator.history", est.history,
                           "at least one pose period of control periods (control_rate_hz / "
                           f"mocap_rate_hz = {self.control_rate_hz / est.mocap_rate_hz:g})")

@@ -9,7 +9,12 @@ from __future__ import annotations
 
 import math
 
-EARTH_RADIUS_M = 6_378_137.0   # WGS-84 equatorial radius
+# the flat-earth NED <-> geodetic conversion is the wire's (the companion inverts it): kept in
+# trq_wire.geodetic, named here too
+from trq_wire.geodetic import EARTH_RADIUS_M, geodetic_to_ned, ned_to_geodetic
+
+__all__ = ["EARTH_RADIUS_M", "euler_to_quat", "geodetic_to_ned", "ned_to_geodetic", "quat_to_dcm",
+           "quat_to_euler", "tilt_from_vertical", "wind_from_to_ned", "wrap_pi"]
 
 
 def quat_to_euler(qw: float, qx: float, qy: float, qz: float) -> tuple[float, float, float]:
@@ -40,22 +45,6 @@ def tilt_from_vertical(qw: float, qx: float, qy: float, qz: float) -> float:
     """Angle (rad) between body z and world z: 0 level, pi upside down."""
     c = 1 - 2 * (qx * qx + qy * qy)
     return math.acos(1.0 if c > 1.0 else -1.0 if c < -1.0 else c)
-
-
-def ned_to_geodetic(north_m: float, east_m: float, down_m: float, lat0_deg: float,
-                    lon0_deg: float, alt0_m: float) -> tuple[float, float, float]:
-    """Local NED around a home point to (lat_deg, lon_deg, alt_m AMSL): flat earth, fine for
-    the few hundred metres a SIL flight covers."""
-    lat = lat0_deg + math.degrees(north_m / EARTH_RADIUS_M)
-    lon = lon0_deg + math.degrees(east_m / (EARTH_RADIUS_M * math.cos(math.radians(lat0_deg))))
-    return lat, lon, alt0_m - down_m
-
-
-def geodetic_to_ned(lat_deg: float, lon_deg: float, alt_m: float, lat0_deg: float,
-                    lon0_deg: float, alt0_m: float) -> tuple[float, float, float]:
-    north = math.radians(lat_deg - lat0_deg) * EARTH_RADIUS_M
-    east = math.radians(lon_deg - lon0_deg) * EARTH_RADIUS_M * math.cos(math.radians(lat0_deg))
-    return north, east, alt0_m - alt_m
 
 
 def wrap_pi(angle: float) -> float:

@@ -308,11 +308,16 @@ def controller_config(c: schema.ControllerFile, file: str) -> ControllerConfig:
     effectiveness = None if e is None or e.estimate == "off" else EffectivenessConfig(
         e.bandwidth_rad_s, e.min, e.substeps)
     f = c.estimator
+    # the history: the configured periods, or with a GNSS source enough to reach back to the
+    # oldest fix fused (gnss_max_age_s) and the period before it
+    history = f.history if f.position_source == "mocap" else max(
+        f.history, math.ceil(f.gnss_max_age_s * c.control_rate_hz - 1e-9) + 2)
     fused = None if f.kind == "autopilot" else FusedConfig(
         f.mocap_std_m, f.accel_std_m_s2, f.model_acc_density_m_s2_rthz,
         f.residual_walk_m_s3_rthz, f.accel_bias_std_m_s2, f.accel_bias_walk_m_s3_rthz,
-        f.pose_gate, f.dropout_s, f.imu_rate_hz, f.mocap_rate_hz, f.history,
-        f.disturbance_input, f.autopilot_vel_std_m_s)
+        f.pose_gate, f.dropout_s, f.imu_rate_hz, f.mocap_rate_hz, history,
+        f.disturbance_input, f.autopilot_vel_std_m_s, f.position_source,
+        f.gnss_rate_hz, tuple(f.gnss_std_m))
     return ControllerConfig(file, c.name, vehicle, c.observer.kind, eso, c.control_rate_hz,
                             c.horizon.steps, c.horizon.step_s, weights,
                             c.constraints.max_roll_pitch_deg, c.constraints.max_body_rate_rad_s,

@@ -73,6 +73,11 @@ from trq_offboard.reference import FlightReference
 
 __all__ = ["Controller"]
 
+HOME_RATE_HZ = 1        # HOME_POSITION asked of the vehicle with a GNSS source (a moved home)
+# with a GNSS source the filter starts from the autopilot's position with this 1 sigma: the
+# fixes' own errors are the autopilot's too, give or take what it fused them with
+GNSS_START_STD_M = 0.1
+
 def _wrap(a):
     """Angle(s) (float or array) wrapped to [-pi, pi)."""
     return (a + math.pi) % (2.0 * math.pi) - math.pi
@@ -187,11 +192,15 @@ class Controller:
     @property
     def sensor_streams(self) -> dict[str, int]:
         """The raw sensor streams (MAVLink message name: Hz) this controller needs from the
-        vehicle: the fused filter's pose and IMU, none on the autopilot's estimate."""
-        if self.cfg.fused is None:
+        vehicle: the fused filter's IMU and position source (the motion capture pose, or the
+        GNSS fix and the home it is relative to), none on the autopilot's estimate."""
+        f = self.cfg.fused
+        if f is None:
             return {}
-        return {"HIGHRES_IMU": self.cfg.fused.imu_rate_hz,
-                "ATT_POS_MOCAP": self.cfg.fused.mocap_rate_hz}
+        if f.position_source == "gnss":
+            return {"HIGHRES_IMU": f.imu_rate_hz, "GPS_RAW_INT": f.gnss_rate_hz,
+                    "HOME_POSITION": HOME_RATE_HZ}
+        return {"HIGHRES_IMU": f.imu_rate_hz, "ATT_POS_MOCAP": f.mocap_rate_hz}
 
     @classmethod
     def from_yaml(cls, path: Path | str) -> "Controller":
@@ -360,15 +369,24 @@ class Controller:
         first position sample; before it (and under `truth`, which sends none) x is as it
         came and the health None."""
         f = self.fused
+        gnss = f.cfg.position_source == "gnss"
         if not self._fused_on:
-            if not sensors.poses_ned_m:      # no position source yet (or none, under truth):
-                return None                  # the state as it came
-            f.reset(sensors.stamp_us, x[0:3], x[3:6])
+            # no position sample yet (none at all under truth): the state as it came
+            if not (sensors.fixes if gnss else sensors.poses_ned_m):
+                return None
+            f.reset(sensors.stamp_us, x[0:3], x[3:6], GNSS_START_STD_M if gnss else None)
             self._fused_on = True
         for acc in sensors.accel_frd_m_s2:
             f.add_imu(acc, x[6:9])
-        for t_us, pos in sensors.poses_ned_m:
-            f.add_pose(t_us, pos)
+        if gnss:
+            h, v = f.cfg.gnss_std_m
+            for fix in sensors.fixes:    # the configured noise, or (0) the fix's own
+                sn, se, sd = fix.std_ned_m
+                f.add_pose(fix.t_us, fix.pos_ned_m,
+                           (h if h > 0.0 else sn, h if h > 0.0 else se, v if v > 0.0 else sd))
+        else:
+            for t_us, pos in sensors.poses_ned_m:
+                f.add_pose(t_us, pos)
         if t_s > self._last_t and sensors.stamp_us > f.t_us:
             a_known = self._b0(x, t_s, applied, u_applied, path)[0:3]
             kind = self.cfg.fused.disturbance_input

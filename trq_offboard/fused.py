@@ -29,7 +29,11 @@ the vehicle's acceleration), advanced once per control period h by `FusedFilter.
                  through the kept periods. A pose whose innovation test ratio (its normalised
                  squared innovation over the chi-square gate `pose_gate`) exceeds 1 is
                  rejected, except after a dropout (a gate would then lock the poses out for
-                 good); one older than the history is dropped.
+                 good); one older than the history is dropped. The same for a GNSS fix
+                 (`position_source: gnss`: GPS_RAW_INT in NED around home, its time_usec the
+                 time of validity, the receiver's delay behind its arrival; its own noise per
+                 axis, an input of the pose's kernel): the history is then sized to cover that
+                 delay (config.py).
     velocity     optional (`autopilot_vel_std_m_s` > 0): the autopilot's velocity, fused as a
                  measurement of v at the period's end (its IMU-integrated velocity blended with
                  the model's)
@@ -77,6 +81,7 @@ class _NUMPY:
     block = staticmethod(np.block)
     kron = staticmethod(np.kron)
     eye = staticmethod(np.eye)
+    diag = staticmethod(np.diag)
     inv = staticmethod(np.linalg.inv)
     solve = staticmethod(np.linalg.solve)
 
@@ -97,6 +102,8 @@ class _CASADI:
     kron = staticmethod(ca.kron)
     inv = staticmethod(ca.inv)
     solve = staticmethod(ca.solve)
+
+    diag = staticmethod(ca.diag)
 
     @staticmethod
     def eye(n: int):
@@ -127,6 +134,11 @@ class FusedConfig:
     history: int = 8                      # control periods kept for the delayed pose
     disturbance_input: str = "motors"     # added to b0: "motors", "observer" (its d), "none"
     autopilot_vel_std_m_s: float = 0.0    # the autopilot's velocity as a measurement (0: not)
+    # the position source: "mocap" (ATT_POS_MOCAP, noise mocap_std_m) or "gnss" (GPS_RAW_INT in
+    # NED, trq_offboard/link/gnss.py; noise gnss_std_m (h, v), 0: each fix's own)
+    position_source: str = "mocap"
+    gnss_rate_hz: int = 10                # GPS_RAW_INT asked of the vehicle
+    gnss_std_m: tuple[float, float] = (0.0, 0.0)
 
 
 def rotation_ned_frd(euler_rad) -> np.ndarray:
@@ -188,9 +200,10 @@ def _accel_update(x, P, a_known, z, var, xp=_NUMPY):
     return x, P
 
 
-def _pose_fusion(x, P, pos, cfg: FusedConfig, xp=_NUMPY):
-    """A pose at the prior's time: (test ratio, x, P updated); the gate is the caller's."""
-    r = cfg.mocap_std_m ** 2 * xp.eye(3)
+def _pose_fusion(x, P, pos, r_pos, cfg: FusedConfig, xp=_NUMPY):
+    """A pose at the prior's time, its variances per axis r_pos (3): (test ratio, x, P
+    updated); the gate is the caller's."""
+    r = xp.diag(r_pos)
     innovation = pos - x[0:3]
     S = P[0:3, 0:3] + r
     ratio = innovation.T @ xp.solve(S, innovation) / cfg.pose_gate
@@ -203,7 +216,7 @@ def _kernels(cfg: FusedConfig) -> tuple[ca.Function, ca.Function] | None:
     """The period's advance and the pose's fusion as compiled functions (module docstring), or
     None without a C compiler or when a build fails (then the NumPy path runs):
         advance (x, P, dt, a_known, z_acc, var_acc, has_acc) -> (x, P)
-        pose    (x, P, dt, a_known, pos, dt_rest, z_acc, var_acc, has_acc)
+        pose    (x, P, dt, a_known, pos, dt_rest, z_acc, var_acc, has_acc, r_pos)
                 -> (test ratio, x, P, x_next, P_next)
     dt in s (the pose's 0 at a kept period's end); P dense, CasADi's column-major order;
     has_acc 0 or 1: without, the predicted (x, P) exactly. The pose lies in the period after
@@ -221,14 +234,15 @@ def _kernels(cfg: FusedConfig) -> tuple[ca.Function, ca.Function] | None:
                           (("dt", 1), ("a_known", m), ("z_acc", m), ("var_acc", 1),
                            ("has_acc", 1)))
     pos, rest = ca.SX.sym("pos", _H_POS.shape[0]), ca.SX.sym("dt_rest")
+    r_pos = ca.SX.sym("r_pos", _H_POS.shape[0])
     F, G, Q = _transition(dt, cfg, _CASADI)
     xp_, Pp = _predict(x, P, F, G, Q, a)
     xa, Pa = _accel_update(xp_, Pp, a, z, var, _CASADI)
     advance = ca.Function(f"fused_advance_{n}", [x, P, dt, a, z, var, has],
                           [ca.if_else(has, xa, xp_), ca.if_else(has, Pa, Pp)])
-    ratio, xu, Pu = _pose_fusion(xp_, Pp, pos, cfg, _CASADI)
+    ratio, xu, Pu = _pose_fusion(xp_, Pp, pos, r_pos, cfg, _CASADI)
     x_next, P_next = advance(xu, Pu, rest, a, z, var, has)
-    pose = ca.Function(f"fused_pose_{n}", [x, P, dt, a, pos, rest, z, var, has],
+    pose = ca.Function(f"fused_pose_{n}", [x, P, dt, a, pos, rest, z, var, has, r_pos],
                        [ratio, xu, Pu, x_next, P_next])
     built = compiled_many([advance, pose])
     if any(how == "interpreted" for _, how in built):
@@ -289,11 +303,12 @@ class FusedFilter:
                                            if kernels is not None else (None, None))
         self._periods: list[_Period] = []
         self._imu: list[np.ndarray] = []          # total accelerations (NED) this period
-        self._poses: list[tuple[int, np.ndarray]] = []
+        self._poses: list[tuple[int, np.ndarray, np.ndarray]] = []
         self.last_pose_us: int | None = None
         self.test_ratio = math.nan
         self.rejected = 0
         self.dropped = 0
+        self._regaining = False          # taking poses back after dead reckoning
 
     def _f(self, dt_us: int):
         got = self._trans.get(dt_us)
@@ -303,13 +318,15 @@ class FusedFilter:
                 self._trans[dt_us] = got
         return got
 
-    def reset(self, t_us: int, pos_ned_m, vel_ned_m_s) -> None:
+    def reset(self, t_us: int, pos_ned_m, vel_ned_m_s, pos_std_m: float | None = None) -> None:
         """Start from a position and velocity (the autopilot's), a_r = 0 and b = 0, with the
-        pose's variance on position, generous ones on velocity and a_r, accel_bias_std on b."""
+        pose's variance on position (or pos_std_m's), generous ones on velocity and a_r,
+        accel_bias_std on b."""
         cfg = self.cfg
         x = np.concatenate([np.asarray(pos_ned_m, float), np.asarray(vel_ned_m_s, float),
                             np.zeros(6)])
-        P = np.diag([cfg.mocap_std_m ** 2] * 3 + [0.1 ** 2] * 3 + [1.0] * 3
+        std = cfg.mocap_std_m if pos_std_m is None else pos_std_m
+        P = np.diag([std ** 2] * 3 + [0.1 ** 2] * 3 + [1.0] * 3
                     + [cfg.accel_bias_std ** 2] * 3)
         self._periods = [_Period(int(t_us), np.zeros(3), None, x, P)]
         self._imu.clear()
@@ -318,6 +335,7 @@ class FusedFilter:
         self.test_ratio = math.nan
         self.rejected = 0
         self.dropped = 0
+        self._regaining = False
 
     @property
     def compiled(self) -> bool:
@@ -343,11 +361,14 @@ class FusedFilter:
         if np.all(np.isfinite(f)):
             self._imu.append(rotation_ned_frd(euler_rad) @ f + np.array([0.0, 0.0, self.g]))
 
-    def add_pose(self, t_us: int, pos_ned_m) -> None:
-        """One motion capture position at its time of validity (fused at the next `step`)."""
+    def add_pose(self, t_us: int, pos_ned_m, std_ned_m=None) -> None:
+        """One position (motion capture, or a GNSS fix in NED) at its time of validity, with
+        its 1-sigma errors per axis (None: mocap_std_m), fused at the next `step`."""
         p = np.asarray(pos_ned_m, float)
-        if np.all(np.isfinite(p)):
-            self._poses.append((int(t_us), p))
+        std = (np.full(3, self.cfg.mocap_std_m) if std_ned_m is None
+               else np.asarray(std_ned_m, float))
+        if np.all(np.isfinite(p)) and np.all(np.isfinite(std)) and np.all(std > 0.0):
+            self._poses.append((int(t_us), p, std * std))
 
     def step(self, t_us: int, a_known_ned: np.ndarray, vel_ned_m_s=None) -> Health:
         """Advance to t_us (> the last period's end) under the known input a_known (m/s^2 NED,
@@ -367,8 +388,8 @@ class FusedFilter:
         x, P = self._advance(last.x, last.P, dt_us, a_known, acc)
         self._periods.append(_Period(int(t_us), a_known, acc, x, P))
         del self._periods[:-self.cfg.history]
-        for t_pose, pos in sorted(self._poses, key=lambda s: s[0]):
-            self._fuse_pose(min(t_pose, int(t_us)), pos)
+        for t_pose, pos, r_pos in sorted(self._poses, key=lambda s: s[0]):
+            self._fuse_pose(min(t_pose, int(t_us)), pos, r_pos)
         self._poses.clear()
         std = self.cfg.autopilot_vel_std_m_s
         if std > 0.0 and vel_ned_m_s is not None:
@@ -393,8 +414,9 @@ class FusedFilter:
             x, P = _accel_update(x, P, a_known, *acc)
         return x, P
 
-    def _pose(self, base: _Period, t_pose: int, pos, nxt: _Period | None):
-        """The pose at t_pose fused into the posterior of the kept period `base`, predicted to
+    def _pose(self, base: _Period, t_pose: int, pos, r_pos, nxt: _Period | None):
+        """The pose at t_pose (variances per axis r_pos) fused into the posterior of the kept
+        period `base`, predicted to
         it under the input of the period after (`nxt`; None: the pose is at the last period's
         end): (test ratio, x, P updated, and the compiled kernel's posterior carried on to
         nxt's end, else None)."""
@@ -410,16 +432,17 @@ class FusedFilter:
                 args[8][0] = 0.0
             else:
                 args[6][:], args[7][0], args[8][0] = nxt.acc[0], nxt.acc[1], 1.0
+            args[9][:] = r_pos
             fn.evaluate()
             ahead = None if nxt is None else (res[3].copy(), _matrix(res[4]))
             return float(res[0][0]), res[1].copy(), _matrix(res[2]), ahead
         if dt_us > 0:
             F, G, Q = self._f(dt_us)
             x, P = _predict(x, P, F, G, Q, a_known)
-        ratio, x, P = _pose_fusion(x, P, pos, self.cfg)
+        ratio, x, P = _pose_fusion(x, P, pos, r_pos, self.cfg)
         return float(ratio), x, P, None
 
-    def _fuse_pose(self, t_pose: int, pos: np.ndarray) -> None:
+    def _fuse_pose(self, t_pose: int, pos: np.ndarray, r_pos: np.ndarray) -> None:
         """The pose at its time of validity: back to the kept period before it, forward to it,
         the update, then forward again through the later periods."""
         periods = self._periods
@@ -432,13 +455,16 @@ class FusedFilter:
         base = periods[k]
         # forward to the pose under the next period's input (none: the pose is at base's end)
         nxt = periods[k + 1] if k + 1 < len(periods) else None
-        ratio, x, P, ahead = self._pose(base, t_pose, pos, nxt)
+        ratio, x, P, ahead = self._pose(base, t_pose, pos, r_pos, nxt)
         self.test_ratio = ratio
         # past the gate: rejected, unless the filter has been without a pose for dropout_s
-        # (then the estimate is what is in doubt, and a gate would lock the poses out for good)
-        if ratio > 1.0 and not self.dead_reckoning(t_pose):
+        # (then the estimate is what is in doubt, and a gate would lock the poses out for good),
+        # or is still taking them back after that: the gate closes again only once a pose
+        # falls inside it (a first pose after an outage may correct only part of the drift)
+        if ratio > 1.0 and not self.dead_reckoning(t_pose) and not self._regaining:
             self.rejected += 1
             return
+        self._regaining = ratio > 1.0
         self.last_pose_us = max(self.last_pose_us or t_pose, t_pose)
         t = t_pose
         if t_pose == base.t_us:
@@ -462,18 +488,21 @@ class FusedFilter:
 
 
 class HealthReport:
-    """The filter's health for the ground station: STATUSTEXT WARNING "fused filter: dead
-    reckoning" when it starts, NOTICE "fused filter: pose back" when it ends (once per change).
-    Pure: the same healths give the same messages."""
+    """The filter's health for the ground station: STATUSTEXT WARNING "fused filter: no pose,
+    dead reckoning" when it starts, NOTICE "fused filter: pose back" when it ends (once per
+    change; `what` names the position source's sample: "pose", "gnss fix"). Pure: the same
+    healths give the same messages."""
 
-    def __init__(self) -> None:
+    def __init__(self, what: str = "pose") -> None:
         self._dead = False
+        self.what = what
 
     def messages(self, health: Health) -> list:
         if health.dead_reckoning == self._dead:
             return []
         self._dead = health.dead_reckoning
-        severity, text = ((mavlink.MAV_SEVERITY_WARNING, "fused filter: no pose, dead reckoning")
+        severity, text = ((mavlink.MAV_SEVERITY_WARNING,
+                           f"fused filter: no {self.what}, dead reckoning")
                           if self._dead else (mavlink.MAV_SEVERITY_NOTICE,
-                                              "fused filter: pose back"))
+                                              f"fused filter: {self.what} back"))
         return [mavlink.MAVLink_statustext_message(severity, text.encode("ascii"))]

@@ -35,7 +35,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from trq_offboard.diagnosis import Diagnosis
 from trq_offboard.fused import HealthReport
-from trq_offboard.link import wire
+from trq_offboard.link import gnss, wire
 from trq_offboard.link.udp import MavlinkUdp
 from trq_offboard.records import (
     ActuatorCommand,
@@ -63,6 +63,9 @@ COMMAND_TRIES = 6
 # most this long, in vehicle time
 ARM_RETRY_US = 200_000
 ARM_WAIT_US = 10_000_000
+# GPS_RAW_INT kept until HOME_POSITION places it (the newest; the filter's history reaches back
+# no further than a few fixes)
+MAX_UNPLACED_FIXES = 4
 LAND_DETECT_S = 0.2                # on the ground and still this long while landing: landed
 IDLE = ActuatorCommand((0.0,) * 4, (0.0,) * 4)   # motors at idle, tilts centred
 
@@ -181,12 +184,17 @@ class OffboardFlight:
         self._mode_task: asyncio.Future | None = None
         self.summary = FlightSummary(name)
         self.diagnosis = Diagnosis()        # the motors' estimates, for the ground station
-        self.estimator_report = HealthReport()   # the fused filter's dead reckoning
         # the raw sensors the controller needs (its sensor_streams) and those received since
         # its last step
         self.streams: dict[str, int] = _streams(controller)
+        # the fused filter's dead reckoning, named after its position source's samples
+        self.estimator_report = HealthReport("gnss fix" if "GPS_RAW_INT" in self.streams
+                                             else "pose")
         self._accel: list = []
         self._poses: list = []
+        self._fixes: list = []          # GNSS fixes in NED (records.PositionFix)
+        self.home: tuple[int, int, int] | None = None     # HOME_POSITION: the origin of NED
+        self._unplaced: list = []       # GPS_RAW_INT received before the home, to place
         self._errors: list[np.ndarray] = []
         self._yaw_errors: list[float] = []
         self._solve_ms: list[float] = []
@@ -227,6 +235,19 @@ class OffboardFlight:
             pose = wire.parse_mocap(msg)
             if pose is not None:
                 self._poses.append(pose)
+        elif kind == "GPS_RAW_INT" and "GPS_RAW_INT" in self.streams:
+            if self.home is None:       # kept (a few) until the home arrives
+                self._unplaced = [*self._unplaced[-(MAX_UNPLACED_FIXES - 1):], msg]
+            else:
+                fix = gnss.fix_of(msg, self.home)
+                if fix is not None:
+                    self._fixes.append(fix)
+        elif kind == "HOME_POSITION" and "HOME_POSITION" in self.streams:
+            self.home = gnss.home_of(msg)
+            if self.home is not None:
+                fixes = [gnss.fix_of(m, self.home) for m in self._unplaced]
+                self._fixes += [f for f in fixes if f is not None]
+                self._unplaced.clear()
         elif kind == "HEARTBEAT":
             self.heartbeat = msg
             self._heartbeat_seen.set()
@@ -309,6 +330,13 @@ class OffboardFlight:
             if result != mavlink.MAV_RESULT_ACCEPTED:
                 log.warning("the vehicle refused %s at %d Hz (MAV_RESULT %s)", name, rate_hz,
                             result)
+        if "HOME_POSITION" in self.streams:
+            # the origin now, not at the stream's next turn (MAV_CMD_REQUEST_MESSAGE)
+            msg = wire.request_message(mavlink.MAVLINK_MSG_ID_HOME_POSITION)
+            if hold:
+                await self._command(msg, mavlink.MAV_CMD_REQUEST_MESSAGE, hold=IDLE)
+            else:
+                self.link.send(msg)
 
     async def _arm(self) -> bool:
         """Arm; while the vehicle answers MAV_RESULT_TEMPORARILY_REJECTED (an autopilot's
@@ -417,9 +445,11 @@ class OffboardFlight:
             applied = self.applied
             wire_rx, self._wire_ns = self._wire_ns, 0     # this state's decode
             if self.streams:
-                sensors = SensorSamples(odo.stamp_us, tuple(self._accel), tuple(self._poses))
+                sensors = SensorSamples(odo.stamp_us, tuple(self._accel), tuple(self._poses),
+                                        tuple(self._fixes))
                 self._accel.clear()
                 self._poses.clear()
+                self._fixes.clear()
                 cmd, info = self.controller.step(t, odo.state, applied, reference, sensors)
             else:
                 cmd, info = self.controller.step(t, odo.state, applied, reference)

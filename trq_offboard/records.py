@@ -93,12 +93,21 @@ class PeriodTimes:
 
 
 @dataclass(frozen=True)
+class PositionFix:
+    """A GNSS fix in the vehicle's NED frame (trq_offboard/link/gnss.py)."""
+    t_us: int                          # its time of validity (GPS_RAW_INT time_usec)
+    pos_ned_m: Vec3
+    std_ned_m: Vec3                    # its 1-sigma errors per axis (nan: not stated)
+
+
+@dataclass(frozen=True)
 class SensorSamples:
     """The raw sensors the flight loop received since the last step, for the fused filter
     (trq_offboard/fused.py), with the vehicle's time of the state the step answers."""
     stamp_us: int                                    # the state's time (ODOMETRY time_usec)
     accel_frd_m_s2: tuple[Vec3, ...] = ()            # HIGHRES_IMU specific forces, body FRD
     poses_ned_m: tuple[tuple[int, Vec3], ...] = ()   # ATT_POS_MOCAP: (time of validity us, pos)
+    fixes: tuple[PositionFix, ...] = ()              # GPS_RAW_INT, 3D fix or better, in NED
 
 
 @dataclass(frozen=True)

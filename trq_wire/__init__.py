@@ -22,6 +22,8 @@ Whatever both ends must compute identically lives here, once:
                 after garbage or a cut, frame sizes, a serial line's pace
     stream      the byte-stream transports on asyncio: a serial line (pyserial, driven with
                 add_reader) and a TCP connection
+    geodetic    the local NED frame around home and lat, lon degE7 / alt mm (flat earth): the
+                vehicle forms a fix's fields with it, a companion turns them back into NED
     connection  connection strings as MAVSDK and pymavlink write them, parsed in one place
     cache       the folder of generated and compiled code ($TRQ_CACHE_DIR, else
                 ~/.cache/trq-ftc), the C compiler found on PATH, and a shared library built

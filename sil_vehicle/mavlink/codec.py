@@ -18,6 +18,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from sil_vehicle.frames import ned_to_geodetic, quat_to_euler
 from trq_wire import actuators
+from trq_wire.geodetic import to_e7
 from trq_wire.signing import SignatureCheck
 
 SYSTEM_ID = 1
@@ -203,8 +204,7 @@ def local_position_ned(m: Measured) -> mavlink.MAVLink_message:
 
 
 def _geo(m: Measured, home: tuple[float, float, float]) -> tuple[int, int, int]:
-    lat, lon, alt = ned_to_geodetic(*m.pos_ned_m, *home)
-    return int(round(lat * 1e7)), int(round(lon * 1e7)), int(round(alt * 1000.0))
+    return to_e7(*ned_to_geodetic(*m.pos_ned_m, *home))
 
 
 def _heading_cdeg(m: Measured) -> int:
@@ -263,9 +263,8 @@ def highres_imu(imu, baro, mag, fields_updated: int) -> mavlink.MAVLink_message:
 
 def geodetic_e7(pos_ned_m, home: tuple[float, float, float]) -> tuple[int, int, int]:
     """(lat degE7, lon degE7, alt mm AMSL) of a NED position around home (flat earth)."""
-    lat, lon, alt = ned_to_geodetic(float(pos_ned_m[0]), float(pos_ned_m[1]),
-                                    float(pos_ned_m[2]), *home)
-    return int(round(lat * 1e7)), int(round(lon * 1e7)), int(round(alt * 1000.0))
+    return to_e7(*ned_to_geodetic(float(pos_ned_m[0]), float(pos_ned_m[1]),
+                                  float(pos_ned_m[2]), *home))
 
 
 def gnss_raw_int(r, home: tuple[float, float, float]) -> mavlink.MAVLink_message:
@@ -304,9 +303,8 @@ def _u32(value: float) -> int:
 
 
 def home_position(home: tuple[float, float, float], t_us: int) -> mavlink.MAVLink_message:
-    lat, lon, alt = home
     return mavlink.MAVLink_home_position_message(
-        int(round(lat * 1e7)), int(round(lon * 1e7)), int(round(alt * 1000.0)), 0.0, 0.0, 0.0,
+        *to_e7(*home), 0.0, 0.0, 0.0,
         [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, t_us)
 
 

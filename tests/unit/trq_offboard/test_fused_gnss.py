@@ -1,0 +1,191 @@
+"""The fused filter on a GNSS position source (trq_offboard/fused.py with position_source gnss):
+fixes at 10 Hz fused at their time of validity about 110 ms (11 control periods) before they
+arrive, through a history sized for it; dead reckoning through an outage, said, and the fix
+taken back after it (the gate does not lock it out); the controller file's GNSS keys."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import yaml
+from pymavlink.dialects.v20 import common as mavlink
+
+from trq_offboard.config import ConfigError, load_controller
+from trq_offboard.controller import Controller
+from trq_offboard.fused import FusedConfig, FusedFilter, HealthReport, rotation_ned_frd
+from trq_params.loader import read_yaml
+
+from conftest import ROOT
+
+G = 9.81
+H_US = 10_000                  # the control period
+FIX_EVERY = 10                 # periods between fixes: 10 Hz
+DELAY = 11                     # periods a fix arrives after its time of validity: 110 ms
+STD = np.array([0.011, 0.011, 0.011])
+CFG = FusedConfig(mocap_std_m=0.0005, accel_std_m_s2=0.3, model_acc_density=0.05,
+                  residual_walk_density=0.5, accel_bias_std=0.2,
+                  accel_bias_walk_density=0.01, pose_gate=25.0, dropout_s=0.3,
+                  imu_rate_hz=125, mocap_rate_hz=100, history=27, position_source="gnss")
+
+
+def _truth(t):
+    """The helix's plane motion at 1 m radius, 10 s a turn, and a slow climb: (p, v, a)."""
+    w, r = 2.0 * math.pi / 10.0, 1.0
+    p = np.array([r * math.cos(w * t), r * math.sin(w * t), -1.0 - 0.05 * t])
+    v = np.array([-r * w * math.sin(w * t), r * w * math.cos(w * t), -0.05])
+    a = np.array([-r * w * w * math.cos(w * t), -r * w * w * math.sin(w * t), 0.0])
+    return p, v, a
+
+
+def _fly(n_steps, *, seed=0, delay=DELAY, outage=(), cfg=CFG, model_error=(0.05, -0.04, 0.02),
+         bias_frd=(0.1, -0.05, 0.1)):
+    """The filter over n_steps periods: the known input the truth's acceleration less a
+    constant model error, two accelerometer samples a period, a fix every FIX_EVERY periods
+    (its time of validity) handed over `delay` periods later (none valid in the periods of
+    `outage`). Returns (filter, rows of (t_us, position error (3), health))."""
+    rng = np.random.default_rng(seed)
+    f = FusedFilter(cfg, G)
+    p0, v0, _ = _truth(0.0)
+    f.reset(0, p0, v0, 0.1)
+    euler = (0.0, 0.0, 0.3)
+    rot = rotation_ned_frd(euler)
+    pending = []
+    rows = []
+    for k in range(1, n_steps + 1):
+        t_us = k * H_US
+        for s in (t_us - 6000, t_us - 2000):
+            a = _truth(s * 1e-6)[2]
+            f_frd = rot.T @ (a - np.array([0.0, 0.0, G])) + np.asarray(bias_frd)
+            f.add_imu(f_frd + rng.normal(0.0, cfg.accel_std_m_s2, 3), euler)
+        if k % FIX_EVERY == 0:           # (the noise drawn in an outage too: the same draws)
+            pos = _truth(t_us * 1e-6)[0] + rng.normal(0.0, STD)
+            if k not in outage:
+                pending.append((k + delay, t_us, pos))
+        for arrive, t_fix, pos in [p for p in pending if p[0] == k]:
+            f.add_pose(t_fix, pos, STD)
+        pending = [p for p in pending if p[0] > k]
+        a_known = _truth((t_us - H_US / 2) * 1e-6)[2] - np.asarray(model_error)
+        health = f.step(t_us, a_known)
+        rows.append((t_us, f.x[0:3] - _truth(t_us * 1e-6)[0], health))
+    return f, rows
+
+
+def test_a_late_fix_fused_at_its_time_of_validity_matches_one_on_time():
+    """Fixes arriving 110 ms after their time of validity, fused through the history, give the
+    estimate of a filter that got each fix at its own time (the re-propagation is exact)."""
+    late, _ = _fly(400)
+    on_time, _ = _fly(400, delay=0)
+    # the on-time filter has fused 11 periods' more fixes at the end: compare where both have
+    # fused the same ones (the last fix's arrival)
+    late2, _ = _fly(400 + DELAY)
+    on_time2, _ = _fly(400 + DELAY, delay=0, outage=set(range(401, 401 + DELAY)))
+    assert np.allclose(late2.x, on_time2.x, atol=1e-9)
+    assert np.allclose(late2.P, on_time2.P, atol=1e-12)
+    assert late.dropped == 0 and not np.allclose(late.x, on_time.x, atol=1e-6)
+
+
+def test_a_history_shorter_than_the_delay_drops_the_fixes():
+    """With the mocap default of 8 periods a fix 11 periods late has no period before it left:
+    it is dropped and the filter dead-reckons; the configured history (27) keeps them."""
+    short = FusedConfig(**{**CFG.__dict__, "history": 8})
+    f, rows = _fly(300, cfg=short)
+    assert f.dropped > 0 and rows[-1][2].dead_reckoning
+    f, rows = _fly(300)
+    assert f.dropped == 0 and not rows[-1][2].dead_reckoning
+    # within the fixes' 1 sigma
+    assert np.sqrt(np.mean(np.array([r[1] for r in rows[200:]]) ** 2)) < 0.011
+
+
+def test_delayed_fixes_taken_as_new_lag_the_estimate():
+    """Fused at their arrival instead (time of validity ignored), the 110 ms delay costs the
+    estimate centimetres on the helix (0.63 m/s); at their time of validity, millimetres."""
+    def rms(rows):
+        return np.sqrt(np.mean(np.array([r[1] for r in rows[200:]]) ** 2))
+    _, good = _fly(800)
+    f = FusedFilter(CFG, G)          # the same fixes stamped with their arrival
+    rng = np.random.default_rng(0)
+    p0, v0, _ = _truth(0.0)
+    f.reset(0, p0, v0, 0.1)
+    rows = []
+    for k in range(1, 801):
+        t_us = k * H_US
+        if k % FIX_EVERY == 0 and k > DELAY:
+            t_fix = t_us - DELAY * H_US
+            f.add_pose(t_us, _truth(t_fix * 1e-6)[0] + rng.normal(0.0, STD), STD)
+        f.step(t_us, _truth((t_us - H_US / 2) * 1e-6)[2])
+        rows.append((t_us, f.x[0:3] - _truth(t_us * 1e-6)[0], None))
+    assert rms(good) < 0.01 and rms(rows) > 2.0 * rms(good), (rms(good), rms(rows))
+
+
+def test_an_outage_dead_reckons_says_so_and_takes_the_fix_back():
+    """4.5 s without a fix: dead reckoning from dropout_s after the last fix, said once
+    ("no gnss fix") and once when it is back; the first fix after it is taken though the
+    estimate has drifted past the gate (the gate does not lock fixes out), and the estimate is
+    back on the fixes within a second."""
+    outage = set(range(1001, 1451))              # fixes valid at 10.0 s to 14.5 s missing
+    f, rows = _fly(2000, outage=outage)
+    report = HealthReport("gnss fix")
+    texts = []
+    for _, _, h in rows:
+        texts += [(m.severity, m.text) for m in report.messages(h)]
+    assert texts == [(mavlink.MAV_SEVERITY_WARNING, "fused filter: no gnss fix, dead reckoning"),
+                     (mavlink.MAV_SEVERITY_NOTICE, "fused filter: gnss fix back")]
+    dead = np.array([r[2].dead_reckoning for r in rows])
+    t = np.array([r[0] for r in rows]) * 1e-6
+    # the last fix valid at 9.99 s arrived at 10.10 s: dead reckoning from 10.29 s on
+    assert not dead[t < 10.25].any() and dead[(t > 10.35) & (t < 14.6)].all()
+    assert not dead[t > 14.8].any()
+    err = np.array([np.linalg.norm(r[1]) for r in rows])
+    drift = err[(t > 10.0) & (t < 14.6)].max()
+    assert drift > 0.05                          # it did drift (the model's error)
+    assert rows[-1][2].rejected == 0             # the fix back was not gated out
+    before = err[(t > 9.0) & (t < 10.0)].max()
+    assert err[(t > 15.6)].max() < max(0.05, 2.0 * before)    # back on the fixes
+
+
+def test_a_wrong_fix_is_gated_while_the_fixes_flow():
+    f, rows = _fly(300)
+    f.add_pose(rows[-1][0], f.x[0:3] + np.array([0.5, 0.0, 0.0]), STD)
+    h = f.step(rows[-1][0] + H_US, np.zeros(3))
+    assert h.rejected == 1 and h.test_ratio > 1.0
+
+
+# --- the controller file ---------------------------------------------------------------------
+
+def test_the_gnss_controller_file_asks_for_the_fix_and_home_and_sizes_the_history():
+    cfg = load_controller(ROOT / "params/controller/trq_nmpc_eso_fused_gnss.yaml")
+    f = cfg.fused
+    assert f.position_source == "gnss" and f.gnss_rate_hz == 10
+    # the history reaches past the oldest fix fused (gnss_max_age_s) and the period before it
+    assert (f.history - 1) / cfg.control_rate_hz >= 0.25 + 1.0 / cfg.control_rate_hz - 1e-9
+    streams = Controller.sensor_streams.fget(type("C", (), {"cfg": cfg})())
+    assert streams == {"HIGHRES_IMU": f.imu_rate_hz, "GPS_RAW_INT": 10, "HOME_POSITION": 1}
+    mocap = load_controller(ROOT / "params/controller/trq_nmpc_eso_fused.yaml")
+    assert Controller.sensor_streams.fget(type("C", (), {"cfg": mocap})()) == {
+        "HIGHRES_IMU": mocap.fused.imu_rate_hz, "ATT_POS_MOCAP": mocap.fused.mocap_rate_hz}
+    assert mocap.fused.history == 8
+
+
+def _controller(tmp_path, estimator):
+    src = read_yaml(ROOT / "params/controller/trq_nmpc_eso.yaml")
+    src["extends"] = str(ROOT / "params/controller/nmpc.yaml")
+    src["vehicle"] = str(ROOT / "params/vehicle/trq.yaml")
+    src["estimator"] = estimator
+    path = tmp_path / "g.yaml"
+    path.write_text(yaml.safe_dump(src))
+    return path
+
+
+@pytest.mark.parametrize("estimator, match", [
+    ({"kind": "fused", "position_source": "lidar"}, r"g\.yaml.*estimator\.position_source"),
+    ({"kind": "fused", "gnss_rate_hz": 10}, r"g\.yaml.*estimator\.gnss_rate_hz.*position_source"),
+    ({"kind": "fused", "position_source": "gnss", "gnss_std_m": [0.01]},
+     r"g\.yaml.*estimator\.gnss_std_m"),
+    ({"kind": "fused", "position_source": "gnss", "gnss_max_age_s": 5.0},
+     r"g\.yaml.*estimator\.gnss_max_age_s.*5"),
+])
+def test_gnss_key_errors_name_file_key_and_value(tmp_path, estimator, match):
+    with pytest.raises(ConfigError, match=match):
+        load_controller(_controller(tmp_path, estimator))
