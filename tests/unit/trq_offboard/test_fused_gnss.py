@@ -189,3 +189,55 @@ def _controller(tmp_path, estimator):
 def test_gnss_key_errors_name_file_key_and_value(tmp_path, estimator, match):
     with pytest.raises(ConfigError, match=match):
         load_controller(_controller(tmp_path, estimator))
+
+
+# --- a closed-loop flight through an outage ------------------------------------------------------
+
+OUTAGE_OFF_S, OUTAGE_S = 5.0, 4.5       # vehicle time
+# the vehicle (truth) against the reference from the outage's start to 2 s after it: the
+# autopilot's own estimate drifts about as far through the same outage (its velocity is blended
+# in); and the largest change of the estimate in one period as the fix comes back
+FLOWN_BOUND_M = 0.75
+JUMP_BOUND_M = 0.25
+
+
+@pytest.mark.slow
+def test_an_rtk_flight_through_a_gnss_outage(tmp_path):
+    """trq_nmpc_eso_fused_gnss hovers under rtk in a 4 m/s wind and loses the receiver for
+    4.5 s: its filter dead-reckons (controller.csv says so through the outage and not after),
+    the vehicle stays within FLOWN_BOUND_M of the reference through it and after, and the
+    fix comes back without a jump in the estimate past JUMP_BOUND_M.
+
+    4.5 s and not issue 34's 5 s: the vehicle's own estimator has the same outage, and its
+    position-lost failsafe (EKF2_NOAID_TOUT, 5 s without a position aid; sil_vehicle/sitl.py
+    `_navigation`) takes over at 5 s and lands, whatever the companion's filter knows: a 5 s
+    outage would test the vehicle's failsafe, not the filter (nav_failure stays 0 here)."""
+    from trq_lab import harness
+    from trq_lab.metrics import read_csv
+    reference = {"kind": "hover", "altitude_m": 1.0, "climb_speed_m_s": 0.8, "hold_s": 0.5,
+                 "duration_s": 13.0, "ramp_s": 0.5}
+    cfg = load_controller(harness.prepare_controller("trq_nmpc_eso_fused_gnss", reference,
+                                                     tmp_path))
+    sim = harness.sim_params(cfg.vehicle.file, cfg.control_rate_hz, seed=5, sensing="rtk",
+                             wind_speed_m_s=4.0)
+    events = harness.script({"at_s": OUTAGE_OFF_S, "sensor": "gnss", "failure": "off"},
+                            {"at_s": OUTAGE_OFF_S + OUTAGE_S, "sensor": "gnss",
+                             "failure": "ok"})
+    res = harness.fly_inprocess(cfg, sim, events, out_dir=tmp_path / "f", timeout_s=40.0)
+    assert res.status in ("done", "not landed"), res.summary
+    _, truth = read_csv(res.flight_csv)
+    _, steps = read_csv(res.controller_csv)
+    assert truth["nav_failure"].max() == 0 and truth["crashed"].max() == 0
+    at = np.minimum(np.searchsorted(truth["t_us"], steps["stamp_us"]), len(truth["t_us"]) - 1)
+    t_vehicle = steps["stamp_us"] * 1e-6
+    dead = steps["est_dead_reckoning"] > 0
+    off, on = OUTAGE_OFF_S, OUTAGE_OFF_S + OUTAGE_S
+    assert dead[(t_vehicle > off + 0.6) & (t_vehicle < on)].all()
+    assert not dead[t_vehicle > on + 1.0].any() and not dead[t_vehicle < off].any()
+    flown = np.sqrt(sum((truth[f"pos_{a}_m"][at] - steps[f"ref_pos_{a}_m"]) ** 2
+                        for a in "ned"))
+    window = (t_vehicle > off) & (t_vehicle < on + 2.0)
+    step = np.sqrt(sum(np.diff(steps[f"pos_{a}_m"]) ** 2 for a in "ned"))
+    near = (t_vehicle[1:] > on - 0.2) & (t_vehicle[1:] < on + 1.0)
+    assert flown[window].max() < FLOWN_BOUND_M
+    assert step[near].max() < JUMP_BOUND_M
