@@ -499,3 +499,27 @@ def test_the_loop_answers_then_prepares_in_its_thread(fail_at):
         assert [r.cpu.prepare_ns for r in records[:3]] == [7_000, 14_000, 21_000]
     else:
         assert ctl.events == ["step 0.00", "prepare", "step 0.01", "prepare"]
+
+
+def test_gnss_fixes_wait_for_the_home_and_then_come_in_ned():
+    """With GPS_RAW_INT and HOME_POSITION among the controller's streams: a fix before the home
+    is kept, placed in NED once HOME_POSITION arrives, and a 2D fix is no position."""
+    from sil_vehicle.mavlink import codec
+    from sil_vehicle.sensors.gnss import GnssReading
+
+    home = (51.5246, -0.134, 30.0)
+    flight, _, ctl = make_flight()
+    flight.streams = {"HIGHRES_IMU": 125, "GPS_RAW_INT": 10, "HOME_POSITION": 1}
+
+    def fix(t_us, pos, fix_type=6):
+        r = GnssReading(t_us, t_us + 110_000, pos, (0.0, 0.0, 0.0), fix_type, 24, 0.01, 0.01,
+                        0.05)
+        return from_vehicle(codec.gnss_raw_int(r, home))
+
+    flight.on_message(fix(100_000, (1.0, 2.0, -3.0)))
+    assert flight.home is None and not flight._fixes
+    flight.on_message(from_vehicle(codec.home_position(home, 200_000)))
+    flight.on_message(fix(200_000, (1.5, 2.0, -3.0)))
+    flight.on_message(fix(300_000, (9.0, 9.0, -9.0), fix_type=mavlink.GPS_FIX_TYPE_2D_FIX))
+    assert [f.t_us for f in flight._fixes] == [100_000, 200_000]
+    assert flight._fixes[1].pos_ned_m == pytest.approx((1.5, 2.0, -3.0), abs=0.006)
