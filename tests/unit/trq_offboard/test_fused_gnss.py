@@ -168,6 +168,39 @@ def test_the_gnss_controller_file_asks_for_the_fix_and_home_and_sizes_the_histor
     assert mocap.fused.history == 8
 
 
+def test_the_gnss_filter_starts_at_the_first_fix():
+    """With a GNSS source the filter starts at the first fix (a pose does not start it): until
+    then the state goes through as it came."""
+    import dataclasses
+
+    from trq_offboard.nmpc.base import Solver
+    from trq_offboard.records import (PositionFix, ReferenceSample, SensorSamples, SolveInfo,
+                                      SolveStatus, StateEstimate)
+    from trq_offboard.reference import ConstantReference
+
+    class Hold(Solver):                    # no NMPC (seconds to build): the plan holds u
+        def __init__(self, n):
+            self.n = n
+            self.ocp = type("NoOcp", (), {"n_lag": 0, "set_throttle_scale": lambda s, e: None})()
+
+        def solve(self, x0, x_ref, d, u_prev, guess, y0=None):
+            return (np.tile(u_prev, (self.n, 1)), np.tile(x0, (self.n + 1, 1)),
+                    SolveInfo(SolveStatus.OK, 1, 1e-4, 0.0))
+
+    cfg = dataclasses.replace(
+        load_controller(ROOT / "params/controller/trq_nmpc_eso_fused_gnss.yaml"),
+        effectiveness=None)
+    ctl = Controller(cfg, solver=Hold(cfg.horizon_steps))
+    ref = ConstantReference(ReferenceSample((0.0, 0.0, -2.0), (0.0, 0.0, 0.0), 0.0))
+    state = StateEstimate((0.1, 0.0, -2.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+    pose = SensorSamples(10_000, ((0.0, 0.0, -9.81),), ((5_000, (0.1, 0.0, -2.0)),))
+    ctl.step(0.01, state, None, ref, pose)
+    assert not ctl._fused_on and ctl._health is None
+    fix = PositionFix(0, (0.1, 0.0, -2.0), (0.01, 0.01, 0.01))
+    ctl.step(0.02, state, None, ref, SensorSamples(20_000, ((0.0, 0.0, -9.81),), (), (fix,)))
+    assert ctl._fused_on and ctl._health is not None
+
+
 def _controller(tmp_path, estimator):
     src = read_yaml(ROOT / "params/controller/trq_nmpc_eso.yaml")
     src["extends"] = str(ROOT / "params/controller/nmpc.yaml")
