@@ -488,21 +488,35 @@ class FusedFilter:
 
 
 class HealthReport:
-    """The filter's health for the ground station: STATUSTEXT WARNING "fused filter: no pose,
-    dead reckoning" when it starts, NOTICE "fused filter: pose back" when it ends (once per
-    change; `what` names the position source's sample: "pose", "gnss fix"). Pure: the same
-    healths give the same messages."""
+    """The filter's health for the ground station, as STATUSTEXT: WARNING "fused filter: no
+    pose, dead reckoning" when dead reckoning starts, NOTICE "fused filter: pose back" when it
+    ends (once per change); WARNING "fused filter: pose rejected (R x gate)" when its
+    gate starts rejecting (once per run of periods with a rejection: the innovation test, the
+    filter's divergence test; rejected for dropout_s, it dead-reckons and takes the source back
+    past the gate). `what` names the position source's sample: "pose", "gnss fix". Pure: the
+    same healths give the same messages."""
 
     def __init__(self, what: str = "pose") -> None:
         self._dead = False
+        self._rejected: int | None = None     # the count last seen
+        self._rejecting = False
         self.what = what
 
     def messages(self, health: Health) -> list:
-        if health.dead_reckoning == self._dead:
-            return []
-        self._dead = health.dead_reckoning
-        severity, text = ((mavlink.MAV_SEVERITY_WARNING,
-                           f"fused filter: no {self.what}, dead reckoning")
-                          if self._dead else (mavlink.MAV_SEVERITY_NOTICE,
-                                              f"fused filter: {self.what} back"))
-        return [mavlink.MAVLink_statustext_message(severity, text.encode("ascii"))]
+        out = []
+        new = self._rejected is not None and health.rejected > self._rejected
+        self._rejected = health.rejected
+        if new and not self._rejecting:
+            # within STATUSTEXT's 50 characters: the test ratio to 3 digits
+            text = f"fused filter: {self.what} rejected ({health.test_ratio:.3g} x gate)"
+            out.append(mavlink.MAVLink_statustext_message(mavlink.MAV_SEVERITY_WARNING,
+                                                          text.encode("ascii")))
+        self._rejecting = new
+        if health.dead_reckoning != self._dead:
+            self._dead = health.dead_reckoning
+            severity, text = ((mavlink.MAV_SEVERITY_WARNING,
+                               f"fused filter: no {self.what}, dead reckoning")
+                              if self._dead else (mavlink.MAV_SEVERITY_NOTICE,
+                                                  f"fused filter: {self.what} back"))
+            out.append(mavlink.MAVLink_statustext_message(severity, text.encode("ascii")))
+        return out

@@ -146,9 +146,22 @@ def test_a_pose_far_off_is_rejected_by_the_gate():
     for k in range(1, 20):
         f.add_pose(k * H_US - H_US, [0.0, 0.0, -1.0])
         f.step(k * H_US, np.zeros(3))
-    f.add_pose(19 * H_US, [0.5, 0.0, -1.0])     # half a metre off
-    h = f.step(20 * H_US, np.zeros(3))
-    assert h.rejected == 1 and h.test_ratio > 1.0 and abs(f.x[0]) < 1e-3
+    report = HealthReport()
+    assert report.messages(f.health(19 * H_US)) == []
+    texts = []
+    for k in (20, 21, 22, 24):                   # off two periods running, then once more
+        f.add_pose(k * H_US - H_US, [0.5, 0.0, -1.0])      # half a metre off
+        h = f.step(k * H_US, np.zeros(3))
+        texts += [m.text for m in report.messages(h)]
+        if k == 22:
+            f.add_pose(22 * H_US, [0.0, 0.0, -1.0])
+            texts += [m.text for m in report.messages(f.step(23 * H_US, np.zeros(3)))]
+    assert h.rejected == 4 and h.test_ratio > 1.0 and abs(f.x[0]) < 1e-3
+    # said once per run of rejections, with the innovation's size against the gate
+    assert len(texts) == 2 and all(t.startswith("fused filter: pose rejected (")
+                                   and t.endswith(" x gate)") for t in texts)
+    assert float(texts[0].split("(")[1].split(" ")[0]) > 1.0
+    assert all(len(t) <= 50 for t in texts)             # STATUSTEXT's text field
 
 
 def test_the_autopilots_velocity_fused_as_a_measurement():
