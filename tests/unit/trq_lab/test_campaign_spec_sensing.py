@@ -104,11 +104,15 @@ def test_a_sample_fixes_or_draws_a_profile_without_moving_the_other_draws(tmp_pa
 
 def test_the_shipped_sensing_campaigns():
     plan = load_campaign(PARAMS / "campaigns" / "sensing_seeds.yaml")
-    assert len(plan.flights) == 240 and plan.sensings == ("truth", "mocap", "rtk", "gnss")
-    assert set(plan.controllers) == {"trq_nmpc_eso", "trq_nmpc_eso_paper", "trq_nmpc"}
+    # five controllers, 20 seeds; each outage under the profiles that carry its sensor
+    outages = {"truth": 1, "mocap": 2, "rtk": 2, "gnss": 2}
+    assert len(plan.flights) == 100 * sum(outages.values())
+    assert plan.sensings == ("truth", "mocap", "rtk", "gnss")
+    assert set(plan.controllers) == {"trq_nmpc_eso", "trq_nmpc_eso_fused",
+                                     "trq_nmpc_eso_fused_gnss", "trq_nmpc_eso_paper", "trq_nmpc"}
     for p in plan.sensings:
         fs = [f for f in plan.flights if f["sensing"] == p]
-        assert len(fs) == 60 and len({f["seed"] for f in fs}) == 20
+        assert len(fs) == 100 * outages[p] and len({f["seed"] for f in fs}) == 20
         assert {json.dumps(f["fault"], sort_keys=True) for f in fs} == {json.dumps(
             {"at_s": 12.0, "effectiveness": 0.5, "motor": 1}, sort_keys=True)}
         assert {(f["wind"]["speed_m_s"], f["wind"]["direction_deg"]) for f in fs} == {(8.0, 0.0)}

@@ -82,11 +82,19 @@ def test_a_bad_target_names_the_file_key_and_value(tmp_path, target, key, value)
 
 def test_sensing_seeds_states_issue_33s_targets():
     plan = load_campaign(PARAMS / "campaigns" / "sensing_seeds.yaml")
-    got = {(t.sensing, t.metric, t.max, t.per) for t in plan.flight_targets}
+    issue_34 = [t for t in plan.flight_targets if t.controller == "trq_nmpc_eso_fused"]
+    assert [(t.outage, t.metric, t.max) for t in issue_34] == [
+        ("mocap", "max_pos_err_outage_m", 0.05)]
+    assert {(t.controller, t.sensing, t.outage, t.max_median_ratio, t.against)
+            for t in plan.paired_targets} == {
+        ("trq_nmpc_eso_fused", "mocap", "none", 0.8, "trq_nmpc_eso"),
+        ("trq_nmpc_eso_fused_gnss", "rtk", "none", 0.8, "trq_nmpc_eso")}
+    got = {(t.sensing, t.metric, t.max, t.per) for t in plan.flight_targets
+           if t.controller == "trq_nmpc_eso"}
     assert got == {("mocap", "rmse_pos_after_fault_m", 0.01, None),
                    ("mocap", "max_yaw_err_deg", 3.0, None), ("mocap", "diagnosis_s", 2.0, None),
                    ("rtk", "rmse_pos_after_fault_m", 0.05, None),
                    ("rtk", "max_yaw_err_deg", 5.0, None), ("gnss", "crashed", 0.0, None),
                    ("gnss", "rmse_pos_after_fault_m", 1.5, "est_rmse_pos_m")}
-    assert {t.controller for t in plan.flight_targets} == {"trq_nmpc_eso"}
+    assert {t.controller for t in plan.flight_targets} == {"trq_nmpc_eso", "trq_nmpc_eso_fused"}
     assert {t.share for t in plan.flight_targets} == {1.0}
