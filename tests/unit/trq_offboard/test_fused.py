@@ -288,3 +288,42 @@ def test_without_a_pose_the_fused_controller_flies_the_state_as_it_came():
     pose = SensorSamples(300_000, (), ((295_000, (0.3, 0.0, -2.0)),))
     fused.step(0.3, state, None, ref, pose)
     assert fused._fused_on and fused._health is not None
+
+
+def test_the_motors_share_handed_to_the_filter_is_bounded_as_the_observers_d():
+    """At a spool-up on the ground the effectiveness observer can read the ground's reaction as
+    a motor deficit far beyond any motor's (docs/decisions/2026-12-05-fused-filter-motors.md,
+    the addendum): the share the filter takes is bounded by the observer's own clamp, its
+    direction kept."""
+    from trq_offboard.controller import Controller
+    from trq_offboard.nmpc.base import Solver
+    from trq_offboard.records import ReferenceSample, SolveInfo, SolveStatus, StateEstimate
+    from trq_offboard.reference import ConstantReference
+
+    class Hold(Solver):
+        def __init__(self, n):
+            self.n = n
+            self.ocp = type("NoOcp", (), {"n_lag": 0, "set_throttle_scale": lambda s, e: None})()
+
+        def solve(self, x0, x_ref, d, u_prev, guess, y0=None):
+            return (np.tile(self.u, (self.n, 1)), np.tile(x0, (self.n + 1, 1)),
+                    SolveInfo(SolveStatus.OK, 1, 1e-4, 0.0))
+
+    cfg = load_controller(ROOT / "params" / "controller" / "trq_nmpc_eso_fused.yaml")
+    ctl = Controller(cfg, solver=Hold(cfg.horizon_steps))
+    ctl.solver.u = ctl.u_trim
+    real = ctl.motors.step
+    huge = np.array([-300.0, 400.0, -28000.0, 0.0, 0.0, 0.0])
+
+    def step(x, d, *args):
+        out = real(x, d, *args)
+        return (out[0] - huge,) + tuple(out[1:])
+    ctl.motors.step = step
+    ref = ConstantReference(ReferenceSample((0.0, 0.0, -2.0), (0.0, 0.0, 0.0), 0.0))
+    state = StateEstimate((0.0, 0.0, -2.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+    for k in range(1, 4):
+        ctl.step(0.01 * k, state, None, ref)
+        share = ctl._motor_share
+        lim = cfg.eso.max_disturbance[0]
+        assert np.linalg.norm(share) == pytest.approx(lim)
+        assert np.dot(share, huge[0:3]) / (lim * np.linalg.norm(huge[0:3])) > 0.999
