@@ -344,7 +344,7 @@ class Estimator(Strict):
     (`fused`; its parameters below, defaults for the `mocap` profile's sensors)."""
     kind: Choice("autopilot", "fused") = "autopilot"
     mocap_std_m: Num(1e-6, 1.0) = 0.0005               # the pose's noise, 1 sigma per axis
-    accel_std_m_s2: Num(1e-4, 100.0) = 0.35            # one accelerometer sample's, per axis
+    accel_std_m_s2: Num(1e-4, 100.0) = 0.35            # one HIGHRES_IMU's, per axis
     model_acc_density_m_s2_rthz: Num(0.0, 100.0) = 0.05    # the model's white error
     residual_walk_m_s3_rthz: Num(1e-6, 1e3) = 0.5      # a_r's random walk
     accel_bias_std_m_s2: Num(1e-4, 10.0) = 0.2         # its bias at the start, 1 sigma
@@ -355,8 +355,10 @@ class Estimator(Strict):
     mocap_rate_hz: Int(1, 1000) = 100                  # ATT_POS_MOCAP asked of the vehicle
     history: Int(2, 100) = 8                           # control periods kept (delayed pose)
     # the known input: the model's acceleration plus the observer's disturbance (issue 34's
-    # coupling), or the model's alone (a_r then carries the disturbance)
-    disturbance_input: Choice("observer", "none") = "observer"
+    # coupling, `observer`), plus the motors' share of it that the effectiveness observer
+    # explains (`motors`: the model with the motors' estimated effectiveness; nothing without
+    # that observer), or the model's alone (`none`); a_r carries what the input leaves out
+    disturbance_input: Choice("observer", "motors", "none") = "observer"
     # the autopilot's velocity (ODOMETRY) fused as a measurement of v, 1 sigma; 0: not fused
     autopilot_vel_std_m_s: Num(0.0, 10.0) = 0.0
 
@@ -841,6 +843,17 @@ class Imu(Strict):
     accel_bias_random_walk_m_s3_rthz: Num(0.0, 10.0)
     accel_turn_on_bias_m_s2: Num(0.0, 10.0)
     accel_vibration_m_s2: Num(0.0, 100.0)
+    # what the vehicle's HIGHRES_IMU carries: the samples' mean over each integration interval
+    # of this rate (PX4's IMU_INTEG_RATE, default 200 Hz: sensor_combined is the delta velocity
+    # and angle over that interval, not one sample); at most the IMU's rate
+    integration_rate_hz: Int(1, 10_000) = 200
+
+    @model_validator(mode="after")
+    def _integration(self) -> "Imu":
+        if self.integration_rate_hz > self.rate_hz:
+            raise Invalid("imu.integration_rate_hz", self.integration_rate_hz,
+                          f"at most the IMU's rate_hz ({self.rate_hz})")
+        return self
 
 
 class Baro(Strict):

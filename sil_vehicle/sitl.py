@@ -162,6 +162,12 @@ class Sitl:
         self._on_arrival = {ON_ARRIVAL[n]: n for n in ON_ARRIVAL if n in has}
         self._arrival_sent: dict[tuple[str, str], int] = {}     # (link, stream) -> arrival_us
         self._imu_sent: dict[str, dict[str, int]] = {link: {} for link in LINKS}
+        # HIGHRES_IMU's accelerometer and gyro: the mean over the last integration interval
+        self.imu_mean: imu.ImuReading | None = None
+        self._imu_sum = [0.0] * 6
+        self._imu_count = 0
+        self._imu_interval_us = (profile.imu.samples_per_interval * profile.imu.period_us
+                                 if profile is not None and profile.imu is not None else 1)
         self._sources = tuple(n for n in ("mocap", "gnss") if n in has)
         self.log_columns = list(LOG_COLUMNS) + [c for n in self._sources
                                                 for c in SOURCE_LOG_COLUMNS[n]]
@@ -231,7 +237,27 @@ class Sitl:
         latest = self.latest
         for r in readings:
             latest[SENSOR_OF[type(r)]] = r
+            if type(r) is imu.ImuReading:
+                self._integrate_imu(r)
         return readings
+
+    def _integrate_imu(self, r: imu.ImuReading) -> None:
+        """The IMU's samples summed over each integration interval (the profile's
+        imu.integration_rate_hz, PX4's IMU_INTEG_RATE; intervals end on its multiples of the
+        clock); at its end their mean is what HIGHRES_IMU carries (`imu_mean`), stamped with the
+        interval's last sample."""
+        acc = self._imu_sum
+        g, a = r.gyro, r.accel
+        for i in range(3):
+            acc[i] += g[i]
+            acc[3 + i] += a[i]
+        self._imu_count += 1
+        if r.t_us % self._imu_interval_us == 0:
+            n = self._imu_count
+            self.imu_mean = imu.ImuReading(r.t_us, tuple(acc[i] / n for i in range(3)),
+                                           tuple(acc[3 + i] / n for i in range(3)))
+            self._imu_sum = [0.0] * 6
+            self._imu_count = 0
 
     def _arrivals(self) -> list[Outgoing]:
         """GPS_RAW_INT and ATT_POS_MOCAP of the readings that arrived at this tick, on each
@@ -260,9 +286,10 @@ class Sitl:
         return codec.att_pos_mocap(r)
 
     def _highres_imu(self, link: str | None) -> mavlink.MAVLink_message:
-        """HIGHRES_IMU of the latest IMU, barometer and magnetometer readings; fields_updated
-        marks those not yet sent on this link."""
-        latest = self.latest
+        """HIGHRES_IMU of the IMU's mean over its last integration interval and the latest
+        barometer and magnetometer readings; fields_updated marks those not yet sent on this
+        link."""
+        latest = {**self.latest, "imu": self.imu_mean}
         sent = self._imu_sent[link] if link is not None else {}
         bits = 0
         for name, fields in (("imu", codec.IMU_FIELDS), ("baro", codec.BARO_FIELDS),
@@ -271,7 +298,7 @@ class Sitl:
             if r is not None and sent.get(name) != r.t_us:
                 bits |= fields
                 sent[name] = r.t_us
-        return codec.highres_imu(latest["imu"], latest.get("baro"), latest.get("mag"), bits)
+        return codec.highres_imu(self.imu_mean, latest.get("baro"), latest.get("mag"), bits)
 
     def _deliver(self, out: list[Outgoing], impaired: bool = True) -> list[Outgoing]:
         """Pass outgoing messages through the impaired links (unless `impaired` is False), and
@@ -441,7 +468,7 @@ class Sitl:
         """Can `build` make the message now? Not a raw sensor's the profile does not carry,
         nor one whose sensor has not reported yet."""
         if stream == "HIGHRES_IMU":
-            return "HIGHRES_IMU" not in self._not_periodic and "imu" in self.latest
+            return "HIGHRES_IMU" not in self._not_periodic and self.imu_mean is not None
         if stream == "ESTIMATOR_STATUS":
             return self.estimator is not None
         if stream in self._on_arrival:

@@ -176,10 +176,12 @@ class Controller:
         self.failures = 0
         # the fused filter (estimator kind fused): position and velocity from the pose, the IMU
         # and the model with the observer's d; started at the first step that brings sensors
-        self.fused = (FusedFilter(cfg.fused, vm.gravity_m_s2) if cfg.fused is not None
-                      else None)
+        self.fused = (FusedFilter(cfg.fused, vm.gravity_m_s2,
+                                  codegen=cfg.solver.codegen == "auto")
+                      if cfg.fused is not None else None)
         self._fused_on = False
         self._eso_d = np.zeros(6)                # the observer's d of the last step
+        self._motor_share = np.zeros(3)          # the motors' share of it (effectiveness)
         self._health: EstimatorHealth | None = None
 
     @property
@@ -282,6 +284,7 @@ class Controller:
         if self.motors is not None:
             d, path, y_act, self._scale = self.motors.step(x, d, y_now, t_prev, t_s, t_act,
                                                            self.solver.ocp)
+            self._motor_share = d_obs[0:3] - d[0:3]
         c2 = clock()
         self._last_t = float(t_s)
         self._last_d = d
@@ -362,8 +365,11 @@ class Controller:
             f.add_pose(t_us, pos)
         if t_s > self._last_t and sensors.stamp_us > f.t_us:
             a_known = self._b0(x, t_s, applied, u_applied, path)[0:3]
-            if self.cfg.fused.disturbance_input:
+            kind = self.cfg.fused.disturbance_input
+            if kind == "observer":
                 a_known = a_known + self._eso_d[0:3]
+            elif kind == "motors":
+                a_known = a_known + self._motor_share
             health = f.step(sensors.stamp_us, a_known, x[3:6])
         else:
             health = f.health(sensors.stamp_us)

@@ -55,9 +55,11 @@ class ImuParams:
     accel_bias_random_walk_m_s3_rthz: float
     accel_turn_on_bias_m_s2: float
     accel_vibration_m_s2: float
+    integration_rate_hz: int = 200      # HIGHRES_IMU's interval (PX4's IMU_INTEG_RATE)
 
     # derived once (per-sample standard deviations)
     period_us: int = field(init=False)
+    samples_per_interval: int = field(init=False)     # the integration interval, in samples
     gyro_white_rad_s: float = field(init=False)
     accel_white_m_s2: float = field(init=False)
     gyro_bias_step_rad_s: float = field(init=False)
@@ -67,6 +69,7 @@ class ImuParams:
         dt = 1.0 / self.rate_hz
         for name, value in (
                 ("period_us", 1_000_000 // self.rate_hz),
+                ("samples_per_interval", max(1, round(self.rate_hz / self.integration_rate_hz))),
                 ("gyro_white_rad_s", white_std(self.gyro_noise_density_rad_s_rthz, self.rate_hz)),
                 ("accel_white_m_s2", white_std(self.accel_noise_density_m_s2_rthz, self.rate_hz)),
                 ("gyro_bias_step_rad_s",

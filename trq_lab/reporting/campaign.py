@@ -201,6 +201,64 @@ def _controller_summary(campaign: Campaign, rows: list[dict]) -> dict:
     return out
 
 
+# the columns of a flight's conditions: two controllers' flights with the same are a pair
+_CONDITION_PREFIXES = ("sensing", "seed", "repeat", "fault_", "wind_", "link_", "traj_",
+                       "plant_", "outage")
+
+
+def _conditions(r: dict) -> tuple:
+    return tuple(sorted((k, str(v)) for k, v in r.items() if k.startswith(_CONDITION_PREFIXES)))
+
+
+def paired_by_seed(campaign: Campaign, rows: list[dict]) -> tuple[list[str], dict]:
+    """Each controller against the campaign's first on the same conditions and seed (flight by
+    flight, per sensing profile): (report lines, summary). A pair counts where both flew (not
+    failed); the ratio is RMSE after the fault, the other's over the first's, over the pairs
+    where neither crashed; a later diagnosis is the other's diagnosis_s above the first's (or
+    missing where the first's is known)."""
+    head = campaign.controllers[0]
+    by: dict = {}
+    for r in rows:
+        if r.get("status") != "failed":
+            by.setdefault((r["sensing"], _conditions(r)), {})[r["controller"]] = r
+    lines = [f"## Paired, flight by flight, against `{head}`", "",
+             f"Each flight of a controller against `{head}`'s under the same conditions and "
+             "seed. Ratio: RMSE after the fault, the controller's over "
+             f"`{head}`'s (median and range over the pairs where neither crashed); better: "
+             "a lower RMSE or flying where the other crashed; a later diagnosis: its "
+             "diagnosis_s above the other's.", "",
+             "| sensing | controller | pairs | better | median ratio (range) | later diagnosis | "
+             "it crashed | the other crashed |", "|---|---|---|---|---|---|---|---|"]
+    summary: dict = {}
+    for p in campaign.sensings:
+        for c in campaign.controllers[1:]:
+            pairs = [(g[c], g[head]) for (s, _), g in by.items() if s == p and c in g
+                     and head in g]
+            if not pairs:
+                continue
+            ratios = [_rmse_of(a) / _rmse_of(b) for a, b in pairs
+                      if not a["crashed"] and not b["crashed"] and _rmse_of(a) is not None
+                      and _rmse_of(b)]
+            better = sum((not a["crashed"] and b["crashed"]) or (
+                not a["crashed"] and _rmse_of(a) is not None and _rmse_of(b) is not None
+                and _rmse_of(a) < _rmse_of(b)) for a, b in pairs)
+            later = sum(b.get("diagnosis_s") is not None and (
+                a.get("diagnosis_s") is None or a["diagnosis_s"] > b["diagnosis_s"])
+                for a, b in pairs)
+            med = float(statistics.median(ratios)) if ratios else None
+            crashed = (sum(bool(a["crashed"]) for a, _ in pairs),
+                       sum(bool(b["crashed"]) for _, b in pairs))
+            rng = (f" ({min(ratios):.3f}-{max(ratios):.3f})" if ratios else "")
+            lines.append(f"| {sensing_label(p)} | {c} | {len(pairs)} | {better} | "
+                         f"{fmt(med, '{:.3f}')}{rng} | {later} | {crashed[0]} | {crashed[1]} |")
+            summary.setdefault(sensing_label(p) or "-", {})[c] = {
+                "pairs": len(pairs), "better": better, "median_ratio": med,
+                "min_ratio": min(ratios) if ratios else None,
+                "max_ratio": max(ratios) if ratios else None, "later_diagnosis": later,
+                "crashed": crashed[0], "other_crashed": crashed[1]}
+    return (lines + [""] if summary else []), summary
+
+
 def meets(r: dict, target) -> bool:
     """Whether one flight's row meets a flight target (trq_params.schema.FlightTarget): not
     failed, not crashed (unless the target is on `crashed` itself), its metric (and `per`)
@@ -382,6 +440,9 @@ def write_report(campaign: Campaign, rows: list[dict], out: Path, run_info: dict
     if varied:
         summary["sensing"] = {sensing_label(p): _controller_summary(campaign, prs)
                               for p, prs in groups}
+    if not campaign.has_plant and len(campaign.controllers) > 1:
+        pair_lines, summary["paired_by_seed"] = paired_by_seed(campaign, rows)
+        lines += pair_lines
     target_lines, failures, headline, judged = judge_flight_targets(campaign, rows)
     if judged:
         lines += target_lines

@@ -1,0 +1,66 @@
+"""A campaign's paired comparison (trq_lab.reporting.campaign.paired_by_seed): each controller's
+flight against the first controller's under the same conditions and seed, per sensing profile;
+a failed flight makes no pair, a crash is never in the ratio, a later diagnosis is counted."""
+
+from __future__ import annotations
+
+import pytest
+from conftest import PARAMS
+
+from trq_lab.campaign.spec import load_campaign
+from trq_lab.campaign.store import flight_inputs
+from trq_lab.reporting.campaign import paired_by_seed
+
+SENSING_SMOKE = PARAMS / "campaigns" / "sensing_smoke.yaml"
+
+
+def _plan(tmp_path):
+    path = tmp_path / "c.yaml"
+    text = SENSING_SMOKE.read_text()
+    start = text.index("controllers:")
+    end = text.index("\n", start)
+    path.write_text(text[:start] + "controllers: [trq_nmpc_eso, trq_nmpc]\nrepeats: 3"
+                    + text[end:])
+    return load_campaign(path)
+
+
+def _rows(plan, results):
+    """results[(controller, sensing)] lists (rmse, diagnosis, crashed, status) per seed."""
+    rows, seen = [], {}
+    for f in plan.flights:
+        key = (f["controller"], f["sensing"])
+        k = seen.setdefault(key, 0)
+        seen[key] += 1
+        rmse, diag, crashed, status = results[key][k]
+        rows.append(dict(flight_inputs(f), crashed=crashed, status=status,
+                         rmse_pos_after_fault_m=rmse, diagnosis_s=diag))
+    return rows
+
+
+def test_each_flight_meets_the_first_controllers_on_its_seed(tmp_path):
+    plan = _plan(tmp_path)
+    profiles = sorted({f["sensing"] for f in plan.flights})
+    assert len(profiles) == 2 and len(plan.flights) == 12
+    a, b = profiles
+    ok = "done"
+    results = {
+        ("trq_nmpc_eso", a): [(0.010, 0.1, False, ok), (0.020, 0.1, False, ok),
+                              (0.040, 0.1, False, ok)],
+        ("trq_nmpc", a): [(0.005, 0.2, False, ok), (0.030, 0.1, False, ok),
+                          (0.020, None, False, ok)],
+        ("trq_nmpc_eso", b): [(0.010, 0.1, False, ok), (0.010, 0.1, True, ok),
+                              (None, None, False, "failed")],
+        ("trq_nmpc", b): [(0.020, 0.1, False, ok), (0.015, 0.1, False, ok),
+                          (0.010, 0.1, False, ok)],
+    }
+    lines, summary = paired_by_seed(plan, _rows(plan, results))
+    sa = summary[a]["trq_nmpc"]
+    # seed by seed: 0.5, 1.5, 0.5; better on two; a later diagnosis on the first and the third
+    assert (sa["pairs"], sa["better"], sa["later_diagnosis"]) == (3, 2, 2)
+    assert sa["median_ratio"] == pytest.approx(0.5)
+    assert (sa["min_ratio"], sa["max_ratio"]) == (pytest.approx(0.5), pytest.approx(1.5))
+    sb = summary[b]["trq_nmpc"]
+    # the failed flight makes no pair; the crash is out of the ratio but flying there is better
+    assert (sb["pairs"], sb["better"], sb["other_crashed"]) == (2, 1, 1)
+    assert sb["median_ratio"] == pytest.approx(2.0)
+    assert any("| trq_nmpc | 3 | 2 | 0.500 (0.500-1.500) | 2 |" in line for line in lines)
