@@ -344,9 +344,9 @@ class Estimator(Strict):
     (`fused`; its parameters below, defaults for the `mocap` profile's sensors)."""
     kind: Choice("autopilot", "fused") = "autopilot"
     mocap_std_m: Num(1e-6, 1.0) = 0.0005               # the pose's noise, 1 sigma per axis
-    accel_std_m_s2: Num(1e-4, 100.0) = 0.35            # one HIGHRES_IMU's, per axis
-    model_acc_density_m_s2_rthz: Num(0.0, 100.0) = 0.05    # the model's white error
-    residual_walk_m_s3_rthz: Num(1e-6, 1e3) = 0.5      # a_r's random walk
+    accel_std_m_s2: Num(1e-4, 100.0) = 0.16            # one HIGHRES_IMU's, per axis
+    model_acc_density_m_s2_rthz: Num(0.0, 100.0) = 0.01    # the model's white error
+    residual_walk_m_s3_rthz: Num(1e-6, 1e3) = 1.0      # a_r's random walk
     accel_bias_std_m_s2: Num(1e-4, 10.0) = 0.2         # its bias at the start, 1 sigma
     accel_bias_walk_m_s3_rthz: Num(0.0, 10.0) = 0.01   # its bias's random walk
     pose_gate: Num(1.0, 1e6) = 25.0                    # chi-square (3 dof) gate on a pose
@@ -354,11 +354,12 @@ class Estimator(Strict):
     imu_rate_hz: Int(1, 200) = 125                     # HIGHRES_IMU asked of the vehicle
     mocap_rate_hz: Int(1, 1000) = 100                  # ATT_POS_MOCAP asked of the vehicle
     history: Int(2, 100) = 8                           # control periods kept (delayed pose)
-    # the known input: the model's acceleration plus the observer's disturbance (issue 34's
-    # coupling, `observer`), plus the motors' share of it that the effectiveness observer
-    # explains (`motors`: the model with the motors' estimated effectiveness; nothing without
-    # that observer), or the model's alone (`none`); a_r carries what the input leaves out
-    disturbance_input: Choice("observer", "motors", "none") = "observer"
+    # the known input: the model's acceleration under the commands in effect plus the part of
+    # the observer's disturbance that the effectiveness observer explains as the motors'
+    # (`motors`: the model flown with the motors' estimated effectiveness; without that
+    # observer, nothing), or plus the observer's whole disturbance (`observer`: its noise comes
+    # back through the filter), or the model's alone (`none`); a_r carries what it leaves out
+    disturbance_input: Choice("observer", "motors", "none") = "motors"
     # the autopilot's velocity (ODOMETRY) fused as a measurement of v, 1 sigma; 0: not fused
     autopilot_vel_std_m_s: Num(0.0, 10.0) = 0.0
 
@@ -572,9 +573,13 @@ class WindEvent(_Event):
         return self
 
 
+# MAV_CMD_INJECT_FAILURE's sensor units (sil_vehicle.sensors.faults)
+SENSOR_UNITS = ("gyro", "accel", "mag", "baro", "gnss", "mocap")
+
+
 class SensorEvent(_Event):
     # MAV_CMD_INJECT_FAILURE's sensor units and types (sil_vehicle.sensors.faults)
-    sensor: Choice("gyro", "accel", "mag", "baro", "gnss", "mocap")
+    sensor: Choice(*SENSOR_UNITS)
     failure: Choice("ok", "off", "stuck", "garbage", "wrong")
     size: Optional[Num(-1e4, 1e4)] = None   # wrong: the error, in the unit's SI unit (or deg)
 
@@ -675,7 +680,7 @@ class ScenarioFile(Strict):
 # campaign (trq_lab.campaign: the axes' keys are checked by trq_lab.campaign.spec)
 # --------------------------------------------------------------------------------------------
 
-AXES = ("fault", "wind", "trajectory", "link", "plant", "sensing")
+AXES = ("fault", "wind", "trajectory", "link", "plant", "sensing", "outage")
 CONTROLLER_MODELS = ("nominal", "plant")
 
 
@@ -704,12 +709,24 @@ class SensingAxis(Strict):
     profile: NameOrPath = "truth"
 
 
+class OutageAxis(Strict):
+    """A campaign's sensor outage: `sensor` off (MAV_CMD_INJECT_FAILURE's OFF: it delivers
+    nothing) from `at_s`, its own readings again (OK) from `at_s + duration_s`, in vehicle time.
+    The two events join the flight's fault script beside its fault; a grid flies it under the
+    sensing profiles that carry the sensor (trq_lab.campaign.spec checks that one does). A grid
+    may write `none` for a flight without an outage."""
+    sensor: Choice(*SENSOR_UNITS)
+    at_s: Num(0.0, 1e6)
+    duration_s: Num(0.0, 3600.0, open_lo=True)
+
+
 # the models whose keys (dotted, `leaf_types`) each axis sets: a fault is a motor or a servo
 # event, a wind a wind event's, a trajectory a controller's reference, a link the offboard link's
-# impairment, a plant the simulated airframe's factors, a sensing the vehicle's sensing profile
+# impairment, a plant the simulated airframe's factors, a sensing the vehicle's sensing profile,
+# an outage a sensor off for a while
 AXIS_MODELS = {"fault": (MotorEvent, ServoEvent), "wind": (EventWind,),
                "trajectory": (ReferenceFile,), "link": (Impair,), "plant": (Plant,),
-               "sensing": (SensingAxis,)}
+               "sensing": (SensingAxis,), "outage": (OutageAxis,)}
 
 
 class CampaignGrid(Strict):
@@ -720,6 +737,7 @@ class CampaignGrid(Strict):
     link: Any = None
     plant: Any = None
     sensing: Any = None
+    outage: Any = None
 
 
 class CampaignSample(CampaignGrid):
@@ -751,22 +769,44 @@ class CampaignTargets(Strict):
 FLIGHT_METRICS = ("crashed", "flight_s", "rmse_pos_m", "max_pos_err_m", "rmse_pos_after_fault_m",
                   "rmse_vert_after_fault_m", "max_sink_after_fault_m", "rmse_yaw_deg",
                   "max_yaw_err_deg", "recovery_s", "solve_ms_p50", "solve_ms_p99",
-                  "est_rmse_pos_m", "est_rmse_att_deg", "diagnosis_s")
+                  "est_rmse_pos_m", "est_rmse_att_deg", "diagnosis_s", "max_pos_err_outage_m")
+# those a flight has only with a sensor outage (a campaign's `outage` axis): flights.csv carries
+# them when the campaign has the axis
+OUTAGE_METRICS = ("max_pos_err_outage_m",)
 
 
 class FlightTarget(Strict):
     """A target on the distribution of a campaign's flights: among the flights of `controller`
-    (only those flown under the sensing profile `sensing` when it is given), at least `share`
-    have `metric` <= `max`, or, with `per`, `metric` <= `max` times the same flight's `per`
-    (`rmse_pos_after_fault_m` within 1.5x its `est_rmse_pos_m`). A flight that failed, or whose
-    metric (or `per`) is missing, does not meet it; nor does a crashed one, except on `crashed`
-    itself (`metric: crashed, max: 0`: no crash)."""
+    (only those flown under the sensing profile `sensing`, and with an outage of the sensor
+    `outage`, when they are given), at least `share` have `metric` <= `max`, or, with `per`,
+    `metric` <= `max` times the same flight's `per` (`rmse_pos_after_fault_m` within 1.5x its
+    `est_rmse_pos_m`). A flight that failed, or whose metric (or `per`) is missing, does not
+    meet it; nor does a crashed one, except on `crashed` itself (`metric: crashed, max: 0`: no
+    crash). A target on an outage's metric (OUTAGE_METRICS) names the outage's sensor
+    (checked by trq_lab.campaign.spec)."""
     controller: Text
     metric: Choice(*FLIGHT_METRICS)
     max: Num(0.0, 1e9)
     per: Optional[Choice(*FLIGHT_METRICS)] = None
     share: Num(0.0, 1.0) = 1.0
     sensing: Optional[NameOrPath] = None
+    # only the flights with an outage of this sensor (`none`: those without an outage)
+    outage: Optional[Choice(*SENSOR_UNITS, "none")] = None
+
+
+class PairedTarget(Strict):
+    """A target on two controllers' flights paired on the same conditions and seed (issue 34's
+    kind): `controller`'s RMSE after the fault over `against`'s (the campaign's first controller
+    when not given), the median of these ratios at most `max_median_ratio`, over the pairs
+    flown under `sensing` and with an outage of `outage` (`none`: without) when given; with no
+    more crashes than `against`, and, with `no_later_diagnosis`, no pair where it diagnoses the
+    fault later."""
+    controller: Text
+    max_median_ratio: Num(0.0, 100.0)
+    against: Optional[Text] = None
+    sensing: Optional[NameOrPath] = None
+    outage: Optional[Choice(*SENSOR_UNITS, "none")] = None
+    no_later_diagnosis: Flag = True
 
 
 class CampaignFile(Strict):
@@ -782,6 +822,7 @@ class CampaignFile(Strict):
     controller_model: Any = "nominal"
     targets: CampaignTargets | None = None
     flight_targets: list[FlightTarget] = []
+    paired_targets: list[PairedTarget] = []
     grid: CampaignGrid | None = None
     sample: CampaignSample | None = None
 

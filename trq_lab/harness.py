@@ -564,9 +564,11 @@ def fly_inprocess(controller, sim, fault_events=(), seed: int | None = None, *,
 
 
 def flight_metrics(log_dir: Path, controller: str, fault_onset_us: int | None,
-                   recovery_threshold_m: float) -> dict:
+                   recovery_threshold_m: float, *,
+                   outage_us: tuple[int, int] | None = None) -> dict:
     """The scenario runner's metrics (trq_lab.metrics) of a flight, from the two logs in
-    log_dir (flight.csv and controller.csv, in process or from the daemons)."""
+    log_dir (flight.csv and controller.csv, in process or from the daemons); `outage_us`, a
+    sensor outage's (start, end) in vehicle microseconds, for the metrics of its window."""
     from sil_vehicle.config import load_vehicle
     from trq_lab import metrics as metrics_mod
 
@@ -574,7 +576,7 @@ def flight_metrics(log_dir: Path, controller: str, fault_onset_us: int | None,
     _, steps = metrics_mod.read_csv(Path(log_dir) / "controller.csv")
     vehicle = Path(load_vehicle(meta["vehicle_file"]).file).stem
     return metrics_mod.compute(controller, vehicle, truth, steps, fault_onset_us,
-                               recovery_threshold_m).as_dict()
+                               recovery_threshold_m, outage_us=outage_us).as_dict()
 
 
 def fingerprint(path: Path) -> str:

@@ -24,6 +24,10 @@ the crash, whichever comes first:
                                    without a faulted motor, without an effectiveness observer,
                                    or if crashed)
     solve_ms_p50, solve_ms_p99     controller solve time per step
+    max_pos_err_outage_m           with a sensor outage (a campaign's `outage` axis): the
+                                   largest position error from the outage's start to
+                                   OUTAGE_SETTLE_S after its end (None without an outage, or
+                                   with no step in that window)
 """
 
 from __future__ import annotations
@@ -40,6 +44,13 @@ GROUND_DOWN_M = 0.0
 # how close the controller's estimated effectiveness of a faulted motor must come to the true
 # factor for the fault to count as diagnosed (issue 33: MOT1_EFF within 0.1 of the true value)
 DIAGNOSIS_BAND = 0.1
+# how long after a sensor outage ends its window still counts: while the sensor is off the
+# estimate drifts and the controller takes the vehicle away with it, unseen; when the sensor
+# returns, the estimator jumps back to it and the controller flies the vehicle back, and that
+# return (its overshoot included) is part of what the outage cost. One second is a few of the
+# position loop's time constants, and short enough that the flight's own tracking error (the
+# fault's transient, max_pos_err_m) does not stand in for the outage's
+OUTAGE_SETTLE_S = 1.0
 
 
 @dataclass(frozen=True)
@@ -63,6 +74,7 @@ class RunMetrics:
     est_rmse_pos_m: float | None = None
     est_rmse_att_deg: float | None = None
     diagnosis_s: float | None = None
+    max_pos_err_outage_m: float | None = None
 
     def as_dict(self) -> dict:
         return {k: (None if isinstance(v, float) and not math.isfinite(v) else v)
@@ -152,10 +164,24 @@ def diagnosis_time(t_us: np.ndarray, eff: np.ndarray, true_factor: np.ndarray,
     return 0.0 if len(over) == 0 else float((t_us[over[-1]] - fault_onset_us) * 1e-6)
 
 
+def outage_error(t_us: np.ndarray, err: np.ndarray, outage_us: tuple[int, int] | None,
+                 settle_s: float = OUTAGE_SETTLE_S) -> float | None:
+    """The largest position error `err` (m, at the steps' stamps `t_us`) from an outage's start
+    to `settle_s` after its end, both included: outage_us is (start, end) in vehicle
+    microseconds. None without an outage or without a step in the window (a crash before it)."""
+    if outage_us is None:
+        return None
+    start_us, end_us = outage_us
+    sel = (t_us >= start_us) & (t_us <= end_us + int(round(settle_s * 1e6)))
+    return float(err[sel].max()) if sel.any() else None
+
+
 def compute(controller: str, vehicle: str, truth: dict[str, np.ndarray],
             steps: dict[str, np.ndarray], fault_onset_us: int | None,
-            recovery_threshold_m: float = 0.1) -> RunMetrics:
-    """Metrics of one run; `truth` and `steps` as read by read_csv."""
+            recovery_threshold_m: float = 0.1, *,
+            outage_us: tuple[int, int] | None = None) -> RunMetrics:
+    """Metrics of one run; `truth` and `steps` as read by read_csv; `outage_us`, a sensor
+    outage's (start, end) in vehicle microseconds, for max_pos_err_outage_m."""
     sm = samples(truth, steps)
     t_us, crash_us = sm.t_us, sm.crash_us
     stamps = steps["stamp_us"].astype(np.int64)
@@ -198,7 +224,8 @@ def compute(controller: str, vehicle: str, truth: dict[str, np.ndarray],
         solve_ms_p50=float(np.percentile(solve, 50)) if len(solve) else math.nan,
         solve_ms_p99=float(np.percentile(solve, 99)) if len(solve) else math.nan,
         est_rmse_pos_m=est_pos, est_rmse_att_deg=est_att,
-        diagnosis_s=_diagnosis(sm, truth, steps, fault_onset_us))
+        diagnosis_s=_diagnosis(sm, truth, steps, fault_onset_us),
+        max_pos_err_outage_m=outage_error(t_us, err, outage_us))
 
 
 def _diagnosis(sm: Samples, truth: dict[str, np.ndarray], steps: dict[str, np.ndarray],

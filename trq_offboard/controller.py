@@ -350,13 +350,19 @@ class Controller:
         return self.predictor.b0_delayed(x, self._last_t, t_s, path)
 
     def _fuse(self, x: np.ndarray, t_s: float, sensors: SensorSamples,
-              applied: ActuatorCommand | None, u_applied: np.ndarray, path) -> EstimatorHealth:
+              applied: ActuatorCommand | None, u_applied: np.ndarray,
+              path) -> EstimatorHealth | None:
         """The fused filter advanced to this state's time on the samples received, its known
-        input the model's acceleration over the period (the observer's b0) plus the observer's
-        translational d of the last step; x's position and velocity replaced (in place: the
-        walk's b0 stays bound to x) by the filter's. Attitude and rates stay the autopilot's."""
+        input the model's acceleration over the period (the observer's b0) plus, by
+        `disturbance_input`, the motors' share of the observer's d or its whole d (the last
+        step's); x's position and velocity replaced (in place: the walk's b0 stays bound to x)
+        by the filter's. Attitude and rates stay the autopilot's. The filter starts at the
+        first position sample; before it (and under `truth`, which sends none) x is as it
+        came and the health None."""
         f = self.fused
         if not self._fused_on:
+            if not sensors.poses_ned_m:      # no position source yet (or none, under truth):
+                return None                  # the state as it came
             f.reset(sensors.stamp_us, x[0:3], x[3:6])
             self._fused_on = True
         for acc in sensors.accel_frd_m_s2:

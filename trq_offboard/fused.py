@@ -125,7 +125,7 @@ class FusedConfig:
     imu_rate_hz: int                      # HIGHRES_IMU asked of the vehicle
     mocap_rate_hz: int                    # ATT_POS_MOCAP asked of the vehicle
     history: int = 8                      # control periods kept for the delayed pose
-    disturbance_input: str = "observer"   # added to b0: "observer" (its d), "motors", "none"
+    disturbance_input: str = "motors"     # added to b0: "motors", "observer" (its d), "none"
     autopilot_vel_std_m_s: float = 0.0    # the autopilot's velocity as a measurement (0: not)
 
 

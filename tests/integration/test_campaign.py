@@ -7,6 +7,8 @@
   rerun (not lost, not retried) unless --retry-failed; --max-flights stops early and the rest
   follows on the next run;
 - a bad campaign file is refused with its file name and the key;
+- a flight with a sensor outage has the sensor off for the outage's window and nowhere else, is
+  the flight without it until the outage starts, and has the outage's metric;
 - the in-process flight (Sitl + OffboardFlight over an in-memory MAVLink link) gives the same
   flight as the two daemons over UDP in lockstep: bit-identical truth log, the same metrics.
 
@@ -23,6 +25,7 @@ import subprocess
 import threading
 from pathlib import Path
 
+import numpy as np
 import pytest
 from conftest import PARAMS, ROOT, cli
 
@@ -397,3 +400,33 @@ def test_summary_median_of_an_even_count_is_the_mean_of_the_middle_two():
     (cell,) = stats.values()
     assert cell["rmse_median"] == pytest.approx((0.048 + 0.062) / 2)
     assert cell["rmse_max"] == 0.068
+
+
+def test_outage_smoke_turns_the_sensor_off_for_its_window(tmp_path):
+    """outage_smoke's trq_nmpc_eso flights, flown as a worker flies them: with the outage the
+    vehicle has its motion capture off from 2 s to 3 s (flight.csv's sensor fault mask) and
+    nowhere else, the flight is the one without it, row for row, until the outage starts (the
+    same seed, the same fault), and its record has the outage's metric; without it, no figure."""
+    from sil_vehicle.sensors import faults as sensor_faults
+    from trq_lab import metrics as metrics_mod
+
+    plan = load_campaign(PARAMS / "campaigns" / "outage_smoke.yaml")
+    specs = {("outage" in f): f for f in plan.flights if f["controller"] == "trq_nmpc_eso"}
+    recs = {k: run_flight(s, str(tmp_path)) for k, s in specs.items()}
+    for rec in recs.values():
+        assert rec["error"] is None and rec["status"] == "done", rec["error"]
+        assert rec["metrics"]["crashed"] is False
+    assert recs[False]["metrics"]["max_pos_err_outage_m"] is None
+    in_outage = recs[True]["metrics"]["max_pos_err_outage_m"]
+    assert 0.0 < in_outage <= recs[True]["metrics"]["max_pos_err_m"]
+    logs = {k: metrics_mod.read_csv(tmp_path / s["id"] / "flight.csv")[1]
+            for k, s in specs.items()}
+    t_us, mask = logs[True]["t_us"], logs[True]["sensor_fault_mask"].astype(int)
+    off = (mask >> sensor_faults.UNIT_OF["mocap"]) & 1 == 1
+    # a row holds the tick that ends at its stamp: the events due at t act from the next row
+    window = (t_us > 2_000_000) & (t_us <= 3_000_000)
+    assert np.all(off[window]) and not np.any(off[~window])
+    assert not np.any(logs[False]["sensor_fault_mask"])
+    before = t_us <= 2_000_000
+    for col in ("pos_n_m", "pos_e_m", "pos_d_m", "est_pos_n_m"):
+        assert np.array_equal(logs[True][col][before], logs[False][col][:before.sum()]), col

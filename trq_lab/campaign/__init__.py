@@ -1,5 +1,5 @@
 """Fault campaigns at scale: a grid and/or a seeded random sample of flights over fault, wind,
-trajectory, link, plant, sensing and controller, flown on Dask (a LocalCluster by
+trajectory, link, plant, sensing, sensor outage and controller, flown on Dask (a LocalCluster by
 default, or an existing cluster).
 
     trq-campaign smoke --out out/campaign_smoke --workers 2
@@ -60,6 +60,18 @@ written as the axis itself, `sensing: [truth, mocap]`, it is that key). Every sp
 `sensing` (truth by default, which stays out of the id: campaigns without the axis keep their
 ids); a profile enters the id and the parameter digest, not the seed. flights.csv has a sensing
 column; a campaign that varies it gets its report's tables per profile.
+An outage (trq_params.schema.OutageAxis: sensor, at_s, duration_s; `none` as in the fault axis)
+turns a sensor off at at_s and on again at at_s + duration_s: two sensor events that join the
+flight's fault script (MAV_CMD_INJECT_FAILURE's OFF, then OK), the fault's onset staying the
+fault's. A grid's outage flies under the sensing profiles that carry its sensor and not under
+the others (`sensing: [mocap, rtk]` with a mocap and a gnss outage: each under its own); one
+that no profile carries, or a sampled one that the draw's profile does not, is an error naming
+the file and the key. `none`, or the axis left out, keeps the spec, id and flight it always
+had; an outage enters the spec and the id, not the seed (a sample draws it from its own
+generator: the other axes draw as without it). With the axis, flights.csv has the outage's columns (outage,
+outage_sensor, outage_at_s, outage_duration_s) and max_pos_err_outage_m (trq_lab.metrics: the
+largest position error from the outage's start to OUTAGE_SETTLE_S after its end), and the
+report's tables are per outage when it varies.
 Fault keys: at_s and either motor (1..4) with effectiveness, or time_varying.a, time_varying.b,
 time_varying.w, time_varying.phi (e = a - b sin(w t + phi)), or stopped: true; or servo (1..4)
 with stuck_deg. Wind keys: speed_m_s, direction_deg (from, clockwise from north), gusts,
@@ -77,7 +89,9 @@ not its seed: the plants of a cell meet the same noise and gusts. `controller_mo
 share}]}, judged in the report
 (trq_lab.reporting.plant_campaign).
 `flight_targets` (optional, any campaign): a list of {controller, metric, max, per, share,
-sensing}: among the flights of `controller` (under the profile `sensing` only, when given), at
+sensing, outage}: among the flights of `controller` (under the profile `sensing` only, and with
+an outage of the sensor `outage` only (`none`: without one), when given; a target on
+max_pos_err_outage_m names the outage's sensor), at
 least `share` (default 1) have `metric` (one of flights.csv's metrics,
 trq_params.schema.FLIGHT_METRICS) <= `max` (times the flight's own `per`, when given), judged in
 the report (trq_lab.reporting.campaign); a failed flight, or a crashed one on any metric but

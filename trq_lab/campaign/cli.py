@@ -159,8 +159,8 @@ SWITCHES = {
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(
         prog="trq-campaign", description="Fault campaigns at scale: a grid and/or a seeded "
-        "random sample of flights over fault, wind, trajectory, link, plant, sensing and "
-        "controller, "
+        "random sample of flights over fault, wind, trajectory, link, plant, sensing, sensor "
+        "outage and controller, "
         "flown on Dask (resumable).")
     ap.add_argument("campaign", help="a built-in campaign by name (" + ", ".join(
         trq_params.names("campaigns")) + ") or a campaign YAML by path")
@@ -191,6 +191,8 @@ def main(argv: list[str] | None = None) -> int:
                 " (model: the plant)" if s.get("controller_model") == "plant" else "")
             if r["sensing"] != SENSING_DEFAULT:
                 plant += f" sensing {r['sensing']}"
+            if "outage" in s:
+                plant += f" outage {r['outage']}"
             print(f"{s['id']} {s['controller']:14s} fault {r['fault_kind']} {r['severity']:g} "
                   f"wind {wind_label(r)} traj {r['traj_kind']} seed {s['seed']}{plant}")
         print(f"campaign: {campaign.name}: {len(campaign.flights)} flights")

@@ -24,7 +24,7 @@ from trq_offboard.controller import Controller
 from trq_lab import harness as inprocess
 from trq_lab import scenario as run_scenario
 from trq_lab.analysis import envelope
-from trq_lab.campaign.spec import fault_event, identity
+from trq_lab.campaign.spec import fault_event, identity, outage_events, outage_window_us
 from trq_lab.overlays import write_controller_overlay, write_vehicle_overlay
 
 def worst_effectiveness(fault: dict) -> float:
@@ -96,6 +96,22 @@ def flight_envelope(vp, fault: dict | None, wind: dict) -> dict:
                                  float(wind["direction_deg"]), stuck))
 
 
+def flight_script(spec: dict, tilt_range_deg: tuple[float, float] = (-90.0, 90.0)
+                  ) -> tuple[tuple, int | None, tuple[int, int] | None]:
+    """(fault-script events, the fault's onset, the outage's window) of a flight: its fault's
+    event and its outage's two sensor events (off, then ok), in time order (the vehicle plays
+    them so); the onset (vehicle microseconds) is the fault's alone, as the metrics after the
+    fault take it, None without a fault; the window (start, end in microseconds) None without
+    an outage."""
+    where = f"flight {spec['id']}"
+    event = fault_event(spec["fault"], where, "fault", tilt_range_deg)
+    outage = spec.get("outage")
+    events = ((event,) if event is not None else ()) + outage_events(outage, where, "outage")
+    return (tuple(sorted(events, key=lambda e: e.at_us)),
+            event.at_us if event is not None else None,
+            outage_window_us(outage) if outage else None)
+
+
 def run_flight(spec: dict, log_dir: str | None = None) -> dict:
     """Fly one campaign flight (trq_lab.harness) and return its record; never raises: an
     error is recorded with its traceback. A worker needs only the installed packages."""
@@ -133,9 +149,8 @@ def run_flight(spec: dict, log_dir: str | None = None) -> dict:
                                        offboard_impair=link or None,
                                        sensing=spec.get("sensing"))
             vp = sim.vehicle
-            event = fault_event(spec["fault"], f"flight {spec['id']}", "fault",
-                                 (math.degrees(vp.tilt_min_rad), math.degrees(vp.tilt_max_rad)))
-            events = (event,) if event is not None else ()
+            events, onset, window = flight_script(
+                spec, (math.degrees(vp.tilt_min_rad), math.degrees(vp.tilt_max_rad)))
             try:                # the envelope never fails the flight: its error is recorded
                 record["envelope"] = flight_envelope(vp, spec["fault"], w)
             except Exception:
@@ -143,9 +158,9 @@ def run_flight(spec: dict, log_dir: str | None = None) -> dict:
             res = inprocess.fly_inprocess(cfg if controller is None else controller, sim,
                                           events, out_dir=out,
                                           timeout_s=spec["timeout_s"], name=spec["controller"])
-            onset = event.at_us if event is not None else None
-            record["metrics"] = inprocess.flight_metrics(res.out_dir, spec["controller"], onset,
-                                                         spec["recovery_threshold_m"])
+            record["metrics"] = inprocess.flight_metrics(
+                res.out_dir, spec["controller"], onset, spec["recovery_threshold_m"],
+                outage_us=window)
             record.update(status=res.status, sim_s=round(res.sim_s, 6), summary=res.summary)
     except Exception:  # recorded, never lost: the campaign goes on
         record["error"] = traceback.format_exc()

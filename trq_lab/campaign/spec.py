@@ -19,12 +19,13 @@ from typing import Annotated, Any, NamedTuple, Optional
 import numpy as np
 import trq_params
 from pydantic import create_model
-from sil_vehicle.faultscript import parse_event
+from sil_vehicle.faultscript import Event, parse_event
+from sil_vehicle.sensors.faults import SENSOR as SENSOR_OF_UNIT
 from trq_offboard.config import load_controller
 from trq_params import ConfigError, schema
-from trq_params.loader import Num, Vec, chain, leaf_types, range_of, read_yaml, validate
-from trq_params.schema import (AXES, AXIS_MODELS, CampaignFile, CampaignGrid, Plant,
-                               SensingAxis, Strict)
+from trq_params.loader import Num, Vec, chain, leaf_types, load, range_of, read_yaml, validate
+from trq_params.schema import (AXES, AXIS_MODELS, OUTAGE_METRICS, CampaignFile, CampaignGrid,
+                               OutageAxis, Plant, SensingAxis, SensingFile, Strict)
 
 from trq_lab.harness import SIM_DEFAULT
 from trq_lab.overlays import controller_file, perturbed_vehicle, vehicle_data
@@ -66,8 +67,10 @@ def _axis_keys(models) -> dict[str, AxisKey]:
 
 
 AXIS_KEYS = {axis: _axis_keys(models) for axis, models in AXIS_MODELS.items()}
-FAULT_KEYS, WIND_KEYS, TRAJECTORY_KEYS, LINK_KEYS, PLANT_KEYS, SENSING_KEYS = (
+FAULT_KEYS, WIND_KEYS, TRAJECTORY_KEYS, LINK_KEYS, PLANT_KEYS, SENSING_KEYS, OUTAGE_KEYS = (
     AXIS_KEYS[a] for a in AXES)
+# the axes whose points may be `none` (no fault, no outage): None in a cell, and when left out
+NONE_AXES = ("fault", "outage")
 MOTOR_KEYS, SERVO_KEYS = (set(leaf_types(m)) - {"at_s"} for m in AXIS_MODELS["fault"])
 PLANT_NEUTRAL = Plant().model_dump()
 WIND_DEFAULT = {"speed_m_s": 0.0, "direction_deg": 0.0, "gusts": False}
@@ -92,6 +95,10 @@ class Campaign:
     sensings: tuple[str, ...] = (SENSING_DEFAULT,)     # the profiles its flights fly under
     # trq_params.schema.FlightTarget each, its `sensing` as the flights carry it (None: all)
     flight_targets: tuple = ()
+    # the outages its flights fly with (`outage_label`): ("none",) without the axis
+    outages: tuple[str, ...] = ("none",)
+    # trq_params.schema.PairedTarget each, its `against` and `sensing` resolved
+    paired_targets: tuple = ()
 
 
 def _axis_models(axis: str):
@@ -172,9 +179,9 @@ def _axis_values(raw_axis: Any, file, where: str, axis: str,
 
 
 def _grid_axis(grid: dict, file, axis: str) -> list[dict | None]:
-    """All points of one grid axis (None: no fault)."""
+    """All points of one grid axis (None: no fault, no outage)."""
     if axis not in grid:
-        return [None] if axis == "fault" else [{}]
+        return [None] if axis in NONE_AXES else [{}]
     raw = grid[axis]
     items = raw if isinstance(raw, list) else [raw]
     if not items:
@@ -183,7 +190,7 @@ def _grid_axis(grid: dict, file, axis: str) -> list[dict | None]:
     points: list[dict | None] = []
     for i, item in enumerate(items):
         where = f"grid.{axis}" + (f"[{i}]" if isinstance(raw, list) else "")
-        if axis == "fault" and item == "none":
+        if axis in NONE_AXES and item == "none":
             points.append(None)
             continue
         values = _axis_values(item, file, where, axis, sampling=False)
@@ -192,6 +199,8 @@ def _grid_axis(grid: dict, file, axis: str) -> list[dict | None]:
             point = dict(zip(names, combo))
             if axis == "fault":
                 fault_event(point, file, where)
+            elif axis == "outage":
+                outage_events(point, file, where)
             points.append(point)
     return points
 
@@ -246,10 +255,65 @@ def fault_event(fault: dict | None, file, where: str, tilt_range_deg=(-90.0, 90.
     return parse_event(nested(f), tilt_range_deg, file=str(file), key=where)
 
 
+def outage_events(outage: dict | None, file, where: str) -> tuple[Event, ...]:
+    """The fault-script Events of a campaign outage: its sensor off at at_s, ok again at
+    at_s + duration_s (each validated by the fault script's own parser); () for none. Every key
+    is needed (trq_params.schema.OutageAxis): a missing or bad one is a ConfigError naming the
+    file and the key."""
+    if outage is None:
+        return ()
+    validate(OutageAxis, outage, file, prefix=where)
+    start_us, end_us = outage_window_us(outage)
+    return tuple(parse_event({"at_s": t_us * 1e-6, "sensor": outage["sensor"], "failure": kind},
+                             file=str(file), key=where)
+                 for t_us, kind in ((start_us, "off"), (end_us, "ok")))
+
+
+def outage_window_us(outage: dict) -> tuple[int, int]:
+    """(start, end) of an outage in integer vehicle microseconds: the sensor off from start, its
+    own readings again from end."""
+    start_us = int(round(outage["at_s"] * 1e6))
+    return start_us, start_us + int(round(outage["duration_s"] * 1e6))
+
+
+def outage_label(outage: dict | None) -> str:
+    """An outage as the tables name it: `none`, or `mocap 14-15 s` (off from, ok again at)."""
+    if outage is None:
+        return "none"
+    return (f"{outage['sensor']} {outage['at_s']:g}-"
+            f"{outage['at_s'] + outage['duration_s']:g} s")
+
+
+@functools.cache
+def carried_sensors(profile: str) -> frozenset[str]:
+    """The sensors a sensing profile carries (its sections that are not null: imu, mocap, ...);
+    `profile` as `_sensing` returns it, already checked."""
+    f = load(trq_params.resolve("sensing", profile), SensingFile)
+    return frozenset(k for k in SensingFile.model_fields
+                     if k not in ("name", "description") and getattr(f, k) is not None)
+
+
+def carries(profile: str, outage: dict | None) -> bool:
+    """Whether a flight under `profile` can have `outage`: none, or its sensor carried (else
+    the vehicle would refuse the fault and the flight fly without it)."""
+    return outage is None or SENSOR_OF_UNIT[outage["sensor"]] in carried_sensors(profile)
+
+
+def _check_outage(outage: dict | None, profiles, file, where: str) -> None:
+    """An outage's sensor must be carried by one of `profiles` (a grid's, or a draw's one)."""
+    if any(carries(p, outage) for p in profiles):
+        return
+    carried = {p: carried_sensors(p) for p in profiles}
+    raise ConfigError(f"{file}: key '{where}.sensor': got {outage['sensor']!r}, expected a "
+                      "sensor that the sensing profile carries (" + "; ".join(
+                          f"{Path(p).stem}: {', '.join(sorted(c)) or 'none'}"
+                          for p, c in carried.items()) + ")")
+
+
 def _sample_axis(values: dict | None, axis: str, rng) -> dict | None:
     """One draw of one axis: every key drawn in sorted order from its own distribution."""
     if values is None:
-        return None if axis == "fault" else {}
+        return None if axis in NONE_AXES else {}
     point = {}
     for key in sorted(values):
         v = values[key]
@@ -384,20 +448,37 @@ def load_campaign(path: Path) -> Campaign:
             profiles[key] = _sensing(point, path, where)
         return profiles[key]
 
-    cells = [(*c[:5], profile_of(c[5], "grid.sensing")) for c in cells]
+    cells = [(*c[:5], profile_of(c[5], "grid.sensing"), c[6]) for c in cells]
+    # a grid's outage flies under the profiles that carry its sensor (`sensing: [mocap, rtk]`
+    # with a mocap and a gnss outage: each under its own), and must have one
+    grid_profiles = list(dict.fromkeys(c[5] for c in cells))
+    for outage in {json.dumps(c[6], sort_keys=True): c[6] for c in cells}.values():
+        _check_outage(outage, grid_profiles, path, "grid.outage")
+    cells = [c for c in cells if carries(c[5], c[6])]
     if top.sample is not None:
         dists = {axis: _axis_values(raw, path, f"sample.{axis}", axis, sampling=True)
                  for axis, raw in _axes(top.sample).items()}
         rng = np.random.default_rng(top.sample.seed)
+        # the outage draws from its own generator: a sample with the axis draws every other
+        # axis as the same sample without it (its flights pair with and without an outage)
+        rngs = {"outage": np.random.default_rng([top.sample.seed, AXES.index("outage")])}
         for k in range(top.sample.n):
-            point = tuple(_sample_axis(dists.get(axis), axis, rng) for axis in AXES)
+            point = tuple(_sample_axis(dists.get(axis), axis, rngs.get(axis, rng))
+                          for axis in AXES)
             try:
                 fault_event(point[0], path, f"sample.fault (draw {k})")
             except ConfigError as exc:
                 raise ConfigError(f"{exc} (a sampled fault must be valid whatever is "
                                   "drawn)") from exc
             _check_plant(point[4], vehicles, path, f"sample.plant (draw {k})")
-            cells.append((*point[:5], profile_of(point[5], "sample.sensing")))
+            profile = profile_of(point[5], "sample.sensing")
+            try:
+                outage_events(point[6], path, "sample.outage")
+                _check_outage(point[6], [profile], path, "sample.outage")
+            except ConfigError as exc:
+                raise ConfigError(f"{exc} (draw {k}: a sampled outage must be valid whatever "
+                                  "is drawn)") from exc
+            cells.append((*point[:5], profile, point[6]))
     name, description, seed = top.name, top.description, top.seed
     success, threshold, timeout, repeats = (top.success_rmse_m, top.recovery_threshold_m,
                                             top.timeout_s, top.repeats)
@@ -405,7 +486,7 @@ def load_campaign(path: Path) -> Campaign:
         [top.controller_model]
     flights = []
     seen = set()
-    for fault, wind, traj, link, plant, sensing in cells:
+    for fault, wind, traj, link, plant, sensing, outage in cells:
         wind = {**WIND_DEFAULT, **(wind or {})}
         for r in range(repeats):
             cell = {"fault": fault, "wind": wind, "trajectory": traj or {}, "repeat": r}
@@ -413,10 +494,12 @@ def load_campaign(path: Path) -> Campaign:
                 cell["link"] = link
             text = json.dumps({"campaign_seed": seed, **cell}, sort_keys=True)
             fseed = int(hashlib.sha256(text.encode()).hexdigest()[:8], 16) % 2**31
-            # neither the plant nor the sensing profile is in the seed: every plant and every
-            # profile of a cell meets the same seeds (common random numbers)
+            # neither the plant nor the sensing profile nor the outage is in the seed: every
+            # plant, profile and outage of a cell meets the same seeds (common random numbers)
             for model in models:
                 extra: dict[str, Any] = {"plant": plant} if has_plant else {}
+                if outage is not None:      # only then: no outage keeps the ids it always had
+                    extra["outage"] = outage
                 if model != "nominal":
                     extra["controller_model"] = model
                 for c in controllers:
@@ -433,17 +516,66 @@ def load_campaign(path: Path) -> Campaign:
                     seen.add(spec["id"])
                     flights.append(spec)
     sensings = tuple(dict.fromkeys(f["sensing"] for f in flights))
+    outages = tuple(dict.fromkeys(outage_label(f.get("outage")) for f in flights))
     return Campaign(name, path, description, seed, tuple(controllers), success, threshold,
                     timeout, repeats, tuple(flights), top.targets, has_plant, sensings,
-                    _flight_targets(top.flight_targets, sensings, path))
+                    _flight_targets(top.flight_targets, sensings, outages, path), outages,
+                    _paired_targets(top.paired_targets, tuple(controllers), sensings, outages,
+                                    path))
 
 
-def _flight_targets(targets, sensings: tuple[str, ...], file: Path) -> tuple:
+def _paired_targets(targets, controllers: tuple[str, ...], sensings: tuple[str, ...],
+                    outages: tuple[str, ...], file: Path) -> tuple:
+    """The paired targets with `against` set (the first controller when not given) and their
+    sensing profile as the flights carry it; a controller, profile or outage the campaign does
+    not fly is a ConfigError naming the file, the key and the value."""
+    out = []
+    flown = {label.split()[0] for label in outages}
+    for i, t in enumerate(targets):
+        key = f"paired_targets[{i}]"
+        for field in ("controller", "against"):
+            value = getattr(t, field)
+            if value is not None and value not in controllers:
+                raise ConfigError(f"{file}: key '{key}.{field}': got {value!r}, expected one "
+                                  "of the campaign's controllers (" + ", ".join(controllers)
+                                  + ")")
+        against = t.against or controllers[0]
+        if against == t.controller:
+            raise ConfigError(f"{file}: key '{key}.against': got {against!r}, expected another "
+                              "controller than the target's own")
+        if t.outage is not None and t.outage not in flown:
+            raise ConfigError(f"{file}: key '{key}.outage': got {t.outage!r}, expected one of "
+                              "the outages the campaign flies (" + ", ".join(sorted(flown)) + ")")
+        update = {"against": against}
+        if t.sensing is not None:
+            profile = _sensing({"profile": t.sensing}, file, f"{key}.sensing")
+            if profile not in sensings:
+                raise ConfigError(f"{file}: key '{key}.sensing': got {t.sensing!r}, expected "
+                                  "one of the profiles the campaign flies ("
+                                  + ", ".join(sensings) + ")")
+            update["sensing"] = profile
+        out.append(t.model_copy(update=update))
+    return tuple(out)
+
+
+def _flight_targets(targets, sensings: tuple[str, ...], outages: tuple[str, ...],
+                    file: Path) -> tuple:
     """The flight targets with their sensing profile as the flights carry it (a built-in name,
     or a path made absolute against the campaign file's folder): one the campaign flies, else a
-    ConfigError naming the file, the key and the value."""
+    ConfigError naming the file, the key and the value. An outage a target names must be one
+    the campaign flies; a target on an outage's metric must name one."""
     out = []
+    flown = {label.split()[0] for label in outages}       # the sensors (and `none`)
     for i, t in enumerate(targets):
+        on = next((m for m in (t.metric, t.per) if m in OUTAGE_METRICS), None)
+        if on is not None and t.outage in (None, "none"):
+            raise ConfigError(f"{file}: key 'flight_targets[{i}].outage': got {t.outage!r}, "
+                              f"expected the outage's sensor ({on} is a metric of the flights "
+                              "with an outage)")
+        if t.outage is not None and t.outage not in flown:
+            raise ConfigError(f"{file}: key 'flight_targets[{i}].outage': got {t.outage!r}, "
+                              "expected one of the outages the campaign flies ("
+                              + ", ".join(sorted(flown)) + ")")
         if t.sensing is not None:
             where = f"flight_targets[{i}].sensing"
             profile = _sensing({"profile": t.sensing}, file, where)

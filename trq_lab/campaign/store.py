@@ -12,11 +12,12 @@ import json
 import os
 from pathlib import Path
 
-from trq_params.schema import FLIGHT_METRICS
+from trq_params.schema import FLIGHT_METRICS, OUTAGE_METRICS
 
 from trq_lab.campaign.flight import plant_id, severity
-from trq_lab.campaign.spec import (FAULT_KEYS, LINK_KEYS, PLANT_KEYS, PLANT_NEUTRAL,
-                                   SENSING_DEFAULT, TRAJECTORY_KEYS, WIND_KEYS, Campaign)
+from trq_lab.campaign.spec import (FAULT_KEYS, LINK_KEYS, OUTAGE_KEYS, PLANT_KEYS, PLANT_NEUTRAL,
+                                   SENSING_DEFAULT, TRAJECTORY_KEYS, WIND_KEYS, Campaign,
+                                   outage_label)
 
 def write_json(path: Path, doc: dict) -> None:
     tmp = path.with_suffix(".json.tmp")
@@ -24,8 +25,10 @@ def write_json(path: Path, doc: dict) -> None:
     os.replace(tmp, path)
 
 
-def flight_inputs(spec: dict) -> dict:
-    """The flat input columns of a flight's row."""
+def flight_inputs(spec: dict, outage: bool | None = None) -> dict:
+    """The flat input columns of a flight's row; the outage's (`outage` its label, `none`
+    without one, then its keys) with `outage` true, or by default when the flight has one (a
+    campaign with the axis gives them to every row: `rows_of`)."""
     fault = spec["fault"] or {}
     kind, sev = severity(spec["fault"])
     row = {"id": spec["id"], "controller": spec["controller"],
@@ -43,6 +46,11 @@ def flight_inputs(spec: dict) -> dict:
         if key != "kind":
             v = traj.get(key)
             row[f"traj_{key}"] = json.dumps(v) if isinstance(v, list) else v
+    if outage or (outage is None and "outage" in spec):
+        out = spec.get("outage") or {}
+        row["outage"] = outage_label(spec.get("outage"))
+        for key in OUTAGE_KEYS:
+            row[f"outage_{key}"] = out.get(key)
     row.update(seed=spec["seed"], repeat=spec["repeat"])
     if "plant" in spec:
         for key in PLANT_KEYS:
@@ -63,8 +71,20 @@ def load_results(out: Path) -> dict[str, dict]:
     return results
 
 
-# a flight's metrics columns: its airframe, then every metric a flight target may bound
+# a flight's metrics columns: its airframe, then every metric a flight target may bound (the
+# outage's only in a campaign with the axis: `metric_keys`)
 METRIC_KEYS = ("vehicle", *FLIGHT_METRICS)
+
+
+def has_outage(campaign: Campaign) -> bool:
+    """Whether a campaign has the outage axis: a flight with an outage."""
+    return campaign.outages != ("none",)
+
+
+def metric_keys(campaign: Campaign) -> tuple[str, ...]:
+    """The metric columns of a campaign's rows: METRIC_KEYS, the outage's only with the axis."""
+    return METRIC_KEYS if has_outage(campaign) else tuple(
+        k for k in METRIC_KEYS if k not in OUTAGE_METRICS)
 
 
 def is_success(record: dict, threshold_m: float) -> bool:
@@ -79,13 +99,14 @@ def is_success(record: dict, threshold_m: float) -> bool:
 
 def rows_of(campaign: Campaign, results: dict[str, dict]) -> list[dict]:
     rows = []
+    outage, keys = has_outage(campaign), metric_keys(campaign)
     for spec in campaign.flights:
         rec = results.get(spec["id"])
         if rec is None:
             continue
-        row = flight_inputs(spec)
+        row = flight_inputs(spec, outage)
         m = rec.get("metrics") or {}
-        for key in METRIC_KEYS:
+        for key in keys:
             row[key] = m.get(key)
         env = rec.get("envelope") or {}
         row.update(env_feasible=env.get("feasible"),

@@ -1,7 +1,9 @@
 """A campaign's report: success rate, position RMSE and diagnosis time per controller against
 fault severity and wind (tables and heat maps), where each controller stops coping, the flight
 targets (`flight_targets`: a bar on one metric of one controller's flights, under one sensing
-profile or all), and the summary that trq-results reads (metrics.json).
+profile or all, with one outage or all), with a sensor outage axis the largest position error
+in each outage's window (trq_lab.metrics.max_pos_err_outage_m) beside them and the tables per
+outage when it varies, and the summary that trq-results reads (metrics.json).
 
 In: a campaign (`trq_lab.campaign.spec.Campaign`) and the rows of its flights
 (`trq_lab.campaign.store.rows_of`). Out: report.md, success.png, rmse.png and metrics.json in the
@@ -10,13 +12,14 @@ output directory; with a plant axis, the plant-campaign report's sections and fi
 
 from __future__ import annotations
 
+import re
 import statistics
 from pathlib import Path
 
 import numpy as np
 
 from trq_lab.campaign.spec import LINK_KEYS, Campaign
-from trq_lab.campaign.store import write_json
+from trq_lab.campaign.store import has_outage, write_json
 from trq_lab.reporting import plant_campaign
 from trq_lab.reporting.fmt import fmt
 from trq_lab.reporting.plot import log_norm, pyplot
@@ -170,7 +173,8 @@ def heatmaps(campaign: Campaign, winds, sevs, stats, out: Path, sensing: str = "
         fig.suptitle(f"{campaign.name}{under}: {title} (success: not crashed, RMSE after fault < "
                      f"{campaign.success_rmse_m:g} m)" if what == "rate" else
                      f"{campaign.name}{under}: {title}", fontsize=9, y=1.04)
-        path = out / (fname.replace(".png", f"_{sensing}.png") if sensing else fname)
+        tag = re.sub(r"[^A-Za-z0-9.-]+", "_", sensing)       # a label as a file name's part
+        path = out / (fname.replace(".png", f"_{tag}.png") if sensing else fname)
         fig.savefig(path, dpi=110, bbox_inches="tight")
         plt.close(fig)
         made.append(path)
@@ -198,6 +202,11 @@ def _controller_summary(campaign: Campaign, rows: list[dict]) -> dict:
                       "crashed": sum(bool(r["crashed"]) for r in rs),
                       "rmse_median_m": float(statistics.median(rm)) if rm else None,
                       "diagnosis_median_s": _median(rs, "diagnosis_s")}
+            if has_outage(campaign):
+                errs = [r["max_pos_err_outage_m"] for r in rs
+                        if r.get("max_pos_err_outage_m") is not None]
+                out[c].update(outage_err_median_m=_median(rs, "max_pos_err_outage_m"),
+                              outage_err_max_m=max(errs) if errs else None)
     return out
 
 
@@ -210,53 +219,125 @@ def _conditions(r: dict) -> tuple:
     return tuple(sorted((k, str(v)) for k, v in r.items() if k.startswith(_CONDITION_PREFIXES)))
 
 
-def paired_by_seed(campaign: Campaign, rows: list[dict]) -> tuple[list[str], dict]:
-    """Each controller against the campaign's first on the same conditions and seed (flight by
-    flight, per sensing profile): (report lines, summary). A pair counts where both flew (not
-    failed); the ratio is RMSE after the fault, the other's over the first's, over the pairs
-    where neither crashed; a later diagnosis is the other's diagnosis_s above the first's (or
-    missing where the first's is known)."""
-    head = campaign.controllers[0]
+def _paired_flights(rows: list[dict]) -> dict:
+    """The flights that did not fail, by (sensing, outage, conditions) and then controller."""
     by: dict = {}
     for r in rows:
         if r.get("status") != "failed":
-            by.setdefault((r["sensing"], _conditions(r)), {})[r["controller"]] = r
+            by.setdefault((r["sensing"], r.get("outage", "none"), _conditions(r)),
+                          {})[r["controller"]] = r
+    return by
+
+
+def _paired_stats(by: dict, c: str, head: str, where) -> dict | None:
+    """`c` against `head` over the pairs of `by` whose (sensing, outage) `where` accepts: pairs,
+    better, the median, smallest and largest ratio of RMSE after the fault (where neither
+    crashed), later diagnoses and crashes; None without a pair."""
+    pairs = [(g[c], g[head]) for (s, o, _), g in by.items() if where(s, o) and c in g
+             and head in g]
+    if not pairs:
+        return None
+    ratios = [_rmse_of(a) / _rmse_of(b) for a, b in pairs
+              if not a["crashed"] and not b["crashed"] and _rmse_of(a) is not None
+              and _rmse_of(b)]
+    better = sum((not a["crashed"] and b["crashed"]) or (
+        not a["crashed"] and _rmse_of(a) is not None and _rmse_of(b) is not None
+        and _rmse_of(a) < _rmse_of(b)) for a, b in pairs)
+    later = sum(b.get("diagnosis_s") is not None and (
+        a.get("diagnosis_s") is None or a["diagnosis_s"] > b["diagnosis_s"]) for a, b in pairs)
+    return {"pairs": len(pairs), "better": better,
+            "median_ratio": float(statistics.median(ratios)) if ratios else None,
+            "min_ratio": min(ratios) if ratios else None,
+            "max_ratio": max(ratios) if ratios else None, "later_diagnosis": later,
+            "crashed": sum(bool(a["crashed"]) for a, _ in pairs),
+            "other_crashed": sum(bool(b["crashed"]) for _, b in pairs)}
+
+
+def _ratio_text(st: dict) -> str:
+    if st["median_ratio"] is None:
+        return "-"
+    return f"{st['median_ratio']:.3f} ({st['min_ratio']:.3f}-{st['max_ratio']:.3f})"
+
+
+def paired_by_seed(campaign: Campaign, rows: list[dict]) -> tuple[list[str], dict]:
+    """Each controller against the campaign's first on the same conditions and seed (flight by
+    flight, per sensing profile and outage): (report lines, summary). A pair counts where both
+    flew (not failed); the ratio is RMSE after the fault, the other's over the first's, over the
+    pairs where neither crashed; a later diagnosis is the other's diagnosis_s above the first's
+    (or missing where the first's is known)."""
+    head = campaign.controllers[0]
+    s_col, o_col = len(campaign.sensings) > 1, len(campaign.outages) > 1   # their columns
+    by = _paired_flights(rows)
     lines = [f"## Paired, flight by flight, against `{head}`", "",
              f"Each flight of a controller against `{head}`'s under the same conditions and "
              "seed. Ratio: RMSE after the fault, the controller's over "
              f"`{head}`'s (median and range over the pairs where neither crashed); better: "
              "a lower RMSE or flying where the other crashed; a later diagnosis: its "
              "diagnosis_s above the other's.", "",
-             "| sensing | controller | pairs | better | median ratio (range) | later diagnosis | "
-             "it crashed | the other crashed |", "|---|---|---|---|---|---|---|---|"]
+             "| sensing " * s_col + "| outage " * o_col + "| controller | pairs | better | "
+             "median ratio (range) | later diagnosis | it crashed | the other crashed |",
+             "|---" * (s_col + o_col) + "|---|---|---|---|---|---|---|"]
     summary: dict = {}
-    for p in campaign.sensings:
-        for c in campaign.controllers[1:]:
-            pairs = [(g[c], g[head]) for (s, _), g in by.items() if s == p and c in g
-                     and head in g]
-            if not pairs:
-                continue
-            ratios = [_rmse_of(a) / _rmse_of(b) for a, b in pairs
-                      if not a["crashed"] and not b["crashed"] and _rmse_of(a) is not None
-                      and _rmse_of(b)]
-            better = sum((not a["crashed"] and b["crashed"]) or (
-                not a["crashed"] and _rmse_of(a) is not None and _rmse_of(b) is not None
-                and _rmse_of(a) < _rmse_of(b)) for a, b in pairs)
-            later = sum(b.get("diagnosis_s") is not None and (
-                a.get("diagnosis_s") is None or a["diagnosis_s"] > b["diagnosis_s"])
-                for a, b in pairs)
-            med = float(statistics.median(ratios)) if ratios else None
-            crashed = (sum(bool(a["crashed"]) for a, _ in pairs),
-                       sum(bool(b["crashed"]) for _, b in pairs))
-            rng = (f" ({min(ratios):.3f}-{max(ratios):.3f})" if ratios else "")
-            lines.append(f"| {sensing_label(p)} | {c} | {len(pairs)} | {better} | "
-                         f"{fmt(med, '{:.3f}')}{rng} | {later} | {crashed[0]} | {crashed[1]} |")
-            summary.setdefault(sensing_label(p) or "-", {})[c] = {
-                "pairs": len(pairs), "better": better, "median_ratio": med,
-                "min_ratio": min(ratios) if ratios else None,
-                "max_ratio": max(ratios) if ratios else None, "later_diagnosis": later,
-                "crashed": crashed[0], "other_crashed": crashed[1]}
+    for p, o, c in ((p, o, c) for p in campaign.sensings for o in campaign.outages
+                    for c in campaign.controllers[1:]):
+        st = _paired_stats(by, c, head, lambda s, so: (s, so) == (p, o))
+        if st is None:
+            continue
+        lines.append(f"| {sensing_label(p)} " * s_col + f"| {o} " * o_col
+                     + f"| {c} | {st['pairs']} | {st['better']} | {_ratio_text(st)} | "
+                     f"{st['later_diagnosis']} | {st['crashed']} | {st['other_crashed']} |")
+        name = sensing_label(p) or "-"
+        summary.setdefault(name if o == "none" else f"{name} {o}", {})[c] = st
     return (lines + [""] if summary else []), summary
+
+
+def judge_paired_targets(campaign: Campaign, rows: list[dict]
+                         ) -> tuple[list[str], list[str], list[str], list[dict]]:
+    """The campaign's paired targets judged on its rows: (report lines, failures, headline
+    parts, one summary per target). Met: at least one pair, the median ratio at most the bar,
+    no more crashes than the other, and (no_later_diagnosis) no later diagnosis."""
+    if not campaign.paired_targets:
+        return [], [], [], []
+    by = _paired_flights(rows)
+    lines = ["## Paired targets", "",
+             "Each target on a controller's flights paired with another's on the same "
+             "conditions and seed (the table above): the median ratio of RMSE after the fault "
+             "at most the bar, no more crashes, and no later diagnosis when it asks.", ""]
+    failures, headline, summary = [], [], []
+    for t in campaign.paired_targets:
+        def where(s, o, t=t):
+            return ((t.sensing is None or s == t.sensing)
+                    and (t.outage is None or o.split()[0] == t.outage))
+        st = _paired_stats(by, t.controller, t.against, where)
+        under = (f" under `{sensing_label(t.sensing)}`" if t.sensing else "") + (
+            f" with outage `{t.outage}`" if t.outage else "")
+        met = (st is not None and st["median_ratio"] is not None
+               and st["median_ratio"] <= t.max_median_ratio
+               and st["crashed"] <= st["other_crashed"]
+               and not (t.no_later_diagnosis and st["later_diagnosis"]))
+        text = (f"`{t.controller}` against `{t.against}`{under}: median ratio <= "
+                f"{t.max_median_ratio:g}, no more crashes"
+                + (", no later diagnosis" if t.no_later_diagnosis else ""))
+        got = ("no pair" if st is None else
+               f"{_ratio_text(st)} over {st['pairs']} pairs, better on {st['better']}, "
+               f"crashed {st['crashed']} against {st['other_crashed']}, later diagnosis "
+               f"{st['later_diagnosis']}")
+        lines.append(f"- {text}: {got}: **{'met' if met else 'missed'}**.")
+        short = (f"{t.controller} / {t.against}"
+                 f"{' ' + sensing_label(t.sensing) if t.sensing else ''}"
+                 f"{' outage ' + t.outage if t.outage else ''} paired ratio "
+                 f"{fmt(st and st['median_ratio'], '{:.3f}')} <= {t.max_median_ratio:g}")
+        headline.append(f"{short} {'met' if met else 'missed'}")
+        if not met:
+            failures.append(short)
+        summary.append({"controller": t.controller, "against": t.against,
+                        "sensing": t.sensing and sensing_label(t.sensing), "outage": t.outage,
+                        "max_median_ratio": t.max_median_ratio, **(st or {"pairs": 0}),
+                        "met": met})
+    lines.append("")
+    if failures:
+        lines += ["**Missed:**", ""] + [f"- {f}" for f in failures] + [""]
+    return lines, failures, headline, summary
 
 
 def meets(r: dict, target) -> bool:
@@ -280,6 +361,8 @@ def meets(r: dict, target) -> bool:
 def target_text(t) -> str:
     """A flight target as the report writes it: who, under which profile, what bar."""
     under = f" under `{sensing_label(t.sensing)}`" if t.sensing is not None else ""
+    if t.outage is not None:
+        under += " without an outage" if t.outage == "none" else f" with a {t.outage} outage"
     bar = f"{t.max:g} x {t.per}" if t.per is not None else f"{t.max:g}"
     return f"`{t.controller}`{under}: {t.metric} <= {bar} on >= {t.share:.0%} of its flights"
 
@@ -291,13 +374,15 @@ def judge_flight_targets(campaign: Campaign, rows: list[dict]
     if not campaign.flight_targets:
         return [], [], [], []
     lines = ["## Flight targets", "",
-             "Each target over the flights of one controller (under one sensing profile when it "
-             "names one): the share of them that meet the bar (a failed flight, or a crashed one "
-             "unless the target is on `crashed`, does not), and the median of the metric.", ""]
+             "Each target over the flights of one controller (under one sensing profile, with "
+             "one outage, when it names them): the share of them that meet the bar (a failed "
+             "flight, or a crashed one unless the target is on `crashed`, does not), and the "
+             "median of the metric.", ""]
     failures, headline, summary = [], [], []
     for t in campaign.flight_targets:
         rs = [r for r in rows if r["controller"] == t.controller
-              and (t.sensing is None or r["sensing"] == t.sensing)]
+              and (t.sensing is None or r["sensing"] == t.sensing)
+              and (t.outage is None or r.get("outage", "none").split()[0] == t.outage)]
         ok = sum(meets(r, t) for r in rs)
         share = ok / len(rs) if rs else None
         met = share is not None and share >= t.share
@@ -310,13 +395,15 @@ def judge_flight_targets(campaign: Campaign, rows: list[dict]
         lines.append(f"- {target_text(t)}: {ok} of {len(rs)} "
                      f"({fmt(share, '{:.0%}')}; median {fmt(median, '{:.4g}')}{extra}): "
                      f"**{verdict}**.")
-        short = (f"{t.controller}{' ' + sensing_label(t.sensing) if t.sensing else ''} "
+        short = (f"{t.controller}{' ' + sensing_label(t.sensing) if t.sensing else ''}"
+                 f"{' outage ' + t.outage if t.outage else ''} "
                  f"{t.metric} <= {t.max:g}{' x ' + t.per if t.per else ''}: {ok}/{len(rs)}")
         headline.append(f"{short} {'met' if met else 'missed'}")
         if not met:
             failures.append(f"{short} (target >= {t.share:.0%})")
         summary.append({"controller": t.controller, "sensing": t.sensing and
-                        sensing_label(t.sensing), "metric": t.metric, "max": t.max,
+                        sensing_label(t.sensing), **({"outage": t.outage} if t.outage else {}),
+                        "metric": t.metric, "max": t.max,
                         "per": t.per, "share_target": t.share, "flights": len(rs), "met_by": ok,
                         "share": share, "median": median, "met": met})
     lines.append("")
@@ -410,26 +497,43 @@ def write_report(campaign: Campaign, rows: list[dict], out: Path, run_info: dict
         return out / "report.md"
     varied = len(campaign.sensings) > 1
     groups = [(p, [r for r in rows if r["sensing"] == p]) for p in campaign.sensings]
-    lines += ["## Success rate per controller" + (" and sensing profile" if varied else ""), "",
-              ("| sensing " if varied else "") + "| controller | flights | success | crashed | "
+    outage = has_outage(campaign)                # the outage's columns
+    o_varied = len(campaign.outages) > 1         # and its own column, rows and sections
+    o_groups = [(o, [r for r in rows if r.get("outage", "none") == o])
+                for o in campaign.outages]
+    # the table's row groups: each (profile, outage) flown, in the campaign's order
+    table = [(p, o, [r for r in prs if not o or r.get("outage", "none") == o])
+             for p, prs in (groups if varied else [("", rows)])
+             for o in (campaign.outages if o_varied else [""])]
+    by = " and ".join(["sensing profile"] * varied + ["outage"] * o_varied)
+    lines += ["## Success rate per controller" + (f" and {by}" if by else ""), "",
+              ("| sensing " if varied else "") + ("| outage " if o_varied else "")
+              + "| controller | flights | success | crashed | "
               "failed | median RMSE after fault m |" + (" median estimate error m |" if varied
-                                                       else "") + " median diagnosis s |",
-              ("|---" if varied else "") + "|---|---|---|---|---|---|" + ("---|" if varied
-                                                                          else "") + "---|"]
-    for p, prs in (groups if varied else [("", rows)]):
+                                                       else "") + " median diagnosis s |"
+              + (" median max error in outage m | max error in outage m |" if outage else ""),
+              ("|---" if varied else "") + ("|---" if o_varied else "")
+              + "|---|---|---|---|---|---|" + ("---|" if varied else "") + "---|"
+              + ("---|---|" if outage else "")]
+    for p, o, prs in table:
         for c in campaign.controllers:
             rs = [r for r in prs if r["controller"] == c]
             if not rs:
                 continue
             rm = sorted(v for r in rs if not r["crashed"] and (v := _rmse_of(r)) is not None)
             est = [r["est_rmse_pos_m"] for r in rs if r.get("est_rmse_pos_m") is not None]
+            in_outage = [r["max_pos_err_outage_m"] for r in rs
+                         if r.get("max_pos_err_outage_m") is not None]
             lines.append((f"| {sensing_label(p)} " if varied else "")
+                         + (f"| {o} " if o_varied else "")
                          + f"| {c} | {len(rs)} | {sum(r['success'] for r in rs) / len(rs):.0%} | "
                          f"{sum(bool(r['crashed']) for r in rs)} | "
                          f"{sum(r['status'] == 'failed' for r in rs)} | "
                          f"{fmt(statistics.median(rm) if rm else None)} |"
                          + (f" {fmt(statistics.median(est) if est else None)} |" if varied
-                            else "") + f" {fmt(_median(rs, 'diagnosis_s'), '{:.2f}')} |")
+                            else "") + f" {fmt(_median(rs, 'diagnosis_s'), '{:.2f}')} |"
+                         + (f" {fmt(_median(rs, 'max_pos_err_outage_m'))} | "
+                            f"{fmt(max(in_outage) if in_outage else None)} |" if outage else ""))
     lines.append("")
     if campaign.has_plant:
         plant_lines, plant_summary = plant_campaign.report(campaign, rows, out, figures)
@@ -440,10 +544,23 @@ def write_report(campaign: Campaign, rows: list[dict], out: Path, run_info: dict
     if varied:
         summary["sensing"] = {sensing_label(p): _controller_summary(campaign, prs)
                               for p, prs in groups}
+    if o_varied:
+        summary["outage"] = {o: _controller_summary(campaign, ors) for o, ors in o_groups}
+        if varied:
+            summary["sensing_outage"] = {
+                f"{sensing_label(p)} {o}": _controller_summary(campaign, prs)
+                for p, o, prs in table}
     if not campaign.has_plant and len(campaign.controllers) > 1:
         pair_lines, summary["paired_by_seed"] = paired_by_seed(campaign, rows)
         lines += pair_lines
     target_lines, failures, headline, judged = judge_flight_targets(campaign, rows)
+    p_lines, p_failures, p_headline, p_judged = judge_paired_targets(campaign, rows)
+    if p_judged:
+        lines += p_lines
+        summary["paired_targets"] = p_judged
+        summary["failures"] = summary.get("failures", []) + p_failures
+        summary["headline"] = "; ".join(([summary["headline"]] if summary.get("headline")
+                                         else []) + p_headline)
     if judged:
         lines += target_lines
         summary["flight_targets"] = judged
@@ -452,9 +569,10 @@ def write_report(campaign: Campaign, rows: list[dict], out: Path, run_info: dict
         summary["headline"] = "; ".join(([summary["headline"]] if summary.get("headline")
                                          else []) + headline)
     write_json(out / "metrics.json", summary)
-    for p, prs in (groups if varied else [("", rows)]):
+    for p, o, prs in table:
         if prs:
-            lines += _cell_sections(campaign, prs, out, figures, sensing_label(p))
+            label = ", ".join(x for x in (sensing_label(p), o and f"outage {o}") if x)
+            lines += _cell_sections(campaign, prs, out, figures, label)
     if failed:
         lines += ["## Failed flights", ""]
         for r in failed[:20]:

@@ -232,3 +232,46 @@ def test_a_mocap_flight_on_the_fused_filter(tmp_path):
     for a in "ned":
         err = steps[f"pos_{a}_m"][flying] - truth[f"pos_{a}_m"][at][flying]
         assert np.max(np.abs(err)) < 0.005, a
+
+
+
+def test_without_a_pose_the_fused_controller_flies_the_state_as_it_came():
+    """Before its first pose (and under `truth`, which sends no raw sensor) the fused filter has
+    not started: the observer runs on the state as it came, as on the autopilot's estimate, bit
+    for bit, IMU samples or not; the first pose starts the filter."""
+    import dataclasses
+
+    from trq_offboard.controller import Controller
+    from trq_offboard.nmpc.base import Solver
+    from trq_offboard.records import (ReferenceSample, SensorSamples, SolveInfo, SolveStatus,
+                                      StateEstimate)
+    from trq_offboard.reference import ConstantReference
+
+    class Hold(Solver):                    # no NMPC (seconds to build): the plan holds u
+        def __init__(self, u, n):
+            self.u, self.n = np.asarray(u, float), n
+            self.ocp = type("NoOcp", (), {"n_lag": 0, "set_throttle_scale": lambda s, e: None})()
+
+        def solve(self, x0, x_ref, d, u_prev, guess, y0=None):
+            return (np.tile(self.u, (self.n, 1)), np.tile(x0, (self.n + 1, 1)),
+                    SolveInfo(SolveStatus.OK, 1, 1e-4, 0.0))
+
+    ref = ConstantReference(ReferenceSample((0.0, 0.0, -2.0), (0.0, 0.0, 0.0), 0.0))
+    ctls = []
+    for name in ("trq_nmpc_eso.yaml", "trq_nmpc_eso_fused.yaml"):
+        cfg = dataclasses.replace(load_controller(ROOT / "params" / "controller" / name),
+                                  effectiveness=None)
+        probe = Controller(cfg, solver=Hold(np.zeros(8), cfg.horizon_steps))
+        ctls.append(Controller(cfg, solver=Hold(probe.u_trim, cfg.horizon_steps)))
+    plain, fused = ctls
+    for k in range(1, 30):
+        state = StateEstimate((0.01 * k, 0.0, -2.0), (0.1 * math.sin(k), 0.05, 0.0),
+                              (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+        imu = SensorSamples(10_000 * k, ((0.0, 0.0, -9.81),), ())
+        plain.step(0.01 * k, state, None, ref)
+        fused.step(0.01 * k, state, None, ref, imu)
+        np.testing.assert_array_equal(fused.eso.z, plain.eso.z)
+    assert fused._health is None and not fused._fused_on
+    pose = SensorSamples(300_000, (), ((295_000, (0.3, 0.0, -2.0)),))
+    fused.step(0.3, state, None, ref, pose)
+    assert fused._fused_on and fused._health is not None
