@@ -6,6 +6,8 @@
     trq-bench-nmpc --quick --repeat 3   # median of 3 interleaved runs
     trq-bench-nmpc --modes rti-gn --daemons    # and the whole period over both daemons
     trq-bench-nmpc --quick --modes rti-gn,rti-exact --anchor acados   # acados' RTI beside ours
+    trq-bench-nmpc --quick --modes rti-gn,rti-exact --anchor acados --daemons --repeat 3 \
+        --controller trq_nmpc_eso_fused --against trq_nmpc_eso   # the fused filter's period
 
 The flight is trq_lab.harness's (`fly_inprocess`, the loop the campaigns and tests fly): the
 vehicle's `Sitl` and the controller's `OffboardFlight` in one process, joined by an in-memory link
@@ -17,6 +19,10 @@ from the start, motor 1 at 50 % from t = 12 s of vehicle time (a fault script th
 Each step: the controller steps on the ODOMETRY it receives, its target goes back over the link
 and the vehicle flies it for one control period, while `Controller.prepare` runs (the RTI's
 preparation phase; a no-op for the other solvers).
+
+A controller that asks the vehicle for raw sensor streams (the fused filter of
+trq_nmpc_eso_fused: HIGHRES_IMU and ATT_POS_MOCAP) flies these flights under --sensing (default
+mocap); the others under the sim file's profile (truth), as before.
 
 Each mode runs in its own subprocess (so that peak memory, ru_maxrss, is its own) with its own
 empty cache directory: the first controller construction is the cold build (code generation and
@@ -34,7 +40,10 @@ to the fastest mode.
 --anchor acados (trq_lab/bench/acados_anchor.py): the flights of rti-gn and rti-exact are
 recorded (what the solver was handed per step) and acados' real-time iteration on the same OCP,
 Gauss-Newton and exact Hessian, replays each right after it in its own process; its preparation
-and feedback times are printed beside ours with the ratios ours / acados'.
+and feedback times are printed beside ours with the ratios ours / acados'. With --daemons the
+controller daemon's CPU per period from outside (trq_lab/bench/period.py) is set against acados'
+step too, and --against CONTROLLER flies a second controller file over the daemons in the same
+run, interleaved, for the ratio of the two (paired run by run).
 """
 
 from __future__ import annotations
@@ -73,10 +82,20 @@ DEFAULT_MODES = "rti-gn,rti-gn-conic,rti-exact,rti-gn-py,sqp-gn,ipopt"
 FAULT_T_S, EFFECTIVENESS, WIND_M_S = 12.0, 0.5, 8.0
 
 
+def inprocess_sensing(sensor_streams: dict[str, int], sensing: str) -> str | None:
+    """The sensing profile of the in-process flights: the sim file's (None) for a controller
+    on the autopilot's estimate, so that those flights stay what they were; `sensing` (the
+    bench's --sensing) for one that asks the vehicle for raw sensor streams (the fused
+    filter's HIGHRES_IMU and ATT_POS_MOCAP), which the sim file's truth does not send."""
+    return sensing if sensor_streams else None
+
+
 def fly(mode: str, seconds: float | None, controller: str = "trq_nmpc_eso",
-        record: Path | None = None) -> dict:
+        record: Path | None = None, sensing: str = "mocap") -> dict:
     """Child process: build twice (cold, cached), fly on the harness, return the figures.
-    `record`: also save what the solver was handed per step (acados_anchor.Recorder) there."""
+    `record`: also save what the solver was handed per step (acados_anchor.Recorder) there.
+    `sensing`: the vehicle's profile if the controller asks for sensor streams
+    (`inprocess_sensing`)."""
     from sil_vehicle.config import load_sim
     from trq_lab import harness
     from trq_offboard.config import load_controller
@@ -103,8 +122,9 @@ def fly(mode: str, seconds: float | None, controller: str = "trq_nmpc_eso",
         recorder = Recorder(ctl)
 
     seed = load_sim(harness.SIM_DEFAULT, cfg.vehicle.file).seed
+    flown_sensing = inprocess_sensing(ctl.sensor_streams, sensing)
     sim = harness.sim_params(cfg.vehicle.file, cfg.control_rate_hz, seed=seed,
-                             wind_speed_m_s=WIND_M_S, wind_from_deg=0.0)
+                             wind_speed_m_s=WIND_M_S, wind_from_deg=0.0, sensing=flown_sensing)
     events = harness.script({"at_s": FAULT_T_S, "motor": 1, "effectiveness": EFFECTIVENESS}) \
         if EFFECTIVENESS < 1 else ()
     qp_iterations = []          # the QP's iterations of each step (read after its prepare)
@@ -138,6 +158,7 @@ def fly(mode: str, seconds: float | None, controller: str = "trq_nmpc_eso",
     crashed = res.status == "crashed" or any(t.crashed for t in res.trace.truth)
     return dict(
         name=mode, steps=len(steps), flight_s=float(res.sim_s), crashed=bool(crashed),
+        sensing=flown_sensing or "the sim file's",
         median_ms=float(np.median(a[:, 0]) * ms), p99_ms=float(np.percentile(a[:, 0], 99) * ms),
         max_ms=float(a[:, 0].max() * ms),
         step_cpu_median_ms=float(np.median(a[:, 1]) * ms),
@@ -164,11 +185,11 @@ def fly(mode: str, seconds: float | None, controller: str = "trq_nmpc_eso",
 
 
 def run_mode(mode: str, seconds: float | None, controller: str = "trq_nmpc_eso",
-             record: Path | None = None) -> dict:
+             record: Path | None = None, sensing: str = "mocap") -> dict:
     with tempfile.TemporaryDirectory(prefix="trq-bench-cache-") as cache_dir:
         env = dict(os.environ, TRQ_CACHE_DIR=cache_dir)
         cmd = [sys.executable, "-m", "trq_lab.bench.nmpc", "--child", mode,
-               "--controller", controller]
+               "--controller", controller, "--sensing", sensing]
         if seconds is not None:
             cmd += ["--seconds", str(seconds)]
         if record is not None:
@@ -196,7 +217,8 @@ def run_anchor(recording: Path, hessian: str, controller: str, init: str = "shif
 
 
 def anchor_table(results: list[dict], anchors: dict[str, dict],
-                 daemons: dict | None = None) -> str:
+                 daemons: dict | None = None, against: dict | None = None,
+                 controller: str = "the controller") -> str:
     """acados' figures beside ours, and the ratios ours / acados' (issue 18's targets: the
     solver's preparation + feedback at most 1.0x acados' RTI step on the median and 1.2x on the
     p99; the controller's whole CPU per period at most 1.5x). prep, prep+feedback: the bench's
@@ -246,11 +268,13 @@ def anchor_table(results: list[dict], anchors: dict[str, dict],
                 f"| {r['total_median_ms'] / a['total_median_ms']:.2f} "
                 f"| {r['total_p99_ms'] / a['total_p99_ms']:.2f} | {solver} "
                 f"| {r['period_cpu_median_ms'] / a['total_median_ms']:.2f} |")
-    if daemons is not None:
+    flown = ([(controller, daemons)] if daemons is not None else []) + \
+        ([(against["controller"], against)] if against is not None else [])
+    for name, fig in flown:
         for mode, a in anchors.items():
-            lines.append(f"\nthe controller daemon's CPU per period from outside / "
-                         f"{a['name']}'s step p50: "
-                         f"{daemons['controller_cpu_ms'] / a['total_median_ms']:.2f}")
+            lines.append(f"\nthe controller daemon's CPU per period from outside ({name}) / "
+                         f"{a['name']}'s step p50 (target <= 1.5): "
+                         f"{fig['controller_cpu_ms'] / a['total_median_ms']:.2f}")
     return "\n".join(lines)
 
 
@@ -294,6 +318,23 @@ def table(results: list[dict]) -> str:
             f"| {r['max_yaw_err_deg']:.2f} | {r['build_cold_s']:.1f} | {r['build_cached_s']:.2f} "
             f"| {r['peak_rss_mb']:.0f} |")
     return "\n".join(lines)
+
+
+def daemon_order(controller: str, against: str | None, k: int) -> list[str]:
+    """The controllers flown over the daemons in repeat `k`: `controller` alone, or both in
+    alternating order (A B, B A, A B, ...) so that a drift of the shared machine across a repeat
+    weighs on both alike."""
+    if against is None:
+        return [controller]
+    return [controller, against] if k % 2 == 0 else [against, controller]
+
+
+def paired_ratios(runs: list[dict], against_runs: list[dict]) -> list[float]:
+    """The controller's CPU per period over the other's, run k against run k (flown next to
+    each other, so that the machine's moment cancels in each ratio)."""
+    if len(runs) != len(against_runs):
+        raise ValueError(f"paired_ratios: {len(runs)} runs against {len(against_runs)}")
+    return [r["controller_cpu_ms"] / a["controller_cpu_ms"] for r, a in zip(runs, against_runs)]
 
 
 def _daemons_summary(runs: list[dict]) -> dict:
@@ -367,7 +408,15 @@ def main(argv=None) -> int:
                          "(trq_lab/bench/period.py)")
     ap.add_argument("--sensing", default="mocap", metavar="NAME|PATH",
                     help="the vehicle's sensing profile in --daemons (default: mocap, as the "
-                         "scenarios fly; truth: the near-truth stream, no estimator)")
+                         "scenarios fly; truth: the near-truth stream, no estimator), and in the "
+                         "in-process flights of a controller that asks for raw sensors (the "
+                         "fused filter; the others fly the sim file's profile there)")
+    ap.add_argument("--against", default=None, metavar="CONTROLLER",
+                    help="with --daemons: also fly this controller file over both daemons, "
+                         "interleaved with --controller's flights (in alternating order), and "
+                         "print the ratio of the two controllers' CPU per period from outside, "
+                         "paired run by run (e.g. --controller trq_nmpc_eso_fused --against "
+                         "trq_nmpc_eso: the fused filter's cost)")
     ap.add_argument("--anchor", choices=("acados",), default=None,
                     help="also step acados' real-time iteration (the same OCP, built from our "
                          "model, weights and bounds) through the flights of rti-gn (Gauss-Newton) "
@@ -380,11 +429,17 @@ def main(argv=None) -> int:
     ap.add_argument("--child", default=None, help=argparse.SUPPRESS)
     ap.add_argument("--record", type=Path, default=None, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
-    if not (trq_params.resolve("controller", args.controller)).is_file():
-        ap.error(f"--controller {args.controller}: no params/controller/{args.controller}.yaml")
+    for flag, name in (("--controller", args.controller), ("--against", args.against)):
+        if name is not None and not trq_params.exists("controller", name):
+            ap.error(f"{flag} {name}: no params/controller/{name}.yaml")
+    if args.against is not None and not args.daemons:
+        ap.error("--against compares the controllers over both daemons: add --daemons")
+    if args.against == args.controller:
+        ap.error(f"--against {args.against}: the same file as --controller")
     seconds = args.seconds if args.seconds is not None else (16.0 if args.quick else None)
     if args.child:
-        print(json.dumps(fly(args.child, seconds, args.controller, args.record)), flush=True)
+        print(json.dumps(fly(args.child, seconds, args.controller, args.record, args.sensing)),
+              flush=True)
         return 0
     modes = [m.strip() for m in args.modes.split(",") if m.strip()]
     unknown = [m for m in modes if m not in MODES]
@@ -402,7 +457,9 @@ def main(argv=None) -> int:
             ap.error("--anchor acados replays the flights of "
                      f"{' and '.join(acados_anchor.ANCHORED_MODES)}: add one to --modes")
     print(machine_line(), flush=True)
-    print(f"controller: params/controller/{args.controller}.yaml", flush=True)
+    print(f"controller: params/controller/{args.controller}.yaml"
+          + (f", against params/controller/{args.against}.yaml over the daemons"
+             if args.against else ""), flush=True)
     if anchored:
         print(f"anchor: {why}; warm start {args.anchor_init}", flush=True)
     if args.repeat < 1:
@@ -410,20 +467,23 @@ def main(argv=None) -> int:
     runs: dict[str, list[dict]] = {m: [] for m in modes}
     anchor_runs: dict[str, list[dict]] = {m: [] for m in anchored}
     daemon_runs: list[dict] = []
+    against_runs: list[dict] = []
     for k in range(args.repeat):
         if args.daemons:      # interleaved with the modes, as they are with each other
             from trq_lab.bench.period import daemons_period
-            d = daemons_period(controller=args.controller, sensing=args.sensing)
-            daemon_runs.append(d)
-            print(f"  daemons{f' (run {k + 1})' if args.repeat > 1 else ''}: controller "
-                  f"{d['controller_cpu_ms']:.2f} ms CPU a period from outside, vehicle "
-                  f"{d['vehicle_cpu_ms']:.2f} ms, lockstep {d['realtime_factor']:.2f}x real "
-                  "time", flush=True)
+            for name in daemon_order(args.controller, args.against, k):
+                d = daemons_period(controller=name, sensing=args.sensing)
+                (daemon_runs if name == args.controller else against_runs).append(d)
+                print(f"  daemons, {name}{f' (run {k + 1})' if args.repeat > 1 else ''}: "
+                      f"controller {d['controller_cpu_ms']:.2f} ms CPU a period from outside, "
+                      f"vehicle {d['vehicle_cpu_ms']:.2f} ms, lockstep "
+                      f"{d['realtime_factor']:.2f}x real time", flush=True)
         for m in modes:       # one after the other: the modes do not share the cores
             if m in anchored:     # the flight recorded, acados replays it right after
                 with tempfile.TemporaryDirectory(prefix="trq-bench-rec-") as rec_dir:
                     rec = Path(rec_dir) / "flight.npz"
-                    r = run_mode(m, seconds, args.controller, record=rec)
+                    r = run_mode(m, seconds, args.controller, record=rec,
+                                 sensing=args.sensing)
                     a = run_anchor(rec, anchored[m], args.controller, args.anchor_init)
                 anchor_runs[m].append(a)
                 print(f"  {a['name']} on {m}'s flight{f' (run {k + 1})' if args.repeat > 1 else ''}"
@@ -432,11 +492,12 @@ def main(argv=None) -> int:
                       f"prep+feedback p50/p99 {a['total_median_ms']:.3f}/"
                       f"{a['total_p99_ms']:.3f} ms", flush=True)
             else:
-                r = run_mode(m, seconds, args.controller)
+                r = run_mode(m, seconds, args.controller, sensing=args.sensing)
             runs[m].append(r)
             print(f"  {m}{f' (run {k + 1})' if args.repeat > 1 else ''}: {r['steps']} steps, "
                   f"crashed {r['crashed']}, build {r['build_mode']}, compilations cold/cached "
-                  f"{r['compilations_cold']}/{r['compilations_cached']}, solver {r['qp']}, solve "
+                  f"{r['compilations_cold']}/{r['compilations_cached']}, sensing "
+                  f"{r['sensing']}, solver {r['qp']}, solve "
                   f"p50/p99 {r['median_ms']:.2f}/{r['p99_ms']:.2f} ms, controller period "
                   f"p50 {r['period_median_ms']:.2f} ms", flush=True)
     results = [combine(runs[m]) for m in modes]
@@ -457,16 +518,35 @@ def main(argv=None) -> int:
         print(f"controller CPU per period / the solver's own step (feedback wall + preparation "
               f"CPU, same flights): {daemons['ratio_to_solver']:.2f}; closed loop "
               f"{daemons['realtime_factor']:.2f}x real time")
+    against = None
+    if against_runs:
+        against = _daemons_summary(against_runs)
+        against["controller"] = args.against
+        ratios = paired_ratios(daemon_runs, against_runs)
+        against["ratio"] = float(np.median(ratios))
+        against["ratios"] = ratios
+        print(f"\n{args.against} over both daemons in the same run (median of "
+              f"{len(against_runs)} run(s)):")
+        print(parts_table(against))
+        print(f"controller CPU per period from outside, {args.controller} / {args.against}, "
+              f"paired run by run: {against['ratio']:.2f} (median; runs "
+              f"{', '.join(f'{r:.2f}' for r in ratios)}); {args.controller} "
+              f"{daemons['controller_cpu_ms']:.3f} ms, {args.against} "
+              f"{against['controller_cpu_ms']:.3f} ms")
     anchors = {m: combine(anchor_runs[m]) for m in anchored}
     if anchors:
         print(f"\nacados' real-time iteration on the same OCP, replaying our flights (median of "
               f"{args.repeat} run(s); times around acados' calls, wall unless said):")
-        print(anchor_table(results, anchors, daemons))
+        print(anchor_table(results, anchors, daemons, against,
+                           controller=args.controller))
     print(f"calibration at the end {calibration_ms():.2f} ms")
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
-        out = {"machine": machine_line(), "modes": results, "daemons": daemons,
-               "daemon_runs": daemon_runs}
+        out = {"machine": machine_line(), "controller": args.controller, "modes": results,
+               "daemons": daemons, "daemon_runs": daemon_runs}
+        if against is not None:
+            out["against"] = against
+            out["against_runs"] = against_runs
         if anchors:
             out["anchor"] = {"modes": anchors, "runs": anchor_runs}
         args.json.write_text(json.dumps(out, indent=1))

@@ -1,0 +1,71 @@
+"""trq-bench-nmpc's choices (trq_lab.bench.nmpc): the in-process flights' sensing profile, the
+second controller over the daemons (--against) and its paired ratio, the options refused."""
+
+from __future__ import annotations
+
+import pytest
+
+from trq_lab.bench import nmpc
+
+
+def test_a_controller_on_the_autopilots_estimate_flies_the_sim_files_profile():
+    assert nmpc.inprocess_sensing({}, "mocap") is None
+
+
+def test_a_controller_asking_for_sensors_flies_the_benchs_profile():
+    streams = {"HIGHRES_IMU": 125, "ATT_POS_MOCAP": 100}
+    assert nmpc.inprocess_sensing(streams, "mocap") == "mocap"
+    assert nmpc.inprocess_sensing(streams, "rtk") == "rtk"
+
+
+@pytest.mark.slow
+def test_the_fused_controller_asks_for_its_streams():
+    """What inprocess_sensing is handed: the fused controller's streams, none for the
+    autopilot's estimate (built controllers: the shipped files)."""
+    import trq_params
+    from trq_offboard.config import load_controller
+    from trq_offboard.controller import Controller
+
+    fused = Controller(load_controller(trq_params.resolve("controller", "trq_nmpc_eso_fused")))
+    plain = Controller(load_controller(trq_params.resolve("controller", "trq_nmpc_eso")))
+    assert nmpc.inprocess_sensing(fused.sensor_streams, "mocap") == "mocap"
+    assert nmpc.inprocess_sensing(plain.sensor_streams, "mocap") is None
+
+
+def test_the_daemons_alternate_the_order_of_the_two_controllers():
+    order = [nmpc.daemon_order("a", "b", k) for k in range(4)]
+    assert order == [["a", "b"], ["b", "a"], ["a", "b"], ["b", "a"]]
+    assert nmpc.daemon_order("a", None, 1) == ["a"]
+
+
+def test_the_ratio_is_paired_run_by_run():
+    runs = [{"controller_cpu_ms": v} for v in (2.0, 3.0, 6.0)]
+    against = [{"controller_cpu_ms": v} for v in (1.0, 2.0, 4.0)]
+    assert nmpc.paired_ratios(runs, against) == [2.0, 1.5, 1.5]
+    with pytest.raises(ValueError, match="3 runs against 2"):
+        nmpc.paired_ratios(runs, against[:2])
+
+
+def test_the_anchor_table_sets_both_daemon_controllers_against_acados():
+    mode = {"name": "rti-exact", "prep_median_ms": 1.0, "median_ms": 1.0, "total_median_ms": 2.0,
+            "total_p99_ms": 3.0, "period_cpu_median_ms": 2.5}
+    anchor = {"name": "acados exact", "hessian": "exact", "prep_median_ms": 0.5,
+              "feedback_median_ms": 0.5, "feedback_p99_ms": 0.8, "total_median_ms": 1.0,
+              "total_p99_ms": 1.5, "total_cpu_median_ms": 1.0, "internal_total_median_ms": 0.9,
+              "qp_iterations_median": 5, "qp_iterations_max": 9, "failures": 0, "build_s": 1.0}
+    text = nmpc.anchor_table([mode], {"rti-exact": anchor}, {"controller_cpu_ms": 1.6},
+                             {"controller_cpu_ms": 1.2, "controller": "trq_nmpc_eso"},
+                             controller="trq_nmpc_eso_fused")
+    assert "(trq_nmpc_eso_fused) / acados exact's step p50 (target <= 1.5): 1.60" in text
+    assert "(trq_nmpc_eso) / acados exact's step p50 (target <= 1.5): 1.20" in text
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--against", "trq_nmpc_eso"], "add --daemons"),
+    (["--daemons", "--against", "no_such_controller"], "no params/controller"),
+    (["--daemons", "--against", "trq_nmpc_eso"], "the same file"),
+])
+def test_against_is_refused_where_it_cannot_compare(argv, message, capsys):
+    with pytest.raises(SystemExit):
+        nmpc.main(argv)
+    assert message in capsys.readouterr().err
