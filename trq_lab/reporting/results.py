@@ -126,7 +126,8 @@ def campaigns_table(paths: list[Path], base: Path | None = None) -> str:
                 controllers.append(c)
     controllers = [c for c in CONTROLLERS if c in controllers] + \
         [c for c in controllers if c not in CONTROLLERS]
-    head = ["campaign", "flights"] + [f"{c} success / median RMSE after fault m"
+    # a controller given by its file's path: named by the file (no machine's folders)
+    head = ["campaign", "flights"] + [f"{Path(c).stem} success / median RMSE after fault m"
                                       for c in controllers] + ["targets"]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for path, doc in docs:
