@@ -15,7 +15,7 @@ from trq_offboard.config import ConfigError, load_controller
 from trq_offboard.fused import FusedConfig, FusedFilter, HealthReport, rotation_ned_frd
 from trq_params.loader import read_yaml
 
-from conftest import ROOT
+from conftest import ROOT, feed_imu
 
 G = 9.81
 H_US = 10_000                 # the control period
@@ -54,10 +54,7 @@ def _fly(n_steps, *, seed=0, model_error=(0.3, -0.2, 0.1), bias_frd=(0.15, -0.1,
     rows = []
     for k in range(1, n_steps + 1):
         t_us = k * H_US
-        for s in (t_us - 6000, t_us - 2000):
-            a = _truth(s * 1e-6)[2]
-            f_frd = rot.T @ (a - np.array([0.0, 0.0, G])) + np.asarray(bias_frd)
-            f.add_imu(f_frd + rng.normal(0.0, cfg.accel_std_m_s2, 3), euler)
+        feed_imu(f, t_us, lambda t: _truth(t)[2], euler, bias_frd, rng, cfg.accel_std_m_s2, G)
         t_pose = t_us - latency_us
         if poses and t_pose >= 0 and k not in drop:
             p = _truth(t_pose * 1e-6)[0] + rng.normal(0.0, cfg.mocap_std_m, 3)

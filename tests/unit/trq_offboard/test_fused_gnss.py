@@ -14,10 +14,10 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from trq_offboard.config import ConfigError, load_controller
 from trq_offboard.controller import Controller
-from trq_offboard.fused import FusedConfig, FusedFilter, HealthReport, rotation_ned_frd
+from trq_offboard.fused import FusedConfig, FusedFilter, HealthReport
 from trq_params.loader import read_yaml
 
-from conftest import ROOT
+from conftest import ROOT, feed_imu
 
 G = 9.81
 H_US = 10_000                  # the control period
@@ -50,15 +50,11 @@ def _fly(n_steps, *, seed=0, delay=DELAY, outage=(), cfg=CFG, model_error=(0.05,
     p0, v0, _ = _truth(0.0)
     f.reset(0, p0, v0, 0.1)
     euler = (0.0, 0.0, 0.3)
-    rot = rotation_ned_frd(euler)
     pending = []
     rows = []
     for k in range(1, n_steps + 1):
         t_us = k * H_US
-        for s in (t_us - 6000, t_us - 2000):
-            a = _truth(s * 1e-6)[2]
-            f_frd = rot.T @ (a - np.array([0.0, 0.0, G])) + np.asarray(bias_frd)
-            f.add_imu(f_frd + rng.normal(0.0, cfg.accel_std_m_s2, 3), euler)
+        feed_imu(f, t_us, lambda t: _truth(t)[2], euler, bias_frd, rng, cfg.accel_std_m_s2, G)
         if k % FIX_EVERY == 0:           # (the noise drawn in an outage too: the same draws)
             pos = _truth(t_us * 1e-6)[0] + rng.normal(0.0, STD)
             if k not in outage:
