@@ -293,13 +293,14 @@ class Controller:
         if self.motors is not None:
             d, path, y_act, self._scale = self.motors.step(x, d, y_now, t_prev, t_s, t_act,
                                                            self.solver.ocp)
-            # the motors' share of the observer's d, bounded as the observer bounds d: at a
-            # spool-up on the ground (d is the ground's reaction) the deficit it explains is not
-            # a motor's, and unbounded it would throw the fused filter off
-            share = d_obs[0:3] - d[0:3]
-            norm = float(np.linalg.norm(share))
-            lim = self.cfg.eso.max_disturbance[0]
-            self._motor_share = share if norm <= lim else share * (lim / norm)
+            # the fused filter's: the motors' share of the observer's d, bounded as the observer
+            # bounds d: at a spool-up on the ground (d is the ground's reaction) the deficit it
+            # explains is not a motor's, and unbounded it would throw the filter off
+            if self.fused is not None:
+                share = d_obs[0:3] - d[0:3]
+                norm = float(np.linalg.norm(share))
+                lim = self.cfg.eso.max_disturbance[0]
+                self._motor_share = share if norm <= lim else share * (lim / norm)
         c2 = clock()
         self._last_t = float(t_s)
         self._last_d = d

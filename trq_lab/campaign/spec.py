@@ -543,18 +543,7 @@ def _paired_targets(targets, controllers: tuple[str, ...], sensings: tuple[str, 
         if against == t.controller:
             raise ConfigError(f"{file}: key '{key}.against': got {against!r}, expected another "
                               "controller than the target's own")
-        if t.outage is not None and t.outage not in flown:
-            raise ConfigError(f"{file}: key '{key}.outage': got {t.outage!r}, expected one of "
-                              "the outages the campaign flies (" + ", ".join(sorted(flown)) + ")")
-        update = {"against": against}
-        if t.sensing is not None:
-            profile = _sensing({"profile": t.sensing}, file, f"{key}.sensing")
-            if profile not in sensings:
-                raise ConfigError(f"{file}: key '{key}.sensing': got {t.sensing!r}, expected "
-                                  "one of the profiles the campaign flies ("
-                                  + ", ".join(sensings) + ")")
-            update["sensing"] = profile
-        out.append(t.model_copy(update=update))
+        out.append(_scoped(t, key, sensings, flown, file, against=against))
     return tuple(out)
 
 
@@ -572,17 +561,23 @@ def _flight_targets(targets, sensings: tuple[str, ...], outages: tuple[str, ...]
             raise ConfigError(f"{file}: key 'flight_targets[{i}].outage': got {t.outage!r}, "
                               f"expected the outage's sensor ({on} is a metric of the flights "
                               "with an outage)")
-        if t.outage is not None and t.outage not in flown:
-            raise ConfigError(f"{file}: key 'flight_targets[{i}].outage': got {t.outage!r}, "
-                              "expected one of the outages the campaign flies ("
-                              + ", ".join(sorted(flown)) + ")")
-        if t.sensing is not None:
-            where = f"flight_targets[{i}].sensing"
-            profile = _sensing({"profile": t.sensing}, file, where)
-            if profile not in sensings:
-                raise ConfigError(f"{file}: key '{where}': got {t.sensing!r}, expected one of "
-                                  "the profiles the campaign flies (" + ", ".join(sensings)
-                                  + ")")
-            t = t.model_copy(update={"sensing": profile})
-        out.append(t)
+        out.append(_scoped(t, f"flight_targets[{i}]", sensings, flown, file))
     return tuple(out)
+
+
+def _scoped(t, key: str, sensings: tuple[str, ...], flown: set[str], file: Path, **update):
+    """A target (flight or paired) with its sensing profile as the flights carry it (a built-in
+    name, or a path made absolute against the campaign file's folder) and `update`; an outage
+    (`flown`: the sensors, and `none`) or profile the campaign does not fly is a ConfigError
+    naming the file, the key and the value."""
+    if t.outage is not None and t.outage not in flown:
+        raise ConfigError(f"{file}: key '{key}.outage': got {t.outage!r}, expected one of the "
+                          "outages the campaign flies (" + ", ".join(sorted(flown)) + ")")
+    if t.sensing is not None:
+        profile = _sensing({"profile": t.sensing}, file, f"{key}.sensing")
+        if profile not in sensings:
+            raise ConfigError(f"{file}: key '{key}.sensing': got {t.sensing!r}, expected one "
+                              "of the profiles the campaign flies (" + ", ".join(sensings)
+                              + ")")
+        update["sensing"] = profile
+    return t.model_copy(update=update) if update else t
