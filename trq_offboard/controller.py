@@ -179,8 +179,9 @@ class Controller:
         self._grid_val: tuple | None = None
         self.clip_count = 0
         self.failures = 0
-        # the fused filter (estimator kind fused): position and velocity from the pose, the IMU
-        # and the model with the observer's d; started at the first step that brings sensors
+        # the fused filter (estimator kind fused): position and velocity from the position
+        # source, the IMU and the model with the motors' share of the observer's d; started at
+        # the first position sample (`_fuse`)
         self.fused = (FusedFilter(cfg.fused, vm.gravity_m_s2,
                                   codegen=cfg.solver.codegen == "auto")
                       if cfg.fused is not None else None)
@@ -238,6 +239,7 @@ class Controller:
         self.failures = 0
         self._fused_on = False
         self._eso_d = np.zeros(6)
+        self._motor_share = np.zeros(3)
         self._health = None
 
     def _euler_rate(self, x: np.ndarray) -> np.ndarray:
