@@ -372,11 +372,13 @@ def test_inprocess_flight_reproduces_the_udp_flight(tmp_path, daemons):
     assert len(a) > 800 and a == b
 
 
-@pytest.mark.parametrize("path", sorted((PARAMS / "campaigns").glob("*.yaml")),
+@pytest.mark.parametrize("path", sorted((PARAMS / "campaigns").glob("*.yaml"))
+                         + sorted((ROOT / "docs" / "decisions" / "studies").glob("*.yaml")),
                          ids=lambda p: p.stem)
 def test_every_shipped_campaign_loads(path):
-    """The campaign files in params/campaigns/ load (strict keys, controllers that build) and
-    expand to flights with distinct ids."""
+    """The campaign files in params/campaigns/, and the studies' beside their records
+    (docs/decisions/studies/), load (strict keys, controllers that build) and expand to flights
+    with distinct ids."""
 
     plan = load_campaign(path)
     ids = [f["id"] for f in plan.flights]
