@@ -277,7 +277,7 @@ def _equilibrium(vp, factors, wind_speed, wind_from_deg, objective, xs, feasible
         throttle_pct=tuple(float(z) for z in zeta), tilt_rad=tuple(float(a) for a in alpha),
         thrust_N=tuple(vp.thrust_N(m) for m in motors), wrench_frd=tuple(float(v) for v in wr),
         thrust_along_axis_N=fn, force_normal_N=f_perp,
-        orbit_radius_m=f_perp / (vp.mass_kg * w * w) if w > 0 else (0.0 if f_perp < 1e-9 else math.inf),
+        orbit_radius_m=f_perp / (vp.mass_kg * w * w) if w > 0 else (0.0 if f_perp < 1e-6 else math.inf),
         residual=tuple(float(v) for v in res))
 
 
