@@ -160,6 +160,9 @@ def main(argv: list[str] | None = None) -> int:
                          "gyro's full scale)")
     ap.add_argument("--simulate", type=float, default=0.0, metavar="SECONDS",
                     help="--spin: fly the plant from the equilibrium on constant commands")
+    ap.add_argument("--descent-margin", type=float, default=0.0,
+                    help="--spin, where no hover exists: the slowest descent keeping every live "
+                         "actuator this fraction of its range from its limits (default 0)")
     ap.add_argument("--sweep", action="store_true",
                     help="--spin: the best equilibrium at each of a range of spin rates")
     args = ap.parse_args(argv)

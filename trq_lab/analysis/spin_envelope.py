@@ -94,8 +94,8 @@ def wrench_expr(zeta, alpha, factors, vp: VehicleParams):
     """Body FRD wrench (6) of the rotors as rotors.body_wrench computes it, for throttle commands
     `zeta` (%) and tilts `alpha` (rad): motor i produces factors[i] * zeta[i] (the plant clamps the
     command to idle..100 before the factor; the solver keeps it there, the relaxed problem aside)."""
-    f_total = ca.MX.zeros(3)
-    m_total = ca.MX.zeros(3)
+    f_total = ca.SX.zeros(3)
+    m_total = ca.SX.zeros(3)
     for i, rotor in enumerate(vp.rotors):
         if factors[i] == 0.0:
             continue                                # a dead motor: no thrust, no torque
@@ -138,23 +138,26 @@ def _margin_terms(zeta, alpha, factors, vp: VehicleParams):
 
 @dataclass(frozen=True)
 class _Problem:
-    x: ca.MX
-    zeta: ca.MX
-    alpha: ca.MX
-    n: ca.MX
-    w: ca.MX
-    vd: ca.MX
-    t: ca.MX
-    wrench: ca.MX
-    eq: ca.MX           # the equilibrium equations (= 0)
-    ineq: ca.MX         # >= 0
-    power: ca.MX
-    tilt_reg: ca.MX
+    x: ca.SX
+    zeta: ca.SX
+    alpha: ca.SX
+    n: ca.SX
+    w: ca.SX
+    vd: ca.SX
+    t: ca.SX
+    wrench: ca.SX
+    eq: ca.SX           # the equilibrium equations (= 0)
+    ineq: ca.SX         # >= 0
+    power: ca.SX
+    tilt_reg: ca.SX
 
 
-def _problem(vp: VehicleParams, factors, wind_ned, max_cone_rad: float, max_orbit_m: float) -> _Problem:
-    zeta, alpha, n = ca.MX.sym("zeta", 4), ca.MX.sym("alpha", 4), ca.MX.sym("n", 3)
-    w, vd, t = ca.MX.sym("w"), ca.MX.sym("vd"), ca.MX.sym("t")
+def _problem(vp: VehicleParams, factors, wind_ned, max_cone_rad: float, max_orbit_m: float,
+             static: bool = False) -> _Problem:
+    """The NLP's pieces; `static` (the spin held at 0): no orbit, the whole force along n (its x
+    and y components normal to n vanish: enough, n being within the cone of -z body)."""
+    zeta, alpha, n = ca.SX.sym("zeta", 4), ca.SX.sym("alpha", 4), ca.SX.sym("n", 3)
+    w, vd, t = ca.SX.sym("w"), ca.SX.sym("vd"), ca.SX.sym("t")
     x = ca.vertcat(zeta, alpha, n, w, vd, t)
     wr = wrench_expr(zeta, alpha, factors, vp)
     f, m = wr[0:3], wr[3:6]
@@ -164,8 +167,12 @@ def _problem(vp: VehicleParams, factors, wind_ned, max_cone_rad: float, max_orbi
     f_perp = f - fn * n
     eq = ca.vertcat(m - w ** 2 * ca.cross(n, jn), fn - ca.norm_2(need), ca.dot(n, n) - 1.0)
     cone = -n[2] - math.cos(max_cone_rad)                          # n within the cone of -z body
-    orbit = (max_orbit_m * vp.mass_kg) ** 2 * w ** 4 - ca.sumsqr(f_perp)
-    ineq = ca.vertcat(*[term - t for term in _margin_terms(zeta, alpha, factors, vp)], cone, orbit)
+    if static:
+        eq = ca.vertcat(eq, f_perp[0], f_perp[1])
+        orbit = []
+    else:
+        orbit = [(max_orbit_m * vp.mass_kg) ** 2 * w ** 4 - ca.sumsqr(f_perp)]
+    ineq = ca.vertcat(*[term - t for term in _margin_terms(zeta, alpha, factors, vp)], cone, *orbit)
     power = 0
     for i in range(4):
         if factors[i] != 0.0:
@@ -219,8 +226,10 @@ def _starts(vp: VehicleParams, factors, spin, max_spin: float):
 
 
 def _solve(vp, factors, wind_ned, *, objective: str, relaxed: bool, spin, descent: bool,
-           max_spin: float, max_cone_rad: float, max_orbit_m: float, x0s=None):
-    p = _problem(vp, factors, wind_ned, max_cone_rad, max_orbit_m)
+           max_spin: float, max_cone_rad: float, max_orbit_m: float, x0s=None,
+           min_margin: float = 0.0):
+    p = _problem(vp, factors, wind_ned, max_cone_rad, max_orbit_m,
+                 static=spin is not None and float(spin) == 0.0)
     reg = 1e-4 * p.tilt_reg
     if descent:
         f = p.vd + reg
@@ -234,9 +243,9 @@ def _solve(vp, factors, wind_ned, *, objective: str, relaxed: bool, spin, descen
     solver = ca.nlpsol("spin", "ipopt", nlp, _OPTS)
     lbx, ubx = _bounds(vp, factors, relaxed=relaxed, spin=spin, descent=descent, max_spin=max_spin)
     if not relaxed:
-        lbx[-1] = 0.0                   # within the limits: t >= 0
+        lbx[-1] = min_margin            # within the limits: t >= 0 (or a margin kept)
         if objective in ("power", "min_spin") or descent:
-            ubx[-1] = 0.0               # t is then only the lower bound of the margin terms
+            ubx[-1] = min_margin        # t is then only the lower bound of the margin terms
     n_eq, n_ineq = p.eq.shape[0], p.ineq.shape[0]
     lbg = [0.0] * n_eq + [0.0] * n_ineq
     ubg = [0.0] * n_eq + [ca.inf] * n_ineq
@@ -277,7 +286,7 @@ def _equilibrium(vp, factors, wind_speed, wind_from_deg, objective, xs, feasible
         throttle_pct=tuple(float(z) for z in zeta), tilt_rad=tuple(float(a) for a in alpha),
         thrust_N=tuple(vp.thrust_N(m) for m in motors), wrench_frd=tuple(float(v) for v in wr),
         thrust_along_axis_N=fn, force_normal_N=f_perp,
-        orbit_radius_m=f_perp / (vp.mass_kg * w * w) if w > 0 else (0.0 if f_perp < 1e-6 else math.inf),
+        orbit_radius_m=f_perp / (vp.mass_kg * w * w) if w > 0 else (0.0 if f_perp < 1e-3 else math.inf),
         residual=tuple(float(v) for v in res))
 
 
@@ -295,12 +304,15 @@ def residual(vp: VehicleParams, motor_pct, tilt_rad, axis_frd, spin_rad_s: float
 def solve(vp: VehicleParams, factors, wind_speed: float = 0.0, wind_from_deg: float = 0.0, *,
           objective: str = "margin", spin_rad_s: float | None = None,
           max_spin_rad_s: float = GYRO_FULL_SCALE_RAD_S, max_cone_deg: float = 89.0,
-          max_orbit_m: float = MAX_ORBIT_RADIUS_M, descend: bool = True) -> SpinEquilibrium:
+          max_orbit_m: float = MAX_ORBIT_RADIUS_M, descend: bool = True,
+          descent_margin: float = 0.0) -> SpinEquilibrium:
     """The best relaxed hover: largest margin ("margin") or least ideal induced power ("power",
     sum of thrust^1.5, momentum theory), at a given spin rate or the best in 0..max_spin_rad_s.
     With no hover within the limits: the best relaxed one is found (negative margin: by how much
     the limits are missed) and, with `descend`, the slowest steady descent within the limits
-    (descent_m_s > 0) is returned instead when one exists."""
+    (descent_m_s > 0) is returned instead when one exists, keeping every live actuator at least
+    `descent_margin` (fraction of its range) from its limits. RuntimeError: no equilibrium at all
+    (not even outside the limits: e.g. too slow a spin for the gyroscopic moment needed)."""
     if objective not in ("margin", "power"):
         raise ValueError(f"spin envelope: objective {objective!r}, expected 'margin' or 'power'")
     factors = [float(f) for f in factors]
@@ -321,7 +333,13 @@ def solve(vp: VehicleParams, factors, wind_speed: float = 0.0, wind_from_deg: fl
             xs = best[1] if best is not None else xs
         return _equilibrium(vp, factors, wind_speed, wind_from_deg, objective, xs, True)
     if descend:
-        _, best = _solve(vp, factors, wind, objective="margin", relaxed=False, descent=True, **kw)
+        starts = _starts(vp, factors, spin_rad_s, max_spin_rad_s)
+        for x0 in starts:
+            x0[12] = 10.0                   # a descent of the order of the drag's speeds
+        if relaxed is not None:
+            starts.insert(0, list(relaxed[1][:12]) + [10.0, 0.0])
+        _, best = _solve(vp, factors, wind, objective="margin", relaxed=False, descent=True,
+                         min_margin=descent_margin, x0s=starts, **kw)
         if best is not None:
             return _equilibrium(vp, factors, wind_speed, wind_from_deg, "descent", best[1], False)
     if relaxed is None:
@@ -344,7 +362,7 @@ def control_margins(vp: VehicleParams, eq: SpinEquilibrium) -> dict[str, float |
     the yaw torque ("Mz", N m; Mx, My, Fn held: the normal force only moves the small orbit).
     None: not reachable (that quantity cannot move alone)."""
     factors = list(eq.motor_factors)
-    zeta, alpha = ca.MX.sym("zeta", 4), ca.MX.sym("alpha", 4)
+    zeta, alpha = ca.SX.sym("zeta", 4), ca.SX.sym("alpha", 4)
     wr = wrench_expr(zeta, alpha, factors, vp)
     n = ca.DM(eq.axis_frd)
     fn = ca.dot(wr[0:3], n)
@@ -546,10 +564,16 @@ def slowest_spin_rad_s(vp: VehicleParams, factors, wind_speed: float = 0.0,
 
 
 def sweep(vp: VehicleParams, factors, rates_rad_s, wind_speed: float = 0.0,
-          wind_from_deg: float = 0.0) -> list[SpinEquilibrium]:
-    """The largest-margin equilibrium at each spin rate (the family the tilts move along)."""
-    return [solve(vp, factors, wind_speed, wind_from_deg, spin_rad_s=float(w), descend=False)
-            for w in rates_rad_s]
+          wind_from_deg: float = 0.0) -> list[SpinEquilibrium | None]:
+    """The largest-margin equilibrium at each spin rate (the family the tilts move along), or the
+    slowest steady descent where no hover is within the limits; None: no equilibrium at all."""
+    out: list[SpinEquilibrium | None] = []
+    for w in rates_rad_s:
+        try:
+            out.append(solve(vp, factors, wind_speed, wind_from_deg, spin_rad_s=float(w)))
+        except RuntimeError:
+            out.append(None)
+    return out
 
 
 # --- the command (trq-envelope --spin) -----------------------------------------------------------
@@ -574,8 +598,17 @@ def main_spin(vp: VehicleParams, factors: list[float], args) -> int:
         print(f"envelope: --spin-rate {args.spin_rate} and --max-spin {max_spin}: expected "
               "0 <= spin rate <= max spin, max spin > 0", file=sys.stderr)
         return 2
-    eq = solve(vp, factors, args.wind, args.wind_dir, objective=args.objective,
-               spin_rad_s=args.spin_rate, max_spin_rad_s=max_spin)
+    if not 0.0 <= args.descent_margin < 0.5:
+        print(f"envelope: --descent-margin {args.descent_margin}: expected 0 <= margin < 0.5",
+              file=sys.stderr)
+        return 2
+    try:
+        eq = solve(vp, factors, args.wind, args.wind_dir, objective=args.objective,
+                   spin_rad_s=args.spin_rate, max_spin_rad_s=max_spin,
+                   descent_margin=args.descent_margin)
+    except RuntimeError as exc:
+        print(f"envelope: {exc}", file=sys.stderr)
+        return 1
     out = {"equilibrium": eq.as_dict(),
            "max_axis_thrust_N": max_axis_thrust_N(vp, factors),
            "weight_N": vp.mass_kg * vp.gravity_m_s2,
@@ -605,12 +638,14 @@ def main_spin(vp: VehicleParams, factors: list[float], args) -> int:
         out["floquet_exponents"] = [[float(e.real), float(e.imag)] for e in ev]
         print(f"  linearised about the orbit: largest real part {max(e.real for e in ev):.2e} /s")
     if args.sweep:
-        out["sweep"] = [e.as_dict() for e in sweep(vp, factors, SWEEP_RATES_RAD_S, args.wind,
-                                                    args.wind_dir)]
-        for e in out["sweep"]:
-            print(f"  sweep: spin {e['spin_rad_s']:6.2f} rad/s: margin {e['margin']:+.3f}, axis "
-                  f"{e['axis_from_body_up_deg']:5.2f} deg, throttle "
-                  f"{[round(z, 1) for z in e['throttle_pct']]} %, tilt {e['tilt_deg']} deg")
+        found = sweep(vp, factors, SWEEP_RATES_RAD_S, args.wind, args.wind_dir)
+        out["sweep"] = [None if e is None else e.as_dict() for e in found]
+        for w, e in zip(SWEEP_RATES_RAD_S, found):
+            print(f"  sweep: spin {w:6.2f} rad/s: " + ("no equilibrium" if e is None else
+                  f"{'hover' if e.feasible else 'descent'} {e.descent_m_s:.2f} m/s, margin "
+                  f"{e.margin:+.3f}, axis {e.axis_from_body_up_deg:5.2f} deg, throttle "
+                  f"{[round(z, 1) for z in e.throttle_pct]} %, tilt "
+                  f"{[round(a, 1) for a in e.tilt_deg]} deg"))
     if args.simulate > 0:
         from sil_vehicle.config import load_sim
         import trq_params

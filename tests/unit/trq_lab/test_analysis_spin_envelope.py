@@ -52,6 +52,10 @@ def test_the_plant_stays_on_the_orbit(sim, spin20):
 
 def test_motor1_lost_has_no_static_trim_and_a_slowest_spin(trq):
     assert not envelope.analyse(trq, MOTOR1_LOST, 0.0, 0.0)["feasible"]
+    # not spinning, not even a steady descent: motor 2's idle thrust rolls the body about the
+    # diagonal of motors 3 and 4, which nothing else can (the record's proof)
+    static = se.solve(trq, MOTOR1_LOST, spin_rad_s=0.0)
+    assert not static.feasible and static.descent_m_s == 0.0 and static.margin < -0.1
     slow = se.slowest_spin_rad_s(trq, MOTOR1_LOST)
     assert slow is not None and 10.0 < slow < 20.0
     below = se.solve(trq, MOTOR1_LOST, spin_rad_s=0.8 * slow, descend=False)
@@ -71,7 +75,7 @@ def test_two_motors_lost_only_descend(trq, factors):
     steady descent needs the drag to make up the rest."""
     weight = trq.mass_kg * trq.gravity_m_s2
     assert se.max_axis_thrust_N(trq, factors) < weight
-    eq = se.solve(trq, factors)
+    eq = se.solve(trq, factors, spin_rad_s=30.0)
     assert not eq.feasible
     bound = math.sqrt((weight - se.max_axis_thrust_N(trq, factors)) / trq.drag_N_s2_m2)
     assert eq.descent_m_s >= bound - 1e-3
@@ -79,8 +83,14 @@ def test_two_motors_lost_only_descend(trq, factors):
     assert max(abs(r) for r in eq.residual) < 1e-5
 
 
+def test_two_adjacent_lost_have_no_static_equilibrium(trq):
+    """Both live rotors behind the centre of mass: a pitch torque only a spin can balance."""
+    with pytest.raises(RuntimeError, match="no solution"):
+        se.solve(trq, [0.0, 1.0, 0.0, 1.0], spin_rad_s=0.0)
+
+
 def test_quad_cannot_balance_yaw_with_a_motor_lost(quad):
-    eq = se.solve(quad, MOTOR1_LOST, descend=False)
+    eq = se.solve(quad, MOTOR1_LOST, spin_rad_s=30.0, descend=False)
     assert not eq.feasible and eq.margin < -0.05
 
 
