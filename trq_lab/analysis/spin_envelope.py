@@ -381,8 +381,8 @@ def control_margins(vp: VehicleParams, eq: SpinEquilibrium) -> dict[str, float |
             solver = ca.nlpsol("m", "ipopt", {"x": x, "f": -sign * q[key], "g": g}, _OPTS)
             r = solver(x0=x0, lbx=lbx, ubx=ubx, lbg=0, ubg=0)
             name = f"{'+' if sign > 0 else '-'}{key}"
-            if solver.stats()["success"]:
-                out[name] = round(sign * (-sign * float(r["f"]) - trim[key]), 4)
+            if solver.stats()["success"]:      # >= 0: the equilibrium itself is a candidate
+                out[name] = max(0.0, round(sign * (-sign * float(r["f"]) - trim[key]), 4))
             else:
                 out[name] = None
     return out
@@ -614,7 +614,8 @@ def main_spin(vp: VehicleParams, factors: list[float], args) -> int:
            "weight_N": vp.mass_kg * vp.gravity_m_s2,
            "slowest_spin_rad_s": slowest_spin_rad_s(vp, factors, args.wind, args.wind_dir,
                                                     max_spin) if eq.feasible else None,
-           "control_margins": control_margins(vp, eq)}
+           "control_margins": (control_margins(vp, eq) if eq.feasible or eq.descent_m_s > 0
+                               else {})}
     print(f"spinning envelope of {vp.name}: motor factors {factors}, wind {args.wind:g} m/s from "
           f"{args.wind_dir:g} deg ({args.objective})")
     kind = "hover" if eq.feasible else ("steady descent" if eq.descent_m_s > 0 else "NONE")
