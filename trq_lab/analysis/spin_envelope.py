@@ -10,7 +10,8 @@ reaction torque, tilts) the conditions are, for the body wrench (F, M) of the ro
     M = w^2 n x (J n)              Euler's equations with omega = w n constant in the body frame
     F . n = |N|                    the thrust along n balances the mean force needed,
     N = m g up + k |v_rel| v_rel   gravity and the mean drag of the air-relative velocity
-                                   v_rel = (0, 0, v_down) - wind (position held, or a steady descent)
+                                   v_rel = (0, 0, v_down) - wind (position held, or a steady
+                                   descent)
 
 n in the world is N's direction (the body's orientation about it is free: it rotates). The part of
 F normal to n rotates with the body and moves the centre of mass on a circle of radius about
@@ -93,7 +94,8 @@ def _curve(c, z):
 def wrench_expr(zeta, alpha, factors, vp: VehicleParams):
     """Body FRD wrench (6) of the rotors as rotors.body_wrench computes it, for throttle commands
     `zeta` (%) and tilts `alpha` (rad): motor i produces factors[i] * zeta[i] (the plant clamps the
-    command to idle..100 before the factor; the solver keeps it there, the relaxed problem aside)."""
+    command to idle..100 before the factor; the solver keeps it there, the relaxed problem
+    aside)."""
     f_total = ca.SX.zeros(3)
     m_total = ca.SX.zeros(3)
     for i, rotor in enumerate(vp.rotors):
@@ -214,7 +216,10 @@ def _bounds(vp: VehicleParams, factors, *, relaxed: bool, spin, descent: bool, m
 def _starts(vp: VehicleParams, factors, spin, max_spin: float):
     """Initial guesses: the primary axis at a few cone angles and azimuths, a few spin rates."""
     z0 = min(95.0, vp.hover_throttle_pct * 4 / max(1e-9, sum(1 for f in factors if f > 0)))
-    spins = [spin] if spin is not None else [s for s in (8.0, 20.0, 30.0) if s <= max_spin] or [max_spin]
+    if spin is not None:
+        spins = [spin]
+    else:
+        spins = [s for s in (8.0, 20.0, 30.0) if s <= max_spin] or [max_spin]
     out = []
     for cone in (15.0, 35.0):
         for az in range(0, 360, 90):
@@ -264,7 +269,8 @@ def _solve(vp, factors, wind_ned, *, objective: str, relaxed: bool, spin, descen
     return p, best
 
 
-def _equilibrium(vp, factors, wind_speed, wind_from_deg, objective, xs, feasible) -> SpinEquilibrium:
+def _equilibrium(vp, factors, wind_speed, wind_from_deg, objective, xs,
+                 feasible) -> SpinEquilibrium:
     from sil_vehicle.dynamics.rotors import body_wrench
     zeta, alpha, n = xs[0:4], xs[4:8], xs[8:11]
     w, vd = float(xs[11]), float(xs[12])
@@ -286,7 +292,8 @@ def _equilibrium(vp, factors, wind_speed, wind_from_deg, objective, xs, feasible
         throttle_pct=tuple(float(z) for z in zeta), tilt_rad=tuple(float(a) for a in alpha),
         thrust_N=tuple(vp.thrust_N(m) for m in motors), wrench_frd=tuple(float(v) for v in wr),
         thrust_along_axis_N=fn, force_normal_N=f_perp,
-        orbit_radius_m=f_perp / (vp.mass_kg * w * w) if w > 0 else (0.0 if f_perp < 1e-3 else math.inf),
+        orbit_radius_m=(f_perp / (vp.mass_kg * w * w) if w > 0
+                        else 0.0 if f_perp < 1e-3 else math.inf),
         residual=tuple(float(v) for v in res))
 
 
@@ -479,7 +486,8 @@ class PlantRun:
     drift_m_at: tuple[float, ...]     # the orbit centre's distance at those times
 
 
-def simulate(sim, eq: SpinEquilibrium, seconds: float = 2.0, *, perturb_rad_s: float = 0.0) -> PlantRun:
+def simulate(sim, eq: SpinEquilibrium, seconds: float = 2.0, *,
+             perturb_rad_s: float = 0.0) -> PlantRun:
     """Fly the plant (sil_vehicle's Vehicle, the Python reference tick) from `eq` on constant
     commands, motors with factor 0 switched off, the wind of `eq` (no gusts), optionally the body
     rates perturbed (rad/s, about body x). `sim`: SimParams (its vehicle is the one analysed)."""
