@@ -19,3 +19,7 @@ $E --spin --motor 1 --motor 2 --eff 0 --sweep --simulate 2 --json motors12_oppos
 $E --spin --motor 1 --motor 2 --eff 0 --descent-margin 0.1 --json motors12_opposite_margin10.json
 $E --vehicle quad --spin --motor 1 --eff 0 --sweep --json quad_motor1.json
 for m in 2 3 4; do $E --spin --motor $m --eff 0 --spin-rate 20 --json motor${m}_spin20.json; done
+# the plant perturbed as a campaign's plants are (trq_lab/overlays.py)
+for p in mass_scale=1.05 mass_scale=1.1 thrust_scale=0.95 thrust_scale=0.9 thrust_scale=0.85; do
+  $E --spin --motor 1 --eff 0 --plant $p --json motor1_best_$(echo $p | tr '=' '_').json
+done
