@@ -24,7 +24,8 @@ flight here is one that the daemons fly the same way on their own.
                     and figures), campaign (a campaign's report), plant_campaign (a campaign's
                     flights against its plants' faulted trim), results (the README's results
                     tables from result files, trq-results)
-    analysis/       envelope (trim and margins, trq-envelope), latency_bound (the best any
+    analysis/       envelope (trim and margins, trq-envelope), spin_envelope (the spinning
+                    equilibria of a lost motor, trq-envelope --spin), latency_bound (the best any
                     controller could fly after a fault, given its reaction time, trq-latency-bound)
     gcs/            client (a small blocking MAVLink client), inject (trq-inject-fault), monitor
                     (trq-monitor): what a ground station does, from the command line

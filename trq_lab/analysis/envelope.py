@@ -6,6 +6,11 @@ solved with CasADi + IPOPT on the simulator's own rotor model).
     trq-envelope [--vehicle params/vehicle/trq.yaml] [--motor 1 --eff 0.5]
                              [--wind 8 --wind-dir 0] [--plant mass_scale=1.03,thrust_scale=0.95]
                              [--json PATH]
+    trq-envelope --spin --motor 1 --eff 0 [--motor 2] [--spin-rate 20] [--objective power]
+                             [--simulate 2] [--sweep] [--json PATH]
+
+--motor may be given twice (two faulty motors, both at --eff). --spin: the spinning ("relaxed
+hover") equilibria instead of the static trim (trq_lab.analysis.spin_envelope).
 
 The trim holds position at constant yaw: roll and pitch are free (a fixed-rotor quadcopter must
 lean into the wind), throttles within idle..100 %, tilts within the servo range. The margins are,
@@ -135,7 +140,8 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="trq-envelope", description=__doc__.splitlines()[0])
     ap.add_argument("--vehicle", default="trq",
                     help="airframe: a built-in name (trq, quad) or a vehicle YAML path (default trq)")
-    ap.add_argument("--motor", type=int, default=None, help="faulty motor 1..4")
+    ap.add_argument("--motor", type=int, action="append", default=None,
+                    help="faulty motor 1..4 (may be given twice)")
     ap.add_argument("--eff", type=float, default=1.0, help="its effectiveness 0..1")
     ap.add_argument("--wind", type=float, default=0.0, help="wind speed m/s")
     ap.add_argument("--wind-dir", type=float, default=0.0, help="wind from, deg")
@@ -143,6 +149,22 @@ def main(argv: list[str] | None = None) -> int:
                     help="the airframe perturbed as a campaign's plant: KEY=VALUE,... "
                          "(mass_scale, thrust_scale, idle_offset_pct, ...)")
     ap.add_argument("--json", type=Path, default=None)
+    ap.add_argument("--spin", action="store_true",
+                    help="the spinning (relaxed hover) equilibria, for a motor lost")
+    ap.add_argument("--objective", choices=("margin", "power"), default="margin",
+                    help="--spin: the largest control margin (default) or the least power")
+    ap.add_argument("--spin-rate", type=float, default=None,
+                    help="--spin: hold this spin rate (rad/s); default: the best up to --max-spin")
+    ap.add_argument("--max-spin", type=float, default=None,
+                    help="--spin: the largest spin rate searched, rad/s (default: a 2000 deg/s "
+                         "gyro's full scale)")
+    ap.add_argument("--simulate", type=float, default=0.0, metavar="SECONDS",
+                    help="--spin: fly the plant from the equilibrium on constant commands")
+    ap.add_argument("--descent-margin", type=float, default=0.0,
+                    help="--spin, where no hover exists: the slowest descent keeping every live "
+                         "actuator this fraction of its range from its limits (default 0)")
+    ap.add_argument("--sweep", action="store_true",
+                    help="--spin: the best equilibrium at each of a range of spin rates")
     args = ap.parse_args(argv)
     vehicle_file = trq_params.resolve("vehicle", args.vehicle)
     if args.plant:
@@ -169,11 +191,14 @@ def main(argv: list[str] | None = None) -> int:
     else:
         vp = load_vehicle(vehicle_file)
     factors = [1.0] * 4
-    if args.motor is not None:
-        if not 1 <= args.motor <= 4 or not 0.0 <= args.eff <= 1.0:
-            print("envelope: --motor 1..4 and --eff 0..1", file=sys.stderr)
+    for motor in args.motor or []:
+        if not 1 <= motor <= 4 or not 0.0 <= args.eff <= 1.0 or len(args.motor) > 2:
+            print("envelope: --motor 1..4 (at most twice) and --eff 0..1", file=sys.stderr)
             return 2
-        factors[args.motor - 1] = args.eff
+        factors[motor - 1] = args.eff
+    if args.spin:
+        from trq_lab.analysis import spin_envelope
+        return spin_envelope.main_spin(vp, factors, args)
     out = analyse(vp, factors, args.wind, args.wind_dir)
     print(f"envelope of {vp.name}: motor factors {factors}, wind {args.wind:g} m/s from "
           f"{args.wind_dir:g} deg")
