@@ -74,9 +74,12 @@ def free_port():
 
 @pytest.fixture(scope="session")
 def sim():
-    """The default simulation settings (trq, lockstep, 1 kHz physics); frozen, so shared."""
-    from sil_vehicle.config import load_sim
-    return load_sim(SIM_DEFAULT)
+    """The default simulation settings (trq, lockstep, 1 kHz physics) under `truth` (no sensor,
+    no estimator: the tests of the plant, the link and the commands; the sim file's own default
+    is `mocap`); frozen, so shared."""
+    from sil_vehicle.config import load_sim, sensing_profile
+    sim = load_sim(SIM_DEFAULT)
+    return sim.with_changes(sensing=sensing_profile("truth", sim.physics_rate_hz, "conftest"))
 
 
 @pytest.fixture(scope="session")
@@ -210,7 +213,11 @@ class Daemons:
     def vehicle(self, *args: str, log_dir: Path | None = None, offboard_target: int | None = None,
                 gcs_target: int | None = None, name: str = "vehicle", **kw) -> Process:
         """`python -m sil_vehicle` with its four ports (binds from the manager, targets given or
-        free) and --log-dir when log_dir is given; args follow."""
+        free) and --log-dir when log_dir is given; args follow. Under `--sensing truth` unless
+        the args name a profile or a sim file (the daemon's own default is `mocap`): these tests
+        are of the plant, the link and the commands, not of the sensing."""
+        if "--sensing" not in args and "--sim" not in args:
+            args = ("--sensing", "truth", *args)
         gcs, off = self.port(), self.port()
         gcs_target = self.port() if gcs_target is None else gcs_target
         offboard_target = self.port() if offboard_target is None else offboard_target

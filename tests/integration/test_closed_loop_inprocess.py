@@ -35,9 +35,9 @@ def config(name: str, **ref_changes):
 
 
 def sim_for(cfg, *, seed: int = 1, noise: bool = False):
-    """The default sim for the controller's airframe and rate; its telemetry noise only with
-    `noise`."""
-    sim = harness.sim_params(cfg.vehicle.file, cfg.control_rate_hz, seed=seed)
+    """The default sim for the controller's airframe and rate under `truth` (these flights test
+    the control, not the sensing); its telemetry noise only with `noise`."""
+    sim = harness.sim_params(cfg.vehicle.file, cfg.control_rate_hz, seed=seed, sensing="truth")
     if not noise:
         sim = sim.with_changes(noise_position_m=0.0, noise_velocity_m_s=0.0,
                                noise_attitude_rad=0.0, noise_rates_rad_s=0.0)

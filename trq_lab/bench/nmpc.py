@@ -83,11 +83,12 @@ FAULT_T_S, EFFECTIVENESS, WIND_M_S = 12.0, 0.5, 8.0
 
 
 def inprocess_sensing(sensor_streams: dict[str, int], sensing: str) -> str | None:
-    """The sensing profile of the in-process flights: the sim file's (None) for a controller
-    on the autopilot's estimate, so that those flights stay what they were; `sensing` (the
-    bench's --sensing) for one that asks the vehicle for raw sensor streams (the fused
-    filter's HIGHRES_IMU and ATT_POS_MOCAP), which the sim file's truth does not send."""
-    return sensing if sensor_streams else None
+    """The sensing profile of the in-process flights: `truth` for a controller on the
+    autopilot's estimate, so that those flights stay what they were (the bench times the
+    controller, not the vehicle's estimator); `sensing` (the bench's --sensing) for one that
+    asks the vehicle for raw sensor streams (the fused filter's HIGHRES_IMU and ATT_POS_MOCAP),
+    which truth does not send."""
+    return sensing if sensor_streams else "truth"
 
 
 def fly(mode: str, seconds: float | None, controller: str = "trq_nmpc_eso",

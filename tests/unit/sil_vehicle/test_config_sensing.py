@@ -20,8 +20,16 @@ def sim_file(folder, **keys):
     return path
 
 
-def test_the_default_is_truth_a_profile_without_sensors():
+def test_the_default_is_mocap_as_the_scenarios_fly():
+    """A vehicle started by hand sees what the scenarios' vehicles see (issue 39 item 8), not the
+    oracle `truth`."""
     sim = load_sim(SIM_DEFAULT)
+    assert sim.sensing is not None and sim.sensing.name == "mocap"
+    assert not sim.sensing.is_truth and sim.senses
+
+
+def test_truth_is_a_profile_without_sensors(tmp_path):
+    sim = load_sim(sim_file(tmp_path, sensing="truth"))
     assert sim.sensing is not None and sim.sensing.name == "truth"
     assert sim.sensing.is_truth and not sim.senses
 

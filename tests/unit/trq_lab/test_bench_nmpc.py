@@ -8,8 +8,8 @@ import pytest
 from trq_lab.bench import nmpc
 
 
-def test_a_controller_on_the_autopilots_estimate_flies_the_sim_files_profile():
-    assert nmpc.inprocess_sensing({}, "mocap") is None
+def test_a_controller_on_the_autopilots_estimate_flies_truth():
+    assert nmpc.inprocess_sensing({}, "mocap") == "truth"
 
 
 def test_a_controller_asking_for_sensors_flies_the_benchs_profile():
@@ -29,7 +29,7 @@ def test_the_fused_controller_asks_for_its_streams():
     fused = Controller(load_controller(trq_params.resolve("controller", "trq_nmpc_eso_fused")))
     plain = Controller(load_controller(trq_params.resolve("controller", "trq_nmpc_eso")))
     assert nmpc.inprocess_sensing(fused.sensor_streams, "mocap") == "mocap"
-    assert nmpc.inprocess_sensing(plain.sensor_streams, "mocap") is None
+    assert nmpc.inprocess_sensing(plain.sensor_streams, "mocap") == "truth"
 
 
 def test_the_daemons_alternate_the_order_of_the_two_controllers():

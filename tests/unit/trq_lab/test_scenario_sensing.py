@@ -80,7 +80,7 @@ def test_the_in_process_vehicle_gets_it_too():
     from trq_params import builtin
     vehicle = builtin("vehicle", "trq")
     assert sim_params(vehicle, 100, seed=1, sensing="mocap").sensing.name == "mocap"
-    assert sim_params(vehicle, 100, seed=1).sensing.name == "truth"
+    assert sim_params(vehicle, 100, seed=1).sensing.name == "mocap"      # the sim file's
 
 
 def test_the_profile_flown_is_the_scenarios_or_the_default(tmp_path):
