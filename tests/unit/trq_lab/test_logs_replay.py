@@ -95,3 +95,22 @@ def test_a_log_without_the_imu_fails_naming_topic_and_file(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "attitude_only.ulg" in err and "sensor_combined" in err
     assert not out.exists()                         # nothing half-written
+
+
+def test_a_vision_pose_is_fused_as_the_motion_capture():
+    """No test log carries vehicle_visual_odometry: the SITL log's own EKF2 pose stands in for it
+    (the filter then follows that pose closely, which is what this checks: the vision path's
+    frames and times, not the filter's quality)."""
+    import dataclasses
+    log = read_ulog(NEW)
+    lp, att = log.ekf2_pos_vel, log.ekf2_quat
+    t = lp.t_us
+    q = att.values[np.clip(np.searchsorted(att.t_us, t), 0, len(att) - 1)]
+    vision = Series(t, np.hstack((lp.values[:, :3], q)))
+    log = dataclasses.replace(log, gnss=None, vision=vision)
+    r = rp.replay(log)
+    m = rp.compare(log, r, settle_s=5.0)
+    assert m["sources"]["vision"] and not m["sources"]["gnss"]
+    assert m["fused"]["vision_pos"] > 200 and m["fused"]["vision_att"] > 200
+    assert m["tilt_deg"]["rms"] < 1.0 and m["heading_deg"]["rms"] < 1.0
+    assert m["position_m"]["horizontal"]["rms"] < 0.1
