@@ -97,3 +97,24 @@ def test_rest_span_finds_the_longest_quiet_stretch():
     a = np.tile((0.0, 0.0, -9.80665), (3000, 1))
     rec = cal.Recording("synthetic", rate, np.arange(3000) * 10_000, g, a)
     assert cal.rest_span(rec, 10.0) == (1200, 3000)
+
+
+def test_a_vibration_that_follows_the_rotors_is_found_at_its_harmonic():
+    """A gyro tone at twice the rotors' rotation frequency (a two-blade pass), the rotors
+    sweeping 37.5 to 45 Hz over 20 s of flight after 20 s at rest: the tracked peak is the
+    second harmonic."""
+    rate = 250.0
+    n = int(40 * rate)
+    t_us = np.arange(1, n + 1, dtype=np.int64) * 4000
+    rotor_hz = np.where(np.arange(n) < n // 2, 0.0, np.linspace(30.0, 45.0, n))
+    phase = 2 * np.pi * np.cumsum(2.0 * rotor_hz) / rate
+    rng = np.random.default_rng(1)
+    gyro = rng.normal(0, 1e-3, (n, 3)) + 0.05 * np.sin(phase)[:, None] * (rotor_hz > 0)[:, None]
+    accel = rng.normal(0, 1e-2, (n, 3)) + (0.0, 0.0, -9.80665)
+    motors = cal.Series(t_us, np.tile(np.where(rotor_hz > 0, 0.5, 0.0)[:, None], (1, 4)))
+    rpm = cal.Series(t_us, np.tile(60.0 * rotor_hz[:, None], (1, 4)))
+    rec = cal.Recording("synthetic", rate, t_us, gyro, accel, motors, rpm)
+    _, record = cal.calibrate(rec, extends="gnss", name="x", min_rest_s=10.0)
+    track = record["flight"]["sensors"]["gyro"]["peak_track"]
+    assert track["harmonic_per_rev"] == pytest.approx(2.0, abs=0.05) and track["r2"] > 0.9
+    assert record["flight"]["rotor_hz"] == pytest.approx(41.25, abs=0.5)
