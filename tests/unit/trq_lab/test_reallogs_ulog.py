@@ -1,4 +1,4 @@
-"""trq_lab.logs.ulog: both of PX4's topic layouts read from the test logs (tests/data/ulog), and
+"""trq_lab.reallogs.ulog: both of PX4's topic layouts read from the test logs (tests/data/ulog), and
 a log lacking a topic named with its file."""
 
 from __future__ import annotations
@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from trq_lab.logs.ulog import LogError, gnss_to_ned, read_ulog
+from trq_lab.reallogs.ulog import LogError, gnss_to_ned, read_ulog
 
 DATA = Path(__file__).resolve().parents[2] / "data" / "ulog"
 NEW = DATA / "px4_sitl_takeoff.ulg"

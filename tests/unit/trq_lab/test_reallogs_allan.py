@@ -1,4 +1,4 @@
-"""trq_lab.logs.allan: the static recording is the vehicle's IMU model at rest, and a few
+"""trq_lab.reallogs.allan: the static recording is the vehicle's IMU model at rest, and a few
 minutes of it calibrate back to its profile within the Allan estimator's own confidence (three
 standard errors of the point each figure is read at; the one-hour check is a recorded run:
 docs/decisions/2026-12-05-ulog-replay-calibration.md)."""
@@ -13,7 +13,7 @@ import pytest
 from sil_vehicle.sensors import imu as imu_model
 from sil_vehicle.sensors.profile import load_sensing
 from sil_vehicle.sensors.truth import STANDARD_GRAVITY_M_S2, Truth
-from trq_lab.logs.allan import (allan_fit, model_bias_instability, relative_sigma,
+from trq_lab.reallogs.allan import (allan_fit, model_bias_instability, relative_sigma,
                                 static_recording)
 
 IMU = load_sensing("gnss", 1000).imu

@@ -1,4 +1,4 @@
-"""trq_lab.logs.calibrate: a profile file that the vehicle's loader takes (`--sensing PATH`), from
+"""trq_lab.reallogs.calibrate: a profile file that the vehicle's loader takes (`--sensing PATH`), from
 a static recording of a known profile and from a PX4 log; bad input leaves nothing written."""
 
 from __future__ import annotations
@@ -14,8 +14,8 @@ from sil_vehicle.config import sensing_profile
 from sil_vehicle.estimator.eskf import Eskf
 from sil_vehicle.estimator.params import EstimatorParams
 from sil_vehicle.sensors.profile import load_sensing
-from trq_lab.logs import calibrate as cal
-from trq_lab.logs.allan import relative_sigma, static_recording
+from trq_lab.reallogs import calibrate as cal
+from trq_lab.reallogs.allan import relative_sigma, static_recording
 
 DATA = Path(__file__).resolve().parents[2] / "data" / "ulog"
 NEW = DATA / "px4_sitl_takeoff.ulg"

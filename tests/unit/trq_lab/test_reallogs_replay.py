@@ -1,4 +1,4 @@
-"""trq_lab.logs.replay: the vehicle's filter on the test logs against the logs' own EKF2 (issue
+"""trq_lab.reallogs.replay: the vehicle's filter on the test logs against the logs' own EKF2 (issue
 39's replay target: within 1 deg RMS in tilt; the figures in
 docs/decisions/2026-12-05-ulog-replay-calibration.md), the IMU resampling, and bad input."""
 
@@ -10,9 +10,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from trq_lab.logs import replay as rp
-from trq_lab.logs.ekf2_params import PX4_DEFAULTS, Sources, ekf2_values, estimator_params
-from trq_lab.logs.ulog import Series, read_ulog
+from trq_lab.reallogs import replay as rp
+from trq_lab.reallogs.ekf2_params import PX4_DEFAULTS, Sources, ekf2_values, estimator_params
+from trq_lab.reallogs.ulog import Series, read_ulog
 
 DATA = Path(__file__).resolve().parents[2] / "data" / "ulog"
 NEW = DATA / "px4_sitl_takeoff.ulg"
