@@ -35,4 +35,7 @@ flight here is one that the daemons fly the same way on their own.
                     --daemons), period_floor (the daemon's machinery alone, trq-bench-floor),
                     cpu_budget (real time on a fraction of a core, trq-bench-cpu-budget), sim
                     (trq-bench-sim), wire (trq-bench-wire), hover_check (trq-hover-check)
+    reallogs/       real logs in: ulog (a PX4 ULog read), ekf2_params (EKF2's parameters as the
+                    vehicle's filter's), replay (trq-ulog-replay), allan and calibrate
+                    (trq-sensing-calibrate), output (all files written at once)
 """
