@@ -315,14 +315,14 @@ def thrust_tilt_deg(truth: dict[str, np.ndarray]) -> np.ndarray:
 
 def touchdown(truth: dict[str, np.ndarray], after_us: int) -> int | None:
     """The truth row of the first ground contact from `after_us` on: the vehicle within
-    CONTACT_DOWN_M of the ground, or the plant's `landed` or `crashed` flag set; None if it
-    never touches. THE definition of the touchdown for touchdown_speed_m_s and
-    touchdown_tilt_deg (one function, so that there is one)."""
+    CONTACT_DOWN_M of the ground, or the plant's `landed` flag set; None if it never touches
+    (a crash in the air, a tumble, is no touchdown: the log ends soon after it). THE definition
+    of the touchdown for touchdown_speed_m_s and touchdown_tilt_deg (one function, so that
+    there is one)."""
     t = truth["t_us"].astype(np.int64)
     on = truth["pos_d_m"] >= GROUND_DOWN_M + CONTACT_DOWN_M
-    for flag in ("landed", "crashed"):
-        if flag in truth:
-            on |= truth[flag] > 0.5
+    if "landed" in truth:
+        on |= truth["landed"] > 0.5
     hit = np.flatnonzero((t >= after_us) & on)
     return int(hit[0]) if len(hit) else None
 
