@@ -345,7 +345,7 @@ class LostMotor(Strict):
     hold_s: Num(0.0, 2.0) = 0.05               # ... held this long without a break
     min_command_pct: Num(0.0, 100.0) = 20.0    # ... while commanded at least this
     yaw_weight: Num(0.0, 1e6) = 0.0            # the failed NMPC's weight on yaw and yaw rate
-    max_body_rate_rad_s: Num(0.1, 100.0) = 40.0  # the failed NMPC's body-rate bound
+    max_body_rate_rad_s: Num(0.1, 100.0) = 30.0  # the failed NMPC's body-rate bound
     descent_speed_m_s: Num(0.05, 5.0) = 1.0    # the descent to the ground once lost
 
 

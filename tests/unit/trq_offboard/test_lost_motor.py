@@ -16,7 +16,7 @@ from conftest import ROOT
 PARAMS = ROOT / "params"
 DT = 0.01                                   # the control period
 CFG = LostMotorConfig(below=0.2, hold_s=0.1, min_command_pct=20.0, yaw_weight=0.0,
-                      max_body_rate_rad_s=40.0, descent_speed_m_s=1.0)
+                      max_body_rate_rad_s=30.0, descent_speed_m_s=1.0)
 CMD = np.array([80.0, 60.0, 60.0, 60.0])    # the commands in effect (%)
 
 
