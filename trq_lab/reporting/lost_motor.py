@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from trq_lab import metrics as metrics_mod
+from trq_lab.reporting.plot import pyplot
 
 __all__ = ["figure", "main"]
 
@@ -24,10 +25,7 @@ BEFORE_S = 0.5           # the figure starts this long before the onset
 
 
 def figure(run_dirs: list[Path], onset_s: float, out: Path, title: str) -> Path:
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = pyplot()
     fig, axes = plt.subplots(4, 1, figsize=(8, 9), sharex=True)
     onset_us = int(round(onset_s * 1e6))
     for d in run_dirs:

@@ -6,9 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from trq_offboard.config import LostMotorConfig, load_controller
+from trq_offboard.config import EffectivenessConfig, LostMotorConfig, load_controller
 from trq_offboard.effectiveness import MotorEffectivenessObserver
-from trq_offboard.config import EffectivenessConfig
 from trq_offboard.lost_motor import LostMotorDetector, failed_config, status_text
 
 from conftest import ROOT
