@@ -254,6 +254,7 @@ class Controller:
         if self.detector is not None:
             self.detector.reset()
             self.solver = self._nominal_solver
+            self._set_horizon(self.solver)
         self.lost_motor = 0
         self._descent = None
 
@@ -361,12 +362,26 @@ class Controller:
             if self._failed_solver is not None:
                 self.solver.discard()
                 self.solver = self._failed_solver
-            if self._plan is not None:            # the warm start: the dead rotor at 0
+                self._set_horizon(self._failed_solver)
+            if self._plan is not None and self.N == len(self._plan[0]):
+                # the warm start: the dead rotor at 0 (another horizon: none, the trim rolled out)
                 u_old = self._plan[0].copy()
                 u_old[:, nt + lost - 1] = 0.0
                 self._plan = (u_old, self._plan[1])
+            else:
+                self._plan = None
         self._scale[nt + lost - 1] = 0.0
         self.solver.ocp.set_throttle_scale(self._scale[nt:])
+
+    def _set_horizon(self, solver: Solver) -> None:
+        """The controller's horizon grid (N, h, the rollout, the shifts' cache) that of
+        `solver`'s OCP (the failed configuration may have its own)."""
+        N, h = solver.ocp.n_steps, solver.ocp.step_s
+        if (N, h) != (self.N, self.h):
+            self.N, self.h = N, h
+            self._rollout = self.model.discrete(h, 1)
+            self._shifts = {}
+            self._grid_key = self._grid_val = None
 
     def _command_of_plan(self, u_row: np.ndarray) -> np.ndarray:
         """The command of a plan's row: the effective throttles divided by the motors' scale;

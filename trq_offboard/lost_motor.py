@@ -18,7 +18,8 @@ control periods; on the lossy link the estimate wanders without reaching the flo
 The failed configuration (`failed_config`): the controller's NMPC rebuilt with the dead rotor's
 throttle bounded to [0, 0] (its thrust fixed at 0, through Ocp.set_throttle_scale), yaw given up
 (weight `yaw_weight` on the yaw angle and the yaw rate), a body-rate bound `max_body_rate_rad_s`
-that lets the vehicle spin, and a descent reference: the horizontal position where the loss was
+that lets the vehicle spin, optionally its own horizon (`horizon_steps`, `horizon_step_s`: the
+controller switches its grid with the solver), and a descent reference: the horizontal position where the loss was
 detected, down at `descent_speed_m_s` to the ground (Controller._reference_states).
 
 Pure: no clock, no I/O; the same inputs give the same detection.
@@ -71,8 +72,10 @@ def failed_config(cfg: ControllerConfig) -> ControllerConfig:
     weights = dataclasses.replace(
         w, euler=(w.euler[0], w.euler[1], lm.yaw_weight),
         rates=(w.rates[0], w.rates[1], lm.yaw_weight))
-    return dataclasses.replace(cfg, weights=weights, max_rate_rad_s=lm.max_body_rate_rad_s,
-                               name=cfg.name + "_failed")
+    return dataclasses.replace(
+        cfg, weights=weights, max_rate_rad_s=lm.max_body_rate_rad_s, name=cfg.name + "_failed",
+        horizon_steps=lm.horizon_steps or cfg.horizon_steps,
+        step_s=lm.horizon_step_s or cfg.step_s)
 
 
 def status_text(motor: int) -> str:
