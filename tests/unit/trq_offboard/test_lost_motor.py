@@ -129,3 +129,14 @@ def test_the_switch_removes_the_rotor_from_the_allocation():
     xr = ctl._reference_states(1.0, state.as_vector(), None)
     assert xr[0, 2] == pytest.approx(-5.0 + (1.0 - ctl._descent[0]))
     assert np.all(xr[:, 5] == cfg.lost_motor.descent_speed_m_s)
+
+
+def test_the_failed_configuration_may_have_its_own_horizon():
+    import dataclasses
+
+    cfg = load_controller(PARAMS / "controller/trq_nmpc_eso_lost.yaml")
+    assert (failed_config(cfg).horizon_steps, failed_config(cfg).step_s) == \
+        (cfg.horizon_steps, cfg.step_s)
+    own = dataclasses.replace(cfg, lost_motor=dataclasses.replace(
+        cfg.lost_motor, horizon_steps=50, horizon_step_s=0.02))
+    assert (failed_config(own).horizon_steps, failed_config(own).step_s) == (50, 0.02)
