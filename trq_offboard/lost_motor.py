@@ -13,7 +13,8 @@ at a time (a second motor lost keeps its loss in the observer's d).
 
 Why this signal and these figures: docs/decisions/2026-12-05-lost-motor-first-flights.md
 (the paper's 50 % fault reads e near 0.5; a 0 % fault drives e to its floor within a few
-control periods; on the lossy link the estimate wanders without reaching the floor).
+control periods; on a lossy link a lost or late command reads, for one to three control periods,
+as a motor's deficit, down to the floor: the hold outlasts these).
 
 The failed configuration (`failed_config`): the controller's NMPC rebuilt with the dead rotor's
 throttle bounded to [0, 0] (its thrust fixed at 0, through Ocp.set_throttle_scale), yaw given up
