@@ -347,6 +347,10 @@ class LostMotor(Strict):
     yaw_weight: Num(0.0, 1e6) = 0.0            # the failed NMPC's weight on yaw and yaw rate
     max_body_rate_rad_s: Num(0.1, 100.0) = 30.0  # the failed NMPC's body-rate bound
     descent_speed_m_s: Num(0.05, 5.0) = 1.0    # the descent to the ground once lost
+    # the spin governed (null: free): the yaw rate's weight and its target's magnitude (rad/s, in
+    # the direction the vehicle spins); the yaw angle keeps yaw_weight
+    spin_weight: Optional[Num(0.0, 1e6)] = None
+    spin_rate_rad_s: Num(0.0, 100.0) = 0.0
     # the failed NMPC's horizon (null: the controller's): a step that resolves the spin
     horizon_steps: Optional[Int(2, 200)] = None
     horizon_step_s: Optional[Num(1e-3, 1.0)] = None

@@ -161,6 +161,8 @@ class LostMotorConfig:
     yaw_weight: float                     # the failed NMPC's weight on yaw and yaw rate
     max_body_rate_rad_s: float            # the failed NMPC's body-rate bound
     descent_speed_m_s: float              # the descent to the ground once lost
+    spin_weight: float | None = None      # the yaw rate's weight (None: yaw_weight, free spin)
+    spin_rate_rad_s: float = 0.0          # the yaw rate's target's magnitude
     horizon_steps: int | None = None      # the failed NMPC's horizon (None: the controller's)
     horizon_step_s: float | None = None
 
@@ -335,7 +337,8 @@ def controller_config(c: schema.ControllerFile, file: str) -> ControllerConfig:
     lm = c.lost_motor
     lost_motor = None if lm is None or lm.detect == "off" else LostMotorConfig(
         lm.below, lm.hold_s, lm.min_command_pct, lm.yaw_weight, lm.max_body_rate_rad_s,
-        lm.descent_speed_m_s, lm.horizon_steps, lm.horizon_step_s)
+        lm.descent_speed_m_s, lm.spin_weight, lm.spin_rate_rad_s, lm.horizon_steps,
+        lm.horizon_step_s)
     return ControllerConfig(file, c.name, vehicle, c.observer.kind, eso, c.control_rate_hz,
                             c.horizon.steps, c.horizon.step_s, weights,
                             c.constraints.max_roll_pitch_deg, c.constraints.max_body_rate_rad_s,

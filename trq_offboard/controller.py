@@ -521,6 +521,8 @@ class Controller:
             xr[:, 2] = p0[2] + v * np.maximum(tk - t0, 0.0)
             xr[:, 5] = v
             xr[:, 8] = yaw
+            # the spin's target (spin_weight), in the direction the vehicle spins
+            xr[:, 11] = math.copysign(self.cfg.lost_motor.spin_rate_rad_s, x[11])
             return xr
         # the preparation samples the time the next step then asks for (when the two floats
         # agree): the last grid kept

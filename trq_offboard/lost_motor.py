@@ -19,7 +19,8 @@ as a motor's deficit, down to the floor: the hold outlasts these).
 The failed configuration (`failed_config`): the controller's NMPC rebuilt with the dead rotor's
 throttle bounded to [0, 0] (its thrust fixed at 0, through Ocp.set_throttle_scale), yaw given up
 (weight `yaw_weight` on the yaw angle and the yaw rate), a body-rate bound `max_body_rate_rad_s`
-that lets the vehicle spin, optionally its own horizon (`horizon_steps`, `horizon_step_s`: the
+that lets the vehicle spin (optionally governed: the yaw rate weighted `spin_weight` towards
+`spin_rate_rad_s` in the direction it spins), optionally its own horizon (`horizon_steps`, `horizon_step_s`: the
 controller switches its grid with the solver), and a descent reference: the horizontal position where the loss was
 detected, down at `descent_speed_m_s` to the ground (Controller._reference_states).
 
@@ -66,13 +67,14 @@ class LostMotorDetector:
 
 def failed_config(cfg: ControllerConfig) -> ControllerConfig:
     """The controller's config for its NMPC with a motor lost: yaw and yaw rate weighted
-    `yaw_weight`, the body-rate bound raised to `max_body_rate_rad_s` (the dead rotor's bounds
+    `yaw_weight` (the yaw rate `spin_weight` when given), the body-rate bound raised to `max_body_rate_rad_s` (the dead rotor's bounds
     are set on the solver's OCP, not here)."""
     lm = cfg.lost_motor
     w = cfg.weights
     weights = dataclasses.replace(
         w, euler=(w.euler[0], w.euler[1], lm.yaw_weight),
-        rates=(w.rates[0], w.rates[1], lm.yaw_weight))
+        rates=(w.rates[0], w.rates[1],
+               lm.yaw_weight if lm.spin_weight is None else lm.spin_weight))
     return dataclasses.replace(
         cfg, weights=weights, max_rate_rad_s=lm.max_body_rate_rad_s, name=cfg.name + "_failed",
         horizon_steps=lm.horizon_steps or cfg.horizon_steps,
