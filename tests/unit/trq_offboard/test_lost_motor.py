@@ -140,3 +140,15 @@ def test_the_failed_configuration_may_have_its_own_horizon():
     own = dataclasses.replace(cfg, lost_motor=dataclasses.replace(
         cfg.lost_motor, horizon_steps=50, horizon_step_s=0.02))
     assert (failed_config(own).horizon_steps, failed_config(own).step_s) == (50, 0.02)
+
+
+def test_the_spin_may_be_governed():
+    import dataclasses
+
+    cfg = load_controller(PARAMS / "controller/trq_nmpc_eso_lost.yaml")
+    assert cfg.lost_motor.spin_weight is None
+    assert failed_config(cfg).weights.rates[2] == cfg.lost_motor.yaw_weight
+    gov = dataclasses.replace(cfg, lost_motor=dataclasses.replace(
+        cfg.lost_motor, spin_weight=0.2, spin_rate_rad_s=15.0))
+    assert failed_config(gov).weights.rates[2] == 0.2
+    assert failed_config(gov).weights.euler[2] == cfg.lost_motor.yaw_weight
