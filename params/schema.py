@@ -337,6 +337,25 @@ class Effectiveness(Strict):
     substeps: Int(1, 1000) = 10
 
 
+class LostMotor(Strict):
+    """A whole motor lost (trq_offboard/lost_motor.py): detected from the motors' effectiveness
+    estimate (needs motor_effectiveness on), then the NMPC flies the failed configuration."""
+    detect: Choice("on", "off")
+    below: Num(0.0, 0.45) = 0.2                # effectiveness at or below: the motor lost
+    hold_s: Num(0.0, 2.0) = 0.05               # ... held this long without a break
+    min_command_pct: Num(0.0, 100.0) = 20.0    # ... while commanded at least this
+    yaw_weight: Num(0.0, 1e6) = 0.0            # the failed NMPC's weight on yaw and yaw rate
+    max_body_rate_rad_s: Num(0.1, 100.0) = 30.0  # the failed NMPC's body-rate bound
+    descent_speed_m_s: Num(0.05, 5.0) = 1.0    # the descent to the ground once lost
+    # the spin governed (null: free): the yaw rate's weight and its target's magnitude (rad/s, in
+    # the direction the vehicle spins); the yaw angle keeps yaw_weight
+    spin_weight: Optional[Num(0.0, 1e6)] = None
+    spin_rate_rad_s: Num(0.0, 100.0) = 0.0
+    # the failed NMPC's horizon (null: the controller's): a step that resolves the spin
+    horizon_steps: Optional[Int(2, 200)] = None
+    horizon_step_s: Optional[Num(1e-3, 1.0)] = None
+
+
 class Estimator(Strict):
     """Where the controller's position and velocity come from (trq_offboard/fused.py): the
     vehicle's ODOMETRY as it is (`autopilot`, the default), or the companion's fused filter on
@@ -474,6 +493,7 @@ class ControllerFile(Strict):
     lagged_actuators: _ON_OFF_AUTO = "auto"
     actuator_states: _ON_OFF_AUTO = "auto"
     motor_effectiveness: Optional[Effectiveness] = None
+    lost_motor: Optional[LostMotor] = None
     estimator: Estimator = Field(default_factory=Estimator)
     control_rate_hz: Int(1, 1000)
     horizon: Horizon
@@ -495,6 +515,10 @@ class ControllerFile(Strict):
                               "commanded with motor_effectiveness on (the outputs the vehicle "
                               "reports already carry the motors' loss: the observer would see "
                               "no fault to estimate)")
+        lm = self.lost_motor
+        if lm is not None and lm.detect == "on" and (eff is None or eff.estimate != "on"):
+            raise Invalid("lost_motor.detect", "on", "off without motor_effectiveness on (the "
+                          "detector reads the motors' effectiveness estimate)")
         s = self.solver
         if s.hessian == "exact" and s.hpipm_mode == "speed_abs":
             raise Invalid("solver.hpipm_mode", "speed_abs",
@@ -645,6 +669,11 @@ class ScenarioTargets(Strict):
     rmse_yaw_deg: Optional[Num(0.0, 1e6)] = None
     recovery_s: Optional[Num(0.0, 1e6)] = None
     diagnosis_s: Optional[Num(0.0, 1e6)] = None
+    # a whole motor lost (issue 40; trq_lab.metrics' lost-motor block)
+    touchdown_speed_m_s: Optional[Num(0.0, 1e6)] = None
+    drift_after_fault_m: Optional[Num(0.0, 1e6)] = None
+    max_thrust_tilt_after_fault_deg: Optional[Num(0.0, 1e6)] = None
+    detection_s: Optional[Num(0.0, 1e6)] = None
 
 
 class ScenarioBetter(Strict):
@@ -785,7 +814,10 @@ class CampaignTargets(Strict):
 FLIGHT_METRICS = ("crashed", "flight_s", "rmse_pos_m", "max_pos_err_m", "rmse_pos_after_fault_m",
                   "rmse_vert_after_fault_m", "max_sink_after_fault_m", "rmse_yaw_deg",
                   "max_yaw_err_deg", "recovery_s", "solve_ms_p50", "solve_ms_p99",
-                  "est_rmse_pos_m", "est_rmse_att_deg", "diagnosis_s", "max_pos_err_outage_m")
+                  "est_rmse_pos_m", "est_rmse_att_deg", "diagnosis_s", "max_pos_err_outage_m",
+                  # a whole motor lost (issue 40; trq_lab.metrics' lost-motor block)
+                  "touchdown_speed_m_s", "touchdown_tilt_deg", "drift_after_fault_m",
+                  "max_thrust_tilt_after_fault_deg", "descent_rate_m_s", "detection_s")
 # those a flight has only with a sensor outage (a campaign's `outage` axis): flights.csv carries
 # them when the campaign has the axis
 OUTAGE_METRICS = ("max_pos_err_outage_m",)

@@ -75,6 +75,13 @@ class RunMetrics:
     est_rmse_att_deg: float | None = None
     diagnosis_s: float | None = None
     max_pos_err_outage_m: float | None = None
+    # a whole motor lost (issue 40): the lost-motor block below (`lost_motor_metrics`)
+    max_thrust_tilt_after_fault_deg: float | None = None
+    drift_after_fault_m: float | None = None
+    descent_rate_m_s: float | None = None
+    touchdown_speed_m_s: float | None = None
+    touchdown_tilt_deg: float | None = None
+    detection_s: float | None = None
 
     def as_dict(self) -> dict:
         return {k: (None if isinstance(v, float) and not math.isfinite(v) else v)
@@ -225,7 +232,8 @@ def compute(controller: str, vehicle: str, truth: dict[str, np.ndarray],
         solve_ms_p99=float(np.percentile(solve, 99)) if len(solve) else math.nan,
         est_rmse_pos_m=est_pos, est_rmse_att_deg=est_att,
         diagnosis_s=_diagnosis(sm, truth, steps, fault_onset_us),
-        max_pos_err_outage_m=outage_error(t_us, err, outage_us))
+        max_pos_err_outage_m=outage_error(t_us, err, outage_us),
+        **lost_motor_metrics(truth, steps, fault_onset_us))
 
 
 def _diagnosis(sm: Samples, truth: dict[str, np.ndarray], steps: dict[str, np.ndarray],
@@ -287,4 +295,82 @@ def true_disturbance(truth: dict[str, np.ndarray], vehicle_params) -> np.ndarray
         out[k, 0:3] = (rot @ (real[0:3] - nominal[0:3]) + drag_real - drag_nominal) / vp.mass_kg
         dm = real[3:6] - nominal[3:6]
         out[k, 3:6] = (dm[0] / ixx, dm[1] / iyy, dm[2] / izz)
+    return out
+
+
+# --------------------------------------------------------------------------------------------
+# a whole motor lost (issue 40): from the fault's onset to the first ground contact
+# --------------------------------------------------------------------------------------------
+# the vehicle touches the ground when its truth position is this close to it (m, down): the
+# landing gear's height above the reference point is 0 in the plant (a choice of the metric)
+CONTACT_DOWN_M = -0.02
+
+
+def thrust_tilt_deg(truth: dict[str, np.ndarray]) -> np.ndarray:
+    """The angle (deg) between the body's thrust axis (-z FRD) and the world's up, per truth
+    row, from the attitude quaternion (qw, qx, qy, qz): acos(1 - 2 (qx^2 + qy^2)); yaw-free."""
+    c = 1.0 - 2.0 * (truth["qx"] ** 2 + truth["qy"] ** 2)
+    return np.degrees(np.arccos(np.clip(c, -1.0, 1.0)))
+
+
+def touchdown(truth: dict[str, np.ndarray], after_us: int) -> int | None:
+    """The truth row of the first ground contact from `after_us` on: the vehicle within
+    CONTACT_DOWN_M of the ground, or the plant's `landed` flag set; None if it never touches
+    (a crash in the air, a tumble, is no touchdown: the log ends soon after it). THE definition
+    of the touchdown for touchdown_speed_m_s and touchdown_tilt_deg (one function, so that
+    there is one)."""
+    t = truth["t_us"].astype(np.int64)
+    on = truth["pos_d_m"] >= GROUND_DOWN_M + CONTACT_DOWN_M
+    if "landed" in truth:
+        on |= truth["landed"] > 0.5
+    hit = np.flatnonzero((t >= after_us) & on)
+    return int(hit[0]) if len(hit) else None
+
+
+def lost_motor_metrics(truth: dict[str, np.ndarray], steps: dict[str, np.ndarray],
+                       fault_onset_us: int | None) -> dict:
+    """The lost-motor metrics of a run (all None without a fault), from the fault's onset to the
+    first ground contact (`touchdown`; the log's end without one):
+
+        max_thrust_tilt_after_fault_deg  the largest tilt of the thrust axis from the vertical
+        drift_after_fault_m              the largest horizontal distance from where the vehicle
+                                         was at the onset
+        descent_rate_m_s                 height lost over the time taken, onset to contact
+        touchdown_speed_m_s              the vertical speed (down, m/s) at the contact (the
+                                         last truth row before it)
+        touchdown_tilt_deg               the thrust axis' tilt at the contact
+        detection_s                      from the onset to the first controller step that flies
+                                         a motor as lost (controller.csv's lost_motor; None if
+                                         it never does or has no such column)
+    """
+    keys = ("max_thrust_tilt_after_fault_deg", "drift_after_fault_m", "descent_rate_m_s",
+            "touchdown_speed_m_s", "touchdown_tilt_deg", "detection_s")
+    out = dict.fromkeys(keys)
+    if fault_onset_us is None or "qx" not in truth:
+        return out
+    t = truth["t_us"].astype(np.int64)
+    after = np.flatnonzero(t >= fault_onset_us)
+    if not len(after):
+        return out
+    i0 = int(after[0])
+    i1 = touchdown(truth, fault_onset_us)
+    end = i1 if i1 is not None else len(t) - 1
+    tilt = thrust_tilt_deg(truth)
+    win = slice(i0, end + 1)
+    out["max_thrust_tilt_after_fault_deg"] = float(tilt[win].max())
+    dn = truth["pos_n_m"][win] - truth["pos_n_m"][i0]
+    de = truth["pos_e_m"][win] - truth["pos_e_m"][i0]
+    out["drift_after_fault_m"] = float(np.hypot(dn, de).max())
+    if i1 is not None:
+        dur = (t[i1] - t[i0]) * 1e-6
+        drop = truth["pos_d_m"][i1] - truth["pos_d_m"][i0]
+        out["descent_rate_m_s"] = float(drop / dur) if dur > 0 else None
+        # the speed it arrived at: the last row above the ground (the contact's own row may
+        # already carry the ground's reaction)
+        out["touchdown_speed_m_s"] = float(truth["vel_d_m_s"][max(i1 - 1, i0)])
+        out["touchdown_tilt_deg"] = float(tilt[i1])
+    if "lost_motor" in steps:
+        lost = np.flatnonzero((steps["stamp_us"] >= fault_onset_us) & (steps["lost_motor"] > 0))
+        if len(lost):
+            out["detection_s"] = float((steps["stamp_us"][lost[0]] - fault_onset_us) * 1e-6)
     return out

@@ -12,6 +12,7 @@ cache) comes from trq_wire.
     predictor       the delay predictor: the commands sent, the actuators' walk, the state when
                     the command acts, the observer's b0 under the commands in effect
     effectiveness   the motor effectiveness observer and its composition with the model
+    lost_motor      a whole motor lost: its detector and the failed configuration
     nmpc/           the OCP and its solvers (ocp, base, rti, nlp, factory; hpipm, hpipm_fetch,
                     feedback, cache)
     controller      Controller: the parts composed; step, prepare, the fallback

@@ -29,7 +29,7 @@ from trq_params.schema import throttle_curve
 from trq_offboard.fused import FusedConfig
 
 __all__ = ["ConfigError", "RotorGeometry", "Curve", "VehicleModel", "EsoChannelGains",
-           "EsoConfig", "EffectivenessConfig", "Weights", "SolverConfig", "ReferenceConfig",
+           "EsoConfig", "EffectivenessConfig", "LostMotorConfig", "Weights", "SolverConfig", "ReferenceConfig",
            "ControllerConfig", "load_vehicle_model", "load_eso", "load_controller", "PARAMS_DIR"]
 
 from trq_params import DIR as PARAMS_DIR  # noqa: E402  (the shipped parameter files)
@@ -153,6 +153,21 @@ class EffectivenessConfig:
 
 
 @dataclass(frozen=True)
+class LostMotorConfig:
+    """A whole motor lost (trq_offboard/lost_motor.py): controller key lost_motor."""
+    below: float                          # effectiveness at or below which a motor is lost
+    hold_s: float                         # held this long without a break
+    min_command_pct: float                # while commanded at least this (throttle %)
+    yaw_weight: float                     # the failed NMPC's weight on yaw and yaw rate
+    max_body_rate_rad_s: float            # the failed NMPC's body-rate bound
+    descent_speed_m_s: float              # the descent to the ground once lost
+    spin_weight: float | None = None      # the yaw rate's weight (None: yaw_weight, free spin)
+    spin_rate_rad_s: float = 0.0          # the yaw rate's target's magnitude
+    horizon_steps: int | None = None      # the failed NMPC's horizon (None: the controller's)
+    horizon_step_s: float | None = None
+
+
+@dataclass(frozen=True)
 class EsoConfig:
     file: str
     kind: str                             # "nonlinear" | "linear"
@@ -253,6 +268,7 @@ class ControllerConfig:
                                           # stage state carries the actuators' lag states
     effectiveness: EffectivenessConfig | None = None   # motor_effectiveness (None: off)
     fused: FusedConfig | None = None      # estimator kind fused (None: the autopilot's estimate)
+    lost_motor: LostMotorConfig | None = None  # lost_motor (None: no detection)
 
     @property
     def predicts_delay(self) -> bool:
@@ -318,12 +334,17 @@ def controller_config(c: schema.ControllerFile, file: str) -> ControllerConfig:
         f.pose_gate, f.dropout_s, f.imu_rate_hz, f.mocap_rate_hz, history,
         f.disturbance_input, f.autopilot_vel_std_m_s, f.position_source,
         f.gnss_rate_hz, tuple(f.gnss_std_m))
+    lm = c.lost_motor
+    lost_motor = None if lm is None or lm.detect == "off" else LostMotorConfig(
+        lm.below, lm.hold_s, lm.min_command_pct, lm.yaw_weight, lm.max_body_rate_rad_s,
+        lm.descent_speed_m_s, lm.spin_weight, lm.spin_rate_rad_s, lm.horizon_steps,
+        lm.horizon_step_s)
     return ControllerConfig(file, c.name, vehicle, c.observer.kind, eso, c.control_rate_hz,
                             c.horizon.steps, c.horizon.step_s, weights,
                             c.constraints.max_roll_pitch_deg, c.constraints.max_body_rate_rad_s,
                             solver, reference, c.applied_input, c.applied_delay_s,
                             c.delay_compensation, c.lagged_actuators, c.actuator_states,
-                            effectiveness, fused)
+                            effectiveness, fused, lost_motor)
 
 
 def load_controller(path: Path | str) -> ControllerConfig:

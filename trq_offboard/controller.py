@@ -52,6 +52,7 @@ from trq_offboard.config import ControllerConfig, load_controller
 from trq_offboard.effectiveness import MotorEffectiveness, MotorEffectivenessObserver
 from trq_offboard.eso import ExtendedStateObserver
 from trq_offboard.fused import FusedFilter
+from trq_offboard.lost_motor import LostMotorDetector, failed_config
 from trq_offboard.model import PredictionModel
 from trq_offboard.model.dynamics import NumpyFunction
 from trq_offboard.nmpc.base import Solver
@@ -189,6 +190,15 @@ class Controller:
         self._eso_d = np.zeros(6)                # the observer's d of the last step
         self._motor_share = np.zeros(3)          # the motors' share of it (effectiveness)
         self._health: EstimatorHealth | None = None
+        # a whole motor lost (lost_motor, with the effectiveness observer): the detector, and
+        # the NMPC of the failed configuration built now (build once), flown once it detects
+        self.detector = (LostMotorDetector(cfg.lost_motor)
+                         if cfg.lost_motor is not None and self.motors is not None else None)
+        self._nominal_solver = self.solver
+        self._failed_solver = (make_solver(failed_config(cfg), self.model, self.u_trim)
+                               if self.detector is not None and solver is None else None)
+        self.lost_motor = 0                   # the motor flown as lost (1..4), 0: none
+        self._descent: tuple[float, np.ndarray] | None = None   # (t_s, position) at detection
 
     @property
     def sensor_streams(self) -> dict[str, int]:
@@ -241,6 +251,12 @@ class Controller:
         self._eso_d = np.zeros(6)
         self._motor_share = np.zeros(3)
         self._health = None
+        if self.detector is not None:
+            self.detector.reset()
+            self.solver = self._nominal_solver
+            self._set_horizon(self.solver)
+        self.lost_motor = 0
+        self._descent = None
 
     def _euler_rate(self, x: np.ndarray) -> np.ndarray:
         return np.asarray(self.model.f(x, self._last_u, np.zeros(6))).ravel()[6:9]
@@ -303,6 +319,8 @@ class Controller:
                 norm = float(np.linalg.norm(share))
                 lim = self.cfg.eso.max_disturbance[0]
                 self._motor_share = share if norm <= lim else share * (lim / norm)
+            if self.detector is not None:
+                self._detect(t_s, x)
         c2 = clock()
         self._last_t = float(t_s)
         self._last_d = d
@@ -321,7 +339,7 @@ class Controller:
         if info.status is SolveStatus.OK and np.all(np.isfinite(u_plan)) \
                 and np.all(np.isfinite(x_plan)):
             self._plan, self._plan_t = (u_plan, x_plan), t_act
-            u, source = u_plan[0] / self._scale, CommandSource.NMPC
+            u, source = self._command_of_plan(u_plan[0]), CommandSource.NMPC
         else:
             self.failures += 1
             if info.status is SolveStatus.OK:      # finite-status but non-finite plan
@@ -329,6 +347,50 @@ class Controller:
                                  float("nan"), "non-finite plan")
             u, source = self._fallback(t_act)
         return self._finish(u, source, info, d_obs, out_err, (c0, c1, c2, c3))
+
+    def _detect(self, t_s: float, x: np.ndarray) -> None:
+        """The lost-motor detector on this step's effectiveness and the commands in effect; on
+        a detection (once) the failed configuration: its NMPC, the descent from here; then, every
+        step, the dead rotor's effective throttle bounded to 0 (trq_offboard/lost_motor.py)."""
+        nt = self._nt
+        lost = self.detector.update(t_s, self._scale[nt:], self._last_u[nt:])
+        if lost is None:
+            return
+        if not self.lost_motor:
+            self.lost_motor = lost
+            self._descent = (float(t_s), x[0:3].copy())
+            if self._failed_solver is not None:
+                self.solver.discard()
+                self.solver = self._failed_solver
+                self._set_horizon(self._failed_solver)
+            if self._plan is not None and self.N == len(self._plan[0]):
+                # the warm start: the dead rotor at 0 (another horizon: none, the trim rolled out)
+                u_old = self._plan[0].copy()
+                u_old[:, nt + lost - 1] = 0.0
+                self._plan = (u_old, self._plan[1])
+            else:
+                self._plan = None
+        self._scale[nt + lost - 1] = 0.0
+        self.solver.ocp.set_throttle_scale(self._scale[nt:])
+
+    def _set_horizon(self, solver: Solver) -> None:
+        """The controller's horizon grid (N, h, the rollout, the shifts' cache) that of
+        `solver`'s OCP (the failed configuration may have its own)."""
+        N, h = solver.ocp.n_steps, solver.ocp.step_s
+        if (N, h) != (self.N, self.h):
+            self.N, self.h = N, h
+            self._rollout = self.model.discrete(h, 1)
+            self._shifts = {}
+            self._grid_key = self._grid_val = None
+
+    def _command_of_plan(self, u_row: np.ndarray) -> np.ndarray:
+        """The command of a plan's row: the effective throttles divided by the motors' scale;
+        a rotor flown as lost (scale 0) is commanded idle."""
+        scale = self._scale
+        dead = scale <= 0.0
+        u = np.asarray(u_row, float) / np.where(dead, 1.0, scale)
+        u[dead] = self._u_lo[dead]
+        return u
 
     def _walk(self, x: np.ndarray, t_s: float, t_act: float):
         """The actuators through their lags from the last step to t_act, when this step's
@@ -450,6 +512,18 @@ class Controller:
         t gives the same grid."""
         xr = np.zeros((self.N + 1, 12))
         yaw = x[8]
+        if self._descent is not None:
+            # a motor lost: down at descent_speed_m_s from where it was detected, yaw free
+            t0, p0 = self._descent
+            v = self.cfg.lost_motor.descent_speed_m_s
+            tk = t_s + self.h * np.arange(self.N + 1)
+            xr[:, 0:2] = p0[0:2]
+            xr[:, 2] = p0[2] + v * np.maximum(tk - t0, 0.0)
+            xr[:, 5] = v
+            xr[:, 8] = yaw
+            # the spin's target (spin_weight), in the direction the vehicle spins
+            xr[:, 11] = math.copysign(self.cfg.lost_motor.spin_rate_rad_s, x[11])
+            return xr
         # the preparation samples the time the next step then asks for (when the two floats
         # agree): the last grid kept
         key = self._grid_key
@@ -503,7 +577,7 @@ class Controller:
             elapsed = t_s - self._plan_t
             k = int(elapsed / self.h + 1e-9)
             if k < self.N:
-                return self._plan[0][k] / self._scale, CommandSource.SHIFTED_PLAN
+                return self._command_of_plan(self._plan[0][k]), CommandSource.SHIFTED_PLAN
         return self.u_trim.copy(), CommandSource.HOVER
 
     def _finish(self, u, source, info, d, out_err, marks) -> tuple[ActuatorCommand, StepInfo]:
@@ -526,7 +600,7 @@ class Controller:
         cpu = StepTimes(c1 - c0, c2 - c1, c3 - c2, self.cpu_ns() - c3)
         info = StepInfo(source, info, tuple(d.tolist()), out_err, n_clip,
                         self.clip_count, self.failures, tuple(self._scale[self._nt:].tolist()),
-                        cpu, self._health)
+                        cpu, self._health, self.lost_motor)
         return cmd, info
 
     def _emergency(self, t_s, why, c0) -> tuple[ActuatorCommand, StepInfo]:

@@ -19,7 +19,8 @@ The state columns (pos_*, vel_*) are the state the controller flew on: the vehic
 or the fused filter's position and velocity (estimator kind fused), whose health follows in
 est_test_ratio (the last pose's innovation test ratio), est_pos_var_m2 (the position's variance),
 est_dead_reckoning (1 without a pose for the filter's dropout_s) and est_rejected (the poses its
-gate has rejected so far); nan without the filter."""
+gate has rejected so far); nan without the filter. lost_motor: the motor the controller flies
+as lost (trq_offboard/lost_motor.py), 0 while none is."""
 
 from __future__ import annotations
 
@@ -43,7 +44,8 @@ COLUMNS = (
     + ["solve_ms", "iterations", "status", "source", "output_error", "cost"]
     + [f"eff_motor{i}" for i in range(1, 5)]
     + [f"cpu_{part}_ms" for part in CPU_PARTS]
-    + ["est_test_ratio", "est_pos_var_m2", "est_dead_reckoning", "est_rejected"])
+    + ["est_test_ratio", "est_pos_var_m2", "est_dead_reckoning", "est_rejected"]
+    + ["lost_motor"])
 
 
 def _ms(ns: int) -> float:
@@ -93,7 +95,8 @@ class ControllerLog:
                      else list(nan4))
                   + [_ms(c.prepare_ns), _ms(c.wire_ns), _ms(c.log_ns), _ms(c.period_ns)]
                   + ([est.test_ratio, est.pos_var_m2, int(est.dead_reckoning), est.rejected]
-                     if est else [math.nan] * 4))
+                     if est else [math.nan] * 4)
+                  + [info.lost_motor if info else 0])
 
     def close(self) -> None:
         for r in self._rows:

@@ -33,6 +33,7 @@ from typing import Callable, Protocol
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
+from trq_offboard import lost_motor
 from trq_offboard.diagnosis import Diagnosis
 from trq_offboard.fused import HealthReport
 from trq_offboard.link import gnss, wire
@@ -184,6 +185,7 @@ class OffboardFlight:
         self._mode_task: asyncio.Future | None = None
         self.summary = FlightSummary(name)
         self.diagnosis = Diagnosis()        # the motors' estimates, for the ground station
+        self._lost_motor = 0                # the motor the controller announced lost
         # the raw sensors the controller needs (its sensor_streams) and those received since
         # its last step
         self.streams: dict[str, int] = _streams(controller)
@@ -435,8 +437,10 @@ class OffboardFlight:
             # land detector: on the ground and still, in the landing phase, for LAND_DETECT_S
             # (the plan aims a little below the ground; pushing on the ground longer only
             # winds the observer up and makes the motors thrash), or the plan is over
+            # (a motor lost: the controller descends to land whatever the reference's phase)
             if self._touched_down(odo.state, ground_z) and (ref.phase == "land"
-                                                            or reference.done(t)):
+                                                            or reference.done(t)
+                                                            or self._lost_motor):
                 down_since = t if down_since is None else down_since
                 if reference.done(t) or t - down_since >= LAND_DETECT_S:
                     break
@@ -509,6 +513,13 @@ class OffboardFlight:
         if info is not None:
             for msg in self.diagnosis.messages(odo.stamp_us, info.effectiveness):
                 self.link.send(msg)
+            if info.lost_motor and not self._lost_motor:
+                # once: what the controller now does (trq_offboard/lost_motor.py)
+                self._lost_motor = info.lost_motor
+                text = lost_motor.status_text(info.lost_motor)
+                log.error(text)
+                self.link.send(mavlink.MAVLink_statustext_message(
+                    mavlink.MAV_SEVERITY_CRITICAL, text.encode("ascii")))
             if info.estimator is not None:
                 for msg in self.estimator_report.messages(info.estimator):
                     self.link.send(msg)

@@ -13,4 +13,6 @@ beside it and the summaries (metrics.json). It flies nothing.
                     (envelope classes, rank correlations, paired comparison, targets)
     results         the README's results tables, generated from result files (trq-results;
                     standard library only)
+    lost_motor      figures of flights with a motor lost: height, thrust axis tilt, yaw rate,
+                    drift from the failure
 """

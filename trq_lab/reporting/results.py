@@ -52,6 +52,7 @@ FAULTS = {
     "fast_timevarying": "`0.8 - 0.2 sin(t)` (period 6 s)",
     "paper_fault50_lossy": "50 %, offboard link 10 % loss, 20 ms each way",
     "nominal": "none",
+    "motor1_lost": "0 % (off) from t = 8 s, hovering at 5 m",
 }
 
 # The controllers' column order (others follow in the order metrics.json lists them).

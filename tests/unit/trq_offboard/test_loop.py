@@ -5,6 +5,7 @@ messages from a coroutine (the lockstep handshake of sil_vehicle/PROTOCOL.md).""
 
 from __future__ import annotations
 
+import dataclasses
 import asyncio
 import math
 
@@ -523,3 +524,46 @@ def test_gnss_fixes_wait_for_the_home_and_then_come_in_ned():
     flight.on_message(fix(300_000, (9.0, 9.0, -9.0), fix_type=mavlink.GPS_FIX_TYPE_2D_FIX))
     assert [f.t_us for f in flight._fixes] == [100_000, 200_000]
     assert flight._fixes[1].pos_ned_m == pytest.approx((1.5, 2.0, -3.0), abs=0.006)
+
+
+class LostMotorController(FakeController):
+    """Declares motor 1 lost from its second step on (StepInfo.lost_motor)."""
+
+    def step(self, t_s, state, applied, reference):
+        cmd, info = super().step(t_s, state, applied, reference)
+        return cmd, dataclasses.replace(info, lost_motor=1 if len(self.steps) > 1 else 0)
+
+
+def test_a_lost_motor_is_announced_once_and_its_touchdown_lands():
+    """The controller's lost motor: one STATUSTEXT CRITICAL naming it and what is done; the
+    touchdown then ends the flight (idle, disarm) though the reference is still holding."""
+    from trq_offboard.loop import LAND_DETECT_S
+
+    async def scenario():
+        link, ctl = FakeLink(), LostMotorController()
+        ref = FakeReference(done_at_s=1e9)                 # phase "hold", never done
+        flight = OffboardFlight(link, ctl, lambda state, airborne=False: ref, name="fake",
+                                tilt_limit_rad=LIMIT, connect_timeout_s=1.0, ack_timeout_s=0.5)
+        task = asyncio.create_task(flight.run())
+        await take_off(flight, link)
+        stamp = 10_000
+        for down in (-1.0, -0.6, -0.3):
+            flight.on_message(odometry(stamp, down_m=down))
+            await until(lambda: link.targets(stamp), f"the target of stamp {stamp}")
+            stamp += 10_000
+        texts = [m.text for m in link.of_type("STATUSTEXT")]
+        assert texts == ["motor 1 lost: yaw given up, descending to land"]
+        assert link.of_type("STATUSTEXT")[0].severity == mavlink.MAV_SEVERITY_CRITICAL
+        first_down = stamp
+        while not link.commands(0.0):
+            flight.on_message(odometry(stamp, down_m=0.0))
+            await until(lambda: link.targets(stamp) or link.commands(0.0), f"answer to {stamp}")
+            stamp += 10_000
+            assert stamp - first_down <= 2e6 * LAND_DETECT_S, "the touchdown did not land"
+        flight.on_message(ack(mavlink.MAV_RESULT_ACCEPTED))
+        flight.on_message(odometry(stamp, down_m=0.0))
+        summary = await asyncio.wait_for(task, WAIT_S)
+        assert summary.landed and summary.disarmed
+        assert len(link.of_type("STATUSTEXT")) == 1
+
+    asyncio.run(scenario())
