@@ -171,7 +171,8 @@ class VehicleFile(Strict):
 # them out.
 STREAMS = ("HEARTBEAT", "SYS_STATUS", "ODOMETRY", "ATTITUDE", "LOCAL_POSITION_NED",
            "SERVO_OUTPUT_RAW", "ACTUATOR_OUTPUT_STATUS", "GLOBAL_POSITION_INT", "GPS_RAW_INT",
-           "HOME_POSITION", "HIGHRES_IMU", "ATT_POS_MOCAP", "ESTIMATOR_STATUS")
+           "HOME_POSITION", "HIGHRES_IMU", "ATT_POS_MOCAP", "ESTIMATOR_STATUS",
+           "EXTENDED_SYS_STATE")
 
 _RATE = Int(0, 10_000)      # then checked against physics_rate_hz by SimFile
 
@@ -190,6 +191,7 @@ class StreamRates(Strict):
     HIGHRES_IMU: _RATE = 0
     ATT_POS_MOCAP: _RATE = 0
     ESTIMATOR_STATUS: _RATE = 0
+    EXTENDED_SYS_STATE: _RATE = 0       # the land detector's landed_state (PX4 sends it at 1 Hz)
 
 
 class Telemetry(Strict):

@@ -272,7 +272,7 @@ class Vehicle:
         landed = False
         if on_ground:
             tilt = tilt_from_vertical(*x[6:10])
-            if self._descending:
+            if self._descending and not before.on_ground:
                 self._descending = False
                 speed, tilt_rad = before.x[5], tilt
                 if not crashed and speed > self.sim.crash_speed_m_s:

@@ -24,6 +24,9 @@ the crash, whichever comes first:
                                    without a faulted motor, without an effectiveness observer,
                                    or if crashed)
     solve_ms_p50, solve_ms_p99     controller solve time per step
+    touchdown_speed_m_s            the vehicle's last touchdown: its down speed just before the
+    touchdown_tilt_deg             gear touched and its tilt from vertical then (flight.csv's
+                                   columns; None without a touchdown or from an older log)
     max_pos_err_outage_m           with a sensor outage (a campaign's `outage` axis): the
                                    largest position error from the outage's start to
                                    OUTAGE_SETTLE_S after its end (None without an outage, or
@@ -75,6 +78,8 @@ class RunMetrics:
     est_rmse_att_deg: float | None = None
     diagnosis_s: float | None = None
     max_pos_err_outage_m: float | None = None
+    touchdown_speed_m_s: float | None = None
+    touchdown_tilt_deg: float | None = None
 
     def as_dict(self) -> dict:
         return {k: (None if isinstance(v, float) and not math.isfinite(v) else v)
@@ -225,7 +230,18 @@ def compute(controller: str, vehicle: str, truth: dict[str, np.ndarray],
         solve_ms_p99=float(np.percentile(solve, 99)) if len(solve) else math.nan,
         est_rmse_pos_m=est_pos, est_rmse_att_deg=est_att,
         diagnosis_s=_diagnosis(sm, truth, steps, fault_onset_us),
-        max_pos_err_outage_m=outage_error(t_us, err, outage_us))
+        max_pos_err_outage_m=outage_error(t_us, err, outage_us),
+        touchdown_speed_m_s=_last_finite(truth, "touchdown_speed_m_s"),
+        touchdown_tilt_deg=_last_finite(truth, "touchdown_tilt_deg"))
+
+
+def _last_finite(truth: dict[str, np.ndarray], column: str) -> float | None:
+    """The log's last finite value of `column` (None: no such column, or never set)."""
+    values = truth.get(column)
+    if values is None:
+        return None
+    finite = values[np.isfinite(values)]
+    return float(finite[-1]) if len(finite) else None
 
 
 def _diagnosis(sm: Samples, truth: dict[str, np.ndarray], steps: dict[str, np.ndarray],
