@@ -176,3 +176,32 @@ def test_compiled_tick_is_cached(sim):
     assert first is not None and first.path.exists()
     assert first.path.parent == cache_dir()
     assert math.isfinite(first.path.stat().st_size)
+
+
+@needs_compiler
+def test_ground_contact_touchdown_slide_tip_over_and_rest(sim):
+    """The gear's contact in every branch: a tilted touchdown sliding sideways (friction's slip
+    and stick), a rebound, rest under a crosswind (the stick region), a take-off, and a
+    tip-over; states equal bit for bit."""
+    for roll, vel, wind in ((0.15, (0.3, 1.5, 0.8), 8.0), (1.0, (0.0, 3.0, 0.5), 0.0)):
+        vehicles = pair(sim, wind_speed_m_s=wind)
+        trim = sim.vehicle.hover_throttle_pct
+
+        def place(v, roll=roll, vel=vel):
+            x = list(v.state.x)
+            x[2] = -0.05
+            x[3:6] = vel
+            x[6:10] = (math.cos(roll / 2), math.sin(roll / 2), 0.0, 0.0)
+            v.state = dataclasses.replace(v.state, x=tuple(x), landed=False, on_ground=False)
+        both(vehicles, place)
+
+        def script(k, v, r):
+            if k == 1500:
+                v.armed = True
+                v.command = ActuatorCommand((trim + 10.0,) * 4)
+        states = fly(vehicles, script, 2000, np.random.default_rng(1))
+        assert any(s.on_ground for s in states)
+        if roll > 0.5:
+            assert states[-1].crashed
+        else:
+            assert not states[-1].crashed and not states[-1].on_ground     # took off again
