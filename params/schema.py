@@ -111,7 +111,8 @@ class LandingGear(Strict):
     stiffness_N_m: Num(1.0, 1e7)
     damping_N_s_m: Num(0.0, 1e5)
     friction: Num(0.0, 5.0)
-    stick_damping_N_s_m: Num(0.0, 1e5, open_lo=True)
+    stick_stiffness_N_m: Num(1.0, 1e7)
+    stick_damping_N_s_m: Num(0.0, 1e5)
 
     @model_validator(mode="after")
     def _stands(self) -> "LandingGear":

@@ -37,10 +37,10 @@ IMPACT, ATTITUDE = 1, 2
 
 # indices of the arrays (tick.c, enums P_* and S_*)
 GEAR_MAX = 8                      # contact points the array holds (params/schema.py's limit)
-P_SIZE = 17 + 3 + 3 + 28 + 7 + 3 * GEAR_MAX
+P_SIZE = 17 + 3 + 3 + 28 + 8 + 3 * GEAR_MAX
 S_X, S_MOTOR, S_TILT, S_LANDED, S_CRASHED, S_RUNNING, S_T = 0, 13, 17, 21, 22, 23, 24
 S_CMD_THROTTLE, S_CMD_TILT, S_WIND, S_MOTOR_FAULT, S_SERVO_FAULT = 25, 29, 33, 36, 56
-S_IMPACT_SPEED, S_SIZE = 64, 65
+S_IMPACT_SPEED, S_ANCHORS, S_SIZE = 64, 65, 65 + 2 * GEAR_MAX
 
 
 class CompiledCore:
@@ -75,7 +75,8 @@ class CompiledCore:
         if len(gear.points_frd_m) > GEAR_MAX:
             raise ValueError(f"{len(gear.points_frd_m)} contact points, tick.c holds {GEAR_MAX}")
         values += [gear.ground_down_m, gear.reach_down_m, gear.stiffness_N_m, gear.damping_N_s_m,
-                   gear.friction, gear.stick_damping_N_s_m, float(len(gear.points_frd_m))]
+                   gear.friction, gear.stick_stiffness_N_m, gear.stick_damping_N_s_m,
+                   float(len(gear.points_frd_m))]
         values += [c for point in gear.points_frd_m for c in point]
         values += [0.0] * (3 * (GEAR_MAX - len(gear.points_frd_m)))
         if len(values) != P_SIZE:

@@ -81,6 +81,7 @@ class VehicleParams:
     gear_stiffness_N_m: float          # per point
     gear_damping_N_s_m: float          # per point
     gear_friction: float
+    gear_stick_stiffness_N_m: float    # per point
     gear_stick_damping_N_s_m: float    # per point
     # derived
     hover_throttle_pct: float = field(init=False)
@@ -96,7 +97,7 @@ class VehicleParams:
         reach = max(math.sqrt(x * x + y * y + z * z) for x, y, z in pts)
         object.__setattr__(self, "gear", Gear(
             pts, self.gear_stiffness_N_m, self.gear_damping_N_s_m, self.gear_friction,
-            self.gear_stick_damping_N_s_m, ground, ground - reach))
+            self.gear_stick_stiffness_N_m, self.gear_stick_damping_N_s_m, ground, ground - reach))
         object.__setattr__(self, "tip_over_rad", tip_over_rad(pts))
 
     @property
@@ -134,6 +135,7 @@ def vehicle_params(v: schema.VehicleFile, file: str) -> VehicleParams:
         gear_stiffness_N_m=v.landing_gear.stiffness_N_m,
         gear_damping_N_s_m=v.landing_gear.damping_N_s_m,
         gear_friction=v.landing_gear.friction,
+        gear_stick_stiffness_N_m=v.landing_gear.stick_stiffness_N_m,
         gear_stick_damping_N_s_m=v.landing_gear.stick_damping_N_s_m)
 
 

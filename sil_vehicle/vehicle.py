@@ -23,7 +23,7 @@ import numpy as np
 from sil_vehicle import compiled
 from sil_vehicle.config import SimParams
 from sil_vehicle.dynamics.actuators import first_order_step, lag_factor
-from sil_vehicle.dynamics.contact import touching
+from sil_vehicle.dynamics.contact import feet_ne_m, touching, update_anchors
 from sil_vehicle.dynamics.environment import gust_coefficients, gust_step
 from sil_vehicle.dynamics.rigid_body import rk4_step
 from sil_vehicle.dynamics.rotors import body_wrench
@@ -64,6 +64,9 @@ class VehicleState:
     on_ground: bool = True                     # a contact point of the gear below the ground
     touchdown_speed_m_s: float = math.nan      # the last touchdown's down speed at contact
     touchdown_tilt_rad: float = math.nan       # and its tilt from vertical
+    # the gear points' stick anchors, north and east per point (sil_vehicle.dynamics.contact);
+    # empty out of the ground's reach (then taken where the points are)
+    anchors_ne_m: tuple[float, ...] = ()
 
     @property
     def pos_ned_m(self) -> tuple[float, ...]:
@@ -131,6 +134,7 @@ class Vehicle:
             self._s_state: VehicleState | None = None
             self._s_command: ActuatorCommand | None = None
             self._s_faults: Faults | None = None
+            self._s_anchors: tuple[float, ...] | None = None
 
     @staticmethod
     def _load_core(choice: str) -> compiled.CompiledCore | None:
@@ -209,6 +213,11 @@ class Vehicle:
                                                    f.phase_rad, float(f.off))]
             st[c.S_SERVO_FAULT:c.S_SERVO_FAULT + 8] = [
                 v for f in faults.servos for v in (float(f.stuck), f.angle_rad)]
+        anchors = self._anchors(s)
+        if anchors is not self._s_anchors:
+            self._s_anchors = anchors
+            if anchors:
+                st[c.S_ANCHORS:c.S_ANCHORS + len(anchors)] = anchors
         st[c.S_RUNNING] = 1.0 if self.armed and not s.crashed else 0.0
         st[c.S_T] = s.t_us * 1e-6
         st[c.S_WIND] = wind[0]
@@ -221,7 +230,7 @@ class Vehicle:
         new = self._ground_events(s, VehicleState(
             s.t_us + self._dt_us, tuple(st[0:13]), tuple(st[13:17]), tuple(st[17:21]), wind,
             self.armed, s.landed, st[c.S_CRASHED] != 0.0, reason, s.on_ground,
-            s.touchdown_speed_m_s, s.touchdown_tilt_rad))
+            s.touchdown_speed_m_s, s.touchdown_tilt_rad, anchors))
         st[c.S_CRASHED] = float(new.crashed)
         self._s_state = new
         return new
@@ -251,13 +260,21 @@ class Vehicle:
         if vp.tilt_locked:
             tilts = [0.0, 0.0, 0.0, 0.0]
         wrench = body_wrench(motors, tilts, vp)
-        x = rk4_step(s.x, self._dt, wrench, wind, *self._rb, vp.gear)
+        anchors = self._anchors(s)
+        x = rk4_step(s.x, self._dt, wrench, wind, *self._rb, vp.gear, anchors)
         crashed, reason = s.crashed, s.crash_reason
         if not crashed and tilt_from_vertical(*x[6:10]) > self.sim.crash_tilt_rad:
             crashed, reason = True, "attitude past the crash limit"
         return self._ground_events(s, VehicleState(
             t_us, x, tuple(motors), tuple(tilts), wind, self.armed, s.landed, crashed, reason,
-            s.on_ground, s.touchdown_speed_m_s, s.touchdown_tilt_rad))
+            s.on_ground, s.touchdown_speed_m_s, s.touchdown_tilt_rad, anchors))
+
+    def _anchors(self, s: VehicleState) -> tuple[float, ...]:
+        """The stick anchors this tick holds: the state's, or, within the ground's reach
+        without any, the points' positions now (where they would first touch)."""
+        if s.anchors_ne_m or not s.x[2] > self.vp.gear.reach_down_m:
+            return s.anchors_ne_m
+        return feet_ne_m(s.x, self.vp.gear)
 
     def _ground_events(self, before: VehicleState, s: VehicleState) -> VehicleState:
         """After a tick, from its state alone (both cores share this): which gear points touch;
@@ -283,5 +300,7 @@ class Vehicle:
                       and x[10] * x[10] + x[11] * x[11] + x[12] * x[12] < RESTING_RATE_RAD_S ** 2)
         elif x[2] < GROUND_DOWN_M - TOUCHDOWN_REARM_M:
             self._descending = True
+        gear = self.vp.gear
+        anchors = update_anchors(x, gear, s.anchors_ne_m) if x[2] > gear.reach_down_m else ()
         return VehicleState(s.t_us, x, s.motor_pct, s.tilt_rad, s.wind_ned_m_s, s.armed, landed,
-                            crashed, reason, on_ground, speed, tilt_rad)
+                            crashed, reason, on_ground, speed, tilt_rad, anchors)

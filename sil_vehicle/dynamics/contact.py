@@ -5,15 +5,18 @@ For each contact point r (body FRD, from the centre of mass) below the plane (de
 world velocity u = v + R (omega x r)):
 
     normal  N   = max(0, k d + c u_down)                       (pushes up, never pulls)
-    tangent F_t = -u_t * min(c_stick, mu N / |u_t|)            (u_t: the point's N, E velocity)
+    tangent F_t = -k_t (p_t - a) - c_t u_t, capped at |F_t| <= mu N
 
-so a point slides with Coulomb friction mu N, and below the speed mu N / c_stick it sticks
-through a viscous term c_stick (the regularisation: a vehicle with no sideways force rests
-without creeping; under a sideways force F below breakaway it creeps at F / (n c_stick)). The
-forces act in world NED, their moments about the centre of mass in body FRD; both are added to
-the rotors' wrench inside every RK4 stage (sil_vehicle.dynamics.rigid_body.derivative), so the
-rigid body settles on its gear under the same integration as in flight. No levelling, no state
-reset: the ground is only a force.
+with p_t the point's north, east position, u_t its velocity and a its stick anchor: where the
+point stuck to the ground. Sticking, the point is held by a stiff spring-damper to its anchor (a
+regularised stick: a sideways force below breakaway, the wind's drag on a vehicle at rest,
+stretches it by F / (n k_t) and no more, it does not creep); past mu N the force is Coulomb's and
+the anchor is dragged along after the tick (`update_anchors`: the spring kept at its breakaway
+stretch). A point out of contact has its anchor where it is. The forces act in world NED, their
+moments about the centre of mass in body FRD; both are added to the rotors' wrench inside every
+RK4 stage (sil_vehicle.dynamics.rigid_body.derivative; the anchors are held over a tick, as the
+rotors' wrench is), so the rigid body settles on its gear under the same integration as in
+flight. No levelling, no state reset: the ground is only a force.
 
 The plane's height is chosen so that the vehicle at rest, level, on its lowest contact points,
 has its centre of mass at down = 0 (the NED origin is home on the ground: PROTOCOL.md), which
@@ -29,7 +32,8 @@ import math
 from dataclasses import dataclass
 from typing import Sequence
 
-__all__ = ["Gear", "contact_wrench", "touching", "resting_plane_down_m", "tip_over_rad"]
+__all__ = ["Gear", "contact_wrench", "touching", "update_anchors", "feet_ne_m",
+           "resting_plane_down_m", "tip_over_rad"]
 
 
 @dataclass(frozen=True)
@@ -39,7 +43,8 @@ class Gear:
     stiffness_N_m: float           # per point
     damping_N_s_m: float           # per point
     friction: float                # Coulomb coefficient mu
-    stick_damping_N_s_m: float     # per point, the viscous stick region
+    stick_stiffness_N_m: float     # per point, k_t: the spring to the stick anchor
+    stick_damping_N_s_m: float     # per point, c_t
     ground_down_m: float           # the plane, world down
     reach_down_m: float            # the centre of mass below this: a point may touch
 
@@ -69,10 +74,12 @@ def tip_over_rad(points_frd_m: Sequence[Sequence[float]]) -> float:
     return math.atan2(a, low) if a > 0.0 else 0.0
 
 
-def contact_wrench(x: Sequence[float], gear: Gear) -> tuple[float, float, float, float, float,
-                                                            float]:
-    """The ground's force (world NED, N) and moment about the centre of mass (body FRD, N m)."""
-    pd, vn, ve, vd, qw, qx, qy, qz, p, q, r = x[2:13]
+def contact_wrench(x: Sequence[float], gear: Gear,
+                   anchors_ne_m: Sequence[float]) -> tuple[float, float, float, float, float,
+                                                           float]:
+    """The ground's force (world NED, N) and moment about the centre of mass (body FRD, N m);
+    `anchors_ne_m`: each point's stick anchor, north and east (2 per point)."""
+    pn0, pe0, pd, vn, ve, vd, qw, qx, qy, qz, p, q, r = x[0:13]
     r00 = 1 - 2 * (qy * qy + qz * qz)
     r01 = 2 * (qx * qy - qw * qz)
     r02 = 2 * (qx * qz + qw * qy)
@@ -82,10 +89,11 @@ def contact_wrench(x: Sequence[float], gear: Gear) -> tuple[float, float, float,
     r20 = 2 * (qx * qz - qw * qy)
     r21 = 2 * (qy * qz + qw * qx)
     r22 = 1 - 2 * (qx * qx + qy * qy)
-    k, c, mu, cs = gear.stiffness_N_m, gear.damping_N_s_m, gear.friction, gear.stick_damping_N_s_m
+    k, c, mu = gear.stiffness_N_m, gear.damping_N_s_m, gear.friction
+    kt, ct = gear.stick_stiffness_N_m, gear.stick_damping_N_s_m
     ground = gear.ground_down_m
     f_n = f_e = f_d = m_x = m_y = m_z = 0.0
-    for px, py, pz in gear.points_frd_m:
+    for i, (px, py, pz) in enumerate(gear.points_frd_m):
         depth = pd + r20 * px + r21 * py + r22 * pz - ground
         if depth <= 0.0:
             continue
@@ -98,11 +106,16 @@ def contact_wrench(x: Sequence[float], gear: Gear) -> tuple[float, float, float,
         normal = k * depth + c * ud
         if normal <= 0.0:
             continue
-        speed = math.sqrt(un * un + ue * ue)
+        fn = pn0 + r00 * px + r01 * py + r02 * pz
+        fe = pe0 + r10 * px + r11 * py + r12 * pz
+        gn = -kt * (fn - anchors_ne_m[2 * i]) - ct * un
+        ge = -kt * (fe - anchors_ne_m[2 * i + 1]) - ct * ue
         slip = mu * normal
-        s = cs if speed * cs <= slip else slip / speed
-        gn = -s * un
-        ge = -s * ue
+        t2 = gn * gn + ge * ge
+        if t2 > slip * slip:                         # sliding: Coulomb's mu N
+            s = slip / math.sqrt(t2)
+            gn = gn * s
+            ge = ge * s
         gd = -normal
         f_n += gn
         f_e += ge
@@ -114,6 +127,50 @@ def contact_wrench(x: Sequence[float], gear: Gear) -> tuple[float, float, float,
         m_y += pz * bx - px * bz
         m_z += px * by - py * bx
     return (f_n, f_e, f_d, m_x, m_y, m_z)
+
+
+def feet_ne_m(x: Sequence[float], gear: Gear) -> tuple[float, ...]:
+    """Each point's north and east position (2 per point): the anchors of a vehicle set down."""
+    pn, pe, _, _, _, _, qw, qx, qy, qz = x[0:10]
+    r00 = 1 - 2 * (qy * qy + qz * qz)
+    r01 = 2 * (qx * qy - qw * qz)
+    r02 = 2 * (qx * qz + qw * qy)
+    r10 = 2 * (qx * qy + qw * qz)
+    r11 = 1 - 2 * (qx * qx + qz * qz)
+    r12 = 2 * (qy * qz - qw * qx)
+    out: list[float] = []
+    for px, py, pz in gear.points_frd_m:
+        out += (pn + r00 * px + r01 * py + r02 * pz, pe + r10 * px + r11 * py + r12 * pz)
+    return tuple(out)
+
+
+def update_anchors(x: Sequence[float], gear: Gear,
+                   anchors_ne_m: Sequence[float]) -> tuple[float, ...]:
+    """The anchors after a tick ending in state x: a point out of contact (or pressing with no
+    force) anchors where it is; one whose spring stretches past breakaway (mu N / k_t) drags its
+    anchor along, the stretch kept at breakaway; the others keep theirs."""
+    feet = feet_ne_m(x, gear)
+    pd, vn, ve, vd, qw, qx, qy, qz, p, q, r = x[2:13]
+    r20 = 2 * (qx * qz - qw * qy)
+    r21 = 2 * (qy * qz + qw * qx)
+    r22 = 1 - 2 * (qx * qx + qy * qy)
+    out: list[float] = []
+    for i, (px, py, pz) in enumerate(gear.points_frd_m):
+        fn, fe = feet[2 * i], feet[2 * i + 1]
+        depth = pd + r20 * px + r21 * py + r22 * pz - gear.ground_down_m
+        ud = vd + r20 * (q * pz - r * py) + r21 * (r * px - p * pz) + r22 * (p * py - q * px)
+        normal = gear.stiffness_N_m * depth + gear.damping_N_s_m * ud
+        if depth <= 0.0 or normal <= 0.0:
+            out += (fn, fe)
+            continue
+        dn, de = fn - anchors_ne_m[2 * i], fe - anchors_ne_m[2 * i + 1]
+        stretch = math.sqrt(dn * dn + de * de)
+        limit = gear.friction * normal / gear.stick_stiffness_N_m
+        if stretch > limit:
+            out += (fn - dn * limit / stretch, fe - de * limit / stretch)
+        else:
+            out += (anchors_ne_m[2 * i], anchors_ne_m[2 * i + 1])
+    return tuple(out)
 
 
 def touching(x: Sequence[float], gear: Gear) -> int:

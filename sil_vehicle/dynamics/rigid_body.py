@@ -29,7 +29,8 @@ N_STATE = 13
 
 def derivative(x: Sequence[float], wrench_frd: Sequence[float], wind_ned: Sequence[float],
                mass_kg: float, inertia: Sequence[float], gravity: float,
-               drag_k: float, gear: Gear | None = None) -> State:
+               drag_k: float, gear: Gear | None = None,
+               anchors_ne_m: Sequence[float] = ()) -> State:
     _, _, _, vn, ve, vd, qw, qx, qy, qz, p, q, r = x
     fx, fy, fz, mx, my, mz = wrench_frd
     # body force to world
@@ -37,7 +38,7 @@ def derivative(x: Sequence[float], wrench_frd: Sequence[float], wind_ned: Sequen
     fe = 2 * (qx * qy + qw * qz) * fx + (1 - 2 * (qx * qx + qz * qz)) * fy + 2 * (qy * qz - qw * qx) * fz
     fdn = 2 * (qx * qz - qw * qy) * fx + 2 * (qy * qz + qw * qx) * fy + (1 - 2 * (qx * qx + qy * qy)) * fz
     if gear is not None and x[2] > gear.reach_down_m:     # the ground within reach
-        cn, ce, cd, cx, cy, cz = contact_wrench(x, gear)
+        cn, ce, cd, cx, cy, cz = contact_wrench(x, gear, anchors_ne_m)
         fn = fn + cn
         fe = fe + ce
         fdn = fdn + cd
@@ -58,10 +59,11 @@ def derivative(x: Sequence[float], wrench_frd: Sequence[float], wind_ned: Sequen
 
 def rk4_step(x: Sequence[float], dt: float, wrench_frd: Sequence[float],
              wind_ned: Sequence[float], mass_kg: float, inertia: Sequence[float],
-             gravity: float, drag_k: float, gear: Gear | None = None) -> State:
+             gravity: float, drag_k: float, gear: Gear | None = None,
+             anchors_ne_m: Sequence[float] = ()) -> State:
     """One RK4 step; the quaternion is renormalised afterwards. `gear`: the ground's contact
-    (none: no ground)."""
-    args = (wrench_frd, wind_ned, mass_kg, inertia, gravity, drag_k, gear)
+    (none: no ground), with its points' stick anchors (held over the step)."""
+    args = (wrench_frd, wind_ned, mass_kg, inertia, gravity, drag_k, gear, anchors_ne_m)
     h = 0.5 * dt
     k1 = derivative(x, *args)
     k2 = derivative([a + h * b for a, b in zip(x, k1)], *args)

@@ -21,7 +21,7 @@ enum {
     P_CRASH_TILT, P_THRUST, /* c2, c1, c0 */ P_TORQUE = P_THRUST + 3, /* c2, c1, c0 */
     P_ROTORS = P_TORQUE + 3, /* 4 x (spin, px, py, pz, ax, ay, az) */
     P_GEAR = P_ROTORS + 28, /* sil_vehicle/dynamics/contact.py's Gear: */
-    P_GROUND = P_GEAR, P_REACH, P_GEAR_K, P_GEAR_C, P_GEAR_MU, P_GEAR_CS, P_GEAR_N,
+    P_GROUND = P_GEAR, P_REACH, P_GEAR_K, P_GEAR_C, P_GEAR_MU, P_GEAR_KT, P_GEAR_CT, P_GEAR_N,
     P_GEAR_POINTS, /* GEAR_MAX x (x, y, z) */
     P_SIZE = P_GEAR_POINTS + 3 * 8
 };
@@ -30,7 +30,9 @@ enum {
     S_X = 0, /* 13 */ S_MOTOR = 13, /* 4 */ S_TILT = 17, /* 4 */ S_LANDED = 21, S_CRASHED = 22,
     S_RUNNING = 23, S_T = 24, S_CMD_THROTTLE = 25, /* 4 */ S_CMD_TILT = 29, /* 4 */
     S_WIND = 33, /* 3 */ S_MOTOR_FAULT = 36, /* 4 x (a, b, w, phi, off) */
-    S_SERVO_FAULT = 56, /* 4 x (stuck, angle) */ S_IMPACT_SPEED = 64, S_SIZE = 65
+    S_SERVO_FAULT = 56, /* 4 x (stuck, angle) */ S_IMPACT_SPEED = 64,
+    S_ANCHORS = 65, /* 8 x (north, east): the contact points' stick anchors */
+    S_SIZE = S_ANCHORS + 16
 };
 
 enum { TICK_OK = 0, TICK_IMPACT = 1, TICK_ATTITUDE = 2 };
@@ -73,9 +75,9 @@ static double fault_factor(const double *f, double t_s)
 }
 
 /* sil_vehicle/dynamics/contact.py contact_wrench: world force, body moment */
-static void contact_wrench(const double *x, const double *p, double *cw)
+static void contact_wrench(const double *x, const double *p, const double *anchors, double *cw)
 {
-    double pd = x[2], vn = x[3], ve = x[4], vd = x[5], qw = x[6], qx = x[7], qy = x[8];
+    double pn0 = x[0], pe0 = x[1], pd = x[2], vn = x[3], ve = x[4], vd = x[5], qw = x[6], qx = x[7], qy = x[8];
     double qz = x[9], pr = x[10], qr = x[11], rr = x[12];
     double r00 = 1 - 2 * (qy * qy + qz * qz);
     double r01 = 2 * (qx * qy - qw * qz);
@@ -86,7 +88,8 @@ static void contact_wrench(const double *x, const double *p, double *cw)
     double r20 = 2 * (qx * qz - qw * qy);
     double r21 = 2 * (qy * qz + qw * qx);
     double r22 = 1 - 2 * (qx * qx + qy * qy);
-    double k = p[P_GEAR_K], c = p[P_GEAR_C], mu = p[P_GEAR_MU], cs = p[P_GEAR_CS];
+    double k = p[P_GEAR_K], c = p[P_GEAR_C], mu = p[P_GEAR_MU], kt = p[P_GEAR_KT];
+    double ct = p[P_GEAR_CT];
     double ground = p[P_GROUND];
     double f_n = 0.0, f_e = 0.0, f_d = 0.0, m_x = 0.0, m_y = 0.0, m_z = 0.0;
     int i, n = (int)p[P_GEAR_N];
@@ -94,7 +97,7 @@ static void contact_wrench(const double *x, const double *p, double *cw)
         const double *pt = p + P_GEAR_POINTS + 3 * i;
         double px = pt[0], py = pt[1], pz = pt[2];
         double depth = pd + r20 * px + r21 * py + r22 * pz - ground;
-        double ux, uy, uz, un, ue, ud, normal, speed, slip, sc, gn, ge, gd, bx, by, bz;
+        double ux, uy, uz, un, ue, ud, normal, fn, fe, gn, ge, gd, slip, t2, bx, by, bz;
         if (depth <= 0.0)
             continue;
         ux = qr * pz - rr * py;
@@ -106,11 +109,17 @@ static void contact_wrench(const double *x, const double *p, double *cw)
         normal = k * depth + c * ud;
         if (normal <= 0.0)
             continue;
-        speed = sqrt(un * un + ue * ue);
+        fn = pn0 + r00 * px + r01 * py + r02 * pz;
+        fe = pe0 + r10 * px + r11 * py + r12 * pz;
+        gn = -kt * (fn - anchors[2 * i]) - ct * un;
+        ge = -kt * (fe - anchors[2 * i + 1]) - ct * ue;
         slip = mu * normal;
-        sc = (speed * cs <= slip) ? cs : slip / speed;
-        gn = -sc * un;
-        ge = -sc * ue;
+        t2 = gn * gn + ge * ge;
+        if (t2 > slip * slip) {                     /* sliding: Coulomb's mu N */
+            double sc = slip / sqrt(t2);
+            gn = gn * sc;
+            ge = ge * sc;
+        }
         gd = -normal;
         f_n += gn;
         f_e += ge;
@@ -131,7 +140,7 @@ static void contact_wrench(const double *x, const double *p, double *cw)
 }
 
 static void derivative(const double *x, const double *w, const double *wind, const double *p,
-                       double *dx)
+                       const double *anchors, double *dx)
 {
     double vn = x[3], ve = x[4], vd = x[5], qw = x[6], qx = x[7], qy = x[8], qz = x[9];
     double pr = x[10], qr = x[11], rr = x[12];
@@ -145,7 +154,7 @@ static void derivative(const double *x, const double *w, const double *wind, con
     double rx, ry, rz, s, inv_m, ixx, iyy, izz;
     if (x[2] > p[P_REACH]) {                        /* the ground within reach */
         double cw[6];
-        contact_wrench(x, p, cw);
+        contact_wrench(x, p, anchors, cw);
         fn = fn + cw[0];
         fe = fe + cw[1];
         fdn = fdn + cw[2];
@@ -176,21 +185,22 @@ static void derivative(const double *x, const double *w, const double *wind, con
     dx[12] = (mz - (iyy - ixx) * pr * qr) / izz;
 }
 
-static void rk4_step(double *x, double dt, const double *w, const double *wind, const double *p)
+static void rk4_step(double *x, double dt, const double *w, const double *wind, const double *p,
+                     const double *anchors)
 {
     double k1[13], k2[13], k3[13], k4[13], y[13];
     double h = 0.5 * dt, d6 = dt / 6.0, n;
     int i;
-    derivative(x, w, wind, p, k1);
+    derivative(x, w, wind, p, anchors, k1);
     for (i = 0; i < 13; i++)
         y[i] = x[i] + h * k1[i];
-    derivative(y, w, wind, p, k2);
+    derivative(y, w, wind, p, anchors, k2);
     for (i = 0; i < 13; i++)
         y[i] = x[i] + h * k2[i];
-    derivative(y, w, wind, p, k3);
+    derivative(y, w, wind, p, anchors, k3);
     for (i = 0; i < 13; i++)
         y[i] = x[i] + dt * k3[i];
-    derivative(y, w, wind, p, k4);
+    derivative(y, w, wind, p, anchors, k4);
     for (i = 0; i < 13; i++)
         x[i] = x[i] + d6 * (k1[i] + 2.0 * (k2[i] + k3[i]) + k4[i]);
     n = 1.0 / sqrt(x[6] * x[6] + x[7] * x[7] + x[8] * x[8] + x[9] * x[9]);
@@ -262,7 +272,7 @@ int trq_tick(const double *p, double *s)
         for (i = 0; i < 4; i++)
             tilt[i] = 0.0;
     body_wrench(motor, tilt, p, w);
-    rk4_step(x, p[P_DT], w, wind, p);          /* the ground's contact inside (derivative) */
+    rk4_step(x, p[P_DT], w, wind, p, s + S_ANCHORS);   /* the ground inside (derivative) */
     if (!crashed) {
         double qx = x[7], qy = x[8];
         double c = 1 - 2 * (qx * qx + qy * qy);

@@ -9,7 +9,7 @@ import math
 
 import numpy as np
 
-from sil_vehicle.dynamics.contact import contact_wrench
+from sil_vehicle.dynamics.contact import contact_wrench, feet_ne_m
 from sil_vehicle.frames import euler_to_quat, tilt_from_vertical
 from sil_vehicle.vehicle import Vehicle
 
@@ -34,7 +34,7 @@ def run(v, ticks):
 def test_resting_equilibrium_carries_the_weight_and_does_not_drift(sim):
     vp = sim.vehicle
     v = Vehicle(sim, np.random.default_rng(0))
-    f = contact_wrench(v.state.x, vp.gear)
+    f = contact_wrench(v.state.x, vp.gear, feet_ne_m(v.state.x, vp.gear))
     assert abs(f[2] + vp.mass_kg * vp.gravity_m_s2) < 1e-9          # normal forces = weight
     assert max(map(abs, f[0:2] + f[3:6])) < 1e-12
     states = run(v, 5000)                                            # 5 s disarmed
@@ -110,3 +110,19 @@ def test_impact_speed_is_recorded_and_judged(sim):
     assert abs(s.touchdown_speed_m_s - math.sqrt(2 * 9.80665 * 0.5)) < 0.02
     assert s.crashed and s.crash_reason.startswith("ground impact at 3.1")
     assert s.touchdown_tilt_rad == 0.0
+
+
+def test_a_crosswind_below_breakaway_does_not_make_it_creep(sim):
+    """8 m/s of wind on the vehicle at rest: 2 N of drag against mu m g = 10 N. The stick anchors
+    hold it: it shifts on its feet's springs by F / (n k_t), and pitches on the normal springs by
+    F h / (k sum x^2) (the drag acts at the centre of mass, h above the feet), and stays there."""
+    v = Vehicle(sim.with_changes(wind_speed_m_s=8.0, wind_from_deg=0.0), np.random.default_rng(0))
+    states = run(v, 5000)
+    gear = sim.vehicle.gear
+    drag = 0.03125 * 8.0 ** 2
+    h = gear.points_frd_m[0][2]
+    pitch = drag * h / sum(gear.stiffness_N_m * p[0] ** 2 for p in gear.points_frd_m)
+    lean = drag / (len(gear.points_frd_m) * gear.stick_stiffness_N_m) + h * pitch
+    assert abs(states[999].x[0] + lean) < 0.05 * lean               # blown south, by the lean
+    assert abs(states[-1].x[0] - states[999].x[0]) < 1e-7           # and no further in 4 s
+    assert all(s.landed for s in states[200:])
