@@ -122,6 +122,7 @@ class Vehicle:
                       sim.gust_sigma_m_s, sim.gust_length_m)
         self._gust = (0.0, 0.0, 0.0)
         self._descending = True          # a contact now would be a touchdown (TOUCHDOWN_REARM_M)
+        self._reach_down_m = self.vp.gear.reach_down_m
         self.state = VehicleState(0, initial_state(), (0.0,) * 4, (0.0,) * 4, self._wind_mean,
                                   False, True, False, "")
         self.core = self._load_core(sim.physics_core)
@@ -213,7 +214,9 @@ class Vehicle:
                                                    f.phase_rad, float(f.off))]
             st[c.S_SERVO_FAULT:c.S_SERVO_FAULT + 8] = [
                 v for f in faults.servos for v in (float(f.stuck), f.angle_rad)]
-        anchors = self._anchors(s)
+        anchors = s.anchors_ne_m
+        if not anchors and s.x[2] > self._reach_down_m:
+            anchors = feet_ne_m(s.x, self.vp.gear)
         if anchors is not self._s_anchors:
             self._s_anchors = anchors
             if anchors:
@@ -227,11 +230,19 @@ class Vehicle:
         reason = s.crash_reason
         if event == compiled.ATTITUDE:
             reason = "attitude past the crash limit"
-        new = self._ground_events(s, VehicleState(
-            s.t_us + self._dt_us, tuple(st[0:13]), tuple(st[13:17]), tuple(st[17:21]), wind,
-            self.armed, s.landed, st[c.S_CRASHED] != 0.0, reason, s.on_ground,
-            s.touchdown_speed_m_s, s.touchdown_tilt_rad, anchors))
-        st[c.S_CRASHED] = float(new.crashed)
+        x = tuple(st[0:13])
+        if x[2] > self._reach_down_m or s.on_ground or s.landed:
+            new = self._ground_events(s, VehicleState(
+                s.t_us + self._dt_us, x, tuple(st[13:17]), tuple(st[17:21]), wind, self.armed,
+                s.landed, st[c.S_CRASHED] != 0.0, reason, s.on_ground, s.touchdown_speed_m_s,
+                s.touchdown_tilt_rad, anchors))
+            st[c.S_CRASHED] = float(new.crashed)
+        else:                     # flying, out of the ground's reach: _ground_events' first case
+            if x[2] < GROUND_DOWN_M - TOUCHDOWN_REARM_M:
+                self._descending = True
+            new = VehicleState(s.t_us + self._dt_us, x, tuple(st[13:17]), tuple(st[17:21]), wind,
+                               self.armed, False, st[c.S_CRASHED] != 0.0, reason, False,
+                               s.touchdown_speed_m_s, s.touchdown_tilt_rad, ())
         self._s_state = new
         return new
 
@@ -283,7 +294,16 @@ class Vehicle:
         tilt past the gear's tip-over angle while touching is a crash; `landed` is resting on
         the gear."""
         x = s.x
-        on_ground = touching(x, self.vp.gear) > 0
+        gear = self.vp.gear
+        if not x[2] > gear.reach_down_m:                  # out of the ground's reach: flying
+            if x[2] < GROUND_DOWN_M - TOUCHDOWN_REARM_M:
+                self._descending = True
+            if not s.landed and not s.on_ground and not s.anchors_ne_m:
+                return s
+            return VehicleState(s.t_us, x, s.motor_pct, s.tilt_rad, s.wind_ned_m_s, s.armed,
+                                False, s.crashed, s.crash_reason, False, s.touchdown_speed_m_s,
+                                s.touchdown_tilt_rad, ())
+        on_ground = touching(x, gear) > 0
         crashed, reason = s.crashed, s.crash_reason
         speed, tilt_rad = s.touchdown_speed_m_s, s.touchdown_tilt_rad
         landed = False
@@ -300,7 +320,6 @@ class Vehicle:
                       and x[10] * x[10] + x[11] * x[11] + x[12] * x[12] < RESTING_RATE_RAD_S ** 2)
         elif x[2] < GROUND_DOWN_M - TOUCHDOWN_REARM_M:
             self._descending = True
-        gear = self.vp.gear
-        anchors = update_anchors(x, gear, s.anchors_ne_m) if x[2] > gear.reach_down_m else ()
+        anchors = update_anchors(x, gear, s.anchors_ne_m)
         return VehicleState(s.t_us, x, s.motor_pct, s.tilt_rad, s.wind_ned_m_s, s.armed, landed,
                             crashed, reason, on_ground, speed, tilt_rad, anchors)
