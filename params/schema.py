@@ -105,9 +105,13 @@ class GearPoint(Strict):
     z_m: Num(-5.0, 5.0)
 
 
+def _as_tuple(value: Any) -> Any:
+    return tuple(value) if isinstance(value, list) else value
+
+
 class LandingGear(Strict):
     """Ground contact (sil_vehicle.dynamics.contact): spring-damper and friction per point."""
-    points: Annotated[tuple[GearPoint, ...], BeforeValidator(lambda v: tuple(v) if isinstance(v, list) else v)]
+    points: Annotated[tuple[GearPoint, ...], BeforeValidator(_as_tuple)]
     stiffness_N_m: Num(1.0, 1e7)
     damping_N_s_m: Num(0.0, 1e5)
     friction: Num(0.0, 5.0)

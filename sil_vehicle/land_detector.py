@@ -15,7 +15,8 @@ weight; it never reads the ground contact itself, as an autopilot cannot.
 Figures: Z_VEL_MAX_M_S is PX4's LNDMC_Z_VEL_MAX default (0.25 m/s), ROT_MAX its LNDMC_ROT_MAX
 (20 deg/s), LANDED_S its one second of landed trigger time; the rest are choices. `landed`
 here is the wire's report only: the plant's `VehicleState.landed` (resting on the gear) still
-decides the disarm refusal and the failsafe, as before (docs/decisions/2026-12-05-ground-contact.md).
+decides the disarm refusal and the failsafe, as before
+(docs/decisions/2026-12-05-ground-contact.md).
 """
 
 from __future__ import annotations

@@ -3,8 +3,9 @@
 `Vehicle` composes the pure dynamics in a short fixed sequence per tick (after ArduPilot's
 `Aircraft::update`): actuator targets -> faults -> motor and servo dynamics -> rotor wrench ->
 wind -> RK4 (the ground's contact forces inside it: sil_vehicle.dynamics.contact) -> crash
-checks -> ground events (touchdown, tip-over, resting: `_ground_events`, shared by both cores). It holds no socket, clock or global random state: the
-random generator for gusts is injected, time is an integer count of microseconds.
+checks -> ground events (touchdown, tip-over, resting: `_ground_events`, shared by both
+cores). It holds no socket, clock or global random state: the random generator for gusts is
+injected, time is an integer count of microseconds.
 
 The tick runs either in Python (`_tick_python`, the reference, built from the pure functions of
 `sil_vehicle.dynamics`) or compiled (`dynamics/tick.c` through `sil_vehicle.compiled`, the same

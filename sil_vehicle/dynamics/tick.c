@@ -75,10 +75,11 @@ static double fault_factor(const double *f, double t_s)
 }
 
 /* sil_vehicle/dynamics/contact.py contact_wrench: world force, body moment */
-static void contact_wrench(const double *x, const double *p, const double *anchors, double *cw)
+static void contact_wrench(const double *x, const double *p, const double *anchors,
+                           double *cw)
 {
-    double pn0 = x[0], pe0 = x[1], pd = x[2], vn = x[3], ve = x[4], vd = x[5], qw = x[6], qx = x[7], qy = x[8];
-    double qz = x[9], pr = x[10], qr = x[11], rr = x[12];
+    double pn0 = x[0], pe0 = x[1], pd = x[2], vn = x[3], ve = x[4], vd = x[5];
+    double qw = x[6], qx = x[7], qy = x[8], qz = x[9], pr = x[10], qr = x[11], rr = x[12];
     double r00 = 1 - 2 * (qy * qy + qz * qz);
     double r01 = 2 * (qx * qy - qw * qz);
     double r02 = 2 * (qx * qz + qw * qy);

@@ -2,7 +2,8 @@
 flights, bit for bit. Flights that visit every branch of the tick: on the ground, take-off, idle
 clamp and full-throttle clamp, rate limits, tilt limits, gusts, a time-varying motor fault, a motor
 switched off, a stuck servo, the quadcopter's locked tilts, a landing, a crash by ground impact and
-one by attitude, and states, commands and faults replaced from outside between ticks."""
+one by attitude, the gear's contact (touchdown, slide, stick, tip-over), and states, commands and
+faults replaced from outside between ticks."""
 
 from __future__ import annotations
 
