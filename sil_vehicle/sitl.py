@@ -29,6 +29,7 @@ from sil_vehicle.frames import euler_to_quat, quat_to_euler
 from sil_vehicle.mavlink import codec
 from sil_vehicle.mavlink.codec import Measured, RxCounters
 from sil_vehicle.failsafe import FailsafeLander
+from sil_vehicle import land_detector
 from sil_vehicle.land_detector import LandDetector
 from sil_vehicle.impair import Impairment
 from sil_vehicle.mavlink.params import Param, ParamTable
@@ -364,6 +365,10 @@ class Sitl:
             self.lander.active = False
             return self.announce(mavlink.MAV_SEVERITY_WARNING, "failsafe: landed, disarmed")
         v.command = self.lander.update(self._nav_state(s), self.sim.dt_us * 1e-6)
+        if self.land_detector.state in (land_detector.LANDING, land_detector.ON_GROUND):
+            # the land detector's ground contact: thrust off, as PX4's position controller
+            # does on it (otherwise the wind slides a vehicle that its thrust keeps light)
+            v.command = ActuatorCommand()
         return out
 
     def _detect_landing(self, s: VehicleState) -> None:
