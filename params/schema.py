@@ -21,6 +21,7 @@ controller's rate against its observer's gains) stay with the daemon that joins 
 
 from __future__ import annotations
 
+import math
 from typing import Annotated, Any, Optional
 
 from pydantic import (BaseModel, BeforeValidator, ConfigDict, Field, ValidationInfo,
@@ -96,6 +97,47 @@ class Drag(Strict):
     quadratic_N_s2_m2: Num(0.0, 10.0)
 
 
+class GearPoint(Strict):
+    """A point of the landing gear that can touch the ground, body FRD from the centre of mass."""
+    name: Text
+    x_m: Num(-5.0, 5.0)
+    y_m: Num(-5.0, 5.0)
+    z_m: Num(-5.0, 5.0)
+
+
+def _as_tuple(value: Any) -> Any:
+    return tuple(value) if isinstance(value, list) else value
+
+
+class LandingGear(Strict):
+    """Ground contact (sil_vehicle.dynamics.contact): spring-damper and friction per point."""
+    points: Annotated[tuple[GearPoint, ...], BeforeValidator(_as_tuple)]
+    stiffness_N_m: Num(1.0, 1e7)
+    damping_N_s_m: Num(0.0, 1e5)
+    friction: Num(0.0, 5.0)
+    stick_stiffness_N_m: Num(1.0, 1e7)
+    stick_damping_N_s_m: Num(0.0, 1e5)
+
+    @model_validator(mode="after")
+    def _stands(self) -> "LandingGear":
+        if not 3 <= len(self.points) <= MAX_GEAR_POINTS:
+            raise Invalid("landing_gear.points", len(self.points),
+                          f"3 to {MAX_GEAR_POINTS} contact points")
+        low = max(p.z_m for p in self.points)
+        feet = sorted(((p.x_m, p.y_m) for p in self.points if p.z_m == low),
+                      key=lambda f: math.atan2(f[1], f[0]))
+        inside = len(feet) >= 3 and low > 0.0 and all(
+            x1 * y2 - x2 * y1 > 0.0 for (x1, y1), (x2, y2) in zip(feet, feet[1:] + feet[:1]))
+        if not inside:
+            raise Invalid("landing_gear.points", [p.name for p in self.points],
+                          "at least 3 lowest points (largest z_m, below the centre of mass) "
+                          "around the centre of mass, so that the vehicle can stand")
+        return self
+
+
+MAX_GEAR_POINTS = 8       # the compiled tick's array holds this many (sil_vehicle/dynamics/tick.c)
+
+
 class VehicleFile(Strict):
     """An airframe. Rotor order is PX4 quad X (motor 1..4)."""
     name: Text
@@ -108,6 +150,7 @@ class VehicleFile(Strict):
     motor: Motor
     tilt: Tilt
     drag: Drag
+    landing_gear: LandingGear
 
     @model_validator(mode="after")
     def _can_fly(self) -> "VehicleFile":
@@ -133,7 +176,8 @@ class VehicleFile(Strict):
 # them out.
 STREAMS = ("HEARTBEAT", "SYS_STATUS", "ODOMETRY", "ATTITUDE", "LOCAL_POSITION_NED",
            "SERVO_OUTPUT_RAW", "ACTUATOR_OUTPUT_STATUS", "GLOBAL_POSITION_INT", "GPS_RAW_INT",
-           "HOME_POSITION", "HIGHRES_IMU", "ATT_POS_MOCAP", "ESTIMATOR_STATUS")
+           "HOME_POSITION", "HIGHRES_IMU", "ATT_POS_MOCAP", "ESTIMATOR_STATUS",
+           "EXTENDED_SYS_STATE")
 
 _RATE = Int(0, 10_000)      # then checked against physics_rate_hz by SimFile
 
@@ -152,6 +196,7 @@ class StreamRates(Strict):
     HIGHRES_IMU: _RATE = 0
     ATT_POS_MOCAP: _RATE = 0
     ESTIMATOR_STATUS: _RATE = 0
+    EXTENDED_SYS_STATE: _RATE = 0       # the land detector's landed_state (PX4 sends it at 1 Hz)
 
 
 class Telemetry(Strict):

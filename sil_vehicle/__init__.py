@@ -10,12 +10,16 @@ Layers (each importing only the ones above it):
                         delayed horizon with an output predictor (pure; run by sitl under a
                         sensing profile; its equations and per-sample step compiled and cached)
     config              frozen parameter records from params/*.yaml (trq_params.loader)
-    dynamics/           pure physics (rotors, actuators, environment, rigid body; tick.c)
+                        (the gear's contact record from dynamics.contact, which imports
+                        nothing of this package)
+    dynamics/           pure physics (rotors, actuators, environment, ground contact, rigid
+                        body; tick.c)
     faults              actuator faults as data (effectiveness, time-varying, off, stuck)
     faultscript         timed fault and wind events from a fault script (params/faults/)
     vehicle             the plant, one physics tick at a time (no I/O, injected RNG)
     compiled            the tick in C (dynamics/tick.c), built once and loaded; bit-identical
     failsafe            the autopilot's own hold-and-land controller when the offboard link is lost
+    land_detector       the autopilot's land detector (PX4-shaped), EXTENDED_SYS_STATE's landed_state
     mavlink/            codec (bytes <-> messages, field scalings) and the parameter protocol
     sitl                the autopilot without sockets: telemetry due, commands, parameters,
                         actuator targets, failsafe, the sensing profile's sensors sampled each

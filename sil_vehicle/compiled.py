@@ -3,7 +3,8 @@
     core = load_core()          # a CompiledCore, or None (no compiler, or the build failed)
     p = core.params(vp, sim)    # the parameter array, once
     s = core.new_state()        # the state/input array, read and written by every tick
-    event = core.tick(p, s)     # 0, IMPACT or ATTITUDE
+    event = core.tick(p, s)     # 0 or ATTITUDE (IMPACT: no longer returned; the ground's events
+                                # are judged in Vehicle._ground_events for both cores)
 
 `tick.c` repeats the arithmetic of the Python reference (`Vehicle._step_python` and the pure
 functions of this package) operation for operation, built without fused multiply-add and without
@@ -35,10 +36,11 @@ CFLAGS = ("-O2", "-fPIC", "-shared", "-ffp-contract=off", "-fno-fast-math")
 IMPACT, ATTITUDE = 1, 2
 
 # indices of the arrays (tick.c, enums P_* and S_*)
-P_SIZE = 17 + 3 + 3 + 28
+GEAR_MAX = 8                      # contact points the array holds (params/schema.py's limit)
+P_SIZE = 17 + 3 + 3 + 28 + 8 + 3 * GEAR_MAX
 S_X, S_MOTOR, S_TILT, S_LANDED, S_CRASHED, S_RUNNING, S_T = 0, 13, 17, 21, 22, 23, 24
 S_CMD_THROTTLE, S_CMD_TILT, S_WIND, S_MOTOR_FAULT, S_SERVO_FAULT = 25, 29, 33, 36, 56
-S_IMPACT_SPEED, S_SIZE = 64, 65
+S_IMPACT_SPEED, S_ANCHORS, S_SIZE = 64, 65, 65 + 2 * GEAR_MAX
 
 
 class CompiledCore:
@@ -69,6 +71,14 @@ class CompiledCore:
                   vp.torque_Nm.c2, vp.torque_Nm.c1, vp.torque_Nm.c0]
         for rotor in vp.rotors:
             values += [float(rotor.spin), *rotor.position_frd_m, *rotor.tilt_axis_frd]
+        gear = vp.gear
+        if len(gear.points_frd_m) > GEAR_MAX:
+            raise ValueError(f"{len(gear.points_frd_m)} contact points, tick.c holds {GEAR_MAX}")
+        values += [gear.ground_down_m, gear.reach_down_m, gear.stiffness_N_m, gear.damping_N_s_m,
+                   gear.friction, gear.stick_stiffness_N_m, gear.stick_damping_N_s_m,
+                   float(len(gear.points_frd_m))]
+        values += [c for point in gear.points_frd_m for c in point]
+        values += [0.0] * (3 * (GEAR_MAX - len(gear.points_frd_m)))
         if len(values) != P_SIZE:
             raise ValueError(f"{len(values)} parameters for tick.c, expected {P_SIZE}")
         return self.P(*values)

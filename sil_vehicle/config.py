@@ -20,6 +20,7 @@ from trq_params import loader, schema
 from trq_params.loader import ConfigError
 from trq_params.schema import STREAMS, throttle_curve
 
+from sil_vehicle.dynamics.contact import Gear, resting_plane_down_m, tip_over_rad
 from sil_vehicle.impair import ImpairParams
 from sil_vehicle.sensors.profile import SensingProfile, load_sensing
 
@@ -76,12 +77,28 @@ class VehicleParams:
     servo_time_constant_s: float
     servo_rate_limit_rad_s: float
     drag_N_s2_m2: float
+    gear_points_frd_m: tuple[tuple[float, float, float], ...]
+    gear_stiffness_N_m: float          # per point
+    gear_damping_N_s_m: float          # per point
+    gear_friction: float
+    gear_stick_stiffness_N_m: float    # per point
+    gear_stick_damping_N_s_m: float    # per point
     # derived
     hover_throttle_pct: float = field(init=False)
+    gear: Gear = field(init=False)                  # the contact model's record
+    tip_over_rad: float = field(init=False)         # tilt on the ground past which it falls over
 
     def __post_init__(self) -> None:
         per_rotor = self.mass_kg * self.gravity_m_s2 / len(self.rotors)
         object.__setattr__(self, "hover_throttle_pct", self.thrust_N.inverse(per_rotor))
+        pts = self.gear_points_frd_m
+        ground = resting_plane_down_m(pts, self.gear_stiffness_N_m,
+                                      self.mass_kg * self.gravity_m_s2)
+        reach = max(math.sqrt(x * x + y * y + z * z) for x, y, z in pts)
+        object.__setattr__(self, "gear", Gear(
+            pts, self.gear_stiffness_N_m, self.gear_damping_N_s_m, self.gear_friction,
+            self.gear_stick_stiffness_N_m, self.gear_stick_damping_N_s_m, ground, ground - reach))
+        object.__setattr__(self, "tip_over_rad", tip_over_rad(pts))
 
     @property
     def tilt_limit_rad(self) -> float:
@@ -113,7 +130,13 @@ def vehicle_params(v: schema.VehicleFile, file: str) -> VehicleParams:
         tilt_min_rad=math.radians(v.tilt.min_deg), tilt_max_rad=math.radians(v.tilt.max_deg),
         servo_time_constant_s=v.tilt.servo_time_constant_s,
         servo_rate_limit_rad_s=math.radians(v.tilt.servo_rate_limit_deg_s),
-        drag_N_s2_m2=v.drag.quadratic_N_s2_m2)
+        drag_N_s2_m2=v.drag.quadratic_N_s2_m2,
+        gear_points_frd_m=tuple((p.x_m, p.y_m, p.z_m) for p in v.landing_gear.points),
+        gear_stiffness_N_m=v.landing_gear.stiffness_N_m,
+        gear_damping_N_s_m=v.landing_gear.damping_N_s_m,
+        gear_friction=v.landing_gear.friction,
+        gear_stick_stiffness_N_m=v.landing_gear.stick_stiffness_N_m,
+        gear_stick_damping_N_s_m=v.landing_gear.stick_damping_N_s_m)
 
 
 def load_vehicle(path: Path | str) -> VehicleParams:

@@ -29,6 +29,8 @@ from sil_vehicle.frames import euler_to_quat, quat_to_euler
 from sil_vehicle.mavlink import codec
 from sil_vehicle.mavlink.codec import Measured, RxCounters
 from sil_vehicle.failsafe import FailsafeLander
+from sil_vehicle import land_detector
+from sil_vehicle.land_detector import LandDetector
 from sil_vehicle.impair import Impairment
 from sil_vehicle.mavlink.params import Param, ParamTable
 from sil_vehicle.sensors import baro, gnss, imu, mag, mocap
@@ -81,6 +83,7 @@ ESTIMATE_LOG_COLUMNS = (tuple(f"est_pos_{a}_m" for a in "ned")
                            "est_position_valid", "sensor_fault_mask", "nav_failure"))
 # flight.csv's nav_failure: what the vehicle lost (Sitl._navigation)
 NAV_FAILURES = {"": 0, "position": 1, "attitude": 2}
+LAND_DETECTOR_HZ = 50
 
 LOG_COLUMNS = (
     ["t_us"] + [f"pos_{a}_m" for a in "ned"] + [f"vel_{a}_m_s" for a in "ned"]
@@ -89,7 +92,9 @@ LOG_COLUMNS = (
     + [f"cmd_throttle{i}_pct" for i in range(1, 5)] + [f"cmd_tilt{i}_rad" for i in range(1, 5)]
     + [f"out_throttle{i}_pct" for i in range(1, 5)] + [f"out_tilt{i}_rad" for i in range(1, 5)]
     + [f"motor{i}_factor" for i in range(1, 5)] + [f"servo{i}_stuck" for i in range(1, 5)]
-    + [f"wind_{a}_m_s" for a in "ned"] + ["armed", "landed", "crashed"])
+    + [f"wind_{a}_m_s" for a in "ned"] + ["armed", "landed", "crashed"]
+    # the gear touching; the last touchdown's down speed and tilt (NaN before the first)
+    + ["on_ground", "touchdown_speed_m_s", "touchdown_tilt_deg"])
 
 
 class Sitl:
@@ -105,6 +110,9 @@ class Sitl:
                   lambda v, value: setattr(self, "offboard_loss_s", value)),))
         self.mode = MODE_OFFBOARD
         self.lander = FailsafeLander(sim.vehicle)
+        # EXTENDED_SYS_STATE's landed_state, updated at LAND_DETECTOR_HZ (PX4 runs its at 50 Hz)
+        self.land_detector = LandDetector()
+        self._land_every = max(1, sim.physics_rate_hz // LAND_DETECTOR_HZ)
         # targets silent for longer than three control periods: the vehicle's own hold bridges
         self._bridge_after_us = 3 * 1_000_000 // sim.control_rate_hz
         self._last_target_us = 0
@@ -201,6 +209,8 @@ class Sitl:
         out += self._failsafe()
         state = self.vehicle.step()
         self.tick += 1
+        if self.tick % self._land_every == 0:
+            self._detect_landing(state)
         self._measured = None
         if self.suite is not None:
             # the tick's readings into the estimator, before the log and the telemetry
@@ -355,7 +365,20 @@ class Sitl:
             self.lander.active = False
             return self.announce(mavlink.MAV_SEVERITY_WARNING, "failsafe: landed, disarmed")
         v.command = self.lander.update(self._nav_state(s), self.sim.dt_us * 1e-6)
+        if self.land_detector.state in (land_detector.LANDING, land_detector.ON_GROUND):
+            # the land detector's ground contact: thrust off, as PX4's position controller
+            # does on it (otherwise the wind slides a vehicle that its thrust keeps light)
+            v.command = ActuatorCommand()
         return out
+
+    def _detect_landing(self, s: VehicleState) -> None:
+        """The land detector on what the autopilot knows: its estimate (the plant's state under
+        `truth`) and the rotors' thrust over the weight."""
+        vp = self.sim.vehicle
+        nav = self._nav_state(s) if self.estimator is not None else s
+        thrust = sum(vp.thrust_N(m) for m in s.motor_pct) / (vp.mass_kg * vp.gravity_m_s2)
+        self.land_detector.update(s.t_us * 1e-6, self.vehicle.armed, nav.x[3:6], nav.x[10:13],
+                                  thrust)
 
     def _navigation(self, s: VehicleState) -> list[Outgoing]:
         """The estimator's health in flight, as an autopilot's failsafe reads it. No attitude
@@ -485,6 +508,9 @@ class Sitl:
         if stream in self._on_arrival:
             return self._sensor_message(stream, self.latest[self._on_arrival[stream]])
         s = self.vehicle.state
+        if stream == "EXTENDED_SYS_STATE":
+            return mavlink.MAVLink_extended_sys_state_message(
+                mavlink.MAV_VTOL_STATE_UNDEFINED, self.land_detector.state)
         if stream == "HEARTBEAT":
             return codec.heartbeat(self.vehicle.armed, s.crashed, not s.landed, self.mode,
                                    failsafe=self.mode != MODE_OFFBOARD)
@@ -836,4 +862,6 @@ class Sitl:
                 + tuple(cmd.throttle_pct) + tuple(cmd.tilt_rad) + s.motor_pct + s.tilt_rad
                 + tuple(m.factor(t_s) for m in self.vehicle.faults.motors)
                 + tuple(float(sv.stuck) for sv in self.vehicle.faults.servos)
-                + s.wind_ned_m_s + (int(s.armed), int(s.landed), int(s.crashed)) + extra)
+                + s.wind_ned_m_s + (int(s.armed), int(s.landed), int(s.crashed))
+                + (int(s.on_ground), s.touchdown_speed_m_s, math.degrees(s.touchdown_tilt_rad))
+                + extra)

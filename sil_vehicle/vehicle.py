@@ -2,8 +2,10 @@
 
 `Vehicle` composes the pure dynamics in a short fixed sequence per tick (after ArduPilot's
 `Aircraft::update`): actuator targets -> faults -> motor and servo dynamics -> rotor wrench ->
-wind -> RK4 -> ground and crash checks. It holds no socket, clock or global random state: the
-random generator for gusts is injected, time is an integer count of microseconds.
+wind -> RK4 (the ground's contact forces inside it: sil_vehicle.dynamics.contact) -> crash
+checks -> ground events (touchdown, tip-over, resting: `_ground_events`, shared by both
+cores). It holds no socket, clock or global random state: the random generator for gusts is
+injected, time is an integer count of microseconds.
 
 The tick runs either in Python (`_tick_python`, the reference, built from the pure functions of
 `sil_vehicle.dynamics`) or compiled (`dynamics/tick.c` through `sil_vehicle.compiled`, the same
@@ -22,13 +24,23 @@ import numpy as np
 from sil_vehicle import compiled
 from sil_vehicle.config import SimParams
 from sil_vehicle.dynamics.actuators import first_order_step, lag_factor
+from sil_vehicle.dynamics.contact import feet_ne_m, touching, update_anchors
 from sil_vehicle.dynamics.environment import gust_coefficients, gust_step
 from sil_vehicle.dynamics.rigid_body import rk4_step
 from sil_vehicle.dynamics.rotors import body_wrench
 from sil_vehicle.faults import Faults, MotorFault
 from sil_vehicle.frames import quat_to_euler, tilt_from_vertical, wind_from_to_ned
 
+# the centre of mass's down position when the vehicle rests level on its gear (the contact
+# model's plane is placed so: sil_vehicle.dynamics.contact.resting_plane_down_m)
 GROUND_DOWN_M = 0.0
+# Ground events (docs/simulator.md, "Crashes"): a contact is a new touchdown once the centre of
+# mass has been this far above its resting height since the last one (lower: a rebound of the
+# last touchdown); a choice above the gear's rebound
+TOUCHDOWN_REARM_M = 0.05
+# resting on the gear (`landed`): touching, slower than this and turning slower than this; choices
+RESTING_SPEED_M_S = 0.05
+RESTING_RATE_RAD_S = 0.1
 _NOISE_BLOCK = 1024
 
 
@@ -50,6 +62,12 @@ class VehicleState:
     landed: bool
     crashed: bool
     crash_reason: str
+    on_ground: bool = True                     # a contact point of the gear below the ground
+    touchdown_speed_m_s: float = math.nan      # the last touchdown's down speed at contact
+    touchdown_tilt_rad: float = math.nan       # and its tilt from vertical
+    # the gear points' stick anchors, north and east per point (sil_vehicle.dynamics.contact);
+    # empty out of the ground's reach (then taken where the points are)
+    anchors_ne_m: tuple[float, ...] = ()
 
     @property
     def pos_ned_m(self) -> tuple[float, ...]:
@@ -104,6 +122,8 @@ class Vehicle:
         self.set_wind(sim.wind_speed_m_s, sim.wind_from_deg, sim.gusts_enabled,
                       sim.gust_sigma_m_s, sim.gust_length_m)
         self._gust = (0.0, 0.0, 0.0)
+        self._descending = True          # a contact now would be a touchdown (TOUCHDOWN_REARM_M)
+        self._reach_down_m = self.vp.gear.reach_down_m
         self.state = VehicleState(0, initial_state(), (0.0,) * 4, (0.0,) * 4, self._wind_mean,
                                   False, True, False, "")
         self.core = self._load_core(sim.physics_core)
@@ -116,6 +136,7 @@ class Vehicle:
             self._s_state: VehicleState | None = None
             self._s_command: ActuatorCommand | None = None
             self._s_faults: Faults | None = None
+            self._s_anchors: tuple[float, ...] | None = None
 
     @staticmethod
     def _load_core(choice: str) -> compiled.CompiledCore | None:
@@ -194,6 +215,13 @@ class Vehicle:
                                                    f.phase_rad, float(f.off))]
             st[c.S_SERVO_FAULT:c.S_SERVO_FAULT + 8] = [
                 v for f in faults.servos for v in (float(f.stuck), f.angle_rad)]
+        anchors = s.anchors_ne_m
+        if not anchors and s.x[2] > self._reach_down_m:
+            anchors = feet_ne_m(s.x, self.vp.gear)
+        if anchors is not self._s_anchors:
+            self._s_anchors = anchors
+            if anchors:
+                st[c.S_ANCHORS:c.S_ANCHORS + len(anchors)] = anchors
         st[c.S_RUNNING] = 1.0 if self.armed and not s.crashed else 0.0
         st[c.S_T] = s.t_us * 1e-6
         st[c.S_WIND] = wind[0]
@@ -201,13 +229,22 @@ class Vehicle:
         st[c.S_WIND + 2] = wind[2]
         event = self.core.tick(self._p, st)
         reason = s.crash_reason
-        if event == compiled.IMPACT:
-            reason = f"ground impact at {st[c.S_IMPACT_SPEED]:.2f} m/s"
-        elif event == compiled.ATTITUDE:
+        if event == compiled.ATTITUDE:
             reason = "attitude past the crash limit"
-        self._s_state = new = VehicleState(
-            s.t_us + self._dt_us, tuple(st[0:13]), tuple(st[13:17]), tuple(st[17:21]), wind,
-            self.armed, st[c.S_LANDED] != 0.0, st[c.S_CRASHED] != 0.0, reason)
+        x = tuple(st[0:13])
+        if x[2] > self._reach_down_m or s.on_ground or s.landed:
+            new = self._ground_events(s, VehicleState(
+                s.t_us + self._dt_us, x, tuple(st[13:17]), tuple(st[17:21]), wind, self.armed,
+                s.landed, st[c.S_CRASHED] != 0.0, reason, s.on_ground, s.touchdown_speed_m_s,
+                s.touchdown_tilt_rad, anchors))
+            st[c.S_CRASHED] = float(new.crashed)
+        else:                     # flying, out of the ground's reach: _ground_events' first case
+            if x[2] < GROUND_DOWN_M - TOUCHDOWN_REARM_M:
+                self._descending = True
+            new = VehicleState(s.t_us + self._dt_us, x, tuple(st[13:17]), tuple(st[17:21]), wind,
+                               self.armed, False, st[c.S_CRASHED] != 0.0, reason, False,
+                               s.touchdown_speed_m_s, s.touchdown_tilt_rad, ())
+        self._s_state = new
         return new
 
     def _tick_python(self, wind: tuple[float, float, float]) -> VehicleState:
@@ -235,28 +272,55 @@ class Vehicle:
         if vp.tilt_locked:
             tilts = [0.0, 0.0, 0.0, 0.0]
         wrench = body_wrench(motors, tilts, vp)
-        x = s.x
-        landed, crashed, reason = s.landed, s.crashed, s.crash_reason
-        if landed and not self._lifts_off(x, wrench):
-            x = x[0:3] + (0.0, 0.0, 0.0) + x[6:10] + (0.0, 0.0, 0.0)
-        else:
-            x = rk4_step(x, self._dt, wrench, wind, *self._rb)
-            landed = False
-            if x[2] >= GROUND_DOWN_M:
-                if not crashed and x[5] > self.sim.crash_speed_m_s:
-                    crashed, reason = True, f"ground impact at {x[5]:.2f} m/s"
-                roll, pitch, yaw = quat_to_euler(*x[6:10])
-                q = x[6:10] if crashed else (math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2))
-                x = x[0:2] + (GROUND_DOWN_M, 0.0, 0.0, 0.0) + tuple(q) + (0.0, 0.0, 0.0)
-                landed = True
-            elif not crashed and tilt_from_vertical(*x[6:10]) > self.sim.crash_tilt_rad:
-                crashed, reason = True, "attitude past the crash limit"
-        return VehicleState(t_us, x, tuple(motors), tuple(tilts), wind, self.armed, landed,
-                            crashed, reason)
+        anchors = self._anchors(s)
+        x = rk4_step(s.x, self._dt, wrench, wind, *self._rb, vp.gear, anchors)
+        crashed, reason = s.crashed, s.crash_reason
+        if not crashed and tilt_from_vertical(*x[6:10]) > self.sim.crash_tilt_rad:
+            crashed, reason = True, "attitude past the crash limit"
+        return self._ground_events(s, VehicleState(
+            t_us, x, tuple(motors), tuple(tilts), wind, self.armed, s.landed, crashed, reason,
+            s.on_ground, s.touchdown_speed_m_s, s.touchdown_tilt_rad, anchors))
 
-    def _lifts_off(self, x: tuple[float, ...], wrench: tuple[float, ...]) -> bool:
-        """On the ground: does the net vertical force point up?"""
-        qw, qx, qy, qz = x[6:10]
-        fdown = (2 * (qx * qz - qw * qy) * wrench[0] + 2 * (qy * qz + qw * qx) * wrench[1]
-                 + (1 - 2 * (qx * qx + qy * qy)) * wrench[2])
-        return fdown + self.vp.mass_kg * self.vp.gravity_m_s2 < 0.0
+    def _anchors(self, s: VehicleState) -> tuple[float, ...]:
+        """The stick anchors this tick holds: the state's, or, within the ground's reach
+        without any, the points' positions now (where they would first touch)."""
+        if s.anchors_ne_m or not s.x[2] > self.vp.gear.reach_down_m:
+            return s.anchors_ne_m
+        return feet_ne_m(s.x, self.vp.gear)
+
+    def _ground_events(self, before: VehicleState, s: VehicleState) -> VehicleState:
+        """After a tick, from its state alone (both cores share this): which gear points touch;
+        a touchdown (the first contact since the vehicle rose TOUCHDOWN_REARM_M) records its
+        down speed just before contact and its tilt, and is a crash above `crash_speed_m_s`; a
+        tilt past the gear's tip-over angle while touching is a crash; `landed` is resting on
+        the gear."""
+        x = s.x
+        gear = self.vp.gear
+        if not x[2] > gear.reach_down_m:                  # out of the ground's reach: flying
+            if x[2] < GROUND_DOWN_M - TOUCHDOWN_REARM_M:
+                self._descending = True
+            if not s.landed and not s.on_ground and not s.anchors_ne_m:
+                return s
+            return VehicleState(s.t_us, x, s.motor_pct, s.tilt_rad, s.wind_ned_m_s, s.armed,
+                                False, s.crashed, s.crash_reason, False, s.touchdown_speed_m_s,
+                                s.touchdown_tilt_rad, ())
+        on_ground = touching(x, gear) > 0
+        crashed, reason = s.crashed, s.crash_reason
+        speed, tilt_rad = s.touchdown_speed_m_s, s.touchdown_tilt_rad
+        landed = False
+        if on_ground:
+            tilt = tilt_from_vertical(*x[6:10])
+            if self._descending and not before.on_ground:
+                self._descending = False
+                speed, tilt_rad = before.x[5], tilt
+                if not crashed and speed > self.sim.crash_speed_m_s:
+                    crashed, reason = True, f"ground impact at {speed:.2f} m/s"
+            if not crashed and tilt > self.vp.tip_over_rad:
+                crashed, reason = True, f"tipped over on the ground ({math.degrees(tilt):.0f} deg)"
+            landed = (x[3] * x[3] + x[4] * x[4] + x[5] * x[5] < RESTING_SPEED_M_S ** 2
+                      and x[10] * x[10] + x[11] * x[11] + x[12] * x[12] < RESTING_RATE_RAD_S ** 2)
+        elif x[2] < GROUND_DOWN_M - TOUCHDOWN_REARM_M:
+            self._descending = True
+        anchors = update_anchors(x, gear, s.anchors_ne_m)
+        return VehicleState(s.t_us, x, s.motor_pct, s.tilt_rad, s.wind_ned_m_s, s.armed, landed,
+                            crashed, reason, on_ground, speed, tilt_rad, anchors)

@@ -24,6 +24,9 @@ the crash, whichever comes first:
                                    without a faulted motor, without an effectiveness observer,
                                    or if crashed)
     solve_ms_p50, solve_ms_p99     controller solve time per step
+    touchdown_speed_m_s            the vehicle's last touchdown: its down speed just before the
+    touchdown_tilt_deg             gear touched and its tilt from vertical then (flight.csv's
+                                   columns; None without a touchdown or from an older log)
     max_pos_err_outage_m           with a sensor outage (a campaign's `outage` axis): the
                                    largest position error from the outage's start to
                                    OUTAGE_SETTLE_S after its end (None without an outage, or
@@ -75,7 +78,8 @@ class RunMetrics:
     est_rmse_att_deg: float | None = None
     diagnosis_s: float | None = None
     max_pos_err_outage_m: float | None = None
-    # a whole motor lost (issue 40): the lost-motor block below (`lost_motor_metrics`)
+    # a whole motor lost (issue 40): the lost-motor block below (`lost_motor_metrics`); the
+    # touchdown's (`touchdown`): after a fault the first after its onset, else the last
     max_thrust_tilt_after_fault_deg: float | None = None
     drift_after_fault_m: float | None = None
     descent_rate_m_s: float | None = None
@@ -233,7 +237,25 @@ def compute(controller: str, vehicle: str, truth: dict[str, np.ndarray],
         est_rmse_pos_m=est_pos, est_rmse_att_deg=est_att,
         diagnosis_s=_diagnosis(sm, truth, steps, fault_onset_us),
         max_pos_err_outage_m=outage_error(t_us, err, outage_us),
-        **lost_motor_metrics(truth, steps, fault_onset_us))
+        **_with_last_touchdown(lost_motor_metrics(truth, steps, fault_onset_us), truth))
+
+
+def _with_last_touchdown(out: dict, truth: dict[str, np.ndarray]) -> dict:
+    """A flight with no fault (or none touched down after it): its last touchdown, as the plant
+    recorded it (`touchdown_speed_m_s`, `touchdown_tilt_deg` of flight.csv)."""
+    if out.get("touchdown_speed_m_s") is None:
+        out["touchdown_speed_m_s"] = _last_finite(truth, "touchdown_speed_m_s")
+        out["touchdown_tilt_deg"] = _last_finite(truth, "touchdown_tilt_deg")
+    return out
+
+
+def _last_finite(truth: dict[str, np.ndarray], column: str) -> float | None:
+    """The log's last finite value of `column` (None: no such column, or never set)."""
+    values = truth.get(column)
+    if values is None:
+        return None
+    finite = values[np.isfinite(values)]
+    return float(finite[-1]) if len(finite) else None
 
 
 def _diagnosis(sm: Samples, truth: dict[str, np.ndarray], steps: dict[str, np.ndarray],
@@ -314,12 +336,21 @@ def thrust_tilt_deg(truth: dict[str, np.ndarray]) -> np.ndarray:
 
 
 def touchdown(truth: dict[str, np.ndarray], after_us: int) -> int | None:
-    """The truth row of the first ground contact from `after_us` on: the vehicle within
-    CONTACT_DOWN_M of the ground, or the plant's `landed` flag set; None if it never touches
-    (a crash in the air, a tumble, is no touchdown: the log ends soon after it). THE definition
-    of the touchdown for touchdown_speed_m_s and touchdown_tilt_deg (one function, so that
-    there is one)."""
+    """The truth row of the first touchdown from `after_us` on: where the plant's own record of
+    its touchdowns (flight.csv's `touchdown_speed_m_s`, docs/simulator.md) shows a new one; in
+    a log without that record, the vehicle within CONTACT_DOWN_M of the ground or the plant's
+    `landed` flag set. None if it never touches (a crash in the air, a tumble, is no touchdown:
+    the log ends soon after it). THE definition of the touchdown for touchdown_speed_m_s and
+    touchdown_tilt_deg (one function, so that there is one)."""
     t = truth["t_us"].astype(np.int64)
+    if "touchdown_speed_m_s" in truth:
+        # the plant's own record (sil_vehicle.vehicle, docs/simulator.md): a row where a new
+        # touchdown's speed appears
+        sp = truth["touchdown_speed_m_s"]
+        prev = np.concatenate(([np.nan], sp[:-1]))
+        new = np.isfinite(sp) & ~(sp == prev)
+        hit = np.flatnonzero((t >= after_us) & new)
+        return int(hit[0]) if len(hit) else None
     on = truth["pos_d_m"] >= GROUND_DOWN_M + CONTACT_DOWN_M
     if "landed" in truth:
         on |= truth["landed"] > 0.5
@@ -365,10 +396,14 @@ def lost_motor_metrics(truth: dict[str, np.ndarray], steps: dict[str, np.ndarray
         dur = (t[i1] - t[i0]) * 1e-6
         drop = truth["pos_d_m"][i1] - truth["pos_d_m"][i0]
         out["descent_rate_m_s"] = float(drop / dur) if dur > 0 else None
-        # the speed it arrived at: the last row above the ground (the contact's own row may
-        # already carry the ground's reaction)
-        out["touchdown_speed_m_s"] = float(truth["vel_d_m_s"][max(i1 - 1, i0)])
-        out["touchdown_tilt_deg"] = float(tilt[i1])
+        if "touchdown_speed_m_s" in truth:          # as the plant recorded it at the contact
+            out["touchdown_speed_m_s"] = float(truth["touchdown_speed_m_s"][i1])
+            out["touchdown_tilt_deg"] = float(truth["touchdown_tilt_deg"][i1])
+        else:
+            # an older log: the speed it arrived at, the last row above the ground (the
+            # contact's own row may already carry the ground's reaction)
+            out["touchdown_speed_m_s"] = float(truth["vel_d_m_s"][max(i1 - 1, i0)])
+            out["touchdown_tilt_deg"] = float(tilt[i1])
     if "lost_motor" in steps:
         lost = np.flatnonzero((steps["stamp_us"] >= fault_onset_us) & (steps["lost_motor"] > 0))
         if len(lost):

@@ -5,7 +5,8 @@ State x (13 floats, a tuple):
     6-9   attitude quaternion (w, x, y, z), body FRD to world NED
     10-12 body rates FRD p, q, r (rad/s)
 Over one step the body wrench of the rotors is held (zero-order hold of the actuator outputs);
-drag is re-evaluated at each RK4 stage since it depends on the velocity.
+drag is re-evaluated at each RK4 stage since it depends on the velocity, and so is the ground's
+contact wrench (sil_vehicle.dynamics.contact, given `gear`), which depends on the whole state.
 
     m dv/dt = R(q) F_B + m g e_z + F_drag(v - w)
     I dw/dt = tau_B - w x I w
@@ -19,6 +20,8 @@ from __future__ import annotations
 import math
 from typing import Sequence
 
+from sil_vehicle.dynamics.contact import Gear, contact_wrench
+
 State = tuple[float, ...]
 
 N_STATE = 13
@@ -26,13 +29,22 @@ N_STATE = 13
 
 def derivative(x: Sequence[float], wrench_frd: Sequence[float], wind_ned: Sequence[float],
                mass_kg: float, inertia: Sequence[float], gravity: float,
-               drag_k: float) -> State:
+               drag_k: float, gear: Gear | None = None,
+               anchors_ne_m: Sequence[float] = ()) -> State:
     _, _, _, vn, ve, vd, qw, qx, qy, qz, p, q, r = x
     fx, fy, fz, mx, my, mz = wrench_frd
     # body force to world
     fn = (1 - 2 * (qy * qy + qz * qz)) * fx + 2 * (qx * qy - qw * qz) * fy + 2 * (qx * qz + qw * qy) * fz
     fe = 2 * (qx * qy + qw * qz) * fx + (1 - 2 * (qx * qx + qz * qz)) * fy + 2 * (qy * qz - qw * qx) * fz
     fdn = 2 * (qx * qz - qw * qy) * fx + 2 * (qy * qz + qw * qx) * fy + (1 - 2 * (qx * qx + qy * qy)) * fz
+    if gear is not None and x[2] > gear.reach_down_m:     # the ground within reach
+        cn, ce, cd, cx, cy, cz = contact_wrench(x, gear, anchors_ne_m)
+        fn = fn + cn
+        fe = fe + ce
+        fdn = fdn + cd
+        mx = mx + cx
+        my = my + cy
+        mz = mz + cz
     rx, ry, rz = vn - wind_ned[0], ve - wind_ned[1], vd - wind_ned[2]
     s = -drag_k * math.sqrt(rx * rx + ry * ry + rz * rz)
     inv_m = 1.0 / mass_kg
@@ -47,9 +59,11 @@ def derivative(x: Sequence[float], wrench_frd: Sequence[float], wind_ned: Sequen
 
 def rk4_step(x: Sequence[float], dt: float, wrench_frd: Sequence[float],
              wind_ned: Sequence[float], mass_kg: float, inertia: Sequence[float],
-             gravity: float, drag_k: float) -> State:
-    """One RK4 step; the quaternion is renormalised afterwards."""
-    args = (wrench_frd, wind_ned, mass_kg, inertia, gravity, drag_k)
+             gravity: float, drag_k: float, gear: Gear | None = None,
+             anchors_ne_m: Sequence[float] = ()) -> State:
+    """One RK4 step; the quaternion is renormalised afterwards. `gear`: the ground's contact
+    (none: no ground), with its points' stick anchors (held over the step)."""
+    args = (wrench_frd, wind_ned, mass_kg, inertia, gravity, drag_k, gear, anchors_ne_m)
     h = 0.5 * dt
     k1 = derivative(x, *args)
     k2 = derivative([a + h * b for a, b in zip(x, k1)], *args)

@@ -8,7 +8,9 @@
  * Layout of the two arrays (sil_vehicle/dynamics/compiled.py names every index):
  *   p (parameters, set once): see P_* below;
  *   s (state and inputs, read and written every tick): see S_* below.
- * Returns 0, or TICK_IMPACT / TICK_ATTITUDE when the vehicle crashed during this tick.
+ * Returns 0, or TICK_ATTITUDE when the vehicle tumbled during this tick (the ground's events,
+ * touchdown and tip-over, are judged after the tick in Python, Vehicle._ground_events, for both
+ * cores; S_LANDED and S_IMPACT_SPEED are kept in the layout, unused here).
  * No allocation, no I/O, no global state: a pure function of (p, s) into s.
  */
 #include <math.h>
@@ -18,14 +20,19 @@ enum {
     P_SERVO_FACTOR, P_SERVO_MAX, P_TILT_MIN, P_TILT_MAX, P_TILT_LOCKED, P_CRASH_SPEED,
     P_CRASH_TILT, P_THRUST, /* c2, c1, c0 */ P_TORQUE = P_THRUST + 3, /* c2, c1, c0 */
     P_ROTORS = P_TORQUE + 3, /* 4 x (spin, px, py, pz, ax, ay, az) */
-    P_SIZE = P_ROTORS + 28
+    P_GEAR = P_ROTORS + 28, /* sil_vehicle/dynamics/contact.py's Gear: */
+    P_GROUND = P_GEAR, P_REACH, P_GEAR_K, P_GEAR_C, P_GEAR_MU, P_GEAR_KT, P_GEAR_CT, P_GEAR_N,
+    P_GEAR_POINTS, /* GEAR_MAX x (x, y, z) */
+    P_SIZE = P_GEAR_POINTS + 3 * 8
 };
 
 enum {
     S_X = 0, /* 13 */ S_MOTOR = 13, /* 4 */ S_TILT = 17, /* 4 */ S_LANDED = 21, S_CRASHED = 22,
     S_RUNNING = 23, S_T = 24, S_CMD_THROTTLE = 25, /* 4 */ S_CMD_TILT = 29, /* 4 */
     S_WIND = 33, /* 3 */ S_MOTOR_FAULT = 36, /* 4 x (a, b, w, phi, off) */
-    S_SERVO_FAULT = 56, /* 4 x (stuck, angle) */ S_IMPACT_SPEED = 64, S_SIZE = 65
+    S_SERVO_FAULT = 56, /* 4 x (stuck, angle) */ S_IMPACT_SPEED = 64,
+    S_ANCHORS = 65, /* 8 x (north, east): the contact points' stick anchors */
+    S_SIZE = S_ANCHORS + 16
 };
 
 enum { TICK_OK = 0, TICK_IMPACT = 1, TICK_ATTITUDE = 2 };
@@ -67,8 +74,74 @@ static double fault_factor(const double *f, double t_s)
     return e < 0.0 ? 0.0 : e > 1.0 ? 1.0 : e;
 }
 
+/* sil_vehicle/dynamics/contact.py contact_wrench: world force, body moment */
+static void contact_wrench(const double *x, const double *p, const double *anchors,
+                           double *cw)
+{
+    double pn0 = x[0], pe0 = x[1], pd = x[2], vn = x[3], ve = x[4], vd = x[5];
+    double qw = x[6], qx = x[7], qy = x[8], qz = x[9], pr = x[10], qr = x[11], rr = x[12];
+    double r00 = 1 - 2 * (qy * qy + qz * qz);
+    double r01 = 2 * (qx * qy - qw * qz);
+    double r02 = 2 * (qx * qz + qw * qy);
+    double r10 = 2 * (qx * qy + qw * qz);
+    double r11 = 1 - 2 * (qx * qx + qz * qz);
+    double r12 = 2 * (qy * qz - qw * qx);
+    double r20 = 2 * (qx * qz - qw * qy);
+    double r21 = 2 * (qy * qz + qw * qx);
+    double r22 = 1 - 2 * (qx * qx + qy * qy);
+    double k = p[P_GEAR_K], c = p[P_GEAR_C], mu = p[P_GEAR_MU], kt = p[P_GEAR_KT];
+    double ct = p[P_GEAR_CT];
+    double ground = p[P_GROUND];
+    double f_n = 0.0, f_e = 0.0, f_d = 0.0, m_x = 0.0, m_y = 0.0, m_z = 0.0;
+    int i, n = (int)p[P_GEAR_N];
+    for (i = 0; i < n; i++) {
+        const double *pt = p + P_GEAR_POINTS + 3 * i;
+        double px = pt[0], py = pt[1], pz = pt[2];
+        double depth = pd + r20 * px + r21 * py + r22 * pz - ground;
+        double ux, uy, uz, un, ue, ud, normal, fn, fe, gn, ge, gd, slip, t2, bx, by, bz;
+        if (depth <= 0.0)
+            continue;
+        ux = qr * pz - rr * py;
+        uy = rr * px - pr * pz;
+        uz = pr * py - qr * px;
+        un = vn + r00 * ux + r01 * uy + r02 * uz;
+        ue = ve + r10 * ux + r11 * uy + r12 * uz;
+        ud = vd + r20 * ux + r21 * uy + r22 * uz;
+        normal = k * depth + c * ud;
+        if (normal <= 0.0)
+            continue;
+        fn = pn0 + r00 * px + r01 * py + r02 * pz;
+        fe = pe0 + r10 * px + r11 * py + r12 * pz;
+        gn = -kt * (fn - anchors[2 * i]) - ct * un;
+        ge = -kt * (fe - anchors[2 * i + 1]) - ct * ue;
+        slip = mu * normal;
+        t2 = gn * gn + ge * ge;
+        if (t2 > slip * slip) {                     /* sliding: Coulomb's mu N */
+            double sc = slip / sqrt(t2);
+            gn = gn * sc;
+            ge = ge * sc;
+        }
+        gd = -normal;
+        f_n += gn;
+        f_e += ge;
+        f_d += gd;
+        bx = r00 * gn + r10 * ge + r20 * gd;
+        by = r01 * gn + r11 * ge + r21 * gd;
+        bz = r02 * gn + r12 * ge + r22 * gd;
+        m_x += py * bz - pz * by;
+        m_y += pz * bx - px * bz;
+        m_z += px * by - py * bx;
+    }
+    cw[0] = f_n;
+    cw[1] = f_e;
+    cw[2] = f_d;
+    cw[3] = m_x;
+    cw[4] = m_y;
+    cw[5] = m_z;
+}
+
 static void derivative(const double *x, const double *w, const double *wind, const double *p,
-                       double *dx)
+                       const double *anchors, double *dx)
 {
     double vn = x[3], ve = x[4], vd = x[5], qw = x[6], qx = x[7], qy = x[8], qz = x[9];
     double pr = x[10], qr = x[11], rr = x[12];
@@ -79,10 +152,25 @@ static void derivative(const double *x, const double *w, const double *wind, con
                 + 2 * (qy * qz - qw * qx) * fz;
     double fdn = 2 * (qx * qz - qw * qy) * fx + 2 * (qy * qz + qw * qx) * fy
                  + (1 - 2 * (qx * qx + qy * qy)) * fz;
-    double rx = vn - wind[0], ry = ve - wind[1], rz = vd - wind[2];
-    double s = -p[P_DRAG] * sqrt(rx * rx + ry * ry + rz * rz);
-    double inv_m = 1.0 / p[P_MASS];
-    double ixx = p[P_IXX], iyy = p[P_IYY], izz = p[P_IZZ];
+    double rx, ry, rz, s, inv_m, ixx, iyy, izz;
+    if (x[2] > p[P_REACH]) {                        /* the ground within reach */
+        double cw[6];
+        contact_wrench(x, p, anchors, cw);
+        fn = fn + cw[0];
+        fe = fe + cw[1];
+        fdn = fdn + cw[2];
+        mx = mx + cw[3];
+        my = my + cw[4];
+        mz = mz + cw[5];
+    }
+    rx = vn - wind[0];
+    ry = ve - wind[1];
+    rz = vd - wind[2];
+    s = -p[P_DRAG] * sqrt(rx * rx + ry * ry + rz * rz);
+    inv_m = 1.0 / p[P_MASS];
+    ixx = p[P_IXX];
+    iyy = p[P_IYY];
+    izz = p[P_IZZ];
     dx[0] = vn;
     dx[1] = ve;
     dx[2] = vd;
@@ -98,21 +186,22 @@ static void derivative(const double *x, const double *w, const double *wind, con
     dx[12] = (mz - (iyy - ixx) * pr * qr) / izz;
 }
 
-static void rk4_step(double *x, double dt, const double *w, const double *wind, const double *p)
+static void rk4_step(double *x, double dt, const double *w, const double *wind, const double *p,
+                     const double *anchors)
 {
     double k1[13], k2[13], k3[13], k4[13], y[13];
     double h = 0.5 * dt, d6 = dt / 6.0, n;
     int i;
-    derivative(x, w, wind, p, k1);
+    derivative(x, w, wind, p, anchors, k1);
     for (i = 0; i < 13; i++)
         y[i] = x[i] + h * k1[i];
-    derivative(y, w, wind, p, k2);
+    derivative(y, w, wind, p, anchors, k2);
     for (i = 0; i < 13; i++)
         y[i] = x[i] + h * k2[i];
-    derivative(y, w, wind, p, k3);
+    derivative(y, w, wind, p, anchors, k3);
     for (i = 0; i < 13; i++)
         y[i] = x[i] + dt * k3[i];
-    derivative(y, w, wind, p, k4);
+    derivative(y, w, wind, p, anchors, k4);
     for (i = 0; i < 13; i++)
         x[i] = x[i] + d6 * (k1[i] + 2.0 * (k2[i] + k3[i]) + k4[i]);
     n = 1.0 / sqrt(x[6] * x[6] + x[7] * x[7] + x[8] * x[8] + x[9] * x[9]);
@@ -153,7 +242,7 @@ int trq_tick(const double *p, double *s)
     double *x = s + S_X, *motor = s + S_MOTOR, *tilt = s + S_TILT;
     const double *wind = s + S_WIND;
     int running = s[S_RUNNING] != 0.0, locked = p[P_TILT_LOCKED] != 0.0;
-    int landed = s[S_LANDED] != 0.0, crashed = s[S_CRASHED] != 0.0, event = TICK_OK;
+    int crashed = s[S_CRASHED] != 0.0, event = TICK_OK;
     double w[6];
     int i;
     for (i = 0; i < 4; i++) {
@@ -184,37 +273,8 @@ int trq_tick(const double *p, double *s)
         for (i = 0; i < 4; i++)
             tilt[i] = 0.0;
     body_wrench(motor, tilt, p, w);
-    if (landed) {
-        double qw = x[6], qx = x[7], qy = x[8], qz = x[9];
-        double fdown = (2 * (qx * qz - qw * qy) * w[0] + 2 * (qy * qz + qw * qx) * w[1]
-                        + (1 - 2 * (qx * qx + qy * qy)) * w[2]);
-        if (!(fdown + p[P_MASS] * p[P_GRAVITY] < 0.0)) {     /* stays on the ground */
-            x[3] = x[4] = x[5] = 0.0;
-            x[10] = x[11] = x[12] = 0.0;
-            return TICK_OK;
-        }
-    }
-    rk4_step(x, p[P_DT], w, wind, p);
-    landed = 0;
-    if (x[2] >= 0.0) {                                       /* GROUND_DOWN_M */
-        double qw = x[6], qx = x[7], qy = x[8], qz = x[9];
-        if (!crashed && x[5] > p[P_CRASH_SPEED]) {
-            crashed = 1;
-            event = TICK_IMPACT;
-            s[S_IMPACT_SPEED] = x[5];
-        }
-        if (!crashed) {
-            double yaw = atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz));
-            x[6] = cos(yaw / 2);
-            x[7] = 0.0;
-            x[8] = 0.0;
-            x[9] = sin(yaw / 2);
-        }
-        x[2] = 0.0;
-        x[3] = x[4] = x[5] = 0.0;
-        x[10] = x[11] = x[12] = 0.0;
-        landed = 1;
-    } else if (!crashed) {
+    rk4_step(x, p[P_DT], w, wind, p, s + S_ANCHORS);   /* the ground inside (derivative) */
+    if (!crashed) {
         double qx = x[7], qy = x[8];
         double c = 1 - 2 * (qx * qx + qy * qy);
         if (acos(c > 1.0 ? 1.0 : c < -1.0 ? -1.0 : c) > p[P_CRASH_TILT]) {
@@ -222,7 +282,6 @@ int trq_tick(const double *p, double *s)
             event = TICK_ATTITUDE;
         }
     }
-    s[S_LANDED] = landed;
     s[S_CRASHED] = crashed;
     return event;
 }

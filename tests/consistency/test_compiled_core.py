@@ -2,7 +2,8 @@
 flights, bit for bit. Flights that visit every branch of the tick: on the ground, take-off, idle
 clamp and full-throttle clamp, rate limits, tilt limits, gusts, a time-varying motor fault, a motor
 switched off, a stuck servo, the quadcopter's locked tilts, a landing, a crash by ground impact and
-one by attitude, and states, commands and faults replaced from outside between ticks."""
+one by attitude, the gear's contact (touchdown, slide, stick, tip-over), and states, commands and
+faults replaced from outside between ticks."""
 
 from __future__ import annotations
 
@@ -63,7 +64,7 @@ def test_flight_with_faults_gusts_and_random_commands(sim):
         if k == 0:
             v.armed = True
         if k % 10 == 0:                          # a new target every control period
-            if k < 300:                          # take off straight
+            if k < 500:                          # take off straight (clear of the ground)
                 v.command = ActuatorCommand((trim + 8.0,) * 4)
             else:
                 random_command(v, r, trim)
@@ -84,7 +85,8 @@ def test_flight_with_faults_gusts_and_random_commands(sim):
     states = fly(vehicles, script, 1600, np.random.default_rng(11))
     airborne = [s for s in states if not s.landed]
     assert len(airborne) > 1200 and min(s.x[2] for s in airborne) < -0.3   # the RK4 ran
-    assert not states[-1].crashed
+    # (the random commands bring it down on its gear, tilted: contact and crash compared too)
+    assert any(s.on_ground for s in states[600:])
 
 
 @needs_compiler
@@ -175,3 +177,32 @@ def test_compiled_tick_is_cached(sim):
     assert first is not None and first.path.exists()
     assert first.path.parent == cache_dir()
     assert math.isfinite(first.path.stat().st_size)
+
+
+@needs_compiler
+def test_ground_contact_touchdown_slide_tip_over_and_rest(sim):
+    """The gear's contact in every branch: a tilted touchdown sliding sideways (friction's slip
+    and stick), a rebound, rest under a crosswind (the stick region), a take-off, and a
+    tip-over; states equal bit for bit."""
+    for roll, vel, wind in ((0.15, (0.3, 1.5, 0.8), 8.0), (1.0, (0.0, 3.0, 0.5), 0.0)):
+        vehicles = pair(sim, wind_speed_m_s=wind)
+        trim = sim.vehicle.hover_throttle_pct
+
+        def place(v, roll=roll, vel=vel):
+            x = list(v.state.x)
+            x[2] = -0.05
+            x[3:6] = vel
+            x[6:10] = (math.cos(roll / 2), math.sin(roll / 2), 0.0, 0.0)
+            v.state = dataclasses.replace(v.state, x=tuple(x), landed=False, on_ground=False)
+        both(vehicles, place)
+
+        def script(k, v, r):
+            if k == 1500:
+                v.armed = True
+                v.command = ActuatorCommand((trim + 10.0,) * 4)
+        states = fly(vehicles, script, 2000, np.random.default_rng(1))
+        assert any(s.on_ground for s in states)
+        if roll > 0.5:
+            assert states[-1].crashed
+        else:
+            assert not states[-1].crashed and not states[-1].on_ground     # took off again

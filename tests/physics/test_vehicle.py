@@ -122,19 +122,20 @@ def test_idle_on_the_ground_stays_put(sim):
     v.command = ActuatorCommand((0.0,) * 4)                        # raised to idle (10 %)
     states = run(v, 1000)
     assert states[-1].motor_pct == pytest.approx((10.0,) * 4, abs=1e-6)
-    assert all(s.x[2] == 0.0 and s.x[5] == 0.0 and s.landed for s in states)
-    # and at 60 %: 4 x 3.27 N < m g, still on the ground
+    assert all(abs(s.x[2]) < 1e-4 and abs(s.x[5]) < 1e-3 and s.landed for s in states)
+    assert max(map(abs, states[-1].x[0:2])) < 1e-9
+    # and at 60 %: 4 x 3.27 N < m g, still on the ground (the gear a little less compressed)
     v.command = ActuatorCommand((60.0,) * 4)
-    assert all(s.x[2] == 0.0 and s.landed for s in run(v, 1000))
+    assert all(abs(s.x[2]) < 1e-3 and s.on_ground and not s.crashed for s in run(v, 1000))
 
 
 def test_gentle_landing_never_goes_below_ground(sim):
     v = make(sim)
     place(v, -0.2)                                                 # 1.98 m/s at touch-down
-    states = run(v, 500)
-    assert all(s.x[2] <= 0.0 for s in states)
-    assert states[-1].landed and not states[-1].crashed and states[-1].x[2] == 0.0
-    assert states[-1].x[5] == 0.0
+    states = run(v, 800)
+    assert all(s.x[2] <= 0.01 for s in states)                     # the gear's compression
+    assert states[-1].landed and not states[-1].crashed and abs(states[-1].x[2]) < 1e-4
+    assert abs(states[-1].x[5]) < 1e-3
 
 
 def test_take_off_from_the_ground(sim):
@@ -150,7 +151,7 @@ def test_drop_from_5m_crashes(sim):
     place(v, -5.0)
     states = run(v, 1500)                                          # no exception
     end = states[-1]
-    assert end.crashed and end.landed and end.x[2] == 0.0
+    assert end.crashed and end.crash_reason.startswith("ground impact at 9.")
     # with quadratic drag, v^2 = vt^2 (1 - exp(-2 g h / vt^2)) at the ground: 9.55 m/s (9.90
     # without drag), reached at t = vt / g acosh(exp(g h / vt^2))
     vt2 = 2.1 * G / 0.03125

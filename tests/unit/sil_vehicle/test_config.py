@@ -233,3 +233,27 @@ def test_inherited_vehicle_path_is_relative_to_the_file_that_names_it(tmp_path):
     path = write(tmp_path, "scenario.yaml", {"extends": str(SIM_DEFAULT), "seed": 7})
     sim = load_sim(path)
     assert sim.vehicle.name == "trq" and sim.seed == 7
+
+
+def test_landing_gear_errors_name_the_key(tmp_path):
+    data = trq_copy()
+    data["landing_gear"]["points"] = data["landing_gear"]["points"][:2]        # cannot stand
+    assert_config_error(load_vehicle, write(tmp_path, "two_feet.yaml", data),
+                        "'landing_gear.points'", "3 to 8")
+    data = trq_copy()
+    for p in data["landing_gear"]["points"]:
+        p["x_m"] = abs(p["x_m"]) + 0.05                                     # all in front
+    assert_config_error(load_vehicle, write(tmp_path, "ahead.yaml", data),
+                        "'landing_gear.points'", "around the centre of mass")
+    data = trq_copy()
+    data["landing_gear"]["stick_stiffness_N_m"] = -1.0
+    assert_config_error(load_vehicle, write(tmp_path, "negative.yaml", data),
+                        "'landing_gear.stick_stiffness_N_m'")
+
+
+def test_landing_gear_derived_figures(trq):
+    assert trq.tip_over_rad == pytest.approx(math.atan2(0.12, 0.10))
+    g = trq.gear
+    # at rest level the lowest points carry the weight: compression m g / (n k) below them
+    assert g.ground_down_m == pytest.approx(0.10 - 2.1 * 9.80665 / (4 * 8000.0))
+    assert g.reach_down_m < 0.0 < g.ground_down_m

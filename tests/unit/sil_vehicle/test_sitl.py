@@ -523,3 +523,16 @@ def test_impaired_lockstep_does_not_depend_on_wall_clock_traffic(sim):
     base, lost = fly(None)
     assert lost > 10                                         # the link did lose targets
     assert fly(7)[0] == base and fly(3)[0] == base           # (the heartbeats lost count apart)
+
+
+def test_extended_sys_state_reports_the_land_detector(sitl):
+    s = sitl
+    states = [m.landed_state for m in of(fly_lockstep(s, 1000), "EXTENDED_SYS_STATE", "gcs")]
+    assert states == [mavlink.MAV_LANDED_STATE_ON_GROUND]               # 1 Hz, disarmed
+    arm(s)
+    fly_lockstep(s, 300, throttle_pct=(90.0,) * 4)
+    assert s.land_detector.state == mavlink.MAV_LANDED_STATE_TAKEOFF
+    assert not s.vehicle.state.on_ground
+    out = fly_lockstep(s, 1000, throttle_pct=(s.sim.vehicle.hover_throttle_pct,) * 4)
+    assert len(of(out, "EXTENDED_SYS_STATE", "gcs")) == 1
+    assert s.land_detector.state == mavlink.MAV_LANDED_STATE_IN_AIR     # TAKEOFF_S later

@@ -403,3 +403,17 @@ def test_outage_error_alone():
     assert metrics.outage_error(t_us, err, (1_000_000, 1_500_000), settle_s=0.0) == 0.1
     assert metrics.outage_error(t_us, err, (1_200_000, 1_500_000), settle_s=0.0) is None
     assert metrics.outage_error(t_us, err, None) is None
+
+
+def test_touchdown_is_the_logs_last_one():
+    truth, steps = synthetic()
+    assert compute(truth, steps).touchdown_speed_m_s is None          # an older log: no column
+    n = len(truth["t_us"])
+    speed = np.full(n, np.nan)
+    tilt = np.full(n, np.nan)
+    speed[n // 2:], tilt[n // 2:] = 0.4, 3.0                           # a touchdown mid-log
+    truth |= {"touchdown_speed_m_s": speed, "touchdown_tilt_deg": tilt}
+    m = compute(truth, steps)
+    assert (m.touchdown_speed_m_s, m.touchdown_tilt_deg) == (0.4, 3.0)
+    assert compute(truth | {"touchdown_speed_m_s": np.full(n, np.nan)},
+                   steps).touchdown_speed_m_s is None                  # never touched down
