@@ -371,6 +371,9 @@ class Estimator(Strict):
     # the oldest fix fused (its time of validity behind the state's time: the receiver's
     # delay and the wait for the next control period); the history kept covers it
     gnss_max_age_s: Num(0.0, 2.0) = 0.25
+    # the receiver's delay: GPS_RAW_INT is stamped at its arrival (as PX4 stamps it), its time
+    # of validity is this much earlier (EKF2_GPS_DELAY's role; PX4's default 110 ms)
+    gnss_delay_s: Num(0.0, 1.0) = 0.11
 
     @model_validator(mode="after")
     def _only_fused(self) -> "Estimator":

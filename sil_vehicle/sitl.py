@@ -55,6 +55,22 @@ SENSOR_FAULT_SEED_KEY = 34      # the sensor faults' (garbage) generator, apart 
 # no IMU reading for this long: the attitude estimate is lost (a choice: ten filter periods;
 # PX4's sensors module flags a silent IMU within a comparable time)
 IMU_TIMEOUT_US = 100_000
+# SYS_STATUS's health report (Sitl.sensor_bits): a sensor silent this long is unhealthy (a
+# choice: one second, PX4's GPS_RAW_INT reports NO_GPS after a second without a fix)
+SENSOR_TIMEOUT_US = 1_000_000
+# GPS_RAW_INT with fix type NO_GPS every second once the receiver has been silent a second (as
+# PX4's stream does: kNoGpsSendInterval)
+NO_GPS_EVERY_US = 1_000_000
+# each sensor's SYS_STATUS bit (MAV_SYS_STATUS_SENSOR): the IMU's are two
+SENSOR_BITS = {"imu": mavlink.MAV_SYS_STATUS_SENSOR_3D_GYRO | mavlink.MAV_SYS_STATUS_SENSOR_3D_ACCEL,
+               "mag": mavlink.MAV_SYS_STATUS_SENSOR_3D_MAG,
+               "baro": mavlink.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE,
+               "gnss": mavlink.MAV_SYS_STATUS_SENSOR_GPS,
+               "mocap": mavlink.MAV_SYS_STATUS_SENSOR_VISION_POSITION}
+# the estimator's (PX4's health report: attitude_estimate -> AHRS and ATTITUDE_STABILIZATION,
+# local_position_estimate -> XY_POSITION_CONTROL)
+ATTITUDE_BITS = mavlink.MAV_SYS_STATUS_AHRS | mavlink.MAV_SYS_STATUS_SENSOR_ATTITUDE_STABILIZATION
+POSITION_BITS = mavlink.MAV_SYS_STATUS_SENSOR_XY_POSITION_CONTROL
 # each reading type's sensor, as the suite and the profile name them
 SENSOR_OF = {imu.ImuReading: "imu", baro.BaroReading: "baro", mag.MagReading: "mag",
              gnss.GnssReading: "gnss", mocap.MocapReading: "mocap"}
@@ -162,6 +178,9 @@ class Sitl:
         self._on_arrival = {ON_ARRIVAL[n]: n for n in ON_ARRIVAL if n in has}
         self._arrival_sent: dict[tuple[str, str], int] = {}     # (link, stream) -> arrival_us
         self._imu_sent: dict[str, dict[str, int]] = {link: {} for link in LINKS}
+        # per link, the IMU's samples summed since its last HIGHRES_IMU (gyro xyz, accel xyz,
+        # count, the last sample's time): each message carries the mean since the one before
+        self._imu_pending: dict[str, list] = {link: [0.0] * 6 + [0, 0] for link in LINKS}
         # HIGHRES_IMU's accelerometer and gyro: the mean over the last integration interval
         self.imu_mean: imu.ImuReading | None = None
         self._imu_sum = [0.0] * 6
@@ -244,8 +263,8 @@ class Sitl:
     def _integrate_imu(self, r: imu.ImuReading) -> None:
         """The IMU's samples summed over each integration interval (the profile's
         imu.integration_rate_hz, PX4's IMU_INTEG_RATE; intervals end on its multiples of the
-        clock); at its end their mean is what HIGHRES_IMU carries (`imu_mean`), stamped with the
-        interval's last sample."""
+        clock); at its end their mean is `imu_mean`, and each link with HIGHRES_IMU on adds the
+        interval's sums to what its next HIGHRES_IMU carries (`_highres_imu`)."""
         acc = self._imu_sum
         g, a = r.gyro, r.accel
         for i in range(3):
@@ -256,6 +275,13 @@ class Sitl:
             n = self._imu_count
             self.imu_mean = imu.ImuReading(r.t_us, tuple(acc[i] / n for i in range(3)),
                                            tuple(acc[3 + i] / n for i in range(3)))
+            for link in LINKS:
+                if self.periods[link]["HIGHRES_IMU"]:
+                    pending = self._imu_pending[link]
+                    for i in range(6):
+                        pending[i] += acc[i]
+                    pending[6] += n
+                    pending[7] = r.t_us
             self._imu_sum = [0.0] * 6
             self._imu_count = 0
 
@@ -285,20 +311,83 @@ class Sitl:
             return codec.gnss_raw_int(r, self.home)
         return codec.att_pos_mocap(r)
 
-    def _highres_imu(self, link: str | None) -> mavlink.MAVLink_message:
-        """HIGHRES_IMU of the IMU's mean over its last integration interval and the latest
-        barometer and magnetometer readings; fields_updated marks those not yet sent on this
-        link."""
-        latest = {**self.latest, "imu": self.imu_mean}
-        sent = self._imu_sent[link] if link is not None else {}
-        bits = 0
-        for name, fields in (("imu", codec.IMU_FIELDS), ("baro", codec.BARO_FIELDS),
-                             ("mag", codec.MAG_FIELDS)):
-            r = latest.get(name)
+    def _highres_imu(self, link: str | None) -> mavlink.MAVLink_message | None:
+        """HIGHRES_IMU on `link`: the mean of the IMU's samples over the integration intervals
+        completed since the link's last HIGHRES_IMU (so that no interval is lost at any rate;
+        None when none completed: PX4 sends only on a new vehicle_imu), stamped with the last
+        sample's time, less the estimator's current gyro and accelerometer bias estimates (as
+        PX4's stream subtracts EKF2's estimator_sensor_bias); with the latest barometer and
+        magnetometer readings, fields_updated marking those not yet sent on this link. `link`
+        None (a MAV_CMD_REQUEST_MESSAGE): the last interval's mean, all fields marked."""
+        if link is None:
+            mean, sent = self.imu_mean, {}
+        else:
+            pending = self._imu_pending[link]
+            n = pending[6]
+            if not n:
+                return None
+            mean = imu.ImuReading(pending[7], tuple(pending[i] / n for i in range(3)),
+                                  tuple(pending[3 + i] / n for i in range(3)))
+            self._imu_pending[link] = [0.0] * 6 + [0, 0]
+            sent = self._imu_sent[link]
+        if self.estimator is not None:
+            e = self.estimate()
+            bg, ba = e.gyro_bias_frd_rad_s, e.accel_bias_frd_m_s2
+            mean = imu.ImuReading(mean.t_us, tuple(float(mean.gyro[i] - bg[i]) for i in range(3)),
+                                  tuple(float(mean.accel[i] - ba[i]) for i in range(3)))
+        bits = codec.IMU_FIELDS
+        for name, fields in (("baro", codec.BARO_FIELDS), ("mag", codec.MAG_FIELDS)):
+            r = self.latest.get(name)
             if r is not None and sent.get(name) != r.t_us:
                 bits |= fields
                 sent[name] = r.t_us
-        return codec.highres_imu(self.imu_mean, latest.get("baro"), latest.get("mag"), bits)
+        return codec.highres_imu(mean, self.latest.get("baro"), self.latest.get("mag"), bits)
+
+    def _no_gps(self) -> list[Outgoing]:
+        """GPS_RAW_INT NO_GPS on each link that has sent a fix and none for NO_GPS_EVERY_US
+        (called on whole seconds of the clock)."""
+        out = []
+        t = self.t_us
+        for link in LINKS:
+            last = self._arrival_sent.get((link, "GPS_RAW_INT"))
+            if self.periods[link]["GPS_RAW_INT"] and last is not None \
+                    and t - last >= NO_GPS_EVERY_US:
+                out.append(Outgoing(link, codec.gnss_raw_int_no_gps(t)))
+        return out
+
+    def sensor_bits(self) -> codec.SensorBits | None:
+        """SYS_STATUS's present / enabled / health bits as PX4's health report sets them (None
+        under `truth`: codec.TRUTH_SENSORS). Present and enabled: each sensor the profile
+        carries, the estimator's attitude and position. Healthy: a sensor heard from within
+        SENSOR_TIMEOUT_US (the IMU within IMU_TIMEOUT_US) and, for GNSS, with a 3D fix or
+        better; the IMU's gyro and accelerometer also while the estimator has not diverged; the
+        attitude while aligned and not diverged; the position while the estimator's position
+        is valid (its no-aid timeout)."""
+        if self.suite is None:
+            return None
+        present = mavlink.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS | ATTITUDE_BITS | POSITION_BITS
+        health = mavlink.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS
+        t = self.t_us
+        e = self.estimate()
+        for name in self.suite.sensors:
+            bit = SENSOR_BITS.get(name)
+            if bit is None:
+                continue
+            present |= bit
+            r = self.latest.get(name)
+            timeout = IMU_TIMEOUT_US if name == "imu" else SENSOR_TIMEOUT_US
+            ok = r is not None and t - r.arrival_us <= timeout
+            if name == "gnss":
+                ok = ok and r.fix_type >= mavlink.GPS_FIX_TYPE_3D_FIX
+            elif name == "imu":
+                ok = ok and not e.diverged
+            if ok:
+                health |= bit
+        if e.attitude_aligned and not e.diverged:
+            health |= ATTITUDE_BITS
+        if e.position_valid and not e.diverged:
+            health |= POSITION_BITS
+        return codec.SensorBits(present, present, health)
 
     def _deliver(self, out: list[Outgoing], impaired: bool = True) -> list[Outgoing]:
         """Pass outgoing messages through the impaired links (unless `impaired` is False), and
@@ -416,13 +505,17 @@ class Sitl:
         readings = self.readings
         out = (self._arrivals() if self._on_arrival and readings
                and type(readings[-1]) in ARRIVING else [])
+        if self.t_us % NO_GPS_EVERY_US == 0 and "GPS_RAW_INT" in self._on_arrival:
+            out += self._no_gps()
         if not everything and self.tick % self._period_gcd():
             return out                  # most ticks: nothing is due (cheap test first)
         skip = self._not_periodic
         for link in LINKS:
             for stream, period in self.periods[link].items():
                 if period and (everything or self.tick % period == 0) and stream not in skip:
-                    out.append(Outgoing(link, self.build(stream, link)))
+                    msg = self.build(stream, link)
+                    if msg is not None:         # a stream PX4 would not send now
+                        out.append(Outgoing(link, msg))
         return out
 
 
@@ -473,11 +566,25 @@ class Sitl:
             return self.estimator is not None
         if stream in self._on_arrival:
             return self._on_arrival[stream] in self.latest
+        if stream in ("LOCAL_POSITION_NED", "GLOBAL_POSITION_INT") and self.estimator is not None:
+            return self._position_sendable(stream)
         return stream not in self._not_periodic
 
-    def build(self, stream: str, link: str | None = None) -> mavlink.MAVLink_message:
+    def _position_sendable(self, stream: str) -> bool:
+        """As PX4's streams under EKF2: LOCAL_POSITION_NED only while the horizontal position
+        and velocity are valid; GLOBAL_POSITION_INT once the estimator is aligned (EKF2
+        publishes vehicle_global_position while its origin is valid and its yaw aligned: a
+        dead-reckoned position keeps coming; its validity is SYS_STATUS's)."""
+        e = self.estimate()
+        if stream == "LOCAL_POSITION_NED":
+            return e.position_valid and not e.diverged
+        return e.attitude_aligned
+
+    def build(self, stream: str, link: str | None = None) -> mavlink.MAVLink_message | None:
         """The message of `stream` now (`link`: the link it goes to, for what HIGHRES_IMU
-        marks as updated). Raw sensors' messages: only when `available`."""
+        carries and marks as updated). Raw sensors' messages: only when `available`. None: a
+        message PX4 would not send now (HIGHRES_IMU with no new interval on `link`;
+        LOCAL_POSITION_NED / GLOBAL_POSITION_INT while the estimate is not valid for it)."""
         if stream == "HIGHRES_IMU":
             return self._highres_imu(link)
         if stream == "ESTIMATOR_STATUS":
@@ -496,15 +603,19 @@ class Sitl:
             rate = int(1000 * total.dropped / max(total.datagrams, 1))
             return codec.sys_status(0, rate * 10, total.dropped,
                                     (total.bad_frames, total.unknown_ids, total.other_system,
-                                     total.rejected_targets + total.stale_targets))
+                                     total.rejected_targets + total.stale_targets),
+                                    self.sensor_bits())
         if stream == "HOME_POSITION":
             return codec.home_position(self.home, s.t_us)
         if stream in ("SERVO_OUTPUT_RAW", "ACTUATOR_OUTPUT_STATUS"):
             fn = codec.servo_output_raw if stream == "SERVO_OUTPUT_RAW" else codec.actuator_output_status
             return fn(s.t_us, s.motor_pct, s.tilt_rad, self._limit)
+        if stream in ("LOCAL_POSITION_NED", "GLOBAL_POSITION_INT") \
+                and self.estimator is not None and not self._position_sendable(stream):
+            return None
         m = self.measured()
         if stream == "ODOMETRY":
-            return codec.odometry(m)
+            return codec.odometry(m, self.estimator.state_resets if self.estimator else 0)
         if stream == "ATTITUDE":
             return codec.attitude(m)
         if stream == "LOCAL_POSITION_NED":
@@ -679,7 +790,7 @@ class Sitl:
             if wanted == mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION:
                 reply = codec.autopilot_version()
             elif wanted in _MSG_NAMES and self.available(_MSG_NAMES[wanted]):
-                reply = self.build(_MSG_NAMES[wanted], link)
+                reply = self.build(_MSG_NAMES[wanted])
             else:
                 return [self._ack(link, msg, mavlink.MAV_RESULT_UNSUPPORTED, sender)]
             return [self._ack(link, msg, ok, sender), Outgoing(link, reply, sender)]

@@ -317,7 +317,7 @@ def controller_config(c: schema.ControllerFile, file: str) -> ControllerConfig:
         f.residual_walk_m_s3_rthz, f.accel_bias_std_m_s2, f.accel_bias_walk_m_s3_rthz,
         f.pose_gate, f.dropout_s, f.imu_rate_hz, f.mocap_rate_hz, history,
         f.disturbance_input, f.autopilot_vel_std_m_s, f.position_source,
-        f.gnss_rate_hz, tuple(f.gnss_std_m))
+        f.gnss_rate_hz, tuple(f.gnss_std_m), gnss_delay_s=f.gnss_delay_s)
     return ControllerConfig(file, c.name, vehicle, c.observer.kind, eso, c.control_rate_hz,
                             c.horizon.steps, c.horizon.step_s, weights,
                             c.constraints.max_roll_pitch_deg, c.constraints.max_body_rate_rad_s,

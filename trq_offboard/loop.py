@@ -195,6 +195,10 @@ class OffboardFlight:
         self._fixes: list = []          # GNSS fixes in NED (records.PositionFix)
         self.home: tuple[int, int, int] | None = None     # HOME_POSITION: the origin of NED
         self._unplaced: list = []       # GPS_RAW_INT received before the home, to place
+        # GPS_RAW_INT is stamped at its arrival (as PX4 stamps it): the fused filter's
+        # configured receiver delay takes it back to its time of validity
+        fused = getattr(getattr(controller, "cfg", None), "fused", None)
+        self._gnss_delay_us = round(fused.gnss_delay_s * 1e6) if fused is not None else 0
         self._errors: list[np.ndarray] = []
         self._yaw_errors: list[float] = []
         self._solve_ms: list[float] = []
@@ -239,13 +243,13 @@ class OffboardFlight:
             if self.home is None:       # kept (a few) until the home arrives
                 self._unplaced = [*self._unplaced[-(MAX_UNPLACED_FIXES - 1):], msg]
             else:
-                fix = gnss.fix_of(msg, self.home)
+                fix = gnss.fix_of(msg, self.home, self._gnss_delay_us)
                 if fix is not None:
                     self._fixes.append(fix)
         elif kind == "HOME_POSITION" and "HOME_POSITION" in self.streams:
             self.home = gnss.home_of(msg)
             if self.home is not None:
-                fixes = [gnss.fix_of(m, self.home) for m in self._unplaced]
+                fixes = [gnss.fix_of(m, self.home, self._gnss_delay_us) for m in self._unplaced]
                 self._fixes += [f for f in fixes if f is not None]
                 self._unplaced.clear()
         elif kind == "HEARTBEAT":
