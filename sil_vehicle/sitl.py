@@ -37,6 +37,7 @@ from sil_vehicle.sensors.faults import SensorFaults
 from sil_vehicle.sensors.suite import Reading, SensorSuite
 from sil_vehicle.sensors.truth import Truth, imu_truth
 from sil_vehicle.vehicle import ActuatorCommand, Vehicle, VehicleState
+from trq_wire.mocap import MOCAP_COMPONENT_ID, MOCAP_SYSTEM_ID, VISION_ESTIMATOR_TYPE
 
 LINKS = ("gcs", "offboard")
 
@@ -84,6 +85,12 @@ class Outgoing:
     link: str                                  # "gcs" or "offboard"
     msg: mavlink.MAVLink_message
     to: tuple[str, int] | None = None          # None: the link's target and every known peer
+    # the sender's (system, component) when not the autopilot's: the simulated mocap PC's
+    # poses (trq_wire.mocap), which share the offboard link's port in the simulation
+    source: tuple[int, int] | None = None
+
+
+MOCAP_SOURCE = (MOCAP_SYSTEM_ID, MOCAP_COMPONENT_ID)
 
 
 # flight.csv's columns for a position source of the sensing profile (only when it has one): its
@@ -170,12 +177,18 @@ class Sitl:
         self.latest: dict[str, Reading] = {}       # each sensor's newest reading arrived
         has = set() if profile is None else {
             name for name in SENSOR_OF.values() if getattr(profile, name) is not None}
+        # the motion capture wired to the companion (trq_wire.mocap): the vehicle sends no
+        # ATT_POS_MOCAP of its own and its estimator takes the companion's forwarded copies
+        self.mocap_to_companion = "mocap" in has and sim.mocap_wiring == "companion"
+        self._visions: list[mocap.MocapReading] = []      # forwarded, for the next tick
+        self._last_vision_us: int | None = None
         # streams the tick loop never sends (not carried, or sent at a reading's arrival)
         self._not_periodic = frozenset(
             {"ATT_POS_MOCAP"} | ({"HIGHRES_IMU"} if "imu" not in has else set())
             | ({"GPS_RAW_INT"} if profile is not None else set())
             | ({"ESTIMATOR_STATUS"} if profile is None else set()))
-        self._on_arrival = {ON_ARRIVAL[n]: n for n in ON_ARRIVAL if n in has}
+        self._on_arrival = {ON_ARRIVAL[n]: n for n in ON_ARRIVAL if n in has
+                            and not (n == "mocap" and self.mocap_to_companion)}
         self._arrival_sent: dict[tuple[str, str], int] = {}     # (link, stream) -> arrival_us
         self._imu_sent: dict[str, dict[str, int]] = {link: {} for link in LINKS}
         # per link, the IMU's samples summed since its last HIGHRES_IMU (gyro xyz, accel xyz,
@@ -202,8 +215,15 @@ class Sitl:
             self._sensed_vel = self.vehicle.state.x[3:6]    # at rest before the first tick
             self._sensed_q = self.vehicle.state.x[6:10]
             self.readings = self._sense(self.vehicle.state)
-            self.estimator = Eskf(EstimatorParams.from_profile(profile))
-            self.estimator.step(self.t_us, self.readings)
+            params = EstimatorParams.from_profile(profile)
+            if self.mocap_to_companion:
+                # the forwarded pose comes up to a control period after the mocap's latency:
+                # the delayed horizon reaches that far back
+                extra = -(-sim.dt_us * sim.ticks_per_control // params.filter_period_us)
+                params = EstimatorParams.from_profile(
+                    profile, horizon_us=params.horizon_us + extra * params.filter_period_us)
+            self.estimator = Eskf(params)
+            self.estimator.step(self.t_us, self._estimator_readings())
 
     # --- time ------------------------------------------------------------------------------
     @property
@@ -224,7 +244,7 @@ class Sitl:
         if self.suite is not None:
             # the tick's readings into the estimator, before the log and the telemetry
             self.readings = self._sense(state)
-            self.estimator.step(state.t_us, self.readings)
+            self.estimator.step(state.t_us, self._estimator_readings())
             self._estimate = None
         if state.crashed and not self._was_crashed:
             self._was_crashed = True
@@ -259,6 +279,37 @@ class Sitl:
             if type(r) is imu.ImuReading:
                 self._integrate_imu(r)
         return readings
+
+    def _estimator_readings(self) -> list[Reading]:
+        """What the estimator takes at this tick: the tick's readings; with the motion capture
+        wired to the companion, not the mocap's own but the poses the companion forwarded
+        (`vision`) since the last tick."""
+        if not self.mocap_to_companion:
+            return self.readings
+        fed = [r for r in self.readings if type(r) is not mocap.MocapReading]
+        if self._visions:
+            fed += self._visions
+            self._visions = []
+        return fed
+
+    def vision(self, arrival_us: int, t_us: int, pos_ned_m, quat_wxyz,
+               pose_cov: tuple[float, ...] | None = None) -> None:
+        """A vision (motion-capture) pose arrived from the companion at `arrival_us`, stamped
+        `t_us` (its time of validity as the mocap system stamped it), with its pose covariance
+        (ODOMETRY's 21 upper-triangle entries; NaN: unknown, the estimator's own figures then).
+        The estimator takes it at the next tick, as a reading that arrived at `arrival_us`.
+        (Today's estimator fuses it at `t_us` with its configured noise; an EKF2-like one takes
+        arrival_us - EKF2_EV_DELAY and the covariance floored by EKF2_EVP_NOISE.)"""
+        self._last_vision_us = arrival_us
+        self._visions.append(mocap.MocapReading(
+            int(t_us), int(arrival_us), np.array(pos_ned_m, dtype=float),
+            np.array(quat_wxyz, dtype=float)))
+
+    def _mocap_poses(self) -> list[Outgoing]:
+        """The simulated mocap PC: each pose that arrived at this tick, as ATT_POS_MOCAP from
+        its own system to the companion (the offboard link's peer)."""
+        return [Outgoing("offboard", codec.att_pos_mocap(r), source=MOCAP_SOURCE)
+                for r in self.readings if type(r) is mocap.MocapReading]
 
     def _integrate_imu(self, r: imu.ImuReading) -> None:
         """The IMU's samples summed over each integration interval (the profile's
@@ -376,7 +427,10 @@ class Sitl:
             present |= bit
             r = self.latest.get(name)
             timeout = IMU_TIMEOUT_US if name == "imu" else SENSOR_TIMEOUT_US
-            ok = r is not None and t - r.arrival_us <= timeout
+            last = r.arrival_us if r is not None else None
+            if name == "mocap" and self.mocap_to_companion:
+                last = self._last_vision_us       # what the autopilot gets: the forwarded
+            ok = last is not None and t - last <= timeout
             if name == "gnss":
                 ok = ok and r.fix_type >= mavlink.GPS_FIX_TYPE_3D_FIX
             elif name == "imu":
@@ -505,6 +559,8 @@ class Sitl:
         readings = self.readings
         out = (self._arrivals() if self._on_arrival and readings
                and type(readings[-1]) in ARRIVING else [])
+        if self.mocap_to_companion and readings and type(readings[-1]) is mocap.MocapReading:
+            out += self._mocap_poses()
         if self.t_us % NO_GPS_EVERY_US == 0 and "GPS_RAW_INT" in self._on_arrival:
             out += self._no_gps()
         if not everything and self.tick % self._period_gcd():
@@ -672,6 +728,9 @@ class Sitl:
         kind = msg.get_type()
         if kind == "SET_ACTUATOR_CONTROL_TARGET":
             return self._target(link, msg)
+        if kind == "ODOMETRY":
+            self._external_vision(msg)
+            return []
         if kind == "COMMAND_LONG":
             return self._command(link, msg, sender)
         if kind == "COMMAND_INT":
@@ -703,6 +762,19 @@ class Sitl:
             return [Outgoing(link, codec.mission_count(msg.get_srcSystem(), msg.get_srcComponent()),
                              sender)]
         return []
+
+    def _external_vision(self, msg) -> None:
+        """ODOMETRY from the companion: external vision (estimator_type MOCAP or VISION, pose
+        in LOCAL_NED), taken as a vision reading arriving now when the motion capture is wired
+        to the companion; anything else is ignored."""
+        if not self.mocap_to_companion or msg.estimator_type not in (
+                VISION_ESTIMATOR_TYPE, mavlink.MAV_ESTIMATOR_TYPE_VISION) \
+                or msg.frame_id != mavlink.MAV_FRAME_LOCAL_NED:
+            return
+        pos, q = (msg.x, msg.y, msg.z), tuple(msg.q)
+        if not all(math.isfinite(v) for v in pos + q):
+            return
+        self.vision(self.t_us, int(msg.time_usec), pos, q, tuple(msg.pose_covariance))
 
     def _target(self, link: str, msg: mavlink.MAVLink_message) -> list[Outgoing]:
         counters = self.counters[link]

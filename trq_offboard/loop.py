@@ -46,6 +46,7 @@ from trq_offboard.records import (
     StepInfo,
 )
 from trq_offboard.reference import FlightReference
+from trq_wire.mocap import MOCAP_SYSTEM_ID
 
 log = logging.getLogger("trq_offboard")
 _sched_yield = getattr(os, "sched_yield", None)      # POSIX; None elsewhere
@@ -195,6 +196,7 @@ class OffboardFlight:
         self._fixes: list = []          # GNSS fixes in NED (records.PositionFix)
         self.home: tuple[int, int, int] | None = None     # HOME_POSITION: the origin of NED
         self._unplaced: list = []       # GPS_RAW_INT received before the home, to place
+        self.forwarded_poses = 0        # motion-capture poses forwarded to the autopilot
         # GPS_RAW_INT is stamped at its arrival (as PX4 stamps it): the fused filter's
         # configured receiver delay takes it back to its time of validity
         fused = getattr(getattr(controller, "cfg", None), "fused", None)
@@ -206,6 +208,9 @@ class OffboardFlight:
 
     # --- incoming --------------------------------------------------------------------------
     def on_message(self, msg) -> None:
+        if msg.get_srcSystem() == MOCAP_SYSTEM_ID:
+            self._mocap_pose(msg)
+            return
         if msg.get_srcComponent() != wire.VEHICLE_COMPONENT:
             # another component of system 1 (a camera, a gimbal, a second companion that the
             # autopilot routes to this link): its HEARTBEAT is not the vehicle's state
@@ -262,6 +267,20 @@ class OffboardFlight:
         elif kind == "STATUSTEXT":
             text = msg.text if isinstance(msg.text, str) else msg.text.decode(errors="replace")
             log.info("vehicle: %s", text)
+
+    def _mocap_pose(self, msg) -> None:
+        """A pose from the motion-capture system (trq_wire.mocap): forwarded at once to the
+        autopilot as external vision (ODOMETRY, as PX4 takes it), and kept for the fused
+        filter when it flies on the pose."""
+        if msg.get_type() != "ATT_POS_MOCAP":
+            return
+        pose = wire.parse_mocap(msg)
+        if pose is None or not all(math.isfinite(v) for v in msg.q):
+            return
+        self.link.send(wire.vision_odometry(msg))
+        self.forwarded_poses += 1
+        if "ATT_POS_MOCAP" in self.streams:
+            self._poses.append(pose)
 
     async def _next_odometry(self) -> wire.Odometry:
         """The newest state not yet answered; waits for it (FlightError once the telemetry has

@@ -144,3 +144,33 @@ def test_truth_keeps_its_sensor_bits_and_sends_the_position_streams(sim):
     (status,) = [m for m in kinds if m.get_type() == "SYS_STATUS"]
     assert mavsdk_global_position_ok(status)
     assert any(m.get_type() == "LOCAL_POSITION_NED" for m in kinds)
+
+
+def test_mocap_wired_to_the_companion_reaches_the_estimator_only_forwarded(sim):
+    """`mocap_wiring: companion`: the vehicle sends no ATT_POS_MOCAP of its own; the mocap PC's
+    poses leave from its own system (trq_wire.mocap); the estimator gets no pose until the
+    companion forwards them (ODOMETRY, external vision), then takes each as arriving when it
+    came (here at the end of each 10 ms control period, as a lockstep companion answers)."""
+    from sil_vehicle.sitl import MOCAP_SOURCE
+    from trq_offboard.link.wire import vision_odometry
+
+    s = Sitl(sim.with_changes(sensing=sensing_profile("mocap", 1000, "test"),
+                              clock_mode="realtime", mocap_wiring="companion"))
+    assert s.mocap_to_companion
+    poses = []
+    for _ in range(3000):
+        out = s.step()
+        assert not [o for o in out if o.msg.get_type() == "ATT_POS_MOCAP" and o.source is None]
+        poses += [o.msg for o in out if o.source == MOCAP_SOURCE]
+    assert len(poses) > 250 and not s.estimate().position_valid       # nothing forwarded
+    ages, poses = [], []
+    for _ in range(3000):
+        out = s.step()
+        poses += [o.msg for o in out if o.source == MOCAP_SOURCE]
+        if s.tick % 10 == 0:                 # the companion's turn: it forwards what it got
+            for m in poses:
+                s.handle("offboard", Codec().decode(Codec().encode(vision_odometry(m)))[0])
+                ages.append(s.t_us - m.time_usec)
+            poses = []
+    assert s.estimator_ready()
+    assert min(ages) >= 10_000 and max(ages) <= 20_000       # the mocap's 10 ms and the wait
