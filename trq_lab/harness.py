@@ -554,7 +554,8 @@ def fly_inprocess(controller, sim, fault_events=(), seed: int | None = None, *,
             name=name or cfg.name,
             tilt_limit_rad=tilt_half_range(cfg.vehicle.tilt_min_rad, cfg.vehicle.tilt_max_rad),
             # nobody to yield the core to (the vehicle is this thread)
-            record=record, yield_core=False)
+            record=record, yield_core=False,
+            gnss_delay_s=cfg.fused.gnss_delay_s if cfg.fused is not None else 0.0)
 
         async def main() -> tuple[str, str]:
             return await _fly(sitl, flight, link, timeout_us=int(round(timeout_s * 1e6)),

@@ -156,7 +156,7 @@ class OffboardFlight:
                  record: Callable[[StepRecord], None] | None = None,
                  connect_timeout_s: float = 30.0, telemetry_timeout_s: float = 2.0,
                  telemetry_lost_s: float = 10.0, ack_timeout_s: float = 1.0,
-                 yield_core: bool = True,
+                 yield_core: bool = True, gnss_delay_s: float = 0.0,
                  cpu_ns: Callable[[], int] = time.thread_time_ns,
                  process_cpu_ns: Callable[[], int] = time.process_time_ns) -> None:
         self.link = link
@@ -198,9 +198,8 @@ class OffboardFlight:
         self._unplaced: list = []       # GPS_RAW_INT received before the home, to place
         self.forwarded_poses = 0        # motion-capture poses forwarded to the autopilot
         # GPS_RAW_INT is stamped at its arrival (as PX4 stamps it): the fused filter's
-        # configured receiver delay takes it back to its time of validity
-        fused = getattr(getattr(controller, "cfg", None), "fused", None)
-        self._gnss_delay_us = round(fused.gnss_delay_s * 1e6) if fused is not None else 0
+        # configured receiver delay (gnss_delay_s) takes it back to its time of validity
+        self._gnss_delay_us = round(gnss_delay_s * 1e6)
         self._errors: list[np.ndarray] = []
         self._yaw_errors: list[float] = []
         self._solve_ms: list[float] = []
