@@ -7,11 +7,13 @@ LOCAL_POSITION_NED / GLOBAL_POSITION_INT while the estimate is invalid."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
 from sil_vehicle.config import sensing_profile
 from sil_vehicle.mavlink.codec import Codec
 from sil_vehicle.sensors.imu import ImuReading
+from sil_vehicle.sensors.mocap import MocapReading
 from sil_vehicle.sitl import SENSOR_TIMEOUT_US, Sitl
 
 _CLIENT = mavlink.MAVLink(None, srcSystem=255, srcComponent=190)
@@ -72,13 +74,9 @@ def test_highres_imu_at_125_hz_loses_no_200_hz_interval(sim):
     assert np.linalg.norm(sent[-1][1]) > 0 and np.linalg.norm(sent[-1][2]) > 0
 
 
-def test_gnss_off_clears_the_global_position_health_within_the_timeouts(sim):
-    """`trq-inject-fault sensor gnss off` on a GNSS vehicle: a ground station reading
-    SYS_STATUS at 1 Hz sees the GPS bit unhealthy (MAVSDK: no global position) within the
-    sensor timeout and one SYS_STATUS period; GPS_RAW_INT turns to NO_GPS every second; the
-    estimator's position (XY_POSITION_CONTROL) goes after its no-aid timeout, and with it
-    LOCAL_POSITION_NED, while GLOBAL_POSITION_INT keeps coming (PX4's streams). Back on: all
-    back."""
+def gnss_off(sim, ticks: int):
+    """An rtk vehicle, ready; `sensor gnss off`; (time since the fault, message) of what the
+    ground station's link got over `ticks` ticks after it, and the vehicle."""
     s = vehicle(sim, "rtk")
     status = [o.msg for _ in range(1000) for o in s.step()
               if o.link == "gcs" and o.msg.get_type() == "SYS_STATUS"]
@@ -87,30 +85,48 @@ def test_gnss_off_clears_the_global_position_health_within_the_timeouts(sim):
     s.handle("gcs", command(mavlink.MAV_CMD_INJECT_FAILURE, mavlink.FAILURE_UNIT_SENSOR_GPS,
                             mavlink.FAILURE_TYPE_OFF, 1))
     t_off = s.t_us
-    seen = []                                     # (t, msg) on the ground station's link
-    for _ in range(8000):
-        seen += [(s.t_us, o.msg) for o in s.step() if o.link == "gcs"]
+    seen = [(s.t_us - t_off, o.msg) for _ in range(ticks) for o in s.step() if o.link == "gcs"]
+    return s, seen
 
-    def kind(name):
-        return [(t - t_off, m) for t, m in seen if m.get_type() == name]
 
-    sys_status = kind("SYS_STATUS")
+def of(seen, name):
+    return [(t, m) for t, m in seen if m.get_type() == name]
+
+
+def test_gnss_off_clears_the_global_position_health_within_the_timeouts(sim):
+    """`trq-inject-fault sensor gnss off` on a GNSS vehicle: a ground station reading
+    SYS_STATUS at 1 Hz sees the GPS bit unhealthy (MAVSDK: no global position) within the
+    sensor timeout and one SYS_STATUS period, the GPS still present; GPS_RAW_INT turns to
+    NO_GPS. Back on: healthy again."""
+    s, seen = gnss_off(sim, 2500)
+    sys_status = of(seen, "SYS_STATUS")
     first_bad = next(t for t, m in sys_status if not mavsdk_global_position_ok(m))
     assert first_bad <= SENSOR_TIMEOUT_US + 1_000_000
     assert all(not mavsdk_global_position_ok(m) for t, m in sys_status if t >= first_bad)
     assert all(m.onboard_control_sensors_present & GPS_BIT for _, m in sys_status)
-    xy_lost = next(t for t, m in sys_status if not m.onboard_control_sensors_health & XY_BIT)
-    assert 4_000_000 <= xy_lost <= 7_000_000      # the no-aid timeout (5 s), a 1 Hz stream
-    no_gps = [(t, m) for t, m in kind("GPS_RAW_INT") if m.fix_type == mavlink.GPS_FIX_TYPE_NO_GPS]
-    assert len(no_gps) >= 6 and no_gps[0][0] <= 2_000_000
-    local = [t for t, _ in kind("LOCAL_POSITION_NED")]
-    assert local and max(local) < xy_lost
-    assert max(t for t, _ in kind("GLOBAL_POSITION_INT")) > xy_lost + 500_000
+    no_gps = [t for t, m in of(seen, "GPS_RAW_INT") if m.fix_type == mavlink.GPS_FIX_TYPE_NO_GPS]
+    assert no_gps and no_gps[0] <= 2_000_000
     s.handle("gcs", command(mavlink.MAV_CMD_INJECT_FAILURE, mavlink.FAILURE_UNIT_SENSOR_GPS,
                             mavlink.FAILURE_TYPE_OK, 1))
-    status = [o.msg for _ in range(3000) for o in s.step()
+    status = [o.msg for _ in range(1500) for o in s.step()     # a fix, then a SYS_STATUS
               if o.link == "gcs" and o.msg.get_type() == "SYS_STATUS"]
     assert mavsdk_global_position_ok(status[-1])
+
+
+@pytest.mark.slow
+def test_gnss_off_the_position_goes_after_the_no_aid_timeout(sim):
+    """The estimator's position (XY_POSITION_CONTROL) goes after its no-aid timeout, and with
+    it LOCAL_POSITION_NED, while GLOBAL_POSITION_INT keeps coming (PX4's streams); NO_GPS every
+    second."""
+    _, seen = gnss_off(sim, 8000)
+    xy_lost = next(t for t, m in of(seen, "SYS_STATUS")
+                   if not m.onboard_control_sensors_health & XY_BIT)
+    assert 4_000_000 <= xy_lost <= 7_000_000      # the no-aid timeout (5 s), a 1 Hz stream
+    local = [t for t, _ in of(seen, "LOCAL_POSITION_NED")]
+    assert local and max(local) < xy_lost
+    assert max(t for t, _ in of(seen, "GLOBAL_POSITION_INT")) > xy_lost + 500_000
+    no_gps = [t for t, m in of(seen, "GPS_RAW_INT") if m.fix_type == mavlink.GPS_FIX_TYPE_NO_GPS]
+    assert len(no_gps) >= 6
 
 
 def test_imu_off_clears_gyro_accel_and_attitude_health(sim):
@@ -174,3 +190,28 @@ def test_mocap_wired_to_the_companion_reaches_the_estimator_only_forwarded(sim):
             poses = []
     assert s.estimator_ready()
     assert min(ages) >= 10_000 and max(ages) <= 20_000       # the mocap's 10 ms and the wait
+
+
+def test_the_daemon_sends_the_mocap_pcs_poses_from_its_own_system(sim):
+    """Over UDP the vehicle daemon encodes the simulated mocap PC's poses with the mocap's
+    system and component ids (its own sequence), to the offboard link's peer."""
+    from sil_vehicle.daemon import VehicleDaemon
+    from sil_vehicle.sitl import MOCAP_SOURCE, Outgoing
+    from sil_vehicle.mavlink import codec
+
+    class Transport:
+        def __init__(self):
+            self.sent = []
+
+        def sendto(self, data, dest):
+            self.sent.append(data)
+
+    d = VehicleDaemon(sim.with_changes(sensing=sensing_profile("mocap", 1000, "test"),
+                                       clock_mode="realtime", mocap_wiring="companion"), None)
+    d.transports["offboard"] = t = Transport()
+    pose = MocapReading(10_000, 20_000, np.zeros(3), np.array((1.0, 0.0, 0.0, 0.0)))
+    d.send([Outgoing("offboard", codec.att_pos_mocap(pose), source=MOCAP_SOURCE),
+            Outgoing("offboard", codec.heartbeat(False, False, False))])
+    msgs = [m for data in t.sent for m in Codec().decode(data)]
+    assert [(m.get_type(), m.get_srcSystem(), m.get_srcComponent()) for m in msgs] == [
+        ("ATT_POS_MOCAP", *MOCAP_SOURCE), ("HEARTBEAT", 1, 1)]
