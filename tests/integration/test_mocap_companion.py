@@ -41,3 +41,34 @@ def test_a_flight_on_the_forwarded_pose(tmp_path):
     # lockstep stays deterministic: the same flight again, the same log
     again = fly(cfg, tmp_path, "b")
     assert harness.fingerprint(res.flight_csv) == harness.fingerprint(again.flight_csv)
+
+
+def test_over_udp_the_daemons_carry_the_mocap_pcs_pose_and_its_forward(tmp_path, daemons):
+    """Both daemons over UDP in lockstep: the vehicle daemon hosts the mocap PC (system 200 on
+    the offboard port), trq-offboard forwards each pose, the vehicle's estimator flies on the
+    forwards: the hover is flown, landed and disarmed, on an estimate within a centimetre."""
+    import sys
+    from pathlib import Path
+
+    import yaml
+
+    sys.path.insert(0, str(Path(__file__).parent))
+    from test_offboard_daemon import HOVER, assert_landed_summary, fly_all, logs, start_flight
+
+    import trq_params
+
+    src = Path(trq_params.resolve("sim", "default"))
+    sim = yaml.safe_load(src.read_text())
+    sim["vehicle"] = str((src.parent / sim["vehicle"]).resolve())
+    sim["mocap_wiring"] = "companion"
+    sim_file = tmp_path / "companion.yaml"
+    sim_file.write_text(yaml.safe_dump(sim))
+    flight = start_flight(daemons, tmp_path / "udp", "trq_nmpc_eso", HOVER, "--mode",
+                          "lockstep", "--sim", str(sim_file), "--sensing", "mocap")
+    fly_all([flight], 180.0)
+    assert_landed_summary(flight)
+    truth, _ = logs(flight)
+    armed = truth["armed"] > 0.5
+    assert truth["pos_d_m"].min() < -0.5
+    for a in "ned":
+        assert np.max(np.abs(truth[f"est_pos_{a}_m"][armed] - truth[f"pos_{a}_m"][armed])) < 0.01
