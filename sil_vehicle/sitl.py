@@ -9,7 +9,10 @@ with its own generator (seeded from the simulation's seed, apart from the gusts'
 and the links'), sampled once per physics tick by `_sense`, the seam where an estimator plugs
 in: its readings are `readings` (the tick's) and `latest` (each sensor's newest), read by the
 raw-sensor telemetry (HIGHRES_IMU, GPS_RAW_INT, ATT_POS_MOCAP) and the flight log. Under
-`truth` no suite is built and nothing of this runs.
+`truth` no suite is built and nothing of this runs. With the motion capture wired to the
+companion (`mocap_wiring: companion`), the Sitl also hosts the simulated mocap PC (its poses
+leave from their own system, `Outgoing.source`) and its estimator takes the poses the companion
+forwards (`vision`) instead of the mocap's own.
 """
 
 from __future__ import annotations
