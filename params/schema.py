@@ -254,9 +254,10 @@ class SimFile(Strict):
     # the sensing profile (params/sensing): a built-in name or a path; checked, against the
     # physics rate, when sil_vehicle.config loads the file
     sensing: NameOrPath = "truth"
-    # where the motion capture's pose enters (a profile with one): `autopilot`, the vehicle's
-    # estimator takes it and sends ATT_POS_MOCAP; `companion`, a simulated mocap PC streams it
-    # to the companion, which forwards it to the autopilot as external vision (trq_wire.mocap)
+    # where the motion capture's pose enters (a profile with one): `companion`, a simulated
+    # mocap PC streams it to the companion, which forwards it to the autopilot as external
+    # vision (trq_wire.mocap, as on a rig; the shipped default.yaml); `autopilot`, the vehicle's
+    # estimator takes it and sends ATT_POS_MOCAP (a rig wired that way)
     mocap_wiring: Choice("autopilot", "companion") = "autopilot"
     clock: Clock
     telemetry: Telemetry

@@ -37,6 +37,8 @@ def command(cmd, p1=0.0, p2=0.0):
 
 def sitl(sim, profile, **changes) -> Sitl:
     p = profile if not isinstance(profile, str) else sensing_profile(profile, 1000, "test")
+    # the motion capture wired to the autopilot: these tests have no companion to forward it
+    changes.setdefault("mocap_wiring", "autopilot")
     return Sitl(sim.with_changes(sensing=p, clock_mode="realtime", **changes))
 
 
@@ -330,7 +332,8 @@ def test_a_request_for_a_raw_sensor_message(sim):
 
 def test_the_log_keeps_the_position_sources_latest_sample(sim, exact):
     rows = []
-    s = Sitl(sim.with_changes(sensing=exact, clock_mode="realtime"), log_sink=rows.append)
+    s = Sitl(sim.with_changes(sensing=exact, clock_mode="realtime",
+                              mocap_wiring="autopilot"), log_sink=rows.append)
     assert s.log_columns == list(LOG_COLUMNS) + ["mocap_t_us", "mocap_pos_n_m",
                                                  "mocap_pos_e_m", "mocap_pos_d_m"] \
         + list(ESTIMATE_LOG_COLUMNS)

@@ -30,7 +30,7 @@ def command(cmd, *p):
 
 def vehicle(sim, profile: str) -> Sitl:
     s = Sitl(sim.with_changes(sensing=sensing_profile(profile, 1000, "test"),
-                              clock_mode="realtime"))
+                              clock_mode="realtime", mocap_wiring="autopilot"))
     for _ in range(8000):
         if s.estimator_ready():
             return s
