@@ -47,12 +47,9 @@ def test_over_udp_the_daemons_carry_the_mocap_pcs_pose_and_its_forward(tmp_path,
     """Both daemons over UDP in lockstep: the vehicle daemon hosts the mocap PC (system 200 on
     the offboard port), trq-offboard forwards each pose, the vehicle's estimator flies on the
     forwards: the hover is flown, landed and disarmed, on an estimate within a centimetre."""
-    import sys
     from pathlib import Path
 
     import yaml
-
-    sys.path.insert(0, str(Path(__file__).parent))
     from test_offboard_daemon import HOVER, assert_landed_summary, fly_all, logs, start_flight
 
     import trq_params
