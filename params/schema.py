@@ -299,6 +299,11 @@ class SimFile(Strict):
     # the sensing profile (params/sensing): a built-in name or a path; checked, against the
     # physics rate, when sil_vehicle.config loads the file
     sensing: NameOrPath = "truth"
+    # where the motion capture's pose enters (a profile with one): `companion`, a simulated
+    # mocap PC streams it to the companion, which forwards it to the autopilot as external
+    # vision (trq_wire.mocap, as on a rig; the shipped default.yaml); `autopilot`, the vehicle's
+    # estimator takes it and sends ATT_POS_MOCAP (a rig wired that way)
+    mocap_wiring: Choice("autopilot", "companion") = "autopilot"
     clock: Clock
     telemetry: Telemetry
     links: Links
@@ -435,6 +440,9 @@ class Estimator(Strict):
     # the oldest fix fused (its time of validity behind the state's time: the receiver's
     # delay and the wait for the next control period); the history kept covers it
     gnss_max_age_s: Num(0.0, 2.0) = 0.25
+    # the receiver's delay: GPS_RAW_INT is stamped at its arrival (as PX4 stamps it), its time
+    # of validity is this much earlier (EKF2_GPS_DELAY's role; PX4's default 110 ms)
+    gnss_delay_s: Num(0.0, 1.0) = 0.11
 
     @model_validator(mode="after")
     def _only_fused(self) -> "Estimator":

@@ -216,6 +216,7 @@ class SimParams:
     # `is_truth` says that it carries no sensor); None only for a record built by hand, read
     # as truth
     sensing: SensingProfile | None = None
+    mocap_wiring: str = "autopilot"     # trq_wire.mocap.WIRINGS: where the mocap pose enters
 
     @property
     def dt_us(self) -> int:
@@ -306,4 +307,5 @@ def load_sim(path: Path | str, vehicle: Path | str | None = None) -> SimParams:
         crash_speed_m_s=sim.ground.crash_speed_m_s,
         crash_tilt_rad=math.radians(sim.ground.crash_tilt_deg), home_lat_deg=sim.home.lat_deg,
         home_lon_deg=sim.home.lon_deg, home_alt_m=sim.home.alt_m, log_dir=sim.log.dir,
-        log_rate_hz=sim.log.rate_hz, physics_core=sim.physics_core, sensing=sensing)
+        log_rate_hz=sim.log.rate_hz, physics_core=sim.physics_core, sensing=sensing,
+        mocap_wiring=sim.mocap_wiring)

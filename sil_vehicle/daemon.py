@@ -130,6 +130,10 @@ class VehicleDaemon:
             self.tlog = Tlog(log_dir / "vehicle.tlog")
             self.sitl.log_sink = self.flight_log
         self.codecs = {name: Codec(counters=self.sitl.counters[name]) for name in LINKS}
+        # other senders the vehicle process hosts (the simulated mocap PC): their own system
+        # and component ids and sequence numbers, on the link's port
+        self._source_codecs: dict[tuple[str, tuple[int, int]], Codec] = {}
+        self._signing_key = signing_key
         self.signed = signing_key is not None
         if signing_key is not None:
             for link_id, name in enumerate(LINKS):
@@ -222,7 +226,8 @@ class VehicleDaemon:
             on_stream = item.link in self.streams
             if not on_stream and item.link not in self.transports:
                 continue
-            data = self.codecs[item.link].encode(item.msg)
+            data = (self.codecs[item.link] if item.source is None
+                    else self._source_codec(item.link, item.source)).encode(item.msg)
             if self.tlog:
                 self.tlog.write(self._log_us(), data)
             if on_stream:                 # one peer, the stream: in order
@@ -249,6 +254,15 @@ class VehicleDaemon:
                 transport.sendto(chunk, dest)
         for link, frames in streamed.items():
             self.streams[link].write_frames(frames)
+
+    def _source_codec(self, link: str, source: tuple[int, int]) -> Codec:
+        codec = self._source_codecs.get((link, source))
+        if codec is None:
+            codec = Codec(*source)
+            if self._signing_key is not None:
+                sign_outgoing(codec.mav, self._signing_key, LINKS.index(link))
+            self._source_codecs[(link, source)] = codec
+        return codec
 
     def _live_peers(self, link: str) -> list[tuple[str, int]]:
         peers = self.peers[link]

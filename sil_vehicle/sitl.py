@@ -9,7 +9,10 @@ with its own generator (seeded from the simulation's seed, apart from the gusts'
 and the links'), sampled once per physics tick by `_sense`, the seam where an estimator plugs
 in: its readings are `readings` (the tick's) and `latest` (each sensor's newest), read by the
 raw-sensor telemetry (HIGHRES_IMU, GPS_RAW_INT, ATT_POS_MOCAP) and the flight log. Under
-`truth` no suite is built and nothing of this runs.
+`truth` no suite is built and nothing of this runs. With the motion capture wired to the
+companion (`mocap_wiring: companion`), the Sitl also hosts the simulated mocap PC (its poses
+leave from their own system, `Outgoing.source`) and its estimator takes the poses the companion
+forwards (`vision`) instead of the mocap's own.
 """
 
 from __future__ import annotations
@@ -39,6 +42,7 @@ from sil_vehicle.sensors.faults import SensorFaults
 from sil_vehicle.sensors.suite import Reading, SensorSuite
 from sil_vehicle.sensors.truth import Truth, imu_truth
 from sil_vehicle.vehicle import ActuatorCommand, Vehicle, VehicleState
+from trq_wire.mocap import MOCAP_COMPONENT_ID, MOCAP_SYSTEM_ID, VISION_ESTIMATOR_TYPE
 
 LINKS = ("gcs", "offboard")
 
@@ -57,6 +61,22 @@ SENSOR_FAULT_SEED_KEY = 34      # the sensor faults' (garbage) generator, apart 
 # no IMU reading for this long: the attitude estimate is lost (a choice: ten filter periods;
 # PX4's sensors module flags a silent IMU within a comparable time)
 IMU_TIMEOUT_US = 100_000
+# SYS_STATUS's health report (Sitl.sensor_bits): a sensor silent this long is unhealthy (a
+# choice: one second, PX4's GPS_RAW_INT reports NO_GPS after a second without a fix)
+SENSOR_TIMEOUT_US = 1_000_000
+# GPS_RAW_INT with fix type NO_GPS every second once the receiver has been silent a second (as
+# PX4's stream does: kNoGpsSendInterval)
+NO_GPS_EVERY_US = 1_000_000
+# each sensor's SYS_STATUS bit (MAV_SYS_STATUS_SENSOR): the IMU's are two
+SENSOR_BITS = {"imu": mavlink.MAV_SYS_STATUS_SENSOR_3D_GYRO | mavlink.MAV_SYS_STATUS_SENSOR_3D_ACCEL,
+               "mag": mavlink.MAV_SYS_STATUS_SENSOR_3D_MAG,
+               "baro": mavlink.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE,
+               "gnss": mavlink.MAV_SYS_STATUS_SENSOR_GPS,
+               "mocap": mavlink.MAV_SYS_STATUS_SENSOR_VISION_POSITION}
+# the estimator's (PX4's health report: attitude_estimate -> AHRS and ATTITUDE_STABILIZATION,
+# local_position_estimate -> XY_POSITION_CONTROL)
+ATTITUDE_BITS = mavlink.MAV_SYS_STATUS_AHRS | mavlink.MAV_SYS_STATUS_SENSOR_ATTITUDE_STABILIZATION
+POSITION_BITS = mavlink.MAV_SYS_STATUS_SENSOR_XY_POSITION_CONTROL
 # each reading type's sensor, as the suite and the profile name them
 SENSOR_OF = {imu.ImuReading: "imu", baro.BaroReading: "baro", mag.MagReading: "mag",
              gnss.GnssReading: "gnss", mocap.MocapReading: "mocap"}
@@ -70,6 +90,12 @@ class Outgoing:
     link: str                                  # "gcs" or "offboard"
     msg: mavlink.MAVLink_message
     to: tuple[str, int] | None = None          # None: the link's target and every known peer
+    # the sender's (system, component) when not the autopilot's: the simulated mocap PC's
+    # poses (trq_wire.mocap), which share the offboard link's port in the simulation
+    source: tuple[int, int] | None = None
+
+
+MOCAP_SOURCE = (MOCAP_SYSTEM_ID, MOCAP_COMPONENT_ID)
 
 
 # flight.csv's columns for a position source of the sensing profile (only when it has one): its
@@ -162,14 +188,23 @@ class Sitl:
         self.latest: dict[str, Reading] = {}       # each sensor's newest reading arrived
         has = set() if profile is None else {
             name for name in SENSOR_OF.values() if getattr(profile, name) is not None}
+        # the motion capture wired to the companion (trq_wire.mocap): the vehicle sends no
+        # ATT_POS_MOCAP of its own and its estimator takes the companion's forwarded copies
+        self.mocap_to_companion = "mocap" in has and sim.mocap_wiring == "companion"
+        self._visions: list[mocap.MocapReading] = []      # forwarded, for the next tick
+        self._last_vision_us: int | None = None
         # streams the tick loop never sends (not carried, or sent at a reading's arrival)
         self._not_periodic = frozenset(
             {"ATT_POS_MOCAP"} | ({"HIGHRES_IMU"} if "imu" not in has else set())
             | ({"GPS_RAW_INT"} if profile is not None else set())
             | ({"ESTIMATOR_STATUS"} if profile is None else set()))
-        self._on_arrival = {ON_ARRIVAL[n]: n for n in ON_ARRIVAL if n in has}
+        self._on_arrival = {ON_ARRIVAL[n]: n for n in ON_ARRIVAL if n in has
+                            and not (n == "mocap" and self.mocap_to_companion)}
         self._arrival_sent: dict[tuple[str, str], int] = {}     # (link, stream) -> arrival_us
         self._imu_sent: dict[str, dict[str, int]] = {link: {} for link in LINKS}
+        # per link, the IMU's samples summed since its last HIGHRES_IMU (gyro xyz, accel xyz,
+        # count, the last sample's time): each message carries the mean since the one before
+        self._imu_pending: dict[str, list] = {link: [0.0] * 6 + [0, 0] for link in LINKS}
         # HIGHRES_IMU's accelerometer and gyro: the mean over the last integration interval
         self.imu_mean: imu.ImuReading | None = None
         self._imu_sum = [0.0] * 6
@@ -191,8 +226,15 @@ class Sitl:
             self._sensed_vel = self.vehicle.state.x[3:6]    # at rest before the first tick
             self._sensed_q = self.vehicle.state.x[6:10]
             self.readings = self._sense(self.vehicle.state)
-            self.estimator = Eskf(EstimatorParams.from_profile(profile))
-            self.estimator.step(self.t_us, self.readings)
+            params = EstimatorParams.from_profile(profile)
+            if self.mocap_to_companion:
+                # the forwarded pose comes up to a control period after the mocap's latency:
+                # the delayed horizon reaches that far back
+                extra = -(-sim.dt_us * sim.ticks_per_control // params.filter_period_us)
+                params = EstimatorParams.from_profile(
+                    profile, horizon_us=params.horizon_us + extra * params.filter_period_us)
+            self.estimator = Eskf(params)
+            self.estimator.step(self.t_us, self._estimator_readings())
 
     # --- time ------------------------------------------------------------------------------
     @property
@@ -215,7 +257,7 @@ class Sitl:
         if self.suite is not None:
             # the tick's readings into the estimator, before the log and the telemetry
             self.readings = self._sense(state)
-            self.estimator.step(state.t_us, self.readings)
+            self.estimator.step(state.t_us, self._estimator_readings())
             self._estimate = None
         if state.crashed and not self._was_crashed:
             self._was_crashed = True
@@ -251,11 +293,42 @@ class Sitl:
                 self._integrate_imu(r)
         return readings
 
+    def _estimator_readings(self) -> list[Reading]:
+        """What the estimator takes at this tick: the tick's readings; with the motion capture
+        wired to the companion, not the mocap's own but the poses the companion forwarded
+        (`vision`) since the last tick."""
+        if not self.mocap_to_companion:
+            return self.readings
+        fed = [r for r in self.readings if type(r) is not mocap.MocapReading]
+        if self._visions:
+            fed += self._visions
+            self._visions = []
+        return fed
+
+    def vision(self, arrival_us: int, t_us: int, pos_ned_m, quat_wxyz,
+               pose_cov: tuple[float, ...] | None = None) -> None:
+        """A vision (motion-capture) pose arrived from the companion at `arrival_us`, stamped
+        `t_us` (its time of validity as the mocap system stamped it), with its pose covariance
+        (ODOMETRY's 21 upper-triangle entries; NaN: unknown, the estimator's own figures then).
+        The estimator takes it at the next tick, as a reading that arrived at `arrival_us`.
+        (Today's estimator fuses it at `t_us` with its configured noise; an EKF2-like one takes
+        arrival_us - EKF2_EV_DELAY and the covariance floored by EKF2_EVP_NOISE.)"""
+        self._last_vision_us = arrival_us
+        self._visions.append(mocap.MocapReading(
+            int(t_us), int(arrival_us), np.array(pos_ned_m, dtype=float),
+            np.array(quat_wxyz, dtype=float)))
+
+    def _mocap_poses(self) -> list[Outgoing]:
+        """The simulated mocap PC: each pose that arrived at this tick, as ATT_POS_MOCAP from
+        its own system to the companion (the offboard link's peer)."""
+        return [Outgoing("offboard", codec.att_pos_mocap(r), source=MOCAP_SOURCE)
+                for r in self.readings if type(r) is mocap.MocapReading]
+
     def _integrate_imu(self, r: imu.ImuReading) -> None:
         """The IMU's samples summed over each integration interval (the profile's
         imu.integration_rate_hz, PX4's IMU_INTEG_RATE; intervals end on its multiples of the
-        clock); at its end their mean is what HIGHRES_IMU carries (`imu_mean`), stamped with the
-        interval's last sample."""
+        clock); at its end their mean is `imu_mean`, and each link with HIGHRES_IMU on adds the
+        interval's sums to what its next HIGHRES_IMU carries (`_highres_imu`)."""
         acc = self._imu_sum
         g, a = r.gyro, r.accel
         for i in range(3):
@@ -266,6 +339,13 @@ class Sitl:
             n = self._imu_count
             self.imu_mean = imu.ImuReading(r.t_us, tuple(acc[i] / n for i in range(3)),
                                            tuple(acc[3 + i] / n for i in range(3)))
+            for link in LINKS:
+                if self.periods[link]["HIGHRES_IMU"]:
+                    pending = self._imu_pending[link]
+                    for i in range(6):
+                        pending[i] += acc[i]
+                    pending[6] += n
+                    pending[7] = r.t_us
             self._imu_sum = [0.0] * 6
             self._imu_count = 0
 
@@ -295,20 +375,86 @@ class Sitl:
             return codec.gnss_raw_int(r, self.home)
         return codec.att_pos_mocap(r)
 
-    def _highres_imu(self, link: str | None) -> mavlink.MAVLink_message:
-        """HIGHRES_IMU of the IMU's mean over its last integration interval and the latest
-        barometer and magnetometer readings; fields_updated marks those not yet sent on this
-        link."""
-        latest = {**self.latest, "imu": self.imu_mean}
-        sent = self._imu_sent[link] if link is not None else {}
-        bits = 0
-        for name, fields in (("imu", codec.IMU_FIELDS), ("baro", codec.BARO_FIELDS),
-                             ("mag", codec.MAG_FIELDS)):
-            r = latest.get(name)
+    def _highres_imu(self, link: str | None) -> mavlink.MAVLink_message | None:
+        """HIGHRES_IMU on `link`: the mean of the IMU's samples over the integration intervals
+        completed since the link's last HIGHRES_IMU (so that no interval is lost at any rate;
+        None when none completed: PX4 sends only on a new vehicle_imu), stamped with the last
+        sample's time, less the estimator's current gyro and accelerometer bias estimates (as
+        PX4's stream subtracts EKF2's estimator_sensor_bias); with the latest barometer and
+        magnetometer readings, fields_updated marking those not yet sent on this link. `link`
+        None (a MAV_CMD_REQUEST_MESSAGE): the last interval's mean, all fields marked."""
+        if link is None:
+            mean, sent = self.imu_mean, {}
+        else:
+            pending = self._imu_pending[link]
+            n = pending[6]
+            if not n:
+                return None
+            mean = imu.ImuReading(pending[7], tuple(pending[i] / n for i in range(3)),
+                                  tuple(pending[3 + i] / n for i in range(3)))
+            self._imu_pending[link] = [0.0] * 6 + [0, 0]
+            sent = self._imu_sent[link]
+        if self.estimator is not None:
+            e = self.estimate()
+            bg, ba = e.gyro_bias_frd_rad_s, e.accel_bias_frd_m_s2
+            mean = imu.ImuReading(mean.t_us, tuple(float(mean.gyro[i] - bg[i]) for i in range(3)),
+                                  tuple(float(mean.accel[i] - ba[i]) for i in range(3)))
+        bits = codec.IMU_FIELDS
+        for name, fields in (("baro", codec.BARO_FIELDS), ("mag", codec.MAG_FIELDS)):
+            r = self.latest.get(name)
             if r is not None and sent.get(name) != r.t_us:
                 bits |= fields
                 sent[name] = r.t_us
-        return codec.highres_imu(self.imu_mean, latest.get("baro"), latest.get("mag"), bits)
+        return codec.highres_imu(mean, self.latest.get("baro"), self.latest.get("mag"), bits)
+
+    def _no_gps(self) -> list[Outgoing]:
+        """GPS_RAW_INT NO_GPS on each link that has sent a fix and none for NO_GPS_EVERY_US
+        (called on whole seconds of the clock)."""
+        out = []
+        t = self.t_us
+        for link in LINKS:
+            last = self._arrival_sent.get((link, "GPS_RAW_INT"))
+            if self.periods[link]["GPS_RAW_INT"] and last is not None \
+                    and t - last >= NO_GPS_EVERY_US:
+                out.append(Outgoing(link, codec.gnss_raw_int_no_gps(t)))
+        return out
+
+    def sensor_bits(self) -> codec.SensorBits | None:
+        """SYS_STATUS's present / enabled / health bits as PX4's health report sets them (None
+        under `truth`: codec.TRUTH_SENSORS). Present and enabled: each sensor the profile
+        carries, the estimator's attitude and position. Healthy: a sensor heard from within
+        SENSOR_TIMEOUT_US (the IMU within IMU_TIMEOUT_US) and, for GNSS, with a 3D fix or
+        better; the IMU's gyro and accelerometer also while the estimator has not diverged; the
+        attitude while aligned and not diverged; the position while the estimator's position
+        is valid (its no-aid timeout)."""
+        if self.suite is None:
+            return None
+        present = mavlink.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS | ATTITUDE_BITS | POSITION_BITS
+        health = mavlink.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS
+        t = self.t_us
+        e = self.estimate()
+        for name in self.suite.sensors:
+            bit = SENSOR_BITS.get(name)
+            if bit is None:
+                continue
+            present |= bit
+            r = self.latest.get(name)
+            timeout = IMU_TIMEOUT_US if name == "imu" else SENSOR_TIMEOUT_US
+            last = r.arrival_us if r is not None else None
+            if name == "mocap" and self.mocap_to_companion:
+                last = self._last_vision_us       # what the autopilot gets: the forwarded
+            ok = last is not None and t - last <= timeout
+            if name == "gnss":
+                ok = ok and r.fix_type >= mavlink.GPS_FIX_TYPE_3D_FIX
+            elif name == "imu":
+                ok = ok and not e.diverged
+            if ok:
+                health |= bit
+        if e.attitude_aligned and not e.diverged:
+            health |= ATTITUDE_BITS
+        if e.position_valid and not e.diverged:
+            health |= POSITION_BITS
+        return codec.SensorBits(present, present, health)
 
     def _deliver(self, out: list[Outgoing], impaired: bool = True) -> list[Outgoing]:
         """Pass outgoing messages through the impaired links (unless `impaired` is False), and
@@ -439,13 +585,19 @@ class Sitl:
         readings = self.readings
         out = (self._arrivals() if self._on_arrival and readings
                and type(readings[-1]) in ARRIVING else [])
+        if self.mocap_to_companion and readings and type(readings[-1]) is mocap.MocapReading:
+            out += self._mocap_poses()
+        if self.t_us % NO_GPS_EVERY_US == 0 and "GPS_RAW_INT" in self._on_arrival:
+            out += self._no_gps()
         if not everything and self.tick % self._period_gcd():
             return out                  # most ticks: nothing is due (cheap test first)
         skip = self._not_periodic
         for link in LINKS:
             for stream, period in self.periods[link].items():
                 if period and (everything or self.tick % period == 0) and stream not in skip:
-                    out.append(Outgoing(link, self.build(stream, link)))
+                    msg = self.build(stream, link)
+                    if msg is not None:         # a stream PX4 would not send now
+                        out.append(Outgoing(link, msg))
         return out
 
 
@@ -496,11 +648,25 @@ class Sitl:
             return self.estimator is not None
         if stream in self._on_arrival:
             return self._on_arrival[stream] in self.latest
+        if stream in ("LOCAL_POSITION_NED", "GLOBAL_POSITION_INT") and self.estimator is not None:
+            return self._position_sendable(stream)
         return stream not in self._not_periodic
 
-    def build(self, stream: str, link: str | None = None) -> mavlink.MAVLink_message:
+    def _position_sendable(self, stream: str) -> bool:
+        """As PX4's streams under EKF2: LOCAL_POSITION_NED only while the horizontal position
+        and velocity are valid; GLOBAL_POSITION_INT once the estimator is aligned (EKF2
+        publishes vehicle_global_position while its origin is valid and its yaw aligned: a
+        dead-reckoned position keeps coming; its validity is SYS_STATUS's)."""
+        e = self.estimate()
+        if stream == "LOCAL_POSITION_NED":
+            return e.position_valid and not e.diverged
+        return e.attitude_aligned
+
+    def build(self, stream: str, link: str | None = None) -> mavlink.MAVLink_message | None:
         """The message of `stream` now (`link`: the link it goes to, for what HIGHRES_IMU
-        marks as updated). Raw sensors' messages: only when `available`."""
+        carries and marks as updated). Raw sensors' messages: only when `available`. None: a
+        message PX4 would not send now (HIGHRES_IMU with no new interval on `link`;
+        LOCAL_POSITION_NED / GLOBAL_POSITION_INT while the estimate is not valid for it)."""
         if stream == "HIGHRES_IMU":
             return self._highres_imu(link)
         if stream == "ESTIMATOR_STATUS":
@@ -522,15 +688,19 @@ class Sitl:
             rate = int(1000 * total.dropped / max(total.datagrams, 1))
             return codec.sys_status(0, rate * 10, total.dropped,
                                     (total.bad_frames, total.unknown_ids, total.other_system,
-                                     total.rejected_targets + total.stale_targets))
+                                     total.rejected_targets + total.stale_targets),
+                                    self.sensor_bits())
         if stream == "HOME_POSITION":
             return codec.home_position(self.home, s.t_us)
         if stream in ("SERVO_OUTPUT_RAW", "ACTUATOR_OUTPUT_STATUS"):
             fn = codec.servo_output_raw if stream == "SERVO_OUTPUT_RAW" else codec.actuator_output_status
             return fn(s.t_us, s.motor_pct, s.tilt_rad, self._limit)
+        if stream in ("LOCAL_POSITION_NED", "GLOBAL_POSITION_INT") \
+                and self.estimator is not None and not self._position_sendable(stream):
+            return None
         m = self.measured()
         if stream == "ODOMETRY":
-            return codec.odometry(m)
+            return codec.odometry(m, self.estimator.state_resets if self.estimator else 0)
         if stream == "ATTITUDE":
             return codec.attitude(m)
         if stream == "LOCAL_POSITION_NED":
@@ -587,6 +757,9 @@ class Sitl:
         kind = msg.get_type()
         if kind == "SET_ACTUATOR_CONTROL_TARGET":
             return self._target(link, msg)
+        if kind == "ODOMETRY":
+            self._external_vision(msg)
+            return []
         if kind == "COMMAND_LONG":
             return self._command(link, msg, sender)
         if kind == "COMMAND_INT":
@@ -618,6 +791,19 @@ class Sitl:
             return [Outgoing(link, codec.mission_count(msg.get_srcSystem(), msg.get_srcComponent()),
                              sender)]
         return []
+
+    def _external_vision(self, msg) -> None:
+        """ODOMETRY from the companion: external vision (estimator_type MOCAP or VISION, pose
+        in LOCAL_NED), taken as a vision reading arriving now when the motion capture is wired
+        to the companion; anything else is ignored."""
+        if not self.mocap_to_companion or msg.estimator_type not in (
+                VISION_ESTIMATOR_TYPE, mavlink.MAV_ESTIMATOR_TYPE_VISION) \
+                or msg.frame_id != mavlink.MAV_FRAME_LOCAL_NED:
+            return
+        pos, q = (msg.x, msg.y, msg.z), tuple(msg.q)
+        if not all(math.isfinite(v) for v in pos + q):
+            return
+        self.vision(self.t_us, int(msg.time_usec), pos, q, tuple(msg.pose_covariance))
 
     def _target(self, link: str, msg: mavlink.MAVLink_message) -> list[Outgoing]:
         counters = self.counters[link]
@@ -705,7 +891,7 @@ class Sitl:
             if wanted == mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION:
                 reply = codec.autopilot_version()
             elif wanted in _MSG_NAMES and self.available(_MSG_NAMES[wanted]):
-                reply = self.build(_MSG_NAMES[wanted], link)
+                reply = self.build(_MSG_NAMES[wanted])
             else:
                 return [self._ack(link, msg, mavlink.MAV_RESULT_UNSUPPORTED, sender)]
             return [self._ack(link, msg, ok, sender), Outgoing(link, reply, sender)]

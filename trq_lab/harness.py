@@ -73,6 +73,8 @@ from typing import TYPE_CHECKING, Callable, Iterable, Protocol
 import trq_params
 from pymavlink.dialects.v20 import common as mavlink
 
+from trq_wire.mocap import MOCAP_SYSTEM_ID
+
 if TYPE_CHECKING:
     from sil_vehicle.vehicle import VehicleState
     from trq_offboard.loop import FlightController
@@ -235,6 +237,8 @@ class InMemoryLink:
         self.received = 0
         self.bytes = 0
         self._meter = meter
+        # the simulated mocap PC's sender (its own system and component ids, trq_wire.mocap)
+        self._sources: dict[tuple[int, int], object] = {}
 
     # controller -> vehicle
     def send(self, msg) -> bool:
@@ -260,7 +264,15 @@ class InMemoryLink:
         for item in outgoing:
             if item.link != "offboard":
                 continue
-            data = self._codec.encode(item.msg)
+            if item.source is None:
+                data = self._codec.encode(item.msg)
+            else:
+                tx = self._sources.get(item.source)
+                if tx is None:
+                    tx = self._sources[item.source] = mavlink.MAVLink(
+                        None, srcSystem=item.source[0], srcComponent=item.source[1])
+                data = bytes(item.msg.pack(tx))
+                tx.seq = (tx.seq + 1) % 256
             self.bytes += len(data)
             loop.call_soon(self._receive, data)
 
@@ -270,7 +282,7 @@ class InMemoryLink:
         for msg in rx.parse_buffer(data) or []:
             if isinstance(msg, mavlink.MAVLink_bad_data) or msg.get_type() == "UNKNOWN":
                 continue
-            if msg.get_srcSystem() != 1:
+            if msg.get_srcSystem() not in (1, MOCAP_SYSTEM_ID):
                 continue
             self.received += 1
             self.on_message(msg)
@@ -542,7 +554,8 @@ def fly_inprocess(controller, sim, fault_events=(), seed: int | None = None, *,
             name=name or cfg.name,
             tilt_limit_rad=tilt_half_range(cfg.vehicle.tilt_min_rad, cfg.vehicle.tilt_max_rad),
             # nobody to yield the core to (the vehicle is this thread)
-            record=record, yield_core=False)
+            record=record, yield_core=False,
+            gnss_delay_s=cfg.fused.gnss_delay_s if cfg.fused is not None else 0.0)
 
         async def main() -> tuple[str, str]:
             return await _fly(sitl, flight, link, timeout_us=int(round(timeout_s * 1e6)),

@@ -333,7 +333,7 @@ def controller_config(c: schema.ControllerFile, file: str) -> ControllerConfig:
         f.residual_walk_m_s3_rthz, f.accel_bias_std_m_s2, f.accel_bias_walk_m_s3_rthz,
         f.pose_gate, f.dropout_s, f.imu_rate_hz, f.mocap_rate_hz, history,
         f.disturbance_input, f.autopilot_vel_std_m_s, f.position_source,
-        f.gnss_rate_hz, tuple(f.gnss_std_m))
+        f.gnss_rate_hz, tuple(f.gnss_std_m), gnss_delay_s=f.gnss_delay_s)
     lm = c.lost_motor
     lost_motor = None if lm is None or lm.detect == "off" else LostMotorConfig(
         lm.below, lm.hold_s, lm.min_command_pct, lm.yaw_weight, lm.max_body_rate_rad_s,

@@ -141,7 +141,8 @@ def main(argv: list[str] | None = None,
         name=cfg.name,
         tilt_limit_rad=tilt_half_range(cfg.vehicle.tilt_min_rad, cfg.vehicle.tilt_max_rad),
         record=clog,
-        connect_timeout_s=args.connect_timeout)
+        connect_timeout_s=args.connect_timeout,
+        gnss_delay_s=cfg.fused.gnss_delay_s if cfg.fused is not None else 0.0)
 
     async def _main() -> int:
         await link.open()

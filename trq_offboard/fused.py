@@ -139,6 +139,7 @@ class FusedConfig:
     position_source: str = "mocap"
     gnss_rate_hz: int = 10                # GPS_RAW_INT asked of the vehicle
     gnss_std_m: tuple[float, float] = (0.0, 0.0)
+    gnss_delay_s: float = 0.11            # GPS_RAW_INT's stamp less this: its time of validity
 
 
 def rotation_ned_frd(euler_rad) -> np.ndarray:

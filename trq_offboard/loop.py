@@ -47,6 +47,7 @@ from trq_offboard.records import (
     StepInfo,
 )
 from trq_offboard.reference import FlightReference
+from trq_wire.mocap import MOCAP_SYSTEM_ID
 
 log = logging.getLogger("trq_offboard")
 _sched_yield = getattr(os, "sched_yield", None)      # POSIX; None elsewhere
@@ -156,7 +157,7 @@ class OffboardFlight:
                  record: Callable[[StepRecord], None] | None = None,
                  connect_timeout_s: float = 30.0, telemetry_timeout_s: float = 2.0,
                  telemetry_lost_s: float = 10.0, ack_timeout_s: float = 1.0,
-                 yield_core: bool = True,
+                 yield_core: bool = True, gnss_delay_s: float = 0.0,
                  cpu_ns: Callable[[], int] = time.thread_time_ns,
                  process_cpu_ns: Callable[[], int] = time.process_time_ns) -> None:
         self.link = link
@@ -197,6 +198,10 @@ class OffboardFlight:
         self._fixes: list = []          # GNSS fixes in NED (records.PositionFix)
         self.home: tuple[int, int, int] | None = None     # HOME_POSITION: the origin of NED
         self._unplaced: list = []       # GPS_RAW_INT received before the home, to place
+        self.forwarded_poses = 0        # motion-capture poses forwarded to the autopilot
+        # GPS_RAW_INT is stamped at its arrival (as PX4 stamps it): the fused filter's
+        # configured receiver delay (gnss_delay_s) takes it back to its time of validity
+        self._gnss_delay_us = round(gnss_delay_s * 1e6)
         self._errors: list[np.ndarray] = []
         self._yaw_errors: list[float] = []
         self._solve_ms: list[float] = []
@@ -204,6 +209,9 @@ class OffboardFlight:
 
     # --- incoming --------------------------------------------------------------------------
     def on_message(self, msg) -> None:
+        if msg.get_srcSystem() == MOCAP_SYSTEM_ID:
+            self._mocap_pose(msg)
+            return
         if msg.get_srcComponent() != wire.VEHICLE_COMPONENT:
             # another component of system 1 (a camera, a gimbal, a second companion that the
             # autopilot routes to this link): its HEARTBEAT is not the vehicle's state
@@ -241,13 +249,13 @@ class OffboardFlight:
             if self.home is None:       # kept (a few) until the home arrives
                 self._unplaced = [*self._unplaced[-(MAX_UNPLACED_FIXES - 1):], msg]
             else:
-                fix = gnss.fix_of(msg, self.home)
+                fix = gnss.fix_of(msg, self.home, self._gnss_delay_us)
                 if fix is not None:
                     self._fixes.append(fix)
         elif kind == "HOME_POSITION" and "HOME_POSITION" in self.streams:
             self.home = gnss.home_of(msg)
             if self.home is not None:
-                fixes = [gnss.fix_of(m, self.home) for m in self._unplaced]
+                fixes = [gnss.fix_of(m, self.home, self._gnss_delay_us) for m in self._unplaced]
                 self._fixes += [f for f in fixes if f is not None]
                 self._unplaced.clear()
         elif kind == "HEARTBEAT":
@@ -260,6 +268,20 @@ class OffboardFlight:
         elif kind == "STATUSTEXT":
             text = msg.text if isinstance(msg.text, str) else msg.text.decode(errors="replace")
             log.info("vehicle: %s", text)
+
+    def _mocap_pose(self, msg) -> None:
+        """A pose from the motion-capture system (trq_wire.mocap): forwarded at once to the
+        autopilot as external vision (ODOMETRY, as PX4 takes it), and kept for the fused
+        filter when it flies on the pose."""
+        if msg.get_type() != "ATT_POS_MOCAP":
+            return
+        pose = wire.parse_mocap(msg)
+        if pose is None or not all(math.isfinite(v) for v in msg.q):
+            return
+        self.link.send(wire.vision_odometry(msg))
+        self.forwarded_poses += 1
+        if "ATT_POS_MOCAP" in self.streams:
+            self._poses.append(pose)
 
     async def _next_odometry(self) -> wire.Odometry:
         """The newest state not yet answered; waits for it (FlightError once the telemetry has

@@ -25,6 +25,8 @@ Whatever both ends must compute identically lives here, once:
     geodetic    the local NED frame around home and lat, lon degE7 / alt mm (flat earth): the
                 vehicle forms a fix's fields with it, a companion turns them back into NED
     connection  connection strings as MAVSDK and pymavlink write them, parsed in one place
+    mocap       the simulated motion-capture system's MAVLink identity (its system and
+                component ids) and the estimator type the companion forwards its pose with
     cache       the folder of generated and compiled code ($TRQ_CACHE_DIR, else
                 ~/.cache/trq-ftc), the C compiler found on PATH, and a shared library built
                 into it under a temporary name renamed into place

@@ -228,6 +228,10 @@ class Eskf:
         self._rejected = [0] * _NAID
         self._stale = 0                 # measurements older than the horizon when they came
         self._pos_resets = 0            # position resets after a lost position source
+        # state resets as EKF2 counts them for ODOMETRY.reset_counter (its quaternion, NE and D
+        # velocity and position reset counts summed): each position reset adds its NE (and D)
+        # position, and from GNSS its NE and D velocity
+        self.state_resets = 0
         self._diverged = False          # latched: checked after each filter period
         self._bg = (0.0, 0.0, 0.0)
         self._ba = (0.0, 0.0, 0.0)
@@ -350,6 +354,7 @@ class Eskf:
             self.P[3:6, :] = 0.0
             self.P[:, 3:6] = 0.0
             self.P[3:6, 3:6] = np.diag(self._r[Aid.GNSS_VEL])
+        self.state_resets += (1 if n == 2 else 2) + (2 if is_gnss else 0)
         self._pos_init = True
         if not self._baro_ref:
             self._baro_init = False     # its offset is taken again against the new height

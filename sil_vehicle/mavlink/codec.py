@@ -170,25 +170,44 @@ def heartbeat(armed: bool, crashed: bool, flying: bool, custom_mode: int = 0,
         mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_GENERIC, base, custom_mode, status, 3)
 
 
+# SYS_STATUS's sensor bits under `truth` (no sensor is modelled: they are all taken as healthy)
+TRUTH_SENSORS = (mavlink.MAV_SYS_STATUS_SENSOR_3D_GYRO | mavlink.MAV_SYS_STATUS_SENSOR_3D_ACCEL
+                 | mavlink.MAV_SYS_STATUS_SENSOR_GPS | mavlink.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS)
+
+
+@dataclass(frozen=True)
+class SensorBits:
+    """SYS_STATUS's onboard_control_sensors_present / _enabled / _health (MAV_SYS_STATUS_SENSOR
+    bits), as the vehicle's health report sets them (Sitl.sensor_bits)."""
+    present: int
+    enabled: int
+    health: int
+
+
 def sys_status(load_permille: int, drop_rate_permille: int, errors_comm: int,
-               dropped_by_kind: Iterable[int]) -> mavlink.MAVLink_message:
-    sensors = (mavlink.MAV_SYS_STATUS_SENSOR_3D_GYRO | mavlink.MAV_SYS_STATUS_SENSOR_3D_ACCEL
-               | mavlink.MAV_SYS_STATUS_SENSOR_GPS | mavlink.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS)
+               dropped_by_kind: Iterable[int],
+               bits: SensorBits | None = None) -> mavlink.MAVLink_message:
+    """SYS_STATUS; `bits` None: TRUTH_SENSORS present, enabled and healthy."""
+    if bits is None:
+        bits = SensorBits(TRUTH_SENSORS, TRUTH_SENSORS, TRUTH_SENSORS)
     e = [min(int(v), 65535) for v in dropped_by_kind][:4] + [0] * 4
     return mavlink.MAVLink_sys_status_message(
-        sensors, sensors, sensors, min(load_permille, 1000), -1 & 0xFFFF, -1, -1,
+        bits.present, bits.enabled, bits.health, min(load_permille, 1000), -1 & 0xFFFF, -1, -1,
         min(drop_rate_permille, 10000), min(errors_comm, 65535), e[0], e[1], e[2], e[3])
 
 
-def odometry(m: Measured) -> mavlink.MAVLink_message:
-    """Pose in LOCAL_NED; child frame LOCAL_NED, so the velocity is NED too; rates are body FRD."""
+def odometry(m: Measured, reset_counter: int = 0) -> mavlink.MAVLink_message:
+    """Pose in LOCAL_NED; child frame LOCAL_NED, so the velocity is NED too; rates are body FRD.
+    `reset_counter`: the estimator's state resets so far (PX4: EKF2's quaternion, NE and D
+    velocity and position reset counts summed), wrapped to a uint8."""
     nan21 = [math.nan] * 21
     estimated = m.pose_covariance is not None
     return mavlink.MAVLink_odometry_message(
         m.t_us, mavlink.MAV_FRAME_LOCAL_NED, mavlink.MAV_FRAME_LOCAL_NED, *m.pos_ned_m,
         list(m.quat_wxyz), *m.vel_ned_m_s, *m.rates_frd_rad_s,
         list(m.pose_covariance) if estimated else nan21,
-        list(m.velocity_covariance) if m.velocity_covariance is not None else nan21, 0,
+        list(m.velocity_covariance) if m.velocity_covariance is not None else nan21,
+        reset_counter & 0xFF,
         mavlink.MAV_ESTIMATOR_TYPE_AUTOPILOT if estimated else mavlink.MAV_ESTIMATOR_TYPE_NAIVE,
         m.quality_pct)
 
@@ -247,10 +266,12 @@ COG_MIN_SPEED_M_S = 0.2       # below this ground speed the course is left unkno
 
 
 def highres_imu(imu, baro, mag, fields_updated: int) -> mavlink.MAVLink_message:
-    """HIGHRES_IMU from the latest readings (`baro`, `mag` None when the profile has none: their
-    fields 0): acceleration m/s^2 (specific force) and rates rad/s body FRD, field gauss body
-    FRD, pressure hPa, pressure altitude m AMSL, temperature degC; `time_usec` the IMU sample's
-    time; `fields_updated` the HIGHRES_IMU_UPDATED bits of what is new in this message."""
+    """HIGHRES_IMU from an IMU reading (the caller's mean, bias-corrected: Sitl._highres_imu) and
+    the latest barometer and magnetometer readings (`baro`, `mag` None when the profile has none:
+    their fields 0): acceleration m/s^2 (specific force) and rates rad/s body FRD, field gauss
+    body FRD, pressure hPa, pressure altitude m AMSL, temperature degC; `time_usec` the IMU
+    reading's time (its last sample's, as PX4's vehicle_imu timestamp_sample); `fields_updated`
+    the HIGHRES_IMU_UPDATED bits of what is new in this message."""
     acc, gyro = imu.accel, imu.gyro
     m = mag.field_frd_gauss if mag is not None else (0.0, 0.0, 0.0)
     p_hpa, alt, temp = ((baro.pressure_pa / PA_PER_HPA, baro.pressure_alt_m, baro.temperature_degc)
@@ -267,21 +288,39 @@ def geodetic_e7(pos_ned_m, home: tuple[float, float, float]) -> tuple[int, int, 
                                   float(pos_ned_m[2]), *home))
 
 
+# GPS_RAW_INT's eph / epv are dilutions of precision x100 (MAVLink; PX4 sends sensor_gps.hdop /
+# vdop). The receiver model has no satellite geometry: the DOPs PX4's own simulated receiver
+# reports (SensorGpsSim: hdop 0.7, vdop 1.1), a choice with that source
+HDOP = 0.7
+VDOP = 1.1
+
+
 def gnss_raw_int(r, home: tuple[float, float, float]) -> mavlink.MAVLink_message:
-    """GPS_RAW_INT from a GNSS receiver's reading: `time_usec` its time of validity, the
-    profile's fix type and satellites, lat/lon degE7 and alt mm AMSL around home, eph/epv cm
-    (the 1-sigma errors), ground speed cm/s, course over ground cdeg (65535 below 0.2 m/s);
-    MAVLink 2 extensions: alt_ellipsoid mm (= alt: no geoid), h_acc, v_acc mm, vel_acc mm/s."""
+    """GPS_RAW_INT from a GNSS receiver's reading, filled as PX4's stream fills it:
+    `time_usec` the reading's arrival (PX4 sends sensor_gps.timestamp, when the driver published
+    it: the time of validity is the receiver's delay earlier, EKF2_GPS_DELAY), the profile's fix
+    type and satellites (used), lat/lon degE7 and alt mm AMSL around home, eph/epv the DOPs x100
+    (HDOP, VDOP), ground speed cm/s, course over ground cdeg (65535 below 0.2 m/s); MAVLink 2
+    extensions: alt_ellipsoid mm (= alt: no geoid), h_acc, v_acc mm and vel_acc mm/s (the
+    receiver's 1-sigma accuracies), hdg_acc 0 and yaw 0 (no dual-antenna heading)."""
     lat, lon, alt_mm = geodetic_e7(r.pos_ned_m, home)
     vn, ve = float(r.vel_ned_m_s[0]), float(r.vel_ned_m_s[1])
     speed = math.hypot(vn, ve)
     cog = (int(round(math.degrees(math.atan2(ve, vn)) % 360.0 * 100.0)) % 36000
            if speed > COG_MIN_SPEED_M_S else COG_UNKNOWN)
     return mavlink.MAVLink_gps_raw_int_message(
-        r.t_us, r.fix_type, lat, lon, alt_mm, _u16(r.eph_m * 100.0), _u16(r.epv_m * 100.0),
+        r.arrival_us, r.fix_type, lat, lon, alt_mm, _u16(HDOP * 100.0), _u16(VDOP * 100.0),
         _u16(speed * 100.0), cog, min(r.satellites, 255), alt_mm,
         _u32(r.eph_m * 1000.0), _u32(r.epv_m * 1000.0), _u32(r.speed_accuracy_m_s * 1000.0), 0,
         0)
+
+
+def gnss_raw_int_no_gps(t_us: int) -> mavlink.MAVLink_message:
+    """GPS_RAW_INT once a receiver has fallen silent (PX4 sends this every second after a
+    second without sensor_gps): fix type NO_GPS, the rest unknown or 0."""
+    return mavlink.MAVLink_gps_raw_int_message(
+        t_us, mavlink.GPS_FIX_TYPE_NO_GPS, 0, 0, 0, 65535, 65535, 65535, COG_UNKNOWN, 255, 0,
+        0, 0, 0, 0, 0)
 
 
 def att_pos_mocap(r) -> mavlink.MAVLink_message:

@@ -238,10 +238,30 @@ class Monitor:
                          f"{st.errors_comm}, bad frames {st.errors_count1}, unknown ids "
                          f"{st.errors_count2}, other system {st.errors_count3}, rejected/stale "
                          f"targets {st.errors_count4}")
+            lines.append(f"  health    {health_line(st)}")
         lines += self.components()
         lines.append("statustext  " + ("(none yet)" if not self.texts else ""))
         lines += [f"  {t}" for t in self.texts]
         return "\n".join(lines) + "\n"
+
+
+# SYS_STATUS's sensor bits the vehicle reports (sil_vehicle/PROTOCOL.md, the health report)
+HEALTH_BITS = (("gyro", mavlink.MAV_SYS_STATUS_SENSOR_3D_GYRO),
+               ("accel", mavlink.MAV_SYS_STATUS_SENSOR_3D_ACCEL),
+               ("mag", mavlink.MAV_SYS_STATUS_SENSOR_3D_MAG),
+               ("baro", mavlink.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE),
+               ("gps", mavlink.MAV_SYS_STATUS_SENSOR_GPS),
+               ("vision", mavlink.MAV_SYS_STATUS_SENSOR_VISION_POSITION),
+               ("attitude", mavlink.MAV_SYS_STATUS_AHRS),
+               ("position", mavlink.MAV_SYS_STATUS_SENSOR_XY_POSITION_CONTROL))
+
+
+def health_line(st) -> str:
+    """SYS_STATUS's present sensors, each ok or FAILING (its health bit clear)."""
+    present, health = st.onboard_control_sensors_present, st.onboard_control_sensors_health
+    parts = [f"{name} {'ok' if health & bit else 'FAILING'}" for name, bit in HEALTH_BITS
+             if present & bit]
+    return ", ".join(parts) if parts else "(no sensor reported)"
 
 
 def build_parser() -> argparse.ArgumentParser:

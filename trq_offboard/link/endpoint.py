@@ -12,6 +12,7 @@ from typing import Callable
 
 from pymavlink.dialects.v20 import common as mavlink
 
+from trq_wire.mocap import MOCAP_SYSTEM_ID
 from trq_wire.connection import Connection
 from trq_wire.signing import SignatureCheck, sign_outgoing
 
@@ -44,8 +45,9 @@ class MavlinkEndpoint:
         self.on_frame: Callable[[bytes], None] | None = None   # raw frames in and out (.tlog)
 
     def _trusted(self, msg) -> bool:
-        """A message of the vehicle's system, and with a key a signed, fresh one."""
-        if msg.get_srcSystem() != 1:
+        """A message of the vehicle's system or of the motion-capture system (trq_wire.mocap),
+        and with a key a signed, fresh one."""
+        if msg.get_srcSystem() not in (1, MOCAP_SYSTEM_ID):
             return False
         if self._verifier is not None and not self._verifier.accept(bytes(msg.get_msgbuf())):
             self.stats.bad += 1            # unsigned, forged or replayed: not trusted

@@ -16,6 +16,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from trq_offboard.records import ActuatorCommand, StateEstimate
 from trq_wire import actuators, frames
+from trq_wire.mocap import VISION_ESTIMATOR_TYPE
 
 VEHICLE_SYSTEM = 1
 HOME_GROUND_DOWN_M = 0.0     # PROTOCOL.md: the NED origin is home, on the ground
@@ -132,6 +133,23 @@ def parse_mocap(msg) -> tuple[int, tuple[float, float, float]] | None:
     """ATT_POS_MOCAP's (time of validity us, position m NED), None if not finite."""
     pos = (msg.x, msg.y, msg.z)
     return (int(msg.time_usec), pos) if all(math.isfinite(v) for v in pos) else None
+
+
+def vision_odometry(mocap_msg):
+    """The companion's forward of a motion-capture pose (ATT_POS_MOCAP from the mocap system)
+    to the autopilot, as PX4 takes external vision: ODOMETRY with `time_usec` the pose's own
+    stamp (its time of validity, the mocap's clock taken as the vehicle's), `frame_id`
+    LOCAL_NED (position m, `q` body FRD -> NED), `child_frame_id` BODY_FRD with no velocity or
+    rates (NaN), `pose_covariance` the mocap's when it states one (else NaN: unknown, the
+    autopilot's EKF2_EVP_NOISE / EKF2_EVA_NOISE then), `estimator_type` MOCAP, `quality` 0
+    (unknown, which EKF2_EV_QMIN's default accepts)."""
+    nan = math.nan
+    cov = list(mocap_msg.covariance)
+    pose_cov = cov if all(math.isfinite(v) for v in cov) else [nan] * 21
+    return mavlink.MAVLink_odometry_message(
+        int(mocap_msg.time_usec), mavlink.MAV_FRAME_LOCAL_NED, mavlink.MAV_FRAME_BODY_FRD,
+        mocap_msg.x, mocap_msg.y, mocap_msg.z, list(mocap_msg.q), nan, nan, nan, nan, nan, nan,
+        pose_cov, [nan] * 21, 0, VISION_ESTIMATOR_TYPE, 0)
 
 
 def is_crashed(heartbeat_msg) -> bool:

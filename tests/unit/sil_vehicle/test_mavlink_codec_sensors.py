@@ -55,9 +55,10 @@ def gnss(pos, vel, fix=6):
 
 def test_gps_raw_int_of_a_receiver_by_hand():
     m = wire(codec.gnss_raw_int(gnss((1.0, 2.0, -3.0), (3.0, 4.0, -0.5)), HOME))
-    assert m.time_usec == 1_200_000 and m.fix_type == 6 and m.satellites_visible == 24
+    # as PX4 fills it: the arrival's time, the DOPs x100 in eph / epv, the accuracies in mm
+    assert m.time_usec == 1_310_000 and m.fix_type == 6 and m.satellites_visible == 24
     assert m.alt == 33_000 and m.alt_ellipsoid == 33_000             # mm AMSL
-    assert (m.eph, m.epv) == (1, 1)                                   # cm
+    assert (m.eph, m.epv) == (70, 110)                                # HDOP 0.7, VDOP 1.1
     assert (m.h_acc, m.v_acc, m.vel_acc) == (10, 11, 50)              # mm, mm/s
     assert m.vel == 500                                               # cm/s
     assert m.cog == round(math.degrees(math.atan2(4.0, 3.0)) * 100)   # cdeg

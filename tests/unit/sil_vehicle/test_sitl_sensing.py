@@ -37,6 +37,8 @@ def command(cmd, p1=0.0, p2=0.0):
 
 def sitl(sim, profile, **changes) -> Sitl:
     p = profile if not isinstance(profile, str) else sensing_profile(profile, 1000, "test")
+    # the motion capture wired to the autopilot: these tests have no companion to forward it
+    changes.setdefault("mocap_wiring", "autopilot")
     return Sitl(sim.with_changes(sensing=p, clock_mode="realtime", **changes))
 
 
@@ -238,13 +240,15 @@ def test_highres_imu_carries_the_mean_of_its_integration_interval(sim):
     for _ in range(200):
         out = s.step()
         samples.update({r.t_us: r for r in s.readings if isinstance(r, ImuReading)})
-        sent += [o.msg for o in out if o.link == "gcs" and o.msg.get_type() == "HIGHRES_IMU"]
+        e = s.estimate()          # the biases the message was corrected with
+        sent += [(o.msg, e.gyro_bias_frd_rad_s, e.accel_bias_frd_m_s2) for o in out
+                 if o.link == "gcs" and o.msg.get_type() == "HIGHRES_IMU"]
     assert len(sent) >= 35
     period = 1_000_000 // s.suite.profile.imu.rate_hz
-    for m in sent[1:]:
+    for m, bg, ba in sent[1:]:
         window = [samples[m.time_usec - k * period] for k in range(5)]
-        acc = np.mean([w.accel for w in window], axis=0)
-        gyro = np.mean([w.gyro for w in window], axis=0)
+        acc = np.mean([w.accel for w in window], axis=0) - ba
+        gyro = np.mean([w.gyro for w in window], axis=0) - bg
         np.testing.assert_allclose([m.xacc, m.yacc, m.zacc], acc, rtol=1e-6, atol=1e-6)
         np.testing.assert_allclose([m.xgyro, m.ygyro, m.zgyro], gyro, rtol=1e-6, atol=1e-7)
         latest = samples[m.time_usec].accel
@@ -292,7 +296,8 @@ def test_gps_raw_int_of_the_rtk_receiver_at_its_arrival(sim):
     assert [r.arrival_us for r in arrived] == expected and len(expected) >= 14
     assert len(sent) == (len(expected) + 1) // 2
     for t, m, r in sent:
-        assert t == r.arrival_us == m.time_usec + gnss.delay_us and m.time_usec == r.t_us
+        # stamped as PX4 stamps it: the arrival (the time of validity is the delay earlier)
+        assert t == r.arrival_us == m.time_usec == r.t_us + gnss.delay_us
         assert m.fix_type == mavlink.GPS_FIX_TYPE_RTK_FIXED == 6
         assert m.satellites_visible == gnss.satellites
         n, e, d = geodetic_to_ned(m.lat * 1e-7, m.lon * 1e-7, m.alt * 1e-3, *home)
@@ -327,7 +332,8 @@ def test_a_request_for_a_raw_sensor_message(sim):
 
 def test_the_log_keeps_the_position_sources_latest_sample(sim, exact):
     rows = []
-    s = Sitl(sim.with_changes(sensing=exact, clock_mode="realtime"), log_sink=rows.append)
+    s = Sitl(sim.with_changes(sensing=exact, clock_mode="realtime",
+                              mocap_wiring="autopilot"), log_sink=rows.append)
     assert s.log_columns == list(LOG_COLUMNS) + ["mocap_t_us", "mocap_pos_n_m",
                                                  "mocap_pos_e_m", "mocap_pos_d_m"] \
         + list(ESTIMATE_LOG_COLUMNS)

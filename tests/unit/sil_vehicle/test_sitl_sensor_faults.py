@@ -35,7 +35,8 @@ def inject(s, unit, kind, instance=1, p4=float("nan")):
 
 def vehicle(sim, profile="mocap", rows=None) -> Sitl:
     p = sensing_profile(profile, 1000, "test")
-    return Sitl(sim.with_changes(sensing=p, clock_mode="realtime"),
+    # the motion capture wired to the autopilot: no companion here to forward it
+    return Sitl(sim.with_changes(sensing=p, clock_mode="realtime", mocap_wiring="autopilot"),
                 log_sink=rows.append if rows is not None else None)
 
 

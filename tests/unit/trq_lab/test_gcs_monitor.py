@@ -69,3 +69,15 @@ def test_monitor_without_a_controller_says_so():
         mon = Monitor(client, 45.0, "udpout:127.0.0.1:9")
         _feed(client, _frames(1, 1, _vehicle_heartbeat(armed=False)))
         assert "component   (no offboard controller heard)" in mon.render()
+
+
+def test_the_health_line_names_each_present_sensor_ok_or_failing():
+    from pymavlink.dialects.v20 import common as mavlink
+
+    from trq_lab.gcs.monitor import health_line
+
+    gps, xy = mavlink.MAV_SYS_STATUS_SENSOR_GPS, mavlink.MAV_SYS_STATUS_SENSOR_XY_POSITION_CONTROL
+    gyro = mavlink.MAV_SYS_STATUS_SENSOR_3D_GYRO
+    st = mavlink.MAVLink_sys_status_message(gps | xy | gyro, gps | xy | gyro, xy | gyro,
+                                            0, 0, 0, 0, 0, 0, 0, 0, 0, 0)
+    assert health_line(st) == "gyro ok, gps FAILING, position ok"

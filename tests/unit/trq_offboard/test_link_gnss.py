@@ -34,7 +34,8 @@ def reading(pos, fix=6, eph=0.0104, epv=0.0112):
                                  (-250.0, 180.5, -30.0), (0.004, 0.003, -0.0004)])
 def test_a_fix_comes_back_to_the_vehicles_ned_within_the_rounding(pos):
     home = gnss.home_of(wire(codec.home_position(HOME, 0)))
-    fix = gnss.fix_of(wire(codec.gnss_raw_int(reading(pos), HOME)), home)
+    # stamped at its arrival (as PX4 stamps it); the companion's delay takes it back
+    fix = gnss.fix_of(wire(codec.gnss_raw_int(reading(pos), HOME)), home, 110_000)
     assert fix.t_us == 1_200_000                          # its time of validity, not arrival
     step = e7_step_m(home[0])
     for got, want, s in zip(fix.pos_ned_m, pos, step):
@@ -71,14 +72,17 @@ def test_below_a_3d_fix_is_no_position(fix_type):
                        home) is not None
 
 
-def test_the_noise_falls_back_to_eph_epv_then_unknown():
+def test_the_noise_is_h_acc_v_acc_never_the_dops():
+    """eph / epv are HDOP / VDOP x100 (PX4 fills them so): a fix without h_acc / v_acc states
+    no error, whatever its DOPs."""
     home = gnss.home_of(codec.home_position(HOME, 0))
     msg = codec.gnss_raw_int(reading((1.0, 2.0, -3.0), eph=2.0, epv=4.0), HOME)
-    msg.h_acc = msg.v_acc = 0                               # MAVLink 1: no extensions
     fix = gnss.fix_of(msg, home)
     assert fix.std_ned_m[0] == pytest.approx(2.0, rel=1e-4)
     assert fix.std_ned_m[2] == pytest.approx(4.0, rel=1e-4)
-    msg.eph = msg.epv = 65535                               # unknown
+    assert fix.t_us == msg.time_usec                        # no delay configured
+    msg.h_acc = msg.v_acc = 0                               # MAVLink 1: no extensions
+    assert (msg.eph, msg.epv) == (70, 110)
     assert all(math.isnan(s) for s in gnss.fix_of(msg, home).std_ned_m)
 
 

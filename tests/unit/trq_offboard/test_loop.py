@@ -511,6 +511,8 @@ def test_gnss_fixes_wait_for_the_home_and_then_come_in_ned():
     home = (51.5246, -0.134, 30.0)
     flight, _, ctl = make_flight()
     flight.streams = {"HIGHRES_IMU": 125, "GPS_RAW_INT": 10, "HOME_POSITION": 1}
+    # GPS_RAW_INT stamped at its arrival, 110 ms after validity: the configured delay undoes it
+    flight._gnss_delay_us = 110_000
 
     def fix(t_us, pos, fix_type=6):
         r = GnssReading(t_us, t_us + 110_000, pos, (0.0, 0.0, 0.0), fix_type, 24, 0.01, 0.01,
