@@ -205,6 +205,7 @@ class Sitl:
         if self.suite is not None:
             # the tick's readings into the estimator, before the log and the telemetry
             self.readings = self._sense(state)
+            self.estimator.set_at_rest(state.landed)     # its zero-velocity update's condition
             self.estimator.step(state.t_us, self.readings)
             self._estimate = None
         if state.crashed and not self._was_crashed:
