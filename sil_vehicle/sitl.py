@@ -14,6 +14,8 @@ raw-sensor telemetry (HIGHRES_IMU, GPS_RAW_INT, ATT_POS_MOCAP) and the flight lo
 
 from __future__ import annotations
 
+import dataclasses
+
 import math
 from dataclasses import dataclass
 from typing import Callable, Iterable
@@ -30,7 +32,7 @@ from sil_vehicle.mavlink import codec
 from sil_vehicle.mavlink.codec import Measured, RxCounters
 from sil_vehicle.failsafe import FailsafeLander
 from sil_vehicle.impair import Impairment
-from sil_vehicle.mavlink.params import Param, ParamTable
+from sil_vehicle.mavlink.params import Param, ParamTable, ekf2_params
 from sil_vehicle.sensors import baro, gnss, imu, mag, mocap
 from sil_vehicle.sensors import faults as sensor_faults
 from sil_vehicle.sensors.faults import SensorFaults
@@ -185,6 +187,15 @@ class Sitl:
             self.readings = self._sense(self.vehicle.state)
             self.estimator = Eskf(EstimatorParams.from_profile(profile))
             self.estimator.step(self.t_us, self.readings)
+            self._ekf2 = profile.estimator     # the estimator's EKF2 parameters in force
+            self.params.extend(ekf2_params(lambda: self._ekf2, self._retune))
+
+    def _retune(self, tuning) -> None:
+        """The estimator's EKF2 parameters set from a ground station (PARAM_SET): the filter
+        retuned in flight, its state kept (Eskf.retune refuses what needs a restart)."""
+        profile = dataclasses.replace(self.sim.sensing, estimator=tuning)
+        self.estimator.retune(EstimatorParams.from_profile(profile))
+        self._ekf2 = tuning
 
     # --- time ------------------------------------------------------------------------------
     @property

@@ -195,6 +195,58 @@ class Eskf:
     def __init__(self, params: EstimatorParams, *, compiled: bool = True) -> None:
         self.params = p = params
         self._f, self.how = load(d.functions(p.gravity_m_s2), compiled)
+        self._configure(p)
+        capacity = p.horizon_us // p.filter_period_us + 2
+        self._imu_buf: deque = deque()          # (t_end_us, dA (3,), dV (3,))
+        self._meas: list[deque] = [deque() for _ in range(_NAID)]
+        # the output predictor, which also sums the IMU samples over each filter period: in C
+        # when `compiled` (the same numbers as the Python reference, bit for bit)
+        self.out = (native_predictor if compiled else OutputPredictor)(
+            gravity_m_s2=p.gravity_m_s2, imu_period_us=p.imu_period_us,
+            filter_period_us=p.filter_period_us, tau_vel_s=p.tau_vel_s, tau_pos_s=p.tau_pos_s,
+            capacity=capacity)
+        # the filter
+        self.x = np.zeros(d.NX)
+        self.x[Q_.start] = 1.0
+        self.P = np.zeros((d.NDX, d.NDX))
+        self.t_filter_us = 0
+        # alignment
+        self._t_first: int | None = None
+        self._t_align = 0
+        self._sum_f = np.zeros(3)
+        self._sum_m = np.zeros(3)
+        self._n_f = self._n_m = 0
+        self.aligned = False
+        self._pos_init = False
+        self._baro_init = False
+        self._baro_ref = p.height_ref == "baro"
+        # health and diagnostics
+        self._now = -1
+        self._gyro = (0.0, 0.0, 0.0)
+        self._last_pos_fuse_us: int | None = None
+        self.innovations: list[Innovation | None] = [None] * _NAID
+        self._fused = [0] * _NAID
+        # the IMU period being summed: its time, the axes that clipped
+        self._acc_us = 0
+        self._clip = [False, False, False]
+        # EKF2's accel bias learning inhibition and the zero-velocity update
+        self._ang_filt = self._acc_filt = 0.0
+        self._ba_inhibit = [False, False, False]
+        self._ba_prev_var = [0.0, 0.0, 0.0]
+        self.at_rest = False
+        self._at_rest_prev = False
+        self._last_zvu_us = 0
+        self._last_vel_fuse_us: int | None = None
+        self.zvu_fused = 0
+        self._rejected = [0] * _NAID
+        self._stale = 0                 # measurements older than the horizon when they came
+        self._pos_resets = 0            # position resets after a lost position source
+        self._diverged = False          # latched: checked after each filter period
+        self._bg = (0.0, 0.0, 0.0)
+        self._ba = (0.0, 0.0, 0.0)
+
+    def _configure(self, p: EstimatorParams) -> None:
+        """What the parameters give: the noise, gates, delays and which sources are taken."""
         self._dt_f = dt_f = p.filter_period_us * 1e-6
         self._period_us = p.filter_period_us
         self._close_us = p.filter_period_us - p.imu_period_us // 2    # a period's end
@@ -229,61 +281,33 @@ class Eskf:
                       p.gnss_vel_noise_d_m_s or 0.0)) ** 2,
             np.full(1, (p.baro_noise_m or 0.0) ** 2),
             np.full(3, (p.mag_noise_gauss or 0.0) ** 2))
-        capacity = p.horizon_us // p.filter_period_us + 2
-        self._imu_buf: deque = deque()          # (t_end_us, dA (3,), dV (3,))
-        self._meas: list[deque] = [deque() for _ in range(_NAID)]
-        # the output predictor, which also sums the IMU samples over each filter period: in C
-        # when `compiled` (the same numbers as the Python reference, bit for bit)
-        self.out = (native_predictor if compiled else OutputPredictor)(
-            gravity_m_s2=p.gravity_m_s2, imu_period_us=p.imu_period_us,
-            filter_period_us=p.filter_period_us, tau_vel_s=p.tau_vel_s, tau_pos_s=p.tau_pos_s,
-            capacity=capacity)
-        # the filter
-        self.x = np.zeros(d.NX)
-        self.x[Q_.start] = 1.0
-        self.P = np.zeros((d.NDX, d.NDX))
-        self.t_filter_us = 0
-        # alignment
-        self._t_first: int | None = None
-        self._t_align = 0
-        self._sum_f = np.zeros(3)
-        self._sum_m = np.zeros(3)
-        self._n_f = self._n_m = 0
-        self.aligned = False
-        self._pos_init = False
-        self._baro_init = False
-        self._baro_ref = p.height_ref == "baro"
-        # health and diagnostics
-        self._now = -1
-        self._gyro = (0.0, 0.0, 0.0)
-        self._last_pos_fuse_us: int | None = None
-        self.innovations: list[Innovation | None] = [None] * _NAID
-        self._fused = [0] * _NAID
         # which measurements it takes (the others are dropped on arrival)
         # (EKF2: no magnetometer while the vision's yaw is fused)
         self._takes = {Aid.MOCAP_POS: p.has_mocap, Aid.GNSS_POS: p.has_gnss, Aid.BARO: p.has_baro,
                        Aid.MAG: p.has_mag and not self._ev_yaw}
         # each delayed kind's configured delay (None: the reading's own time of validity)
         self._delay = {Aid.MOCAP_POS: p.ev_delay_us, Aid.GNSS_POS: p.gnss_delay_us}
-        # the IMU period being summed: its time, the axes that clipped
-        self._acc_us = 0
-        self._clip = [False, False, False]
-        # EKF2's accel bias learning inhibition and the zero-velocity update
         self._alpha_abl = min(max(dt_f / p.abl_tau_s, 0.0), 1.0)
-        self._ang_filt = self._acc_filt = 0.0
-        self._ba_inhibit = [False, False, False]
-        self._ba_prev_var = [0.0, 0.0, 0.0]
-        self.at_rest = False
-        self._at_rest_prev = False
-        self._last_zvu_us = 0
-        self._last_vel_fuse_us: int | None = None
-        self.zvu_fused = 0
-        self._rejected = [0] * _NAID
-        self._stale = 0                 # measurements older than the horizon when they came
-        self._pos_resets = 0            # position resets after a lost position source
-        self._diverged = False          # latched: checked after each filter period
-        self._bg = (0.0, 0.0, 0.0)
-        self._ba = (0.0, 0.0, 0.0)
+
+    def retune(self, params: EstimatorParams) -> None:
+        """New parameters in flight (a ground station's PARAM_SET), the filter's state kept. What
+        sizes or places the filter (its horizon, period, IMU rate, height reference, the
+        sources it fuses, gravity, the initial figures) is EKF2's reboot_required: refused."""
+        old = self.params
+        fixed = ("horizon_us", "filter_period_us", "imu_rate_hz", "height_ref", "has_mocap",
+                 "has_gnss", "has_baro", "has_mag", "gravity_m_s2", "ev_yaw_only",
+                 "gnss_markov_ne_m", "gnss_markov_d_m")
+        changed = [k for k in fixed if getattr(old, k) != getattr(params, k)]
+        if changed:
+            raise ValueError(f"{', '.join(changed)} changed: takes effect at the next start "
+                             "(EKF2: reboot required)")
+        bb_ref = self._a[2]
+        self.params = params
+        self._configure(params)
+        self._a[2] = bb_ref
+        dt_f = self._dt_f
+        self.out._k_v = dt_f / min(max(params.tau_vel_s, dt_f), 10.0)
+        self.out._k_p = dt_f / min(max(params.tau_pos_s, dt_f), 10.0)
 
     # ---------------------------------------------------------------- per physics tick
 
