@@ -199,7 +199,7 @@ def test_zero_velocity_update_on_the_ground():
 def ekf2_world(tmp_path, **estimator):
     """A sensing profile whose sensors are what EKF2's defaults describe: IMU white noise of
     EKF2_GYR_NOISE / EKF2_ACC_NOISE per 10 ms period (density = noise sqrt(0.01 s)), bias walks
-    of EKF2_*_B_NOISE likewise, turn-on biases inside EKF2_*BIAS_INIT, no vibration, motion
+    of EKF2_*_B_NOISE likewise, turn-on biases of EKF2_*BIAS_INIT, no vibration, motion
     capture noise at EKF2_EVP_NOISE / EKF2_EVA_NOISE with the latency EKF2_EV_DELAY says, the
     barometer at EKF2_BARO_NOISE without drift; and the filter tuned with the mocap profile's
     EKF2 settings, changed by `estimator`."""
@@ -209,7 +209,7 @@ def ekf2_world(tmp_path, **estimator):
                     "accel_noise_density_m_s2_rthz": 0.35 * root,
                     "gyro_bias_random_walk_rad_s2_rthz": 0.001 * root,
                     "accel_bias_random_walk_m_s3_rthz": 0.003 * root,
-                    "gyro_turn_on_bias_rad_s": 0.01, "accel_turn_on_bias_m_s2": 0.1,
+                    "gyro_turn_on_bias_rad_s": 0.1, "accel_turn_on_bias_m_s2": 0.2,
                     "gyro_vibration_rad_s": 0.0, "accel_vibration_m_s2": 0.0},
             "mocap": {"position_noise_m": 0.01, "attitude_noise_rad": 0.05,
                       "dropout_probability": 0.0},
