@@ -1,9 +1,10 @@
 """The estimator (sil_vehicle.estimator.eskf), tuned by the generator's figures (the machinery
 against exact noise figures and times of validity; EKF2's tuning: test_estimator_ekf2.py), on
-readings of the real sensor models (SensorSuite, seeded) along an analytic trajectory whose position, velocity, attitude, rates and
-specific force are known exactly: errors against truth per profile and against the filter's own
-variances, bias recovery, fusion of a delayed measurement at its time of validity, the output
-predictor without the horizon's lag, innovation gating, health flags, and determinism."""
+readings of the real sensor models (SensorSuite, seeded) along an analytic trajectory whose
+position, velocity, attitude, rates and specific force are known exactly: errors against truth
+per profile and against the filter's own variances, bias recovery, fusion of a delayed
+measurement at its time of validity, the output predictor without the horizon's lag, innovation
+gating, health flags, and determinism."""
 
 from __future__ import annotations
 
