@@ -75,8 +75,8 @@ height beside a baro reference too (EKF2_GPS_CTRL's VPOS bit, through a bias est
 
 Health: attitude aligned (after the initialisation); position valid (a position measurement
 fused within `no_aid_timeout_us` of the filter's time; a position source rejected by its gate
-for longer than `reset_timeout_us` resets the position to it, as EKF2 does; horizontally only when the
-barometer keeps the height); diverged (a state or variance not finite, a variance above
+for longer than `reset_timeout_us` resets the position to it, as EKF2 does; horizontally only
+when the barometer keeps the height); diverged (a state or variance not finite, a variance above
 `max_var` or below zero; checked after each filter period and latched). The variances the
 Estimate carries are the filter's, at the delayed horizon (EKF2 reports the same).
 """

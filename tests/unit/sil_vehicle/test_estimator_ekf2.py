@@ -20,7 +20,7 @@ from sil_vehicle.config import sensing_profile
 from sil_vehicle.estimator import derivation as d
 from sil_vehicle.estimator.eskf import Aid, Eskf
 from sil_vehicle.estimator.params import EstimatorParams
-from sil_vehicle.sensors.imu import ImuReading, ImuState
+from sil_vehicle.sensors.imu import ImuReading
 from sil_vehicle.sensors.mocap import MocapReading
 from sil_vehicle.sensors.profile import load_sensing
 from sil_vehicle.sensors.suite import SensorSuite
