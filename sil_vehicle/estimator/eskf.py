@@ -25,8 +25,9 @@ takes it, or with those None (the generator tuning) the reading's exact one; the
 magnetometer, undelayed, wait in their buffers for the horizon too.
 
 EKF2's behaviours (ekf2 and generator tunings alike, unless said):
-- vision as EKF2_EV_CTRL allows: horizontal and vertical position (bits 0, 1; an axis left out is
-  fused with no weight), yaw (bit 3; with `ev_yaw_only`, EKF2's way, the vision's heading alone
+- vision as EKF2_EV_CTRL allows, its reported variances (when the reading carries them) floored
+  by EKF2_EVP_NOISE / EKF2_EVA_NOISE, as EKF2_EV_NOISE_MD 0: horizontal and vertical position
+  (bits 0, 1; an axis left out is fused with no weight), yaw (bit 3; with `ev_yaw_only`, EKF2's way, the vision's heading alone
   and the magnetometer not fused; otherwise the whole attitude beside the magnetometer);
 - GNSS noise from the fix's reported accuracies floored by the parameters (use_reported_accuracy:
   max(eph, EKF2_GPS_P_NOISE), max(epv, 1.5 EKF2_GPS_P_NOISE), max(s_acc, EKF2_GPS_V_NOISE));
@@ -597,10 +598,16 @@ class Eskf:
                 self._reset_position(r, t_us)
                 return
             if aid == Aid.MOCAP_POS:
-                if not self._fuse(aid, t_us, r.pos_ned_m):
+                # the reported variances floored by the parameters (EKF2_EV_NOISE_MD 0)
+                rp = ra = None
+                if r.pos_var_m2 is not None:
+                    rp = np.maximum(self._r[aid], r.pos_var_m2)
+                if r.att_var_rad2 is not None:
+                    ra = np.maximum(self._r[Aid.MOCAP_ATT], r.att_var_rad2)
+                if not self._fuse(aid, t_us, r.pos_ned_m, rp):
                     self._reset_if_lost(r)
                 if self._ev_att:
-                    self._fuse(Aid.MOCAP_ATT, t_us, r.quat_wxyz, fn=self._att_fn)
+                    self._fuse(Aid.MOCAP_ATT, t_us, r.quat_wxyz, ra, fn=self._att_fn)
                 return
             r_pos, r_vel = self._gnss_r(r)
             if not self._fuse(aid, t_us, r.pos_ned_m, r_pos) and self._reset_if_lost(r):

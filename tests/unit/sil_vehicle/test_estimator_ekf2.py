@@ -123,11 +123,13 @@ def level_imu(t_us: int, dt_us: int = 1000, clipped=(False, False, False)) -> Im
     return ImuReading(t_us, (0.0, 0.0, 0.0), (0.0, 0.0, -G), dt_us, clipped)
 
 
-def pose(t_us: int, latency_us: int = 10_000) -> MocapReading:
-    return MocapReading(t_us - latency_us, t_us, np.zeros(3), np.array((1.0, 0.0, 0.0, 0.0)))
+def pose(t_us: int, latency_us: int = 10_000, var_m2: float | None = None) -> MocapReading:
+    return MocapReading(t_us - latency_us, t_us, np.zeros(3), np.array((1.0, 0.0, 0.0, 0.0)),
+                        var_m2)
 
 
-def static_filter(seconds: float, *, skip=(), clip_at=(), at_rest=False, **overrides):
+def static_filter(seconds: float, *, skip=(), clip_at=(), at_rest=False, pose_var=None,
+                  **overrides):
     """The mocap-tuned filter on a vehicle at rest (exact readings, pose at 100 Hz); the IMU
     samples at `skip` (ms) missing, those at `clip_at` (ms) clipped on x. Returns the filter
     and the periods it processed (t_end, dt_us, clip)."""
@@ -149,7 +151,7 @@ def static_filter(seconds: float, *, skip=(), clip_at=(), at_rest=False, **overr
             rs.append(level_imu(t, t - last, (ms in clip_at, False, False)))
             last = t
         if ms % 10 == 0 and ms >= 20:
-            rs.append(pose(t))
+            rs.append(pose(t, var_m2=pose_var))
         est.step(t, rs)
     return est, periods
 
@@ -186,6 +188,18 @@ def test_a_clipped_axis_inflates_its_noise_and_holds_its_bias():
     assert P[v + 1, v + 1] == pytest.approx(clean.P[v + 1, v + 1], rel=0.05)
     # after: released, learnt again
     assert est._ba_inhibit == [False, False, False] and est.P[k, v] != 0.0
+
+
+def test_the_poses_reported_variance_is_floored_by_the_parameter():
+    """EKF2_EV_NOISE_MD 0: the larger of the reported variance and EKF2_EVP_NOISE^2."""
+    told, _ = static_filter(0.5, pose_var=0.2 ** 2)
+    floored, _ = static_filter(0.5, pose_var=1e-8)
+    none, _ = static_filter(0.5)
+    s_told = told.innovations[Aid.MOCAP_POS].variance
+    s_floor = floored.innovations[Aid.MOCAP_POS].variance
+    assert np.all(s_told > 0.2 ** 2)
+    np.testing.assert_array_equal(s_floor, none.innovations[Aid.MOCAP_POS].variance)
+    assert np.all(s_floor < 2 * 0.01 ** 2 + 1e-4)
 
 
 def test_zero_velocity_update_on_the_ground():
