@@ -52,7 +52,8 @@ def test_defaults_are_px4s_and_scaled_as_ekf2_scales_them():
     assert p.gnss_markov_ne_m == 0.0 and p.baro_drift_sigma_m == 0.0   # no generator figure
     assert (p.gnss_delay_us, p.horizon_us) == (110_000, 110_000)  # EKF2_GPS_DELAY
     assert (p.no_aid_timeout_us, p.reset_timeout_us) == (5_000_000, 7_000_000)
-    assert p.height_ref == "gnss"                                  # EKF2_HGT_REF 1
+    assert p.height_ref == "baro"              # the gnss profile's EKF2_HGT_REF 0
+    assert EstimatorParams.from_profile(load_sensing("rtk", 1000)).height_ref == "gnss"  # PX4's
     assert p.use_reported_accuracy
     # EKF2_GYR_NOISE is the rate's std per filter period: var(dA) = (dt 0.015)^2 per 10 ms
     est = Eskf(p)

@@ -49,11 +49,12 @@ def test_overrides_and_refusals():
 
 @pytest.mark.parametrize("name, ref, ekf2_ref", [("mocap", "mocap", "mocap"),
                                                  ("rtk", "gnss", "gnss"),
-                                                 ("gnss", "baro", "gnss")])
+                                                 ("gnss", "baro", "baro")])
 def test_height_reference_by_profile(name, ref, ekf2_ref):
     """The generator's rule: the motion capture's height where there is one, an RTK receiver's
-    (centimetres, below the barometer's drift), else the barometer's. EKF2's: EKF2_HGT_REF
-    (PX4's default GNSS; the mocap profile sets vision)."""
+    (centimetres, below the barometer's drift), else the barometer's. EKF2's: EKF2_HGT_REF as
+    the profile sets it (PX4's default GNSS under rtk; the barometer under gnss, vision under
+    mocap)."""
     prof = load_sensing(name, 1000)
     assert EstimatorParams.generator(prof).height_ref == ref
     assert EstimatorParams.from_profile(prof).height_ref == ekf2_ref
