@@ -70,6 +70,8 @@ class EstimatorParams:
     gnss_markov_ne_m: float = 0.0                   # the correlated part (state bn); EKF2: none
     gnss_markov_d_m: float = 0.0
     gnss_markov_tau_s: float = 60.0
+    gnss_hgt_walk_m_s_rthz: float = 0.0             # bn_d's walk while the barometer keeps
+                                                    # the height (EKF2's GNSS height bias)
     gnss_vel_noise_ne_m_s: float | None = None      # EKF2_GPS_V_NOISE
     gnss_vel_noise_d_m_s: float | None = None       # EKF2: 1.5 EKF2_GPS_V_NOISE
     baro_noise_m: float | None = None               # EKF2_BARO_NOISE
@@ -211,8 +213,12 @@ class EstimatorParams:
             f.update(mocap_pos_noise_m=e.EKF2_EVP_NOISE, mocap_att_noise_rad=e.EKF2_EVA_NOISE)
             delays.append(f["ev_delay_us"])
         if profile.gnss is not None:
+            # EKF2 fuses the GNSS height beside a barometer reference through a bias estimate
+            # (its gps_hgt_bias_nsd, 0.13 m/s/rthz, a constant there): here the receiver's down
+            # error state bn_d as a walk of that density, no Gauss-Markov pull
             f.update(gnss_pos_noise_ne_m=e.EKF2_GPS_P_NOISE,
                      gnss_pos_noise_d_m=1.5 * e.EKF2_GPS_P_NOISE,
+                     gnss_hgt_walk_m_s_rthz=GNSS_HGT_BIAS_NSD, gnss_markov_tau_s=math.inf,
                      gnss_vel_noise_ne_m_s=e.EKF2_GPS_V_NOISE,
                      gnss_vel_noise_d_m_s=1.5 * e.EKF2_GPS_V_NOISE)
             delays.append(f["gnss_delay_us"])
@@ -286,6 +292,11 @@ class EstimatorParams:
 BARO_BIAS_NSD = 0.13
 """EKF2's baro_bias_nsd (m/s/rthz; src/modules/ekf2/EKF/common.h, a constant there): the
 process noise of its barometer offset estimate."""
+
+
+GNSS_HGT_BIAS_NSD = 0.13
+"""EKF2's gps_hgt_bias_nsd (m/s/rthz; src/modules/ekf2/EKF/common.h, a constant there): the
+process noise of its GNSS height bias estimate."""
 
 
 def _imu_of(profile: SensingProfile):
