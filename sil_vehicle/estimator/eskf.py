@@ -261,7 +261,10 @@ class Eskf:
             (dt_f * p.gyro_bias_noise_rad_s2) ** 2, (dt_f * p.accel_bias_noise_m_s3) ** 2,
             p.gnss_markov_ne_m ** 2 * (1 - a * a), p.gnss_markov_d_m ** 2 * (1 - a * a)
             + (p.gnss_hgt_walk_m_s_rthz ** 2 * dt_f if p.height_ref == "baro" else 0.0),
-            p.baro_drift_sigma_m ** 2 * (1 - a_b * a_b) + p.baro_walk_m_s_rthz ** 2 * dt_f))
+            p.baro_drift_sigma_m ** 2 * (1 - a_b * a_b)
+            + (p.baro_walk_m_s_rthz ** 2 * dt_f if p.height_ref != "baro" else 0.0)))
+        # (EKF2: the height reference's own bias is not estimated; the other sources' biases
+        # walk with its bias estimators' densities)
         self._m_ned = np.array(p.mag_field_ned_gauss)
         # one gyro sample's variance: EKF2_GYR_NOISE is the rate's std over a filter period
         self._gyro_var = p.gyro_noise_rad_s ** 2 * dt_f * p.imu_rate_hz

@@ -77,7 +77,8 @@ class EstimatorParams:
     baro_noise_m: float | None = None               # EKF2_BARO_NOISE
     baro_drift_sigma_m: float = 0.0                 # the offset state bb (Gauss-Markov)
     baro_drift_tau_s: float = 300.0
-    baro_walk_m_s_rthz: float = 0.0                 # a random walk added to bb (EKF2's)
+    baro_walk_m_s_rthz: float = 0.0                 # a random walk added to bb (EKF2's),
+                                                    # unless the barometer is the reference
     mag_noise_gauss: float | None = None            # EKF2_MAG_NOISE
     mag_field_ned_gauss: tuple[float, float, float] = (0.0, 0.0, 0.0)
     mag_declination_rad: float = 0.0
