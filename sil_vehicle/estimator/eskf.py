@@ -198,7 +198,7 @@ class Eskf:
         self._f, self.how = load(d.functions(p.gravity_m_s2), compiled)
         self._configure(p)
         capacity = p.horizon_us // p.filter_period_us + 2
-        self._imu_buf: deque = deque()          # (t_end_us, dA (3,), dV (3,))
+        self._imu_buf: deque = deque()          # (t_end_us, dA (3,), dV (3,), dt_us, clipped)
         self._meas: list[deque] = [deque() for _ in range(_NAID)]
         # the output predictor, which also sums the IMU samples over each filter period: in C
         # when `compiled` (the same numbers as the Python reference, bit for bit)
