@@ -32,7 +32,8 @@ from trq_params.loader import (Choice, Flag, Int, Invalid, Items, NameOrPath, Nu
 
 __all__ = ["Strict", "VehicleFile", "SimFile", "ControllerFile", "EsoFile", "MotorEvent",
            "ServoEvent", "WindEvent", "SensorEvent", "ClearEvent", "ScenarioFile",
-           "CampaignFile", "FlightTarget", "FLIGHT_METRICS", "SensingFile", "STREAMS",
+           "CampaignFile", "FlightTarget", "FLIGHT_METRICS", "SensingFile", "Ekf2", "EKF2_KEYS",
+           "STREAMS",
            "HPIPM_OPTIONS", "DELAY_BUFFER_MS", "parse_endpoint", "throttle_curve"]
 
 
@@ -1057,6 +1058,62 @@ class Mocap(Strict):
     dropout_windows: Annotated[tuple[DropoutWindow, ...], BeforeValidator(_windows)]
 
 
+class Ekf2(Strict):
+    """The vehicle's estimator tuned as PX4 ships EKF2 (sil_vehicle.estimator.params reads it;
+    docs/estimator.md). Every key is EKF2's parameter of that name, in its unit, with its
+    range and its default from PX4's src/modules/ekf2 module.yaml and params_*.yaml (PX4-Autopilot
+    main, 2024-2025; docs/decisions/2026-12-05-ekf2-defaults.md cites the files). `tuning:
+    generator` instead matches the filter to the profile's own sensor figures (the simulator's
+    noise, delays and drift: a study's option, the inverse crime, never a default); the EKF2_*
+    keys are then unused. EKF2_RESET_TOUT is EKF2's reset_timeout_max (7 s, a constant there,
+    not a parameter)."""
+    tuning: Choice("ekf2", "generator") = "ekf2"
+    EKF2_GYR_NOISE: Num(0.0001, 0.1) = 0.015         # rad/s, per sample at the filter's rate
+    EKF2_ACC_NOISE: Num(0.01, 1.0) = 0.35            # m/s^2, likewise
+    EKF2_GYR_B_NOISE: Num(0.0, 0.01) = 0.001         # rad/s^2
+    EKF2_ACC_B_NOISE: Num(0.0, 0.01) = 0.003         # m/s^3
+    EKF2_GBIAS_INIT: Num(0.0, 0.2) = 0.1             # rad/s
+    EKF2_ABIAS_INIT: Num(0.0, 0.5) = 0.2             # m/s^2
+    EKF2_ANGERR_INIT: Num(0.0, 0.5) = 0.1            # rad
+    EKF2_ABL_ACCLIM: Num(20.0, 200.0) = 25.0         # m/s^2
+    EKF2_ABL_GYRLIM: Num(2.0, 20.0) = 3.0            # rad/s
+    EKF2_ABL_TAU: Num(0.1, 1.0) = 0.5                # s
+    EKF2_EV_CTRL: Int(0, 15) = 0                     # bits: 0 hpos, 1 vpos, 2 vel, 3 yaw
+    EKF2_EV_DELAY: Num(0.0, 300.0) = 0.0             # ms
+    EKF2_EVP_NOISE: Num(0.01, 10.0) = 0.1            # m
+    EKF2_EVA_NOISE: Num(0.05, 10.0) = 0.1            # rad
+    EKF2_EVP_GATE: Num(1.0, 100.0) = 5.0             # SD
+    EKF2_GPS_DELAY: Num(0.0, 300.0) = 110.0          # ms
+    EKF2_GPS_P_NOISE: Num(0.01, 10.0) = 0.5          # m
+    EKF2_GPS_V_NOISE: Num(0.01, 5.0) = 0.3           # m/s
+    EKF2_GPS_P_GATE: Num(1.0, 100.0) = 5.0           # SD
+    EKF2_GPS_V_GATE: Num(1.0, 100.0) = 5.0           # SD
+    EKF2_BARO_NOISE: Num(0.01, 15.0) = 3.5           # m
+    EKF2_BARO_GATE: Num(1.0, 100.0) = 5.0            # SD
+    EKF2_MAG_NOISE: Num(0.001, 1.0) = 0.05           # gauss
+    EKF2_MAG_GATE: Num(1.0, 100.0) = 3.0             # SD
+    EKF2_HGT_REF: Int(0, 3) = 1                      # 0 baro, 1 GNSS, 2 range (none here), 3 vision
+    EKF2_NOAID_TOUT: Int(500_000, 10_000_000) = 5_000_000     # us
+    EKF2_RESET_TOUT: Int(500_000, 30_000_000) = 7_000_000     # us
+    EKF2_TAU_VEL: Num(0.01, 1.0) = 0.25              # s
+    EKF2_TAU_POS: Num(0.1, 1.0) = 0.25               # s
+
+    @model_validator(mode="after")
+    def _delays(self) -> "Ekf2":
+        for key in ("EKF2_EV_DELAY", "EKF2_GPS_DELAY"):
+            if getattr(self, key) > DELAY_BUFFER_MS:
+                raise Invalid(f"estimator.{key}", getattr(self, key),
+                              f"a delay in [0, {DELAY_BUFFER_MS}] ms (the estimator's buffer)")
+        if self.EKF2_HGT_REF == 2:
+            raise Invalid("estimator.EKF2_HGT_REF", 2, "0 (baro), 1 (GNSS) or 3 (vision): this "
+                                                       "vehicle carries no range sensor")
+        return self
+
+
+EKF2_KEYS = tuple(k for k in Ekf2.model_fields if k.startswith("EKF2_"))
+"""The EKF2 parameters the vehicle's estimator takes, in the schema's order."""
+
+
 _SENSORS = ("imu", "baro", "mag", "gnss", "mocap")
 
 
@@ -1069,6 +1126,8 @@ class SensingFile(Strict):
     mag: Optional[Mag]
     gnss: Optional[Gnss]
     mocap: Optional[Mocap]
+    # the vehicle's estimator: EKF2's parameters (PX4's defaults when left out)
+    estimator: Ekf2 = Ekf2()
 
     @model_validator(mode="after")
     def _timing(self, info: ValidationInfo) -> "SensingFile":

@@ -17,6 +17,8 @@ forwards (`vision`) instead of the mocap's own.
 
 from __future__ import annotations
 
+import dataclasses
+
 import math
 from dataclasses import dataclass
 from typing import Callable, Iterable
@@ -35,7 +37,7 @@ from sil_vehicle.failsafe import FailsafeLander
 from sil_vehicle import land_detector
 from sil_vehicle.land_detector import LandDetector
 from sil_vehicle.impair import Impairment
-from sil_vehicle.mavlink.params import Param, ParamTable
+from sil_vehicle.mavlink.params import Param, ParamTable, ekf2_params
 from sil_vehicle.sensors import baro, gnss, imu, mag, mocap
 from sil_vehicle.sensors import faults as sensor_faults
 from sil_vehicle.sensors.faults import SensorFaults
@@ -226,15 +228,29 @@ class Sitl:
             self._sensed_vel = self.vehicle.state.x[3:6]    # at rest before the first tick
             self._sensed_q = self.vehicle.state.x[6:10]
             self.readings = self._sense(self.vehicle.state)
-            params = EstimatorParams.from_profile(profile)
-            if self.mocap_to_companion:
-                # the forwarded pose comes up to a control period after the mocap's latency:
-                # the delayed horizon reaches that far back
-                extra = -(-sim.dt_us * sim.ticks_per_control // params.filter_period_us)
-                params = EstimatorParams.from_profile(
-                    profile, horizon_us=params.horizon_us + extra * params.filter_period_us)
-            self.estimator = Eskf(params)
+            self.estimator = Eskf(self._estimator_params(profile))
             self.estimator.step(self.t_us, self._estimator_readings())
+            self._ekf2 = profile.estimator     # the estimator's EKF2 parameters in force
+            self.params.extend(ekf2_params(lambda: self._ekf2, self._retune))
+
+    def _estimator_params(self, profile) -> EstimatorParams:
+        """The estimator's parameters for `profile`; with the motion capture wired through the
+        companion, its delayed horizon reaching a control period further back (the forwarded
+        pose comes up to a control period after the mocap's latency)."""
+        params = EstimatorParams.from_profile(profile)
+        if self.mocap_to_companion:
+            sim = self.sim
+            extra = -(-sim.dt_us * sim.ticks_per_control // params.filter_period_us)
+            params = EstimatorParams.from_profile(
+                profile, horizon_us=params.horizon_us + extra * params.filter_period_us)
+        return params
+
+    def _retune(self, tuning) -> None:
+        """The estimator's EKF2 parameters set from a ground station (PARAM_SET): the filter
+        retuned in flight, its state kept (Eskf.retune refuses what needs a restart)."""
+        profile = dataclasses.replace(self.sim.sensing, estimator=tuning)
+        self.estimator.retune(self._estimator_params(profile))
+        self._ekf2 = tuning
 
     # --- time ------------------------------------------------------------------------------
     @property
@@ -257,6 +273,7 @@ class Sitl:
         if self.suite is not None:
             # the tick's readings into the estimator, before the log and the telemetry
             self.readings = self._sense(state)
+            self.estimator.set_at_rest(state.landed)     # its zero-velocity update's condition
             self.estimator.step(state.t_us, self._estimator_readings())
             self._estimate = None
         if state.crashed and not self._was_crashed:
@@ -311,12 +328,20 @@ class Sitl:
         `t_us` (its time of validity as the mocap system stamped it), with its pose covariance
         (ODOMETRY's 21 upper-triangle entries; NaN: unknown, the estimator's own figures then).
         The estimator takes it at the next tick, as a reading that arrived at `arrival_us`.
-        (Today's estimator fuses it at `t_us` with its configured noise; an EKF2-like one takes
-        arrival_us - EKF2_EV_DELAY and the covariance floored by EKF2_EVP_NOISE.)"""
+        The EKF2-like estimator takes it at arrival_us - EKF2_EV_DELAY, its variances floored by
+        EKF2_EVP_NOISE / EKF2_EVA_NOISE (sil_vehicle.estimator.eskf)."""
         self._last_vision_us = arrival_us
+        pos_var = att_var = None
+        if pose_cov is not None:
+            # the diagonal of the upper triangle (x, y, z, roll, pitch, yaw): the largest of
+            # each triple, as EKF2 takes one variance per vision position and one for its yaw
+            pv = [pose_cov[i] for i in (0, 6, 11)]
+            av = [pose_cov[i] for i in (15, 18, 20)]
+            pos_var = max(pv) if all(math.isfinite(v) for v in pv) else None
+            att_var = max(av) if all(math.isfinite(v) for v in av) else None
         self._visions.append(mocap.MocapReading(
             int(t_us), int(arrival_us), np.array(pos_ned_m, dtype=float),
-            np.array(quat_wxyz, dtype=float)))
+            np.array(quat_wxyz, dtype=float), pos_var, att_var))
 
     def _mocap_poses(self) -> list[Outgoing]:
         """The simulated mocap PC: each pose that arrived at this tick, as ATT_POS_MOCAP from

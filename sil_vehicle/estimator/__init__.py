@@ -6,8 +6,9 @@ random numbers; time as integer microseconds.
                 each measurement's h and H, built once into casadi.Function objects
     codegen     those functions generated as C, compiled once into a cached library, called
                 through ctypes (CasADi's interpreter without a compiler)
-    params      EstimatorParams: the filter's noise figures, gates and time constants, matched
-                to a sensing profile by default
+    params      EstimatorParams: the filter's noise figures, gates, delays and time constants,
+                from EKF2's parameters (PX4's defaults unless the profile's `estimator:` sets
+                them), or matched to the profile's sensors (`tuning: generator`, for studies)
     predictor   the output predictor: the delayed state carried to `now` at IMU rate, with
                 EKF2's complementary correction; it sums the IMU samples per filter period too
     predictor.c  its per-sample step in C (the same numbers as the Python one, bit for bit),

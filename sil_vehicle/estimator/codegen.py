@@ -2,7 +2,7 @@
 (the vehicle's own small equivalent of trq_offboard.nmpc.cache, which it may not import).
 
     calls, how = load(functions(g))     # how: "compiled" | "cached" | "interpreted"
-    x_next, P_next = calls["predict"](x, P, dA, dV, dt, a_gnss, qd)
+    x_next, P_next = calls["predict"](x, P, dA, dV, dt, a, qd)
 
 All functions go into one C file (casadi.CodeGenerator), built once into a shared library with
 trq_wire.cache.build_library and called through ctypes with preallocated buffers (an `Evaluator`

@@ -93,7 +93,7 @@ class OutputPredictor:
     def __init__(self, *, gravity_m_s2: float, imu_period_us: int, filter_period_us: int,
                  tau_vel_s: float, tau_pos_s: float, capacity: int) -> None:
         self._g = gravity_m_s2
-        self._dt_imu = imu_period_us * 1e-6
+        self._dt_imu = self._dt_nominal = imu_period_us * 1e-6
         self._dt_f = dt_f = filter_period_us * 1e-6
         self._k_v = dt_f / min(max(tau_vel_s, dt_f), 10.0)
         self._k_p = dt_f / min(max(tau_pos_s, dt_f), 10.0)
@@ -125,9 +125,12 @@ class OutputPredictor:
         """The filter's gyro and accelerometer bias estimates, which `sample` removes."""
         self._bg, self._ba = tuple(bg), tuple(ba)
 
-    def sample(self, t_us: int, gyro, accel) -> None:
+    def sample(self, t_us: int, gyro, accel, dt_s: float | None = None) -> None:
         """One IMU sample (as `propagate`, with the biases of `set_biases`), added to the
-        period's sums too."""
+        period's sums too. `dt_s`: the sample's own interval (EKF2's delta_ang_dt), kept for
+        the samples after it; None: the last one (at first the IMU's nominal period)."""
+        if dt_s is not None:
+            self._dt_imu = dt_s
         self.propagate(t_us, gyro, accel, self._bg, self._ba)
         self._sum(gyro, accel)
 
@@ -212,7 +215,7 @@ class OutputPredictor:
         qy = aw * by - ax * bz + ay * bw + az * bx
         qz = aw * bz + ax * by - ay * bx + az * bw
         s = 2.0 if qw >= 0.0 else -2.0
-        gain = 0.5 * self._dt_imu / max((self.t_us - t_delayed_us) * 1e-6, self._dt_f)
+        gain = 0.5 * self._dt_nominal / max((self.t_us - t_delayed_us) * 1e-6, self._dt_f)
         self._c_ang = (s * qx * gain, s * qy * gain, s * qz * gain)
         ev0, ev1, ev2 = v[0] - v_o[0], v[1] - v_o[1], v[2] - v_o[2]
         ep0, ep1, ep2 = p[0] - p_o[0], p[1] - p_o[1], p[2] - p_o[2]
@@ -258,8 +261,10 @@ class NativeOutputPredictor(OutputPredictor):
         self._s[S_DT] = self._dt_imu
         self._s[S_G] = self._g
 
-    def sample(self, t_us: int, gyro, accel) -> None:
+    def sample(self, t_us: int, gyro, accel, dt_s: float | None = None) -> None:
         s = self._s
+        if dt_s is not None:
+            s[S_DT] = dt_s
         s[S_GYRO:S_GYRO + 3] = gyro
         s[S_ACCEL:S_ACCEL + 3] = accel
         self._c(s)

@@ -1,13 +1,19 @@
 """The vehicle's parameters over the MAVLink parameter protocol: the settings a user changes
 while flying (wind, gusts, motor effectiveness and time-varying fault terms, motors off, stuck
-servos). Every value is a REAL32; a value outside its range is refused and nothing changes.
+servos) and, under a sensing profile, its estimator's EKF2_* parameters (`ekf2_params`; their
+ranges and defaults are the schema's, trq_params.schema.Ekf2). Every value is a REAL32; a value
+outside its range, or one the setter refuses (a ValueError: an EKF2 parameter that needs a
+restart), is refused and nothing changes.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Callable
+from typing import Callable, get_args
+
+from trq_params.loader import range_of
+from trq_params.schema import EKF2_KEYS, Ekf2
 
 from sil_vehicle.vehicle import Vehicle
 
@@ -97,6 +103,32 @@ def build_params(vehicle: Vehicle) -> tuple[Param, ...]:
     return tuple(out)
 
 
+def ekf2_params(get: Callable[[], Ekf2], set_: Callable[[Ekf2], None]) -> tuple[Param, ...]:
+    """The estimator's EKF2_* parameters: `get` gives the tuning in force, `set_` applies a new
+    one (raising ValueError to refuse it). An integer parameter takes a whole REAL32 only."""
+    out = []
+    for key in EKF2_KEYS:
+        info = Ekf2.model_fields[key]
+        rng = range_of(info.annotation) or next(
+            (m for m in info.metadata if hasattr(m, "lo")), None)
+        whole = get_args(info.annotation)[:1] == (int,) or info.annotation is int
+
+        def get_(v, key=key) -> float:
+            return float(getattr(get(), key))
+
+        def put(v, value: float, key=key, whole=whole) -> None:
+            if whole and not float(value).is_integer():
+                raise ValueError(f"{key}={value:g}: a whole number")
+            now = get().model_dump()
+            now[key] = int(value) if whole else float(value)
+            set_(Ekf2.model_validate(now))
+
+        lo, hi = (rng.lo, rng.hi) if rng is not None else (-math.inf, math.inf)
+        doc = (info.description or key).split("\n")[0]
+        out.append(Param(key, lo, hi, "", doc, get_, put))
+    return tuple(out)
+
+
 class ParamTable:
     def __init__(self, vehicle: Vehicle, extra: tuple[Param, ...] = ()) -> None:
         self.vehicle = vehicle
@@ -120,5 +152,13 @@ class ParamTable:
         p = self.params[i]
         if not math.isfinite(value) or not p.lo <= value <= p.hi:
             return i, f"{name}={value:g} out of [{p.lo:g}, {p.hi:g}]"
-        p.set(self.vehicle, value)
+        try:
+            p.set(self.vehicle, value)
+        except ValueError as exc:
+            return i, f"{name}={value:g} refused: {exc}"
         return i, None
+
+    def extend(self, extra: tuple[Param, ...]) -> None:
+        """More parameters, after those already in the table."""
+        self.params = self.params + tuple(extra)
+        self._index = {p.name: i for i, p in enumerate(self.params)}

@@ -93,6 +93,11 @@ class ImuReading:
     t_us: int                           # time of validity (no delay: also its arrival)
     gyro: Sequence[float]               # (3,) body FRD rates, rad/s
     accel: Sequence[float]              # (3,) specific force, body FRD, m/s^2
+    # the sample's interval (us; 0: the IMU's nominal period) and which axes clipped in it
+    # (the names the IMU's integrating model fills; the estimator reads them)
+    dt_us: int = 0
+    accel_clipped: tuple[bool, bool, bool] = (False, False, False)
+    gyro_clipped: tuple[bool, bool, bool] = (False, False, False)
 
     @property
     def arrival_us(self) -> int:

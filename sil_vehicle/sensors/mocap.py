@@ -65,6 +65,10 @@ class MocapReading:
     arrival_us: int
     pos_ned_m: np.ndarray           # (3,)
     quat_wxyz: np.ndarray           # (4,)
+    # the variances the pose reports, when its message carries them (VISION_POSITION_ESTIMATE's
+    # covariance; None: none): the estimator floors them by EKF2_EVP_NOISE / EKF2_EVA_NOISE
+    pos_var_m2: float | None = None
+    att_var_rad2: float | None = None
 
 
 def initial(params: MocapParams, rng: np.random.Generator) -> MocapState:

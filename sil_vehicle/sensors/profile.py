@@ -21,7 +21,7 @@ from pathlib import Path
 
 import trq_params
 from trq_params import loader
-from trq_params.schema import DELAY_BUFFER_MS, SensingFile
+from trq_params.schema import DELAY_BUFFER_MS, Ekf2, SensingFile
 
 from sil_vehicle.sensors.baro import BaroParams
 from sil_vehicle.sensors.gnss import GnssParams
@@ -42,6 +42,9 @@ class SensingProfile:
     mag: MagParams | None
     gnss: GnssParams | None
     mocap: MocapParams | None
+    # the vehicle's estimator's tuning (the file's `estimator:`; PX4's EKF2 defaults when left
+    # out): read by sil_vehicle.estimator.params, never by a sensor model
+    estimator: Ekf2 = Ekf2()
 
     @property
     def dt_us(self) -> int:
@@ -82,4 +85,5 @@ def load_sensing(name_or_path: str | Path, physics_rate_hz: int) -> SensingProfi
                             c.attitude_noise_rad, c.dropout_probability,
                             tuple((w.start_ms * 1000, w.end_ms * 1000)
                                   for w in c.dropout_windows))
-    return SensingProfile(f.name, str(path), physics_rate_hz, imu, baro, mag, gnss, mocap)
+    return SensingProfile(f.name, str(path), physics_rate_hz, imu, baro, mag, gnss, mocap,
+                          f.estimator)

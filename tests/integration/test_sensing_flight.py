@@ -44,10 +44,12 @@ def test_a_mocap_flight_flies_on_the_estimate_and_logs_the_pose(tmp_path):
     for a in "ned":
         err = mocap[f"mocap_pos_{a}_m"][late][ok] - mocap[f"pos_{a}_m"][at[ok]]
         assert np.max(np.abs(err)) < 0.005        # 0.5 mm noise: ten sigma
-    # the estimate the controller flew on, against the truth, while armed: millimetres
+    # the estimate the controller flew on, against the truth, while armed: within three times
+    # the vision noise the filter is told (EKF2_EVP_NOISE 0.01 m in the mocap profile; its
+    # largest error is the take-off's transient, docs/decisions/2026-12-05-ekf2-defaults.md)
     for a in "ned":
         err = mocap[f"est_pos_{a}_m"][armed] - mocap[f"pos_{a}_m"][armed]
-        assert np.max(np.abs(err)) < 0.01, a
+        assert np.max(np.abs(err)) < 0.03, a
 
 
 def test_the_motion_capture_lost_in_flight_the_vehicle_descends_on_its_estimate(tmp_path):

@@ -19,8 +19,8 @@ def test_compiled_equals_interpreted():
     x[6:10] /= np.linalg.norm(x[6:10])
     A = rng.normal(size=(d.NDX, d.NDX))
     P = A @ A.T
-    args = {"predict": (x, P, rng.normal(size=3), rng.normal(size=3), 0.01, 0.99,
-                        rng.uniform(0, 1e-3, 7)),
+    args = {"predict": (x, P, rng.normal(size=3), rng.normal(size=3), 0.01,
+                        np.array((0.99, 0.97, 1.3)), rng.uniform(0, 1e-3, d.NQD)),
             "fuse_mag": (x, P, rng.normal(size=3), np.full(3, 0.01), rng.normal(size=3)),
             "h_baro": (x, x[6:10], np.zeros(3))}
     for name, a in args.items():

@@ -13,7 +13,7 @@ import pytest
 
 from sil_vehicle.estimator import derivation as d
 from sil_vehicle.estimator.codegen import load
-from sil_vehicle.frames import quat_to_dcm
+from sil_vehicle.frames import quat_to_dcm, quat_to_euler
 from sil_vehicle.sensors.noise import perturb_quat
 
 G = 9.80665
@@ -68,15 +68,20 @@ def nominal_np(x, dA, dV, dt, a):
     """The nominal equations (derivation's docstring), with the exact quaternion exponential."""
     q = perturb_quat(x[6:10], dA - x[10:13] * dt)
     v = x[3:6] + np.array(quat_to_dcm(*x[6:10])) @ (dV - x[13:16] * dt) + np.array((0, 0, G)) * dt
-    return np.concatenate((x[0:3] + (x[3:6] + v) * dt / 2, v, q, x[10:16], a * x[16:19], x[19:]))
+    a_gnss, a_baro, bb_ref = a
+    return np.concatenate((x[0:3] + (x[3:6] + v) * dt / 2, v, q, x[10:16], a_gnss * x[16:19],
+                           bb_ref + a_baro * (x[19:] - bb_ref)))
+
+
+A_IN = np.array((0.99, 0.97, 1.3))      # (a_gnss, a_baro, bb_ref)
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_nominal_matches_numpy(fns, seed):
     rng = np.random.default_rng(seed)
     x, dA, dV = random_state(rng), rng.normal(size=3) * 0.05, rng.normal(size=3) * 0.1
-    got = np.array(fns["nominal"](x, dA, dV, 0.01, 0.99)).ravel()
-    np.testing.assert_allclose(got, nominal_np(x, dA, dV, 0.01, 0.99), rtol=0, atol=1e-10)
+    got = np.array(fns["nominal"](x, dA, dV, 0.01, A_IN)).ravel()
+    np.testing.assert_allclose(got, nominal_np(x, dA, dV, 0.01, A_IN), rtol=0, atol=1e-10)
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
@@ -84,7 +89,7 @@ def test_transition_against_finite_differences(fns, seed):
     """F = d diff(f(x), f(inject(x, dx))) / d dx and G (noise on dA, dV), column by column."""
     rng = np.random.default_rng(seed)
     x, dA, dV = random_state(rng), rng.normal(size=3) * 0.05, rng.normal(size=3) * 0.1
-    dt, a = 0.01, 0.995
+    dt, a = 0.01, np.array((0.995, 0.98, 0.7))
     F, Gm = (np.array(m) for m in fns["transition"](x, dA, dV, dt, a))
     f0 = nominal_np(x, dA, dV, dt, a)
     F_fd = np.zeros((d.NDX, d.NDX))
@@ -107,7 +112,7 @@ def h_np(name, x, q_ref, m_ned):
     R = np.array(quat_to_dcm(*x[6:10]))
     return {"mocap_pos": x[0:3], "gnss_pos": x[0:3] + x[16:19], "gnss_vel": x[3:6],
             "mocap_att": qlog(qmul(qconj(q_ref), x[6:10])), "baro": np.array((-x[2] + x[19],)),
-            "mag": R.T @ m_ned}[name]
+            "mag": R.T @ m_ned, "ev_yaw": np.array((quat_to_euler(*x[6:10])[2],))}[name]
 
 
 @pytest.mark.parametrize("name", d.MEASUREMENTS)
@@ -134,15 +139,15 @@ def spd(rng, n=d.NDX):
 def test_predict_is_the_covariance_formula(calls, fns):
     rng = np.random.default_rng(3)
     x, P = random_state(rng), spd(rng)
-    dA, dV, qd = rng.normal(size=3) * 0.05, rng.normal(size=3) * 0.1, rng.uniform(1e-6, 1e-4, 7)
-    x1, P1 = (m.copy() for m in calls["predict"](x, P, dA, dV, 0.01, 0.99, qd))
-    F, Gm = (np.array(m) for m in fns["transition"](x, dA, dV, 0.01, 0.99))
-    Qd = np.diag(np.concatenate((np.zeros(9), np.full(3, qd[2]), np.full(3, qd[3]),
-                                 (qd[4], qd[4], qd[5], qd[6]))))
-    want = F @ P @ F.T + Gm @ np.diag(np.repeat(qd[:2], 3)) @ Gm.T + Qd
+    dA, dV, qd = rng.normal(size=3) * 0.05, rng.normal(size=3) * 0.1, rng.uniform(1e-6, 1e-4, d.NQD)
+    x1, P1 = (m.copy() for m in calls["predict"](x, P, dA, dV, 0.01, A_IN, qd))
+    F, Gm = (np.array(m) for m in fns["transition"](x, dA, dV, 0.01, A_IN))
+    Qd = np.diag(np.concatenate((np.zeros(9), np.full(3, qd[4]), np.full(3, qd[5]),
+                                 (qd[6], qd[6], qd[7], qd[8]))))
+    want = F @ P @ F.T + Gm @ np.diag(np.r_[np.repeat(qd[0], 3), qd[1:4]]) @ Gm.T + Qd
     np.testing.assert_allclose(P1, want, rtol=1e-12, atol=1e-14)
     np.testing.assert_array_equal(P1, P1.T)
-    np.testing.assert_allclose(x1.ravel(), nominal_np(x, dA, dV, 0.01, 0.99), atol=1e-10)
+    np.testing.assert_allclose(x1.ravel(), nominal_np(x, dA, dV, 0.01, A_IN), atol=1e-10)
 
 
 @pytest.mark.parametrize("name", d.MEASUREMENTS)
@@ -155,6 +160,10 @@ def test_fusion_is_the_joseph_update(calls, fns, name):
     if name == "mocap_att":
         z = perturb_quat(x[6:10], np.array((0.01, -0.02, 0.005)))
         y_want = qlog(qmul(qconj(x[6:10]), z))
+    elif name == "ev_yaw":
+        z = perturb_quat(x[6:10], np.array((0.01, -0.02, 0.005)))
+        dyaw = quat_to_euler(*z)[2] - quat_to_euler(*x[6:10])[2]
+        y_want = np.array((math.atan2(math.sin(dyaw), math.cos(dyaw)),))
     else:
         z = h.ravel() + rng.normal(size=m) * 0.1
         y_want = z - h.ravel()

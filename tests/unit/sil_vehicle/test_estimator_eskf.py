@@ -1,8 +1,10 @@
-"""The estimator (sil_vehicle.estimator.eskf) on readings of the real sensor models
-(SensorSuite, seeded) along an analytic trajectory whose position, velocity, attitude, rates and
-specific force are known exactly: errors against truth per profile and against the filter's own
-variances, bias recovery, fusion of a delayed measurement at its time of validity, the output
-predictor without the horizon's lag, innovation gating, health flags, and determinism."""
+"""The estimator (sil_vehicle.estimator.eskf), tuned by the generator's figures (the machinery
+against exact noise figures and times of validity; EKF2's tuning: test_estimator_ekf2.py), on
+readings of the real sensor models (SensorSuite, seeded) along an analytic trajectory whose
+position, velocity, attitude, rates and specific force are known exactly: errors against truth
+per profile and against the filter's own variances, bias recovery, fusion of a delayed
+measurement at its time of validity, the output predictor without the horizon's lag, innovation
+gating, health flags, and determinism."""
 
 from __future__ import annotations
 
@@ -114,7 +116,7 @@ def run(prof, readings, every_us: int = 10_000, **overrides):
     # the trajectory starts in the air, not on the ground at the origin: a barometer-referenced
     # height starts where it is (the motion capture and an RTK receiver give their own)
     overrides.setdefault("init_pos_d_m", truth_at(0).pos_ned_m[2])
-    est = Eskf(EstimatorParams.from_profile(prof, **overrides))
+    est = Eskf(EstimatorParams.generator(prof, **overrides))
     out = []
     for t, rs in readings:
         est.step(t, rs)
@@ -215,7 +217,7 @@ def test_a_delayed_measurement_is_fused_at_its_time_of_validity():
     assert sum(isinstance(r, GnssReading) for _, rs in moved for r in rs) >= 18
 
     def states(rs, **kw):
-        est = Eskf(EstimatorParams.from_profile(prof, **kw))
+        est = Eskf(EstimatorParams.generator(prof, **kw))
         got = {}
         for t, r in rs:
             est.step(t, r)
@@ -271,7 +273,7 @@ def test_gating_rejects_an_outlier_and_counts_it():
             new.append(r)
         bad.append((t, tuple(new)))
     clean, _ = run(prof, readings)
-    est = Eskf(EstimatorParams.from_profile(prof))
+    est = Eskf(EstimatorParams.generator(prof))
     ratio = None
     for t, rs in bad:
         est.step(t, rs)
@@ -288,12 +290,21 @@ def test_gating_rejects_an_outlier_and_counts_it():
 
 def test_a_position_source_rejected_too_long_resets_the_position():
     """The GNSS jumps 3 m north for good at 8 s (a new datum): rejected by the gate, then, after
-    the no-aid timeout (1 s here), taken and the position reset to it."""
+    the reset timeout (1 s here; EKF2's 7 s by default), taken and the position reset to it;
+    the fix that reset the velocity is not fused again as a measurement."""
     prof, readings = flight("rtk")
     shifted = [(t, tuple(replace(r, pos_ned_m=r.pos_ned_m + np.array((3.0, 0.0, 0.0)))
                          if isinstance(r, GnssReading) and r.t_us >= 8_000_000 else r
                          for r in rs)) for t, rs in readings]
-    est = Eskf(EstimatorParams.from_profile(prof, no_aid_timeout_us=1_000_000))
+    est = Eskf(EstimatorParams.generator(prof, reset_timeout_us=1_000_000))
+    fuse_vel = []
+    real = est._fuse
+
+    def spy(aid, t_us, z, r=None, fn=None):
+        if aid == Aid.GNSS_VEL:
+            fuse_vel.append(t_us)
+        return real(aid, t_us, z, r, fn)
+    est._fuse = spy
     seen = {}
     for t, rs in shifted:
         est.step(t, rs)
@@ -302,6 +313,7 @@ def test_a_position_source_rejected_too_long_resets_the_position():
     before, after = seen[8_900_000], seen[13_900_000]
     assert before.rejected[Aid.GNSS_POS] >= 5 and before.pos_resets == 0
     assert after.pos_resets == 1 and after.position_valid
+    assert len(fuse_vel) == len(set(fuse_vel))      # no fix's velocity fused twice
     err = after.pos_ned_m - truth_at(13_900_000).pos_ned_m
     assert abs(err[0] - 3.0) < 0.1 and abs(err[1]) < 0.1
 
@@ -311,7 +323,7 @@ def test_position_valid_lapses_in_a_long_dropout():
     prof = load_sensing("mocap", 1000)
     prof = replace(prof, mocap=replace(prof.mocap, dropout_windows_us=((3_000_000, 4_500_000),)))
     suite = SensorSuite(prof, np.random.default_rng(3))
-    est = Eskf(EstimatorParams.from_profile(prof, no_aid_timeout_us=500_000))
+    est = Eskf(EstimatorParams.generator(prof, no_aid_timeout_us=500_000))
     flags = {}
     for k in range(6000):
         t = k * 1000
@@ -328,7 +340,7 @@ def test_position_valid_lapses_in_a_long_dropout():
 
 def test_divergence_is_flagged_and_latched():
     prof, readings = flight("mocap")
-    est = Eskf(EstimatorParams.from_profile(prof))
+    est = Eskf(EstimatorParams.generator(prof))
     for t, rs in readings[:1000]:
         est.step(t, rs)
     assert not est.output().diverged
@@ -358,8 +370,8 @@ def test_interpreted_functions_give_the_same_filter():
     """Without compiled code (CasADi's interpreter, the same Functions) the filter is the same to
     rounding, and the covariance blocks of the estimate are the filter's."""
     prof, readings = flight("mocap")
-    a = Eskf(EstimatorParams.from_profile(prof))
-    b = Eskf(EstimatorParams.from_profile(prof), compiled=False)
+    a = Eskf(EstimatorParams.generator(prof))
+    b = Eskf(EstimatorParams.generator(prof), compiled=False)
     assert b.how == "interpreted"
     for t, rs in readings[:1500]:
         a.step(t, rs)

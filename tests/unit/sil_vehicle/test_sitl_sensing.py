@@ -392,8 +392,10 @@ def test_odometry_carries_the_estimate_and_its_covariances(sim):
     e = s.estimator.output()
     assert odo.estimator_type == mavlink.MAV_ESTIMATOR_TYPE_AUTOPILOT and odo.quality == 100
     # the pose's variances on the diagonal of the upper triangle (x, y, z, roll, pitch, yaw)
+    # (EKF2's tuning: the attitude's within its initial EKF2_ANGERR_INIT^2, the position's
+    # within EKF2_EVP_NOISE^2 as the mocap profile sets it)
     diag = [odo.pose_covariance[i] for i in (0, 6, 11, 15, 18, 20)]
-    assert all(0.0 < v < 1e-4 for v in diag[:3]) and all(0.0 < v < 1e-3 for v in diag[3:])
+    assert all(0.0 < v < 1e-4 for v in diag[:3]) and all(0.0 < v < 1e-2 for v in diag[3:])
     assert all(0.0 < odo.velocity_covariance[i] for i in (0, 6, 11))
     # it is the estimate (near the truth: millimetres), not the truth itself
     pos = np.array([odo.x, odo.y, odo.z])
