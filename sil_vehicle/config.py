@@ -76,6 +76,9 @@ class VehicleParams:
     servo_time_constant_s: float
     servo_rate_limit_rad_s: float
     drag_N_s2_m2: float
+    # the rotors' speed at full throttle and blades per propeller (None: not given)
+    rotor_max_rad_s: float | None = None
+    rotor_blades: int | None = None
     # derived
     hover_throttle_pct: float = field(init=False)
 
@@ -113,7 +116,9 @@ def vehicle_params(v: schema.VehicleFile, file: str) -> VehicleParams:
         tilt_min_rad=math.radians(v.tilt.min_deg), tilt_max_rad=math.radians(v.tilt.max_deg),
         servo_time_constant_s=v.tilt.servo_time_constant_s,
         servo_rate_limit_rad_s=math.radians(v.tilt.servo_rate_limit_deg_s),
-        drag_N_s2_m2=v.drag.quadratic_N_s2_m2)
+        drag_N_s2_m2=v.drag.quadratic_N_s2_m2,
+        rotor_max_rad_s=v.rotor_speed.max_rad_s if v.rotor_speed else None,
+        rotor_blades=v.rotor_speed.blades if v.rotor_speed else None)
 
 
 def load_vehicle(path: Path | str) -> VehicleParams:
