@@ -37,8 +37,8 @@ tick's internal samples, in steady state:
 
 so that a line above the output rate's Nyquist frequency shows at its alias, attenuated by the
 filter and the averaging, as on a real IMU. The rotor speeds are read once per vibration block
-of VIBRATION_BLOCK_US (a choice: 20 ms, two thirds of the trq motor's 30 ms time constant; the
-cost per tick falls with the block, docs/decisions/2026-12-05-imu-vibration.md) and held over it; the
+of VIBRATION_BLOCK_US (a choice: 50 ms, for speed: the cost per tick falls with the block,
+docs/decisions/2026-12-05-imu-vibration.md) and held over it; the
 phase runs on continuously.
 
 Delivery: with `timestamp_jitter_us` each stamp is off by a normal error of that std (dt_us
@@ -66,10 +66,10 @@ from sil_vehicle.sensors.truth import STANDARD_GRAVITY_M_S2, Truth
 __all__ = ["ImuParams", "ImuHarmonic", "ImuVibration", "RotorModel", "ImuState", "ImuReading",
            "ImuClips", "NOISE", "VIBRATION_BLOCK_US", "AXIS_PHASE_RAD", "initial", "draw",
            "noise_block", "vibration_block", "response", "harmonic_multiples",
-           "check_vibration", "response_table", "reading", "step", "mean_throttle"]
+           "check_vibration", "response_table", "smear_lines", "reading", "step", "mean_throttle"]
 
 NOISE = 12      # standard normals per tick: w_g, w_a, w_bg, w_ba (3 each)
-VIBRATION_BLOCK_US = 20_000     # rotor speeds read once per block (a choice)
+VIBRATION_BLOCK_US = 50_000     # rotor speeds read once per block (a choice)
 # each axis's phase in the vibration lines (x, y, z of gyro, then of accel): a choice, so that
 # the axes are not in step (a rotating imbalance moves x and y a quarter turn apart)
 AXIS_PHASE_RAD = (0.0, 0.5 * math.pi, 0.25 * math.pi, 0.0, 0.5 * math.pi, 0.25 * math.pi)
@@ -311,11 +311,11 @@ def check_vibration(p: ImuParams, rotor: RotorModel, file: str) -> None:
                 f"{p.internal_rate_hz})")
 
 
-def vibration_coefficients(p: ImuParams) -> np.ndarray:
-    """(H, 6) complex: each harmonic's amplitude per axis (gyro x y z, accel x y z) with the
-    axis's phase."""
+def vibration_coefficients(p: ImuParams, n_rotors: int = 1) -> np.ndarray:
+    """(H * n_rotors, 6) complex: each harmonic's amplitude per axis (gyro x y z, accel x y z)
+    with the axis's phase, repeated for each rotor (harmonic-major)."""
     amp = np.array([tuple(h.gyro_rad_s) + tuple(h.accel_m_s2) for h in p.vibration.harmonics])
-    return amp * np.exp(1j * np.array(AXIS_PHASE_RAD))
+    return np.repeat(amp * np.exp(1j * np.array(AXIS_PHASE_RAD)), n_rotors, axis=0)
 
 
 RESPONSE_STEP_HZ = 0.05        # the response table's frequency step (see `response_table`)
@@ -327,29 +327,41 @@ def response_table(p: ImuParams, max_hz: float) -> np.ndarray:
     return response(p, np.arange(0.0, max_hz + 2 * RESPONSE_STEP_HZ, RESPONSE_STEP_HZ))
 
 
+def smear_lines(multiples: np.ndarray, walk: np.ndarray) -> np.ndarray:
+    """e^{j n_h W_m(k)}: the smear's phase walk W (n_motors, K) on each harmonic's line,
+    (H * n_motors, K), harmonic-major (computed once per noise block)."""
+    return np.exp(np.multiply.outer(1j * multiples, walk).reshape(-1, walk.shape[1]))
+
+
 def vibration_block(p: ImuParams, rotor: RotorModel, multiples: np.ndarray,
                     coefficients: np.ndarray, table: np.ndarray, phases: np.ndarray,
-                    motor_pct: Sequence[float], w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The vibration over B ticks with the rotor speeds of `motor_pct` held, from the rotors'
-    phases at the block's start, the smear's standard normals `w` (n_motors, B) and the chip's
-    response table (`response_table`): (vib (B, 6), gyro then accel; the phases at its end)."""
+                    motor_pct: Sequence[float], smear: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The vibration over B ticks with the rotor speeds of `motor_pct` held: from the rotors'
+    deterministic phases at the block's start (n_motors,: the speed's integral, without the
+    smear), the smear's factor on each line at each of the block's ticks (`smear_lines`' columns,
+    (H * n_motors, B)), `coefficients` (`vibration_coefficients` repeated per rotor, (H * M, 6))
+    and the chip's response table (`response_table`): (vib (B, 6), gyro then accel; the
+    deterministic phases at its end). Each line at tick b of the block is
+    e^{j n (phase + (b + 1) step)} times its smear factor: the start's e^{j n phase} times the
+    running product of e^{j n step} (a product of B unit complex numbers, exact to rounding)."""
     dt = 1.0 / p.physics_rate_hz
     c2, c1, c0 = rotor.c2, rotor.c1, rotor.c0
     full = (c2 * 100.0 + c1) * 100.0 + c0
     frac = [max((c2 * z + c1) * z + c0, 0.0) / full for z in motor_pct]   # amplitude scale
-    omega = np.array([rotor.max_rad_s * math.sqrt(x) for x in frac])     # (M,) rad/s
-    sigma = math.sqrt(2.0 * math.pi * p.vibration.smear_hz * dt)
-    b = w.shape[1]
-    ph = np.cumsum(sigma * w, axis=1)
-    ph += np.outer(omega * dt, np.arange(1.0, b + 1.0)) + phases[:, None]     # (M, B)
-    idx = [int(n * om * (1.0 / (2.0 * math.pi * RESPONSE_STEP_HZ)) + 0.5)
-           for n in multiples.tolist() for om in omega.tolist()]
-    g = table[idx] * (frac * len(multiples))                                   # (H * M,)
-    lines = np.exp(1j * (multiples[:, None, None] * ph[None]))                 # (H, M, B)
-    # each line's gain times each axis's coefficient, (H * M, 6); summed over lines per tick
-    d = g[:, None] * np.repeat(coefficients, len(frac), axis=0)
-    vib = (lines.reshape(-1, b).T @ d).imag                                    # (B, 6)
-    return vib, np.mod(ph[:, -1], 2.0 * math.pi)
+    step = [rotor.max_rad_s * math.sqrt(x) * dt for x in frac]           # rad per tick
+    b = smear.shape[1]
+    n = multiples.tolist()
+    k = 1.0 / (2.0 * math.pi * RESPONSE_STEP_HZ * dt)
+    idx = [int(h * st * k + 0.5) for h in n for st in step]
+    g = table[idx] * (frac * len(n))                                         # (H * M,)
+    ph0 = phases.tolist()
+    # e^{j n phase} and e^{j n step} for every line, one exp
+    arg = np.array([[h * x for h in n for x in ph0], [h * st for h in n for st in step]])
+    start, rot = np.exp(1j * arg)
+    lines = np.cumprod(np.broadcast_to(rot[:, None], (len(idx), b)), axis=1)
+    lines *= smear
+    vib = (lines.T @ ((g * start)[:, None] * coefficients)).imag             # (B, 6)
+    return vib, np.array([x + b * st for x, st in zip(ph0, step)])
 
 
 def mean_throttle(motor_pct) -> float:

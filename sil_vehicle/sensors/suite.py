@@ -50,6 +50,9 @@ Reading = Union[imu.ImuReading, baro.BaroReading, mag.MagReading, gnss.GnssReadi
 _IMMEDIATE = (("imu", imu), ("baro", baro), ("mag", mag))
 
 
+N_ROTORS = 4       # the airframe's rotors (VehicleFile's four)
+
+
 def _rotor(vehicle: Any, p: imu.ImuParams) -> imu.RotorModel | None:
     """The rotors' speed model for the IMU's vibration: the vehicle's (its rotor_speed and thrust
     curve); without a vehicle, the built-in airframe the sim files fly (trq)."""
@@ -137,11 +140,16 @@ class _Imu:
                 raise ValueError(f"{file}: imu.vibration: needs the vehicle's rotor_speed")
             imu.check_vibration(p, rotor, file)
             mult = imu.harmonic_multiples(p, rotor.blades)
-            self._vib = (rotor, mult, imu.vibration_coefficients(p),
+            self._vib = (rotor, mult, imu.vibration_coefficients(p, N_ROTORS),
                          imu.response_table(p, float(mult.max()) * rotor.max_rad_s
                                             / (2 * math.pi)))
             self._vib_rng = vib_rng
-            self._phases = vib_rng.uniform(0.0, 2.0 * math.pi, 4)
+            self._phases = vib_rng.uniform(0.0, 2.0 * math.pi, N_ROTORS)
+            # the smear's phase walk per rotor over the noise block (drawn per block) and its
+            # factor on each line
+            self._smear = math.sqrt(2.0 * math.pi * p.vibration.smear_hz / p.physics_rate_hz)
+            self._walk = np.zeros(N_ROTORS)
+            self._lines = np.ones((0, 0), complex)
         self._w = np.empty((0, imu.NOISE))             # the noise block's standard normals
         self._adds = np.empty((0, 6))                  # its bias plus white noise, per tick
         self._bias = np.empty((1, 6))                  # its biases (and the state after it)
@@ -167,16 +175,23 @@ class _Imu:
             self._adds, self._bias = imu.noise_block(self.params, self._after, self._w)
             self._after = imu.ImuState(self._bias[-1, :3].copy(), self._bias[-1, 3:].copy())
             self._i = 0
+            if self._vib is not None:
+                walk = np.cumsum(self._smear * self._vib_rng.standard_normal(
+                    (N_ROTORS, self._k)), axis=1) + self._walk[:, None]
+                self._walk = np.mod(walk[:, -1], 2.0 * math.pi)      # carried to the next
+                self._lines = imu.smear_lines(self._vib[1], walk)
+                self._phases = np.mod(self._phases, 2.0 * math.pi)
         i, b = self._i, self._b
         adds = self._adds[i:i + b]
         if self._vib is not None:
             rotor, mult, coef, table = self._vib
             motors = truth.motors
-            if len(motors) != len(self._phases):
-                self._phases = np.resize(self._phases, len(motors))
-            w = self._vib_rng.standard_normal((len(motors), b))
+            if len(motors) != N_ROTORS:
+                raise ValueError(f"imu.vibration: {len(motors)} motors, the model has "
+                                 f"{N_ROTORS}")
             self._vib_rows, self._phases = imu.vibration_block(
-                self.params, rotor, mult, coef, table, self._phases, motors, w)
+                self.params, rotor, mult, coef, table, self._phases, motors,
+                self._lines[:, i:i + b])
             adds = adds + self._vib_rows
         else:
             self._vib_rows = np.zeros((b, 6))
