@@ -65,6 +65,8 @@ def _rotor(vehicle: Any, p: imu.ImuParams) -> imu.RotorModel | None:
 _DELAYED = (("gnss", gnss), ("mocap", mocap))
 _PER_SAMPLE = frozenset({"mocap"})      # draws that mix normals and uniforms: not in blocks
 _NEVER = float("inf")                   # no reading in a delay line
+_NO_CLIP = imu.NO_CLIP
+_new = object.__new__                   # an ImuReading built as imu.reading builds it
 
 
 class _Normals:
@@ -157,6 +159,7 @@ class _Imu:
         self._rows: list[list[float]] = []             # the vibration block's rows to use
         self._vib_rows = np.zeros((0, 6))
         self._gfs, self._afs = p.gyro_full_scale_rad_s, p.accel_full_scale_m_s2
+        self._tick_us = p.tick_us
         self.accel_clips = [0, 0, 0]
         self.gyro_clips = [0, 0, 0]
         # one tick per output sample, every one delivered on time: the short path
@@ -213,14 +216,20 @@ class _Imu:
         row = (self._rows or self._block(truth)).pop()
         r0, r1, r2 = truth.rates
         f0, f1, f2 = truth.force
-        g = (r0 + row[0], r1 + row[1], r2 + row[2])
-        a = (f0 + row[3], f1 + row[4], f2 + row[5])
+        g0, g1, g2 = r0 + row[0], r1 + row[1], r2 + row[2]
+        a0, a1, a2 = f0 + row[3], f1 + row[4], f2 + row[5]
         G, A = self._gfs, self._afs
-        if (-G <= g[0] <= G and -G <= g[1] <= G and -G <= g[2] <= G
-                and -A <= a[0] <= A and -A <= a[1] <= A and -A <= a[2] <= A):
-            gc = ac = imu.NO_CLIP
+        if (-G <= g0 <= G and -G <= g1 <= G and -G <= g2 <= G
+                and -A <= a0 <= A and -A <= a1 <= A and -A <= a2 <= A):
+            if self._simple:
+                r = _new(imu.ImuReading)
+                r.__dict__.update(t_us=truth.t_us, gyro=(g0, g1, g2), accel=(a0, a1, a2),
+                                  dt_us=self._tick_us, accel_clipped=_NO_CLIP,
+                                  gyro_clipped=_NO_CLIP)
+                return r
+            g, a, gc, ac = (g0, g1, g2), (a0, a1, a2), _NO_CLIP, _NO_CLIP
         else:
-            g, a, gc, ac = self._clip(g, a)
+            g, a, gc, ac = self._clip((g0, g1, g2), (a0, a1, a2))
         p = self.params
         if self._simple:
             return imu.reading(truth.t_us, g, a, p.tick_us, ac, gc)
