@@ -329,8 +329,11 @@ def response_table(p: ImuParams, max_hz: float) -> np.ndarray:
 
 def smear_lines(multiples: np.ndarray, walk: np.ndarray) -> np.ndarray:
     """e^{j n_h W_m(k)}: the smear's phase walk W (n_motors, K) on each harmonic's line,
-    (H * n_motors, K), harmonic-major (computed once per noise block)."""
-    return np.exp(np.multiply.outer(1j * multiples, walk).reshape(-1, walk.shape[1]))
+    (H * n_motors, K), harmonic-major (computed once per noise block): e^{j W} once, raised to
+    each whole multiple (NumPy's integer power: repeated products), for speed."""
+    z = np.exp(1j * walk)
+    return np.concatenate([z ** int(n) if n == int(n) else np.exp(1j * n * walk)
+                           for n in multiples.tolist()])
 
 
 def vibration_block(p: ImuParams, rotor: RotorModel, multiples: np.ndarray,
@@ -358,7 +361,7 @@ def vibration_block(p: ImuParams, rotor: RotorModel, multiples: np.ndarray,
     # e^{j n phase} and e^{j n step} for every line, one exp
     arg = np.array([[h * x for h in n for x in ph0], [h * st for h in n for st in step]])
     start, rot = np.exp(1j * arg)
-    lines = np.cumprod(np.broadcast_to(rot[:, None], (len(idx), b)), axis=1)
+    lines = np.cumprod(rot[:, None].repeat(b, axis=1), axis=1)
     lines *= smear
     vib = (lines.T @ ((g * start)[:, None] * coefficients)).imag             # (B, 6)
     return vib, np.array([x + b * st for x, st in zip(ph0, step)])
