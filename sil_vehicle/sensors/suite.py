@@ -6,7 +6,11 @@
 `sample` must be called once per physics tick, in order (t_us = k * dt_us). It returns the
 readings that arrive at t_us, in a fixed order: IMU, barometer, magnetometer, GNSS, motion
 capture (a delayed reading arrives at t + delay and carries its time of validity `t_us` and its
-`arrival_us`). A sensor samples on the ticks where t_us is a multiple of its period. Each of the
+`arrival_us`). A sensor samples on the ticks where t_us is a multiple of its period; the IMU
+works every tick (it integrates over its output interval) and its reading arrives at the
+interval's end. `imu_clips` holds the IMU's running clip counts per axis. The IMU's vibration
+needs the rotors' speed: `vehicle` (a sil_vehicle.config.VehicleParams with rotor_speed; the
+Sitl passes its own), or without one the built-in `trq` airframe's. Each of the
 five sensor slots draws its noise from its own child of the injected generator
 (`rng.spawn(5)`, in that order, whether the profile carries the sensor or not), so the same seed
 and the same truths give the same readings bit for bit, a sensor's noise does not change when
@@ -23,9 +27,11 @@ sensor's standard normals are drawn a block of samples at a time (one second's w
 Generator fills a (K, n) draw in the order of K draws of n, so each sensor sees the same stream
 as one draw per sample, and its readings are the same bit for bit. The motion capture draws a
 uniform between its normals, which a block would reorder: it draws per sample (at its own,
-lower rate). The IMU, sampled every tick, precomputes what each sample of a block adds
-(`imu.noise_block`) and keeps its state as the position in that block; its record is built
-when `states` is read. The other sensors step their frozen records at their own rates, and a
+lower rate). The IMU, stepped every tick, precomputes what each tick of a block adds
+(`imu.noise_block`, a second's worth; `imu.vibration_block`, one vibration block's) and keeps
+its state as the position in that block; its record is built when `states` is read. The IMU's
+vibration, jitter and dropouts draw from their own children of the IMU's generator
+(`spawn(3)`), so its white noise and biases do not change when they are switched on or off. The other sensors step their frozen records at their own rates, and a
 delayed sensor's line is only released when its first reading is due.
 """
 
