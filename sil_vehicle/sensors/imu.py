@@ -66,7 +66,7 @@ from sil_vehicle.sensors.truth import STANDARD_GRAVITY_M_S2, Truth
 __all__ = ["ImuParams", "ImuHarmonic", "ImuVibration", "RotorModel", "ImuState", "ImuReading",
            "ImuClips", "NOISE", "VIBRATION_BLOCK_US", "AXIS_PHASE_RAD", "initial", "draw",
            "noise_block", "vibration_block", "response", "harmonic_multiples",
-           "check_vibration", "response_table", "smear_lines", "reading", "step", "mean_throttle"]
+           "check_vibration", "response_table", "smear_lines", "reading", "clip3", "step"]
 
 NOISE = 12      # standard normals per tick: w_g, w_a, w_bg, w_ba (3 each)
 VIBRATION_BLOCK_US = 50_000     # rotor speeds read once per block (a choice)
@@ -367,13 +367,8 @@ def vibration_block(p: ImuParams, rotor: RotorModel, multiples: np.ndarray,
     return vib, np.array([x + b * st for x, st in zip(ph0, step)])
 
 
-def mean_throttle(motor_pct) -> float:
-    """The mean motor output as a fraction of full."""
-    n = len(motor_pct)
-    return float(sum(motor_pct)) / (100.0 * n) if n else 0.0
-
-
-def _clip3(v, fs):
+def clip3(v, fs: float) -> tuple[tuple[float, ...], tuple[bool, ...]]:
+    """A 3-vector held to [-fs, fs], and per axis whether it was beyond."""
     out = tuple(fs if x > fs else -fs if x < -fs else x for x in v)
     return out, tuple(x > fs or x < -fs for x in v)
 
@@ -384,7 +379,7 @@ def step(p: ImuParams, s: ImuState, truth: Truth, w: np.ndarray,
     `truth` with the normals `w` (NOISE,) and the tick's vibration `vib` (6,)."""
     adds, bias = noise_block(p, s, np.asarray(w, float).reshape(1, NOISE))
     a = adds[0] + np.asarray(vib, float)
-    g, gc = _clip3([truth.rates[i] + a[i] for i in range(3)], p.gyro_full_scale_rad_s)
-    f, ac = _clip3([truth.force[i] + a[3 + i] for i in range(3)], p.accel_full_scale_m_s2)
+    g, gc = clip3([truth.rates[i] + a[i] for i in range(3)], p.gyro_full_scale_rad_s)
+    f, ac = clip3([truth.force[i] + a[3 + i] for i in range(3)], p.accel_full_scale_m_s2)
     nxt = ImuState(bias[1, :3].copy(), bias[1, 3:].copy())
     return nxt, reading(truth.t_us, g, f, p.period_us, ac, gc)

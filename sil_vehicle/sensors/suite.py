@@ -211,8 +211,8 @@ class _Imu:
         return rows
 
     def _clip(self, g, a):
-        g, gc = imu._clip3(g, self._gfs)
-        a, ac = imu._clip3(a, self._afs)
+        g, gc = imu.clip3(g, self._gfs)
+        a, ac = imu.clip3(a, self._afs)
         for j in range(3):
             self.gyro_clips[j] += gc[j]
             self.accel_clips[j] += ac[j]
