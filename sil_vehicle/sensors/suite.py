@@ -150,9 +150,9 @@ class _Imu:
             mult = imu.harmonic_multiples(p, rotor.blades)
             self._vib = (rotor, mult, imu.vibration_coefficients(p, N_ROTORS),
                          imu.response_table(p, float(mult.max()) * rotor.max_rad_s
-                                            / (2 * math.pi)))
+                                            / (2 * math.pi)).tolist(), mult.tolist())
             self._vib_rng = vib_rng
-            self._phases = vib_rng.uniform(0.0, 2.0 * math.pi, N_ROTORS)
+            self._phases = vib_rng.uniform(0.0, 2.0 * math.pi, N_ROTORS).tolist()
             # the smear's phase walk per rotor over the noise block (drawn per block) and its
             # factor on each line
             self._smear = math.sqrt(2.0 * math.pi * p.vibration.smear_hz / p.physics_rate_hz)
@@ -189,11 +189,11 @@ class _Imu:
                     (N_ROTORS, self._k)), axis=1) + self._walk[:, None]
                 self._walk = np.mod(walk[:, -1], 2.0 * math.pi)      # carried to the next
                 self._lines = imu.smear_lines(self._vib[1], walk)
-                self._phases = np.mod(self._phases, 2.0 * math.pi)
+                self._phases = [x % (2.0 * math.pi) for x in self._phases]
         i, b = self._i, self._b
         adds = self._adds[i:i + b]
         if self._vib is not None:
-            rotor, mult, coef, table = self._vib
+            rotor, _, coef, table, mult = self._vib
             motors = truth.motors
             if len(motors) != N_ROTORS:
                 raise ValueError(f"imu.vibration: {len(motors)} motors, the model has "
