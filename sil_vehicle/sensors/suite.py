@@ -287,21 +287,21 @@ class _Imu:
         return imu.ImuState(self._bias[j, :3].copy(), self._bias[j, 3:].copy())
 
     def set_state(self, s: imu.ImuState) -> None:
-        # the noise block's remaining normals, from s on; the vibration block's lines kept
+        # the noise block's remaining normals, from s on, in place (the block's positions and
+        # the vibration's stay aligned); the vibration block's lines kept
         if not self._rows and self._i == len(self._adds):
             self._after = s
             return
         j = self._i - len(self._rows)
-        w = self._w[j:]
-        self._adds, self._bias = imu.noise_block(self.params, s, w)
-        self._after = imu.ImuState(self._bias[-1, :3].copy(), self._bias[-1, 3:].copy())
-        self._w = w
+        adds, bias = imu.noise_block(self.params, s, self._w[j:])
+        self._adds = np.concatenate((self._adds[:j], adds))
+        self._bias = np.concatenate((self._bias[:j], bias))
+        self._after = imu.ImuState(bias[-1, :3].copy(), bias[-1, 3:].copy())
         rest = len(self._rows)
         vib = self._vib_rows[len(self._vib_rows) - rest:]
-        rows = (self._adds[:rest] + vib).tolist()
+        rows = (self._adds[j:self._i] + vib).tolist()
         rows.reverse()
         self._rows = rows
-        self._i = rest
 
 
 class _States(MutableMapping):

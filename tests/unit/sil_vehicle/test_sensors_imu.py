@@ -295,3 +295,22 @@ def test_the_builtin_vibration_is_the_published_figure():
     assert (p.accel_full_scale_g, p.gyro_full_scale_deg_s) == (16.0, 2000.0)
     assert [(h.of, h.times) for h in p.vibration.harmonics] == [
         ("rotor", 1), ("blade_pass", 1), ("blade_pass", 2)]
+
+
+def test_an_imu_state_set_mid_block_with_vibration_holds_and_the_lines_run_on():
+    """states["imu"] assigned between two vibration blocks' ticks (tick 1234, not a block
+    boundary), with the shipped vibration: the next tick's bias is the assigned one, the
+    suite runs on across its noise and vibration blocks, and the same assignment on the same
+    seed replays bit for bit."""
+    bias = imu.ImuState(np.array((0.01, -0.02, 0.03)), np.array((0.2, -0.1, 0.05)))
+
+    def fly():
+        suite = suite_of(load_sensing("mocap", 1000).imu, 12)
+        out = readings(suite, 1234, lambda t: hover(t, 70.0))
+        suite.states["imu"] = bias
+        assert np.array_equal(suite.states["imu"].accel_bias_frd_m_s2, bias.accel_bias_frd_m_s2)
+        for k in range(1234, 3100):
+            out += [r for r in suite.sample(k * 1000, hover(k * 1000, 70.0))]
+        return out
+    a, b = fly(), fly()
+    assert len(a) == 3100 and a == b
