@@ -139,6 +139,14 @@ class LandingGear(Strict):
 MAX_GEAR_POINTS = 8       # the compiled tick's array holds this many (sil_vehicle/dynamics/tick.c)
 
 
+class RotorSpeed(Strict):
+    """The rotors' speed, for what depends on it (the IMU's vibration harmonics): the speed at
+    full throttle and the blades per propeller. Below full throttle the speed follows the thrust
+    curve, thrust proportional to speed squared (sil_vehicle.sensors.imu)."""
+    max_rad_s: Num(1.0, 1e5)
+    blades: Int(2, 8)
+
+
 class VehicleFile(Strict):
     """An airframe. Rotor order is PX4 quad X (motor 1..4)."""
     name: Text
@@ -152,6 +160,7 @@ class VehicleFile(Strict):
     tilt: Tilt
     drag: Drag
     landing_gear: LandingGear
+    rotor_speed: Optional[RotorSpeed] = None      # absent: no rotor-speed-driven model
 
     @model_validator(mode="after")
     def _can_fly(self) -> "VehicleFile":
@@ -967,6 +976,12 @@ class CampaignFile(Strict):
 # DELAY_BUFFER_MS is refused with or without it.
 # --------------------------------------------------------------------------------------------
 
+def _nonempty_list(value: Any) -> tuple[Any, ...]:
+    if not isinstance(value, (list, tuple)) or not value:
+        raise expect("a non-empty list of mappings")
+    return tuple(value)
+
+
 DELAY_BUFFER_MS = 500
 """The longest delay (ms) a delayed measurement may have: the history the estimator keeps to
 fuse it at its time of validity. Both daemons may read it from here."""
@@ -975,27 +990,56 @@ _SENSOR_RATE = Int(1, 10_000)        # Hz; then checked against the physics rate
 _SENSOR_DELAY = Int(0, 10_000)       # ms; then checked against DELAY_BUFFER_MS and the physics tick
 
 
+class ImuHarmonic(Strict):
+    """One vibration line per rotor: `times` the rotor's frequency (`of: rotor`) or its
+    blade-pass frequency (`of: blade_pass`, the rotor's times its blade count); its amplitude
+    per body axis (FRD) at full rotor speed, one rotor's, scaling with the speed squared."""
+    of: Choice("rotor", "blade_pass")
+    times: Int(1, 16)
+    accel_m_s2: Vec(3, 0.0, 1000.0)
+    gyro_rad_s: Vec(3, 0.0, 100.0)
+
+
+class ImuVibration(Strict):
+    """The rotors' vibration as the IMU sees it (sil_vehicle.sensors.imu states the model)."""
+    harmonics: Annotated[tuple[ImuHarmonic, ...], BeforeValidator(_nonempty_list)]
+    smear_hz: Num(0.0, 100.0)            # each rotor line's width (phase random walk)
+
+
 class Imu(Strict):
-    """Gyro and accelerometer (sil_vehicle.sensors.imu states the model)."""
+    """Gyro and accelerometer (sil_vehicle.sensors.imu states the model). `rate_hz` is the
+    output rate: each reading integrates the physics ticks of its interval."""
     rate_hz: _SENSOR_RATE
     gyro_noise_density_rad_s_rthz: Num(0.0, 1.0)
     gyro_bias_random_walk_rad_s2_rthz: Num(0.0, 1.0)
     gyro_turn_on_bias_rad_s: Num(0.0, 1.0)
-    gyro_vibration_rad_s: Num(0.0, 10.0)
     accel_noise_density_m_s2_rthz: Num(0.0, 10.0)
     accel_bias_random_walk_m_s3_rthz: Num(0.0, 10.0)
     accel_turn_on_bias_m_s2: Num(0.0, 10.0)
-    accel_vibration_m_s2: Num(0.0, 100.0)
     # what the vehicle's HIGHRES_IMU carries: the samples' mean over each integration interval
     # of this rate (PX4's IMU_INTEG_RATE, default 200 Hz: sensor_combined is the delta velocity
     # and angle over that interval, not one sample); at most the IMU's rate
     integration_rate_hz: Int(1, 10_000) = 200
+    # the chip: its internal sample rate (a multiple of the physics rate) and its anti-alias
+    # low-pass filter's cutoff; full scales (clipping); null vibration: none
+    internal_rate_hz: Int(1, 1_000_000) = 8000
+    anti_alias_cutoff_hz: Num(1.0, 100_000.0) = 585.0
+    accel_full_scale_g: Num(0.5, 1000.0) = 16.0
+    gyro_full_scale_deg_s: Num(10.0, 100_000.0) = 2000.0
+    vibration: Optional[ImuVibration] = None
+    # delivery: each output sample's stamp error (std, us) and the probability that one is
+    # not delivered (the next one then covers both intervals)
+    timestamp_jitter_us: Num(0.0, 100_000.0) = 0.0
+    dropout_probability: Num(0.0, 0.99) = 0.0
 
     @model_validator(mode="after")
     def _integration(self) -> "Imu":
         if self.integration_rate_hz > self.rate_hz:
             raise Invalid("imu.integration_rate_hz", self.integration_rate_hz,
                           f"at most the IMU's rate_hz ({self.rate_hz})")
+        if self.anti_alias_cutoff_hz >= self.internal_rate_hz / 2:
+            raise Invalid("imu.anti_alias_cutoff_hz", self.anti_alias_cutoff_hz,
+                          f"below the internal rate's Nyquist ({self.internal_rate_hz / 2:g} Hz)")
         return self
 
 
@@ -1148,6 +1192,10 @@ class SensingFile(Strict):
             if hz > physics or physics % hz:
                 raise Invalid(f"{name}.rate_hz", hz, f"a rate in Hz that divides the physics "
                                                      f"rate ({physics} Hz)")
+        imu = self.imu
+        if imu is not None and imu.internal_rate_hz % physics:
+            raise Invalid("imu.internal_rate_hz", imu.internal_rate_hz,
+                          f"a multiple of the physics rate ({physics} Hz)")
         for key, delay in (("gnss.delay_ms", self.gnss and self.gnss.delay_ms),
                            ("mocap.latency_ms", self.mocap and self.mocap.latency_ms)):
             if delay and (delay * 1000) % tick_us:

@@ -83,6 +83,9 @@ class VehicleParams:
     gear_friction: float
     gear_stick_stiffness_N_m: float    # per point
     gear_stick_damping_N_s_m: float    # per point
+    # the rotors' speed at full throttle and blades per propeller (None: not given)
+    rotor_max_rad_s: float | None = None
+    rotor_blades: int | None = None
     # derived
     hover_throttle_pct: float = field(init=False)
     gear: Gear = field(init=False)                  # the contact model's record
@@ -136,7 +139,9 @@ def vehicle_params(v: schema.VehicleFile, file: str) -> VehicleParams:
         gear_damping_N_s_m=v.landing_gear.damping_N_s_m,
         gear_friction=v.landing_gear.friction,
         gear_stick_stiffness_N_m=v.landing_gear.stick_stiffness_N_m,
-        gear_stick_damping_N_s_m=v.landing_gear.stick_damping_N_s_m)
+        gear_stick_damping_N_s_m=v.landing_gear.stick_damping_N_s_m,
+        rotor_max_rad_s=v.rotor_speed.max_rad_s if v.rotor_speed else None,
+        rotor_blades=v.rotor_speed.blades if v.rotor_speed else None)
 
 
 def load_vehicle(path: Path | str) -> VehicleParams:

@@ -222,7 +222,7 @@ class Sitl:
                 np.random.default_rng([sim.seed, SENSOR_FAULT_SEED_KEY]))
             self.suite = SensorSuite(profile,
                                      np.random.default_rng([sim.seed, SENSOR_SEED_KEY]),
-                                     home_alt_m=sim.home_alt_m)
+                                     home_alt_m=sim.home_alt_m, vehicle=sim.vehicle)
             self._dt_s = sim.dt_us * 1e-6
             self._gravity = sim.vehicle.gravity_m_s2
             self._sensed_vel = self.vehicle.state.x[3:6]    # at rest before the first tick

@@ -9,7 +9,8 @@ truth, noise samples), the suite the only thing that holds state.
               specific force, motor outputs)
     noise     continuous-time figures to per-sample noise: white, random walk, Gauss-Markov
     delay     a bounded delay line: readings held until their arrival time
-    imu       gyro and accelerometer: noise density, bias random walk, turn-on bias, vibration
+    imu       gyro and accelerometer: noise density, bias random walk, turn-on bias, rotor
+              vibration lines behind the chip's filter, full scales, integration per interval
     baro      pressure altitude with white noise and a Gauss-Markov drift (ISA pressure)
     mag       the earth's field in body axes, with bias and noise
     gnss      NED position and velocity, delayed, Gauss-Markov error, fix type and accuracy

@@ -25,7 +25,7 @@ from trq_params.schema import DELAY_BUFFER_MS, Ekf2, SensingFile
 
 from sil_vehicle.sensors.baro import BaroParams
 from sil_vehicle.sensors.gnss import GnssParams
-from sil_vehicle.sensors.imu import ImuParams
+from sil_vehicle.sensors.imu import ImuHarmonic, ImuParams, ImuVibration
 from sil_vehicle.sensors.mag import MagParams
 from sil_vehicle.sensors.mocap import MocapParams
 
@@ -68,7 +68,12 @@ def load_sensing(name_or_path: str | Path, physics_rate_hz: int) -> SensingProfi
     ticks = lambda ms: ms * 1000 // dt_us          # noqa: E731  (whole: checked by the schema)
     imu = baro = mag = gnss = mocap = None
     if f.imu is not None:
-        imu = ImuParams(**f.imu.model_dump())
+        d = f.imu.model_dump(exclude={"vibration"})
+        v = f.imu.vibration
+        vibration = None if v is None else ImuVibration(
+            tuple(ImuHarmonic(h.of, h.times, tuple(h.accel_m_s2), tuple(h.gyro_rad_s))
+                  for h in v.harmonics), v.smear_hz)
+        imu = ImuParams(physics_rate_hz=physics_rate_hz, vibration=vibration, **d)
     if f.baro is not None:
         baro = BaroParams(**f.baro.model_dump())
     if f.mag is not None:

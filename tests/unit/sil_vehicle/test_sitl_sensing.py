@@ -50,9 +50,9 @@ def exact(tmp_path_factory):
         "extends": "builtin:sensing/mocap", "name": "exact",
         "imu": {k: 0.0 for k in ("gyro_noise_density_rad_s_rthz",
                                  "gyro_bias_random_walk_rad_s2_rthz", "gyro_turn_on_bias_rad_s",
-                                 "gyro_vibration_rad_s", "accel_noise_density_m_s2_rthz",
-                                 "accel_bias_random_walk_m_s3_rthz", "accel_turn_on_bias_m_s2",
-                                 "accel_vibration_m_s2")},
+                                 "accel_noise_density_m_s2_rthz",
+                                 "accel_bias_random_walk_m_s3_rthz", "accel_turn_on_bias_m_s2")}
+        | {"vibration": None},
         "mocap": {"position_noise_m": 0.0, "attitude_noise_rad": 0.0,
                   "dropout_probability": 0.0}}))
     return sensing_profile(str(path), 1000, "test")
