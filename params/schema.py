@@ -1110,9 +1110,12 @@ class Ekf2(Strict):
     generator` instead matches the filter to the profile's own sensor figures (the simulator's
     noise, delays and drift: a study's option, the inverse crime, never a default); the EKF2_*
     keys are then unused. EKF2_RESET_TOUT is EKF2's reset_timeout_max (7 s, a constant there,
-    not a parameter)."""
+    not a parameter). IMU_GYRO_CUTOFF is not EKF2's but PX4's sensors module's: the low-pass of
+    the body rates the autopilot publishes (vehicle_angular_velocity: ATTITUDE, ODOMETRY), 40 Hz
+    by default as PX4 ships it; 0 publishes the raw sample."""
     tuning: Choice("ekf2", "generator") = "ekf2"
     EKF2_GYR_NOISE: Num(0.0001, 0.1) = 0.015         # rad/s, per sample at the filter's rate
+    IMU_GYRO_CUTOFF: Num(0.0, 1000.0) = 40.0         # Hz, the published rates' low-pass
     EKF2_ACC_NOISE: Num(0.01, 1.0) = 0.35            # m/s^2, likewise
     EKF2_GYR_B_NOISE: Num(0.0, 0.01) = 0.001         # rad/s^2
     EKF2_ACC_B_NOISE: Num(0.0, 0.01) = 0.003         # m/s^3
@@ -1154,8 +1157,9 @@ class Ekf2(Strict):
         return self
 
 
-EKF2_KEYS = tuple(k for k in Ekf2.model_fields if k.startswith("EKF2_"))
-"""The EKF2 parameters the vehicle's estimator takes, in the schema's order."""
+EKF2_KEYS = tuple(k for k in Ekf2.model_fields if k.startswith(("EKF2_", "IMU_")))
+"""The parameters the vehicle's estimator takes (EKF2's, and the published rates' IMU_GYRO_CUTOFF),
+in the schema's order."""
 
 
 _SENSORS = ("imu", "baro", "mag", "gnss", "mocap")

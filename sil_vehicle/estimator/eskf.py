@@ -95,6 +95,7 @@ from sil_vehicle.estimator import derivation as d
 from sil_vehicle.estimator.derivation import (BA, BB_I, BG, BN, BN_D, DBA, DBB_I, DBG, DBN,
                                               DBN_D, DP, DP_D, DTH, DV, P_, P_D, Q_, V_)
 from sil_vehicle.estimator.codegen import load
+from sil_vehicle.estimator.lowpass import LowPass2
 from sil_vehicle.estimator.params import EstimatorParams
 from sil_vehicle.estimator.predictor import OutputPredictor, native_predictor
 from sil_vehicle.frames import euler_to_quat, quat_to_dcm, quat_to_euler
@@ -150,7 +151,8 @@ class Estimate:
     pos_ned_m: np.ndarray               # (3,)
     vel_ned_m_s: np.ndarray             # (3,)
     quat_wxyz: np.ndarray               # (4,) body FRD -> NED
-    rates_frd_rad_s: np.ndarray         # (3,) the last gyro sample less the bias estimate
+    rates_frd_rad_s: np.ndarray         # (3,) the gyro through IMU_GYRO_CUTOFF's low-pass, less
+                                        # the bias estimate (PX4's vehicle_angular_velocity)
     pos_var_ned_m2: np.ndarray          # (3,)
     vel_var_ned_m2_s2: np.ndarray       # (3,)
     att_var_frd_rad2: np.ndarray        # (3,) of the body-frame attitude error
@@ -223,7 +225,8 @@ class Eskf:
         self._baro_ref = p.height_ref == "baro"
         # health and diagnostics
         self._now = -1
-        self._gyro = (0.0, 0.0, 0.0)
+        self._gyro = (0.0, 0.0, 0.0)           # the last gyro sample through the rates' low-pass
+        self._gyro_lpf = LowPass2(p.imu_rate_hz, p.gyro_cutoff_hz)
         self._last_pos_fuse_us: int | None = None
         self.innovations: list[Innovation | None] = [None] * _NAID
         self._fused = [0] * _NAID
@@ -311,6 +314,7 @@ class Eskf:
             raise ValueError(f"{', '.join(changed)} changed: takes effect at the next start "
                              "(EKF2: reboot required)")
         bb_ref = self._a[2]
+        self._gyro_lpf.set_cutoff(params.imu_rate_hz, params.gyro_cutoff_hz)
         self.params = params
         self._configure(params)
         self._a[2] = bb_ref
@@ -354,7 +358,7 @@ class Eskf:
 
     def _imu(self, r: ImuReading) -> None:
         g = r.gyro
-        self._gyro = g
+        self._gyro = self._gyro_lpf.apply(g)
         t = r.t_us
         if not self.aligned:
             if self._t_first is None:

@@ -125,6 +125,8 @@ class EstimatorParams:
     gravity_m_s2: float = STANDARD_GRAVITY_M_S2
     max_var: float = 1.0e6                  # a variance beyond this (or not finite): diverged
     tuning: str = "custom"                  # "ekf2", "generator" (the builder that made it)
+    # the published body rates' low-pass (PX4's IMU_GYRO_CUTOFF, Hz; 0: none, the raw sample)
+    gyro_cutoff_hz: float = 0.0
 
     def __post_init__(self) -> None:
         if self.filter_period_us % (1_000_000 // self.imu_rate_hz):
@@ -195,7 +197,7 @@ class EstimatorParams:
         imu = _imu_of(profile)
         e = profile.estimator
         f: dict = dict(
-            tuning="ekf2", imu_rate_hz=imu.rate_hz,
+            tuning="ekf2", imu_rate_hz=imu.rate_hz, gyro_cutoff_hz=e.IMU_GYRO_CUTOFF,
             gyro_noise_rad_s=e.EKF2_GYR_NOISE, accel_noise_m_s2=e.EKF2_ACC_NOISE,
             gyro_bias_noise_rad_s2=e.EKF2_GYR_B_NOISE, accel_bias_noise_m_s3=e.EKF2_ACC_B_NOISE,
             gyro_bias_init_rad_s=e.EKF2_GBIAS_INIT, accel_bias_init_m_s2=e.EKF2_ABIAS_INIT,
