@@ -44,6 +44,7 @@ class SpinFlight:
     crashed: bool
     crash_reason: str
     landed: bool
+    motors_off: bool                  # the controller saw the touchdown and cut the motors
     max_axis_lean_deg: float          # the trim's primary axis (body) from the world vertical
     max_body_tilt_deg: float          # body -z from the world vertical
     max_lean_first_s_deg: float       # the axis' largest lean in the first second after the switch
@@ -56,7 +57,7 @@ class SpinFlight:
     max_rate_axis_rad_s: float        # the largest |omega_i| of any body axis (the gyro reads)
     gyro_ok: bool                     # max_rate_axis_rad_s below the full scale
     saturated_fraction: float         # share of the steps with a live command clipped
-    step_us_mean: float               # the controller's step, wall time (a measurement)
+    step_us_mean: float               # the controller's step, CPU time of the thread (a measurement)
 
 
 def _start_on_orbit(sim, motor: int, spin_rad_s: float, altitude_m: float):
@@ -70,7 +71,7 @@ def fly(scenario: str = "orbit", *, seed: int = 0, seconds: float = 2.0, motor: 
         altitude_m: float = 5.0, land: bool = False, switch_delay_s: float = 0.0,
         perturb_rates_rad_s: float = 0.1, perturb_pos_m: float = 0.1,
         gyro_clip: bool = False, controller: SpinController | None = None,
-        physics_core: str = "auto") -> SpinFlight:
+        physics_core: str = "auto", command_delay_s: float = 0.0, trace=None) -> SpinFlight:
     from sil_vehicle.config import load_sim
     from sil_vehicle.faults import Faults
     from sil_vehicle.frames import quat_to_dcm, quat_to_euler
@@ -121,11 +122,13 @@ def fly(scenario: str = "orbit", *, seed: int = 0, seconds: float = 2.0, motor: 
     touchdown_speed = touchdown_drift = math.nan
     spins, hold_pos = [], []
     last_vz = 0.0
+    touchdown_tick = n_ticks
+    pending: list = []           # (tick, command): the link's delay
     hold_end = switch_delay_s + (cfg.landing.hold_s if land else seconds)
     for k in range(n_ticks):
         s = veh.state
         t = k * dt
-        if k >= switch_tick and k % ticks_per == 0 and not s.landed:
+        if k >= switch_tick and k % ticks_per == 0:
             rates = np.asarray(s.x[10:13])
             if gyro_clip:
                 rates = np.clip(rates, -GYRO_FULL_SCALE_RAD_S, GYRO_FULL_SCALE_RAD_S)
@@ -140,12 +143,17 @@ def fly(scenario: str = "orbit", *, seed: int = 0, seconds: float = 2.0, motor: 
                 ref = landing_reference(t_sw, failure_pos, cfg.landing, 0.0)
             else:
                 ref = ReferenceSample(tuple(failure_pos), (0.0, 0.0, 0.0), 0.0, "hold")
-            t0 = time.perf_counter_ns()
+            t0 = time.thread_time_ns()
             cmd = controller.step(est, ref)
-            step_ns += time.perf_counter_ns() - t0
+            step_ns += time.thread_time_ns() - t0
             steps += 1
             sat += controller.info.saturated > 0
-            veh.command = ActuatorCommand(cmd.throttle_pct, cmd.tilt_rad)
+            pending.append((k + int(round(command_delay_s / dt)),
+                            ActuatorCommand(cmd.throttle_pct, cmd.tilt_rad)))
+            if trace is not None:
+                trace.append((t, s.x, cmd, controller.info))
+        while pending and pending[0][0] <= k:
+            veh.command = pending.pop(0)[1]
         last_vz = s.x[5]
         s = veh.step()
         if s.crashed:
@@ -154,7 +162,8 @@ def fly(scenario: str = "orbit", *, seed: int = 0, seconds: float = 2.0, motor: 
             if math.isnan(touchdown_speed):
                 touchdown_speed = last_vz
                 touchdown_drift = float(np.linalg.norm(np.asarray(s.x[0:2]) - failure_pos[0:2]))
-            if k * dt > t + 0.2:
+                touchdown_tick = k
+            if k - touchdown_tick > int(round(0.5 / dt)):
                 break
             continue
         r = np.array(quat_to_dcm(*s.x[6:10]))
@@ -178,6 +187,7 @@ def fly(scenario: str = "orbit", *, seed: int = 0, seconds: float = 2.0, motor: 
     return SpinFlight(
         scenario=scenario, seed=seed, seconds=round(veh.state.t_us * 1e-6, 3),
         crashed=s.crashed, crash_reason=s.crash_reason, landed=s.landed,
+        motors_off=controller.info.landed and max(veh.command.throttle_pct) == 0.0,
         max_axis_lean_deg=lean, max_body_tilt_deg=tilt, max_lean_first_s_deg=lean_first,
         max_drift_m=drift, hold_drift_m=hold_drift, touchdown_drift_m=touchdown_drift,
         touchdown_speed_m_s=touchdown_speed, max_descent_m_s=max_down,
@@ -202,3 +212,42 @@ def main() -> None:       # a manual run: python -m trq_lab.analysis.spin_flight
 
 if __name__ == "__main__":
     main()
+
+
+def step_time_ratio(steps: int = 200, seed: int = 0) -> dict:
+    """The CPU time per step of the spin controller against the existing NMPC controller
+    (trq_nmpc_eso.yaml's Controller), both stepped in this process on the plant's truth: the
+    NMPC in a level hover at 5 m (no fault), the spin controller on the orbit. Thread CPU time
+    (a measurement: it depends on the machine and its load; the ratio is what is reported)."""
+    from sil_vehicle.config import load_sim
+    from sil_vehicle.frames import quat_to_euler
+    from sil_vehicle.vehicle import ActuatorCommand, Vehicle, VehicleState
+    from trq_offboard.controller import Controller
+    from trq_offboard.reference import ConstantReference
+
+    sim = load_sim(SIM_FILE).with_changes(wind_speed_m_s=0.0, gusts_enabled=False)
+    nmpc = Controller.from_yaml(CONTROLLER_FILE)
+    veh = Vehicle(sim, np.random.default_rng(seed))
+    veh.armed = True
+    hover = sim.vehicle.thrust_N.inverse(sim.vehicle.mass_kg * sim.vehicle.gravity_m_s2 / 4.0)
+    x0 = (0.0, 0.0, -5.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    veh.state = VehicleState(0, x0, (hover,) * 4, (0.0,) * 4, (0.0, 0.0, 0.0), True, False,
+                             False, "")
+    ref = ConstantReference(ReferenceSample((0.0, 0.0, -5.0), (0.0, 0.0, 0.0), 0.0))
+    ticks = int(round(1.0 / (nmpc.cfg.control_dt_s * sim.dt_us * 1e-6)))
+    ns = []
+    for k in range(steps):
+        s = veh.state
+        est = StateEstimate(tuple(s.x[0:3]), tuple(s.x[3:6]), tuple(quat_to_euler(*s.x[6:10])),
+                            tuple(s.x[10:13]))
+        t0 = time.thread_time_ns()
+        cmd, _ = nmpc.step(k * nmpc.cfg.control_dt_s, est, None, ref)
+        ns.append(time.thread_time_ns() - t0)
+        veh.command = ActuatorCommand(cmd.throttle_pct, cmd.tilt_rad)
+        for _ in range(ticks):
+            veh.step()
+    nmpc_us = float(np.median(ns[20:])) / 1e3
+    flight = fly("orbit", seed=seed, seconds=steps / 100.0)
+    return {"nmpc_step_us_median": nmpc_us, "nmpc_control_rate_hz": 1.0 / nmpc.cfg.control_dt_s,
+            "spin_step_us_mean": flight.step_us_mean,
+            "ratio_spin_over_nmpc": flight.step_us_mean / nmpc_us}
