@@ -278,7 +278,11 @@ def _zoh(a: np.ndarray, b: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarra
     return e[:nx, :nx], e[:nx, nx:]
 
 
-def _lqr_gain(lin: _Linear, cfg: SpinConfig, n: np.ndarray, basis: np.ndarray) -> np.ndarray:
+def _lqr_gain(lin: _Linear, cfg: SpinConfig, n: np.ndarray, basis: np.ndarray,
+              delay_steps: int = 0) -> np.ndarray:
+    """The discrete LQR gain (6 x (11 + 6 delay_steps)) on the state (omega, axis, actuators)
+    and, with a delay of `delay_steps` control periods between a command and its effect, the
+    commands still in flight (oldest first)."""
     w = cfg.weights
     q = np.zeros((11, 11))
     q[0:3, 0:3] = w.spin * np.outer(n, n) + basis @ np.diag(w.rates) @ basis.T
@@ -287,6 +291,19 @@ def _lqr_gain(lin: _Linear, cfg: SpinConfig, n: np.ndarray, basis: np.ndarray) -
     q += w.force * lin.c_force.T @ lin.c_force
     r = np.diag([w.input[0]] * 3 + [w.input[1]] * 3)
     ad, bd = _zoh(lin.a, lin.b, cfg.dt_s)
+    if delay_steps:
+        nx, nu, d = 11, 6, delay_steps
+        na = nx + nu * d
+        a_aug = np.zeros((na, na))
+        b_aug = np.zeros((na, nu))
+        a_aug[:nx, :nx] = ad
+        a_aug[:nx, nx:nx + nu] = bd                 # the oldest command in flight acts now
+        for j in range(d - 1):                      # the buffer shifts by one period
+            a_aug[nx + j * nu:nx + (j + 1) * nu, nx + (j + 1) * nu:nx + (j + 2) * nu] = np.eye(nu)
+        b_aug[nx + (d - 1) * nu:, :] = np.eye(nu)   # this period's command enters last
+        q_aug = np.zeros((na, na))
+        q_aug[:nx, :nx] = q
+        ad, bd, q = a_aug, b_aug, q_aug
     p = solve_discrete_are(ad, bd, q, r)
     return np.linalg.solve(r + bd.T @ p @ bd, bd.T @ p @ ad)
 
@@ -318,14 +335,21 @@ class SpinController:
     the LQR's Riccati equation: about a second), then `reset` at the switch and `step` every
     1 / config.control_rate_hz s. No clock, no I/O: the caller owns time."""
 
-    def __init__(self, config: SpinConfig, vehicle: VehicleModel, motor: int) -> None:
+    def __init__(self, config: SpinConfig, vehicle: VehicleModel, motor: int,
+                 delay_s: float = 0.0) -> None:
+        """`delay_s`: the time from the state a command answers to the command's effect (the
+        controller file's applied_delay_s: 0 in lockstep), rounded up to whole control periods
+        and carried in the LQR's state as the commands in flight."""
+        if not 0.0 <= delay_s <= 0.2:
+            raise ValueError(f"spin: delay_s {delay_s!r}, expected 0..0.2 s")
         self.config, self.vehicle, self.motor = config, vehicle, motor
+        self.delay_steps = int(math.ceil(delay_s / config.dt_s - 1e-9))
         self.trim = trim = equilibrium(vehicle, motor, config.spin_rate_rad_s)
         self._live = live = [i for i in range(4) if i != motor - 1]
         self._n = n = np.asarray(trim.axis_frd)
         self._e = _basis(n)
         lin = _linearise(vehicle, trim, live, self._e)
-        self.gain = _lqr_gain(lin, config, n, self._e)              # 6 x 11
+        self.gain = _lqr_gain(lin, config, n, self._e, self.delay_steps)  # 6 x (11 + 6 d)
         self._a0 = np.array([trim.throttle_pct[i] / 100.0 for i in live]
                             + [trim.tilt_rad[i] for i in live])
         # the operating point's move per newton of force along the axis with the torque held
@@ -353,6 +377,7 @@ class SpinController:
             self._act = np.array([command.throttle_pct[i] / 100.0 for i in self._live]
                                  + [command.tilt_rad[i] for i in self._live])
         self._act = np.clip(self._act, self._lo, self._hi)
+        self._in_flight = [self._act.copy() for _ in range(self.delay_steps)]   # oldest first
         self._integral = np.zeros(3)
         self._ground = float(ground_down_m)
         if hold_pos_ned_m is None and estimate is not None:
@@ -402,12 +427,17 @@ class SpinController:
         s = rot.T @ n_des
         a_op = self._a0 + self._per_newton * (f_des - f0)
         x = np.concatenate([om - self.trim.spin_rad_s * self._n, self._e.T @ s,
-                            self._act - a_op])
+                            self._act - a_op, *(u - a_op for u in self._in_flight)])
         u_raw = a_op - self.gain @ x
         u = np.clip(u_raw, self._lo, self._hi)
         saturated = int(np.sum(np.abs(u - u_raw) > 1e-12))
-        # the actuators' outputs, as the vehicle file's lags and rate limits make them
-        self._act = self._act + np.clip(self._lag * (u - self._act), -self._rate, self._rate)
+        # the actuators' outputs over this period, as the vehicle file's lags and rate limits
+        # make them from the command that acts now (the oldest in flight, or this one)
+        acting = u
+        if self._in_flight:
+            acting = self._in_flight.pop(0)
+            self._in_flight.append(u)
+        self._act = self._act + np.clip(self._lag * (acting - self._act), -self._rate, self._rate)
         body_axis = rot @ self._n
         self.info = SpinInfo(float(om @ self._n),
                              math.acos(max(-1.0, min(1.0, float(body_axis @ n_des)))), f_des,
