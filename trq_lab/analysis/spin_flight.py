@@ -71,7 +71,13 @@ def fly(scenario: str = "orbit", *, seed: int = 0, seconds: float = 2.0, motor: 
         altitude_m: float = 5.0, land: bool = False, switch_delay_s: float = 0.0,
         perturb_rates_rad_s: float = 0.1, perturb_pos_m: float = 0.1,
         gyro_clip: bool = False, controller: SpinController | None = None,
-        physics_core: str = "auto", command_delay_s: float = 0.0, trace=None) -> SpinFlight:
+        physics_core: str = "auto", command_delay_s: float = 0.0, measured: bool = False,
+        wind_m_s: float = 0.0, gusts: bool = False, trace=None) -> SpinFlight:
+    """One flight (the module docstring). `measured`: the controller flies on the autopilot's
+    estimate (sil_vehicle's ESKF on the `mocap` sensing profile's IMU, barometer, magnetometer and
+    pose, aligned on a still hover for `_ALIGN_S` before the flight) instead of the truth; hover
+    scenario only. `wind_m_s`: a mean wind from the north (with `gusts`, the simulation file's
+    turbulence); the controller knows nothing of it (its trim is calm air's)."""
     from sil_vehicle.config import load_sim
     from sil_vehicle.faults import Faults
     from sil_vehicle.frames import quat_to_dcm, quat_to_euler
@@ -80,8 +86,8 @@ def fly(scenario: str = "orbit", *, seed: int = 0, seconds: float = 2.0, motor: 
     if scenario not in ("orbit", "hover"):
         raise ValueError(f"spin_flight: scenario {scenario!r}, expected 'orbit' or 'hover'")
     rng = np.random.default_rng(seed)
-    sim = load_sim(SIM_FILE).with_changes(physics_core=physics_core, wind_speed_m_s=0.0,
-                                           gusts_enabled=False)
+    sim = load_sim(SIM_FILE).with_changes(physics_core=physics_core, wind_speed_m_s=wind_m_s,
+                                           gusts_enabled=gusts)
     vp = sim.vehicle
     if controller is None:
         cfg = load_spin_config(CONTROLLER_FILE)
@@ -108,7 +114,18 @@ def fly(scenario: str = "orbit", *, seed: int = 0, seconds: float = 2.0, motor: 
         held = ActuatorCommand((hover,) * 4, (0.0,) * 4)
         motors, tilts = (0.0, hover, hover, hover), (0.0,) * 4
     veh.command = held
-    veh.state = VehicleState(0, tuple(x0), motors, tilts, (0.0, 0.0, 0.0), True, False, False, "")
+    sensing = None
+    t_start_us = 0
+    if measured:
+        if scenario != "hover":
+            raise ValueError("spin_flight: measured flights start from a hover (the estimator "
+                             "aligns on it)")
+        x0[3:6] = [0.0, 0.0, 0.0]
+        x0[10:13] = [0.0, 0.0, 0.0]
+        sensing = _Sensing(sim, seed, x0, motors)
+        t_start_us = sensing.t_us
+    veh.state = VehicleState(t_start_us, tuple(x0), motors, tilts, (0.0, 0.0, 0.0), True, False,
+                             False, "")
     failure_pos = np.array([0.0, 0.0, -altitude_m])        # the point to hold (unperturbed)
     dt = sim.dt_us * 1e-6
     ticks_per = int(round(1.0 / (cfg.control_rate_hz * dt)))
@@ -129,11 +146,16 @@ def fly(scenario: str = "orbit", *, seed: int = 0, seconds: float = 2.0, motor: 
         s = veh.state
         t = k * dt
         if k >= switch_tick and k % ticks_per == 0:
-            rates = np.asarray(s.x[10:13])
+            if sensing is not None:
+                e = sensing.eskf.output()
+                pos_e, vel_e, q_e, rates = e.pos_ned_m, e.vel_ned_m_s, e.quat_wxyz, \
+                    np.asarray(e.rates_frd_rad_s)
+            else:
+                pos_e, vel_e, q_e, rates = s.x[0:3], s.x[3:6], s.x[6:10], np.asarray(s.x[10:13])
             if gyro_clip:
                 rates = np.clip(rates, -GYRO_FULL_SCALE_RAD_S, GYRO_FULL_SCALE_RAD_S)
-            est = StateEstimate(tuple(s.x[0:3]), tuple(s.x[3:6]),
-                                tuple(quat_to_euler(*s.x[6:10])), tuple(rates.tolist()))
+            est = StateEstimate(tuple(map(float, pos_e)), tuple(map(float, vel_e)),
+                                tuple(quat_to_euler(*q_e)), tuple(rates.tolist()))
             if not started:
                 controller.reset(est, command=OffboardCommand(held.throttle_pct, held.tilt_rad),
                                  hold_pos_ned_m=tuple(failure_pos), ground_down_m=0.0)
@@ -155,7 +177,10 @@ def fly(scenario: str = "orbit", *, seed: int = 0, seconds: float = 2.0, motor: 
         while pending and pending[0][0] <= k:
             veh.command = pending.pop(0)[1]
         last_vz = s.x[5]
+        prev = s
         s = veh.step()
+        if sensing is not None:
+            sensing.tick(prev, s)
         if s.crashed:
             break
         if s.landed:
@@ -185,7 +210,7 @@ def fly(scenario: str = "orbit", *, seed: int = 0, seconds: float = 2.0, motor: 
     hold_drift = (float(np.linalg.norm(np.mean(hold_pos, axis=0) - failure_pos[0:2]))
                   if hold_pos else math.nan)
     return SpinFlight(
-        scenario=scenario, seed=seed, seconds=round(veh.state.t_us * 1e-6, 3),
+        scenario=scenario, seed=seed, seconds=round((veh.state.t_us - t_start_us) * 1e-6, 3),
         crashed=s.crashed, crash_reason=s.crash_reason, landed=s.landed,
         motors_off=controller.info.landed and max(veh.command.throttle_pct) == 0.0,
         max_axis_lean_deg=lean, max_body_tilt_deg=tilt, max_lean_first_s_deg=lean_first,
@@ -212,6 +237,45 @@ def main() -> None:       # a manual run: python -m trq_lab.analysis.spin_flight
 
 if __name__ == "__main__":
     main()
+
+
+_ALIGN_S = 10.0       # the estimator's still hover before a measured flight (a choice)
+
+
+class _Sensing:
+    """The autopilot's sensors and estimator as sil_vehicle.sitl.Sitl wires them (its _sense),
+    on the `mocap` profile, first on `_ALIGN_S` of a still hover at the start's pose."""
+
+    def __init__(self, sim, seed: int, x0, motors) -> None:
+        from sil_vehicle.estimator.eskf import Eskf
+        from sil_vehicle.estimator.params import EstimatorParams
+        from sil_vehicle.sensors.profile import load_sensing
+        from sil_vehicle.sensors.suite import SensorSuite
+        from sil_vehicle.sensors.truth import Truth, specific_force_frd
+
+        self.dt_us, self.g = sim.dt_us, sim.vehicle.gravity_m_s2
+        profile = load_sensing("mocap", sim.physics_rate_hz)
+        self.suite = SensorSuite(profile, np.random.default_rng([seed, 7]),
+                                 home_alt_m=sim.home_alt_m)
+        self.eskf = Eskf(EstimatorParams.from_profile(profile))
+        q = np.asarray(x0[6:10], float)
+        f = specific_force_frd(q, np.zeros(3), self.g)
+        t = 0
+        for _ in range(int(round(_ALIGN_S * 1e6 / self.dt_us))):
+            truth = Truth.of(t, x0[0:3], (0.0, 0.0, 0.0), q, (0.0, 0.0, 0.0), f, motors)
+            self.eskf.step(t, self.suite.sample(t, truth))
+            t += self.dt_us
+        e = self.eskf.output()
+        if not (e.attitude_aligned and e.position_valid) or e.diverged:
+            raise RuntimeError("spin_flight: the estimator did not align on the still hover")
+        self.t_us = t
+
+    def tick(self, s0, s1) -> None:
+        from sil_vehicle.sensors.truth import Truth, imu_truth
+        rates, f = imu_truth(s0.x[6:10], s1.x[6:10], s0.x[3:6], s1.x[3:6], self.dt_us * 1e-6,
+                             self.g)
+        truth = Truth(s1.t_us, s1.x[0:3], s1.x[3:6], s1.x[6:10], rates, f, s1.motor_pct)
+        self.eskf.step(s1.t_us, self.suite.sample(s1.t_us, truth))
 
 
 def step_time_ratio(steps: int = 200, seed: int = 0) -> dict:
