@@ -72,12 +72,15 @@ def fly(scenario: str = "orbit", *, seed: int = 0, seconds: float = 2.0, motor: 
         perturb_rates_rad_s: float = 0.1, perturb_pos_m: float = 0.1,
         gyro_clip: bool = False, controller: SpinController | None = None,
         physics_core: str = "auto", command_delay_s: float = 0.0, measured: bool = False,
-        wind_m_s: float = 0.0, gusts: bool = False, trace=None) -> SpinFlight:
+        wind_m_s: float = 0.0, gusts: bool = False, nmpc_before_s: float = 0.0,
+        trace=None) -> SpinFlight:
     """One flight (the module docstring). `measured`: the controller flies on the autopilot's
     estimate (sil_vehicle's ESKF on the `mocap` sensing profile's IMU, barometer, magnetometer and
     pose, aligned on a still hover for `_ALIGN_S` before the flight) instead of the truth; hover
     scenario only. `wind_m_s`: a mean wind from the north (with `gusts`, the simulation file's
-    turbulence); the controller knows nothing of it (its trim is calm air's)."""
+    turbulence); the controller knows nothing of it (its trim is calm air's). `nmpc_before_s` > 0
+    (hover, on the truth): the project's NMPC (trq_nmpc_eso.yaml's Controller) flies the hover
+    that long before the failure and on until the switch, instead of the held hover commands."""
     from sil_vehicle.config import load_sim
     from sil_vehicle.faults import Faults
     from sil_vehicle.frames import quat_to_dcm, quat_to_euler
@@ -128,6 +131,28 @@ def fly(scenario: str = "orbit", *, seed: int = 0, seconds: float = 2.0, motor: 
                              False, "")
     failure_pos = np.array([0.0, 0.0, -altitude_m])        # the point to hold (unperturbed)
     dt = sim.dt_us * 1e-6
+    nmpc = None
+    if nmpc_before_s > 0.0:
+        if scenario != "hover" or measured:
+            raise ValueError("spin_flight: nmpc_before_s with the hover scenario on the truth")
+        from trq_offboard.controller import Controller
+        from trq_offboard.reference import ConstantReference
+        nmpc = Controller.from_yaml(CONTROLLER_FILE)
+        nmpc_ref = ConstantReference(ReferenceSample(tuple(failure_pos), (0.0, 0.0, 0.0), 0.0))
+        faults, veh.faults = veh.faults, Faults()
+
+        def nmpc_step(state):
+            est_n = StateEstimate(tuple(state.x[0:3]), tuple(state.x[3:6]),
+                                  tuple(quat_to_euler(*state.x[6:10])), tuple(state.x[10:13]))
+            c, _ = nmpc.step(state.t_us * 1e-6, est_n, None, nmpc_ref)
+            return ActuatorCommand(c.throttle_pct, c.tilt_rad)
+
+        for k in range(int(round(nmpc_before_s / dt))):
+            if k % int(round(1.0 / (cfg.control_rate_hz * dt))) == 0:
+                veh.command = nmpc_step(veh.state)
+            veh.step()
+        veh.faults = faults
+        t_start_us = veh.state.t_us
     ticks_per = int(round(1.0 / (cfg.control_rate_hz * dt)))
     switch_tick = int(round(switch_delay_s / dt))
     switch_tick -= switch_tick % ticks_per
@@ -145,6 +170,9 @@ def fly(scenario: str = "orbit", *, seed: int = 0, seconds: float = 2.0, motor: 
     for k in range(n_ticks):
         s = veh.state
         t = k * dt
+        if nmpc is not None and k < switch_tick and k % ticks_per == 0:
+            held = nmpc_step(s)
+            veh.command = held
         if k >= switch_tick and k % ticks_per == 0:
             if sensing is not None:
                 e = sensing.eskf.output()
