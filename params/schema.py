@@ -490,6 +490,7 @@ class SpinLanding(Strict):
     final_speed_m_s: Num(0.05, 5.0)
     contact_height_m: Num(0.0, 1.0)       # motors off within it of the ground, when still
     contact_speed_m_s: Num(0.0, 5.0)
+    final_spin_rate_rad_s: Num(5.0, 60.0)  # the spin below final_height_m (a smaller cone)
 
 
 class Spin(Strict):

@@ -87,6 +87,7 @@ class SpinLanding:
     final_speed_m_s: float
     contact_height_m: float
     contact_speed_m_s: float
+    final_spin_rate_rad_s: float        # the spin below final_height_m (a smaller cone)
 
 
 @dataclass(frozen=True)
@@ -113,7 +114,7 @@ def spin_config(s: schema.Spin, file: str, vehicle_file: str) -> SpinConfig:
         SpinPosition(tuple(p.kp_s2), tuple(p.kd_s), tuple(p.ki_s3), math.radians(p.max_lean_deg),
                      p.climb_force_N, p.sink_force_N, p.max_integral_m_s2),
         SpinLanding(la.hold_s, la.descent_speed_m_s, la.final_height_m, la.final_speed_m_s,
-                    la.contact_height_m, la.contact_speed_m_s),
+                    la.contact_height_m, la.contact_speed_m_s, la.final_spin_rate_rad_s),
         vehicle_file)
 
 
@@ -311,6 +312,17 @@ def _lqr_gain(lin: _Linear, cfg: SpinConfig, n: np.ndarray, basis: np.ndarray,
 # --- the controller ------------------------------------------------------------------------------
 
 @dataclass(frozen=True)
+class _Stage:
+    """One spin rate's trim and LQR."""
+    trim: SpinTrim
+    axis: np.ndarray                   # n, body FRD
+    basis: np.ndarray                  # 3x2 normal to n
+    gain: np.ndarray                   # 6 x (11 + 6 d)
+    a0: np.ndarray                     # the live actuators at the trim (fractions, rad)
+    per_newton: np.ndarray             # their move per newton along the axis
+
+
+@dataclass(frozen=True)
 class SpinInfo:
     """What the last step did (for the log and the tests)."""
     spin_rad_s: float                  # the body rates' component along the trim's axis
@@ -344,18 +356,11 @@ class SpinController:
             raise ValueError(f"spin: delay_s {delay_s!r}, expected 0..0.2 s")
         self.config, self.vehicle, self.motor = config, vehicle, motor
         self.delay_steps = int(math.ceil(delay_s / config.dt_s - 1e-9))
-        self.trim = trim = equilibrium(vehicle, motor, config.spin_rate_rad_s)
-        self._live = live = [i for i in range(4) if i != motor - 1]
-        self._n = n = np.asarray(trim.axis_frd)
-        self._e = _basis(n)
-        lin = _linearise(vehicle, trim, live, self._e)
-        self.gain = _lqr_gain(lin, config, n, self._e, self.delay_steps)  # 6 x (11 + 6 d)
-        self._a0 = np.array([trim.throttle_pct[i] / 100.0 for i in live]
-                            + [trim.tilt_rad[i] for i in live])
-        # the operating point's move per newton of force along the axis with the torque held
-        # (the least change in scaled units): the linearised family of equilibria
-        sens = np.vstack([lin.m_act, lin.f_act])                     # 4 x 6
-        self._per_newton = np.linalg.pinv(sens) @ np.array([0.0, 0.0, 0.0, 1.0])
+        self._live = [i for i in range(4) if i != motor - 1]
+        self._stages = [self._stage(config.spin_rate_rad_s)]
+        if config.landing.final_spin_rate_rad_s != config.spin_rate_rad_s:
+            self._stages.append(self._stage(config.landing.final_spin_rate_rad_s))
+        self._use(0)
         self._lo = np.array([vehicle.idle_pct / 100.0] * 3 + [vehicle.tilt_min_rad] * 3)
         self._hi = np.array([1.0] * 3 + [vehicle.tilt_max_rad] * 3)
         dt = config.dt_s
@@ -364,6 +369,27 @@ class SpinController:
         self._rate = np.array([vehicle.motor_rate_limit_pct_s / 100.0] * 3
                               + [vehicle.servo_rate_limit_rad_s] * 3) * dt
         self.reset(None)
+
+    def _stage(self, spin_rad_s: float) -> _Stage:
+        """The trim at `spin_rad_s`, its LQR gain and its family's slope (built once)."""
+        trim = equilibrium(self.vehicle, self.motor, spin_rad_s)
+        live = self._live
+        n = np.asarray(trim.axis_frd)
+        e = _basis(n)
+        lin = _linearise(self.vehicle, trim, live, e)
+        gain = _lqr_gain(lin, self.config, n, e, self.delay_steps)     # 6 x (11 + 6 d)
+        a0 = np.array([trim.throttle_pct[i] / 100.0 for i in live] + [trim.tilt_rad[i] for i in live])
+        # the operating point's move per newton of force along the axis with the torque held
+        # (the least change in scaled units): the linearised family of equilibria
+        sens = np.vstack([lin.m_act, lin.f_act])                         # 4 x 6
+        per_newton = np.linalg.pinv(sens) @ np.array([0.0, 0.0, 0.0, 1.0])
+        return _Stage(trim, n, e, gain, a0, per_newton)
+
+    def _use(self, i: int) -> None:
+        st = self._stages[i]
+        self._stage_index = i
+        self.trim, self._n, self._e, self.gain = st.trim, st.axis, st.basis, st.gain
+        self._a0, self._per_newton = st.a0, st.per_newton
 
     # --- the switch ----------------------------------------------------------------------------
     def reset(self, estimate: StateEstimate | None, *, command: ActuatorCommand | None = None,
@@ -384,6 +410,7 @@ class SpinController:
             hold_pos_ned_m = estimate.pos_ned_m
         self.hold_pos_ned_m = None if hold_pos_ned_m is None else tuple(map(float, hold_pos_ned_m))
         self._landed = False
+        self._use(0)
         self.info = SpinInfo(0.0, 0.0, self.trim.force_along_axis_N, 0, False)
 
     # --- one control period --------------------------------------------------------------------
@@ -401,6 +428,9 @@ class SpinController:
             self._landed = True
             self.info = SpinInfo(float(om @ self._n), 0.0, 0.0, 0, True)
             return ActuatorCommand((0.0,) * 4, (0.0,) * 4)
+        if (len(self._stages) > 1 and self._stage_index == 0 and reference.phase == "land"
+                and p[2] >= self._ground - cfg.landing.final_height_m):
+            self._use(1)                     # the final descent at the faster spin: less cone
         rot = _rotation(estimate.euler_rad)
         # the position loop: the force vector asked for (world NED)
         e_p = np.asarray(reference.pos_ned_m, float) - p

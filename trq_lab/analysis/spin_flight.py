@@ -52,6 +52,7 @@ class SpinFlight:
     hold_drift_m: float               # the same over the hold's last second (1-period mean)
     touchdown_drift_m: float          # horizontal distance at touchdown (nan: no touchdown)
     touchdown_speed_m_s: float        # vertical speed on the last tick before contact
+    touchdown_tilt_deg: float         # body -z from the vertical on that tick (the cone + lean)
     max_descent_m_s: float            # the largest downward speed
     spin_mean_rad_s: float            # |omega| over the hold's last second
     max_rate_axis_rad_s: float        # the largest |omega_i| of any body axis (the gyro reads)
@@ -161,7 +162,7 @@ def fly(scenario: str = "orbit", *, seed: int = 0, seconds: float = 2.0, motor: 
     started = False
     step_ns, steps, sat = 0, 0, 0
     lean = tilt = lean_first = drift = max_down = rate_axis = 0.0
-    touchdown_speed = touchdown_drift = math.nan
+    touchdown_speed = touchdown_drift = touchdown_tilt = tilt_now = math.nan
     spins, hold_pos = [], []
     last_vz = 0.0
     touchdown_tick = n_ticks
@@ -214,6 +215,7 @@ def fly(scenario: str = "orbit", *, seed: int = 0, seconds: float = 2.0, motor: 
         if s.landed:
             if math.isnan(touchdown_speed):
                 touchdown_speed = last_vz
+                touchdown_tilt = tilt_now
                 touchdown_drift = float(np.linalg.norm(np.asarray(s.x[0:2]) - failure_pos[0:2]))
                 touchdown_tick = k
             if k - touchdown_tick > int(round(0.5 / dt)):
@@ -224,6 +226,7 @@ def fly(scenario: str = "orbit", *, seed: int = 0, seconds: float = 2.0, motor: 
         a_lean = math.degrees(math.acos(max(-1.0, min(1.0, float(up @ axis)))))
         b_tilt = math.degrees(math.acos(max(-1.0, min(1.0, float(r[2, 2])))))
         lean, tilt = max(lean, a_lean), max(tilt, b_tilt)
+        tilt_now = b_tilt
         if t < switch_delay_s + 1.0:
             lean_first = max(lean_first, a_lean)
         drift = max(drift, float(np.linalg.norm(np.asarray(s.x[0:2]) - failure_pos[0:2])))
@@ -243,7 +246,8 @@ def fly(scenario: str = "orbit", *, seed: int = 0, seconds: float = 2.0, motor: 
         motors_off=controller.info.landed and max(veh.command.throttle_pct) == 0.0,
         max_axis_lean_deg=lean, max_body_tilt_deg=tilt, max_lean_first_s_deg=lean_first,
         max_drift_m=drift, hold_drift_m=hold_drift, touchdown_drift_m=touchdown_drift,
-        touchdown_speed_m_s=touchdown_speed, max_descent_m_s=max_down,
+        touchdown_speed_m_s=touchdown_speed, touchdown_tilt_deg=touchdown_tilt,
+        max_descent_m_s=max_down,
         spin_mean_rad_s=float(np.mean(spins)) if spins else math.nan,
         max_rate_axis_rad_s=rate_axis, gyro_ok=rate_axis < GYRO_FULL_SCALE_RAD_S,
         saturated_fraction=sat / max(1, steps), step_us_mean=step_ns / max(1, steps) / 1e3)

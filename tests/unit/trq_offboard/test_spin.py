@@ -78,7 +78,8 @@ def test_on_the_orbit_the_command_is_the_trim(controller):
 def test_landing_reference_holds_then_descends_then_slows():
     from trq_offboard.spin import SpinLanding
     la = SpinLanding(hold_s=2.0, descent_speed_m_s=1.0, final_height_m=1.0, final_speed_m_s=0.5,
-                     contact_height_m=0.05, contact_speed_m_s=0.05)
+                     contact_height_m=0.05, contact_speed_m_s=0.05,
+                     final_spin_rate_rad_s=30.0)
     start = (1.0, 2.0, -5.0)
     assert landing_reference(1.0, start, la).pos_ned_m == start
     assert landing_reference(1.0, start, la).phase == "hold"
