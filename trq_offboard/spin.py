@@ -42,16 +42,15 @@ from pathlib import Path
 
 import casadi as ca
 import numpy as np
-from scipy.linalg import expm, solve_discrete_are
 
 from trq_params import loader, schema
 
 from trq_offboard.config import VehicleModel, load_vehicle_model
 from trq_offboard.records import ActuatorCommand, ReferenceSample, StateEstimate
 
-__all__ = ["load_for_vehicle", "SpinWeights", "SpinPosition", "SpinLanding", "SpinConfig", "SpinTrim", "SpinInfo",
-           "equilibrium", "SpinController", "landing_reference", "load_spin_config",
-           "spin_config"]
+__all__ = ["SpinWeights", "SpinPosition", "SpinLanding", "SpinConfig", "SpinTrim", "SpinInfo",
+           "equilibrium", "SpinController", "landing_reference", "load_spin_config", "spin_config",
+           "load_for_vehicle"]
 
 _IPOPT = {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes", "ipopt.max_iter": 500}
 
@@ -271,11 +270,46 @@ def _linearise(vm: VehicleModel, trim: SpinTrim, live, basis: np.ndarray) -> _Li
     return _Linear(a, b, c_force, j[7:10, 6:12], j[6:7, 6:12])
 
 
+def _expm(m: np.ndarray) -> np.ndarray:
+    """The matrix exponential: scaling and squaring of an 18-term Taylor series (the matrices here
+    are small, their norm times the step well below 10; numpy only, the package's dependency)."""
+    norm = float(np.max(np.sum(np.abs(m), axis=1)))
+    k = max(0, int(math.ceil(math.log2(norm / 0.5)))) if norm > 0.5 else 0
+    a = m / (2.0 ** k)
+    term = np.eye(len(m))
+    out = term.copy()
+    for i in range(1, 19):
+        term = term @ a / i
+        out = out + term
+    for _ in range(k):
+        out = out @ out
+    return out
+
+
+def _dare(a: np.ndarray, b: np.ndarray, q: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """The stabilising solution P of the discrete algebraic Riccati equation
+    P = A'PA - A'PB (R + B'PB)^-1 B'PA + Q, by the structured doubling algorithm (quadratic
+    convergence; numpy only). ValueError if it does not converge."""
+    n = len(a)
+    ak, gk, hk = a.copy(), b @ np.linalg.solve(r, b.T), q.copy()
+    for _ in range(100):
+        w = np.linalg.inv(np.eye(n) + gk @ hk)
+        a_next = ak @ w @ ak
+        g_next = gk + ak @ w @ gk @ ak.T
+        h_next = hk + ak.T @ hk @ w @ ak
+        done = np.max(np.abs(h_next - hk)) <= 1e-12 * max(1.0, np.max(np.abs(h_next)))
+        ak, gk, hk = a_next, 0.5 * (g_next + g_next.T), 0.5 * (h_next + h_next.T)
+        if done:
+            return hk
+    raise ValueError("spin: the LQR's Riccati equation did not converge (weights: "
+                     "docs/decisions/2026-12-05-lost-motor-spin-controller.md)")
+
+
 def _zoh(a: np.ndarray, b: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
     nx, nu = b.shape
     blk = np.zeros((nx + nu, nx + nu))
     blk[:nx, :nx], blk[:nx, nx:] = a, b
-    e = expm(blk * dt)
+    e = _expm(blk * dt)
     return e[:nx, :nx], e[:nx, nx:]
 
 
@@ -305,7 +339,7 @@ def _lqr_gain(lin: _Linear, cfg: SpinConfig, n: np.ndarray, basis: np.ndarray,
         q_aug = np.zeros((na, na))
         q_aug[:nx, :nx] = q
         ad, bd, q = a_aug, b_aug, q_aug
-    p = solve_discrete_are(ad, bd, q, r)
+    p = _dare(ad, bd, q, r)
     return np.linalg.solve(r + bd.T @ p @ bd, bd.T @ p @ ad)
 
 
@@ -378,7 +412,8 @@ class SpinController:
         e = _basis(n)
         lin = _linearise(self.vehicle, trim, live, e)
         gain = _lqr_gain(lin, self.config, n, e, self.delay_steps)     # 6 x (11 + 6 d)
-        a0 = np.array([trim.throttle_pct[i] / 100.0 for i in live] + [trim.tilt_rad[i] for i in live])
+        a0 = np.array([trim.throttle_pct[i] / 100.0 for i in live]
+                      + [trim.tilt_rad[i] for i in live])
         # the operating point's move per newton of force along the axis with the torque held
         # (the least change in scaled units): the linearised family of equilibria
         sens = np.vstack([lin.m_act, lin.f_act])                         # 4 x 6
@@ -478,7 +513,7 @@ class SpinController:
         return ActuatorCommand(tuple(thr), tuple(til))
 
 
-# --- the descent ------------------------------------------------------------------------------------
+# --- the descent -------------------------------------------------------------------------------
 
 def landing_reference(t_s: float, start_pos_ned_m, landing: SpinLanding,
                       ground_down_m: float = 0.0) -> ReferenceSample:

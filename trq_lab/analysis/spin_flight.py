@@ -58,7 +58,7 @@ class SpinFlight:
     max_rate_axis_rad_s: float        # the largest |omega_i| of any body axis (the gyro reads)
     gyro_ok: bool                     # max_rate_axis_rad_s below the full scale
     saturated_fraction: float         # share of the steps with a live command clipped
-    step_us_mean: float               # the controller's step, CPU time of the thread (a measurement)
+    step_us_mean: float               # the controller's step, the thread's CPU (a measurement)
 
 
 def _start_on_orbit(sim, motor: int, spin_rad_s: float, altitude_m: float):

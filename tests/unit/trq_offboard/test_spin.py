@@ -99,3 +99,30 @@ def test_touchdown_cuts_the_motors(controller):
     controller.reset(None, hold_pos_ned_m=(0.0, 0.0, 0.0))
     controller.step(est, ReferenceSample((0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 0.0, "hold"))
     assert not controller.info.landed
+
+
+def test_expm_and_riccati_against_their_definitions():
+    """The numpy matrix exponential against exp of a diagonalisable matrix, and the Riccati
+    solution satisfying its equation with a stable closed loop (the LQR's pieces)."""
+    from trq_offboard.spin import _dare, _expm
+    rng = np.random.default_rng(0)
+    v = rng.normal(size=(5, 5))
+    lam = np.array([-3.0, -0.5, 0.0, 0.7, 2.0])
+    m = v @ np.diag(lam) @ np.linalg.inv(v)
+    assert np.allclose(_expm(m), v @ np.diag(np.exp(lam)) @ np.linalg.inv(v), rtol=1e-9,
+                       atol=1e-9)
+    a = np.array([[1.0, 0.1, 0.0], [0.0, 1.0, 0.1], [0.0, 0.0, 1.02]])   # unstable, controllable
+    b = np.array([[0.0], [0.0], [0.1]])
+    q, r = np.eye(3), np.array([[0.5]])
+    p = _dare(a, b, q, r)
+    k = np.linalg.solve(r + b.T @ p @ b, b.T @ p @ a)
+    assert np.allclose(a.T @ p @ a - a.T @ p @ b @ k + q, p, atol=1e-8)
+    assert np.max(np.abs(np.linalg.eigvals(a - b @ k))) < 1.0
+
+
+def test_the_delay_is_carried_in_the_gain():
+    cfg = load_spin_config(CONTROLLER)
+    c = SpinController(cfg, load_vehicle_model(cfg.vehicle_file), 1, delay_s=0.015)
+    assert c.delay_steps == 2 and c.gain.shape == (6, 11 + 12)
+    with pytest.raises(ValueError, match="delay_s"):
+        SpinController(cfg, load_vehicle_model(cfg.vehicle_file), 1, delay_s=-0.01)
