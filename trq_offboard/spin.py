@@ -238,7 +238,8 @@ class _Linear:
     f_act: np.ndarray      # 1x6: the force along n's
 
 
-def _linearise(vm: VehicleModel, trim: SpinTrim, live, basis: np.ndarray) -> _Linear:
+def _linearise(vm: VehicleModel, trim: SpinTrim, live, basis: np.ndarray,
+               direction: int = 1) -> _Linear:
     om, s, act = ca.SX.sym("om", 3), ca.SX.sym("s", 3), ca.SX.sym("act", 6)
     zeta, alpha = [0.0] * 4, [0.0] * 4
     for k, i in enumerate(live):
@@ -253,7 +254,7 @@ def _linearise(vm: VehicleModel, trim: SpinTrim, live, basis: np.ndarray) -> _Li
     n = np.asarray(trim.axis_frd)
     a0 = np.array([trim.throttle_pct[i] / 100.0 for i in live]
                   + [trim.tilt_rad[i] for i in live])
-    j = np.array(jac(trim.spin_rad_s * n, n, a0))              # 10 x 12
+    j = np.array(jac(direction * trim.spin_rad_s * n, n, a0))  # 10 x 12
     e = basis
     a = np.zeros((11, 11))
     a[0:3, 0:3] = j[0:3, 0:3]
@@ -382,13 +383,24 @@ class SpinController:
     1 / config.control_rate_hz s. No clock, no I/O: the caller owns time."""
 
     def __init__(self, config: SpinConfig, vehicle: VehicleModel, motor: int,
-                 delay_s: float = 0.0) -> None:
+                 delay_s: float = 0.0, direction: int | None = None) -> None:
         """`delay_s`: the time from the state a command answers to the command's effect (the
         controller file's applied_delay_s: 0 in lockstep), rounded up to whole control periods
-        and carried in the LQR's state as the commands in flight."""
+        and carried in the LQR's state as the commands in flight. `direction`: the spin's sense
+        about the primary axis (omega = direction w n; both are equilibria); None: the sense the
+        live rotors' reaction torques push the body at equal throttles (the one the body starts
+        turning in after the failure)."""
         if not 0.0 <= delay_s <= 0.2:
             raise ValueError(f"spin: delay_s {delay_s!r}, expected 0..0.2 s")
+        if direction not in (None, 1, -1):
+            raise ValueError(f"spin: direction {direction!r}, expected 1, -1 or None")
         self.config, self.vehicle, self.motor = config, vehicle, motor
+        if direction is None:
+            # a ccw rotor's reaction pushes the body +z (FRD); n points up (-z): omega = w n
+            # turns the body -z, so the live rotors' net push -z asks direction +1
+            push = sum(r.spin for i, r in enumerate(vehicle.rotors) if i != motor - 1)
+            direction = 1 if push < 0 else -1
+        self.direction = direction
         self.delay_steps = int(math.ceil(delay_s / config.dt_s - 1e-9))
         self._live = [i for i in range(4) if i != motor - 1]
         self._stages = [self._stage(config.spin_rate_rad_s)]
@@ -410,7 +422,7 @@ class SpinController:
         live = self._live
         n = np.asarray(trim.axis_frd)
         e = _basis(n)
-        lin = _linearise(self.vehicle, trim, live, e)
+        lin = _linearise(self.vehicle, trim, live, e, self.direction)
         gain = _lqr_gain(lin, self.config, n, e, self.delay_steps)     # 6 x (11 + 6 d)
         a0 = np.array([trim.throttle_pct[i] / 100.0 for i in live]
                       + [trim.tilt_rad[i] for i in live])
@@ -491,7 +503,7 @@ class SpinController:
         # the inner LQR about the orbit
         s = rot.T @ n_des
         a_op = self._a0 + self._per_newton * (f_des - f0)
-        x = np.concatenate([om - self.trim.spin_rad_s * self._n, self._e.T @ s,
+        x = np.concatenate([om - self.direction * self.trim.spin_rad_s * self._n, self._e.T @ s,
                             self._act - a_op, *(u - a_op for u in self._in_flight)])
         u_raw = a_op - self.gain @ x
         u = np.clip(u_raw, self._lo, self._hi)

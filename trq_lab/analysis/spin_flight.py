@@ -45,7 +45,7 @@ class SpinFlight:
     crash_reason: str
     landed: bool
     motors_off: bool                  # the controller saw the touchdown and cut the motors
-    max_axis_lean_deg: float          # the trim's primary axis (body) from the world vertical
+    max_axis_lean_deg: float          # the flown trim's primary axis (body) from the vertical
     max_body_tilt_deg: float          # body -z from the world vertical
     max_lean_first_s_deg: float       # the axis' largest lean in the first second after the switch
     max_drift_m: float                # horizontal distance from the failure point, largest
@@ -116,7 +116,9 @@ def fly(scenario: str = "orbit", *, seed: int = 0, seconds: float = 2.0, motor: 
         x0 = [0.0, 0.0, -altitude_m, *v0.tolist(), math.cos(yaw / 2), 0.0, 0.0,
               math.sin(yaw / 2), *rng.normal(0.0, perturb_rates_rad_s, 3).tolist()]
         held = ActuatorCommand((hover,) * 4, (0.0,) * 4)
-        motors, tilts = (0.0, hover, hover, hover), (0.0,) * 4
+        # every motor at hover: the dead one's output decays through the plant's motor lag and
+        # rate limit from the failure on, as the plant's own fault does
+        motors, tilts = (hover,) * 4, (0.0,) * 4
     veh.command = held
     sensing = None
     t_start_us = 0
@@ -199,6 +201,7 @@ def fly(scenario: str = "orbit", *, seed: int = 0, seconds: float = 2.0, motor: 
             step_ns += time.thread_time_ns() - t0
             steps += 1
             sat += controller.info.saturated > 0
+            axis = np.asarray(controller.trim.axis_frd)     # the stage flown (final spin: its own)
             pending.append((k + int(round(command_delay_s / dt)),
                             ActuatorCommand(cmd.throttle_pct, cmd.tilt_rad)))
             if trace is not None:

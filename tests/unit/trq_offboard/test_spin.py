@@ -126,3 +126,13 @@ def test_the_delay_is_carried_in_the_gain():
     assert c.delay_steps == 2 and c.gain.shape == (6, 11 + 12)
     with pytest.raises(ValueError, match="delay_s"):
         SpinController(cfg, load_vehicle_model(cfg.vehicle_file), 1, delay_s=-0.01)
+
+
+def test_the_spin_turns_the_way_the_live_rotors_push():
+    """Motor 1 or 2 (ccw) lost: the cw rotors 3 and 4 push the body -z, omega = +w n (n up);
+    motor 3 or 4 (cw) lost: the other way."""
+    cfg = load_spin_config(CONTROLLER)
+    vm = load_vehicle_model(cfg.vehicle_file)
+    assert SpinController(cfg, vm, 1).direction == 1
+    assert SpinController(cfg, vm, 4).direction == -1
+    assert SpinController(cfg, vm, 4, direction=1).direction == 1
