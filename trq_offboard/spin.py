@@ -365,6 +365,7 @@ class SpinInfo:
     force_N: float                     # the force along the axis asked for
     saturated: int                     # live commands clipped at a limit
     landed: bool                       # touchdown seen: the motors are off
+    fallback: bool = False             # a non-finite estimate: the trim commanded, the state kept
 
 
 def _rotation(euler_rad) -> np.ndarray:
@@ -469,6 +470,13 @@ class SpinController:
         p = np.asarray(estimate.pos_ned_m, float)
         v = np.asarray(estimate.vel_ned_m_s, float)
         om = np.asarray(estimate.rates_frd_rad_s, float)
+        if not (np.all(np.isfinite(p)) and np.all(np.isfinite(v)) and np.all(np.isfinite(om))
+                and all(math.isfinite(a) for a in estimate.euler_rad)):
+            self.info = SpinInfo(math.nan, math.nan, self.trim.force_along_axis_N, 0,
+                                 self._landed, True)
+            if self._landed:
+                return ActuatorCommand((0.0,) * 4, (0.0,) * 4)
+            return ActuatorCommand(self.trim.throttle_pct, self.trim.tilt_rad)
         if self._landed or (reference.phase == "land"
                             and p[2] >= self._ground - cfg.landing.contact_height_m
                             and abs(v[2]) <= cfg.landing.contact_speed_m_s):

@@ -13,5 +13,6 @@ $PY nmpc_before_land.py > nmpc_before_land.jsonl      # (b) + (c) with the NMPC 
 $PY measured.py 3 land > measured.jsonl               # on the autopilot's ESKF (mocap profile)
 $PY wind.py > wind.jsonl                              # 4 and 8 m/s, with and without gusts
 $PY spin_rates.py > spin_rates.jsonl                  # other spin references: 17, 20, 25, 30
-$PY -c "import json; from trq_lab.analysis.spin_flight import step_time_ratio; print(json.dumps(step_time_ratio()))" > step_time.json # (not rerun: see the record)
+$PY -c "import json; from trq_lab.analysis.spin_flight import step_time_ratio; print(json.dumps(step_time_ratio()))" > step_time.json
 $PY motors.py > motors.jsonl                          # each motor lost in turn
+$PY seeds10.py > seeds10.jsonl                        # 10 seeds, held 20 ms and NMPC 50 ms

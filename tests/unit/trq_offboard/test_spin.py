@@ -136,3 +136,12 @@ def test_the_spin_turns_the_way_the_live_rotors_push():
     assert SpinController(cfg, vm, 1).direction == 1
     assert SpinController(cfg, vm, 4).direction == -1
     assert SpinController(cfg, vm, 4, direction=1).direction == 1
+
+
+def test_a_non_finite_estimate_gives_the_trim(controller):
+    controller.reset(None, hold_pos_ned_m=(0.0, 0.0, -5.0))
+    est = StateEstimate((0.0, 0.0, math.nan), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+    cmd = controller.step(est, ReferenceSample((0.0, 0.0, -5.0), (0.0, 0.0, 0.0), 0.0))
+    assert controller.info.fallback
+    assert cmd.throttle_pct == controller.trim.throttle_pct
+    assert all(math.isfinite(a) for a in cmd.tilt_rad)
