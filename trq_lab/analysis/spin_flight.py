@@ -74,14 +74,17 @@ def fly(scenario: str = "orbit", *, seed: int = 0, seconds: float = 2.0, motor: 
         gyro_clip: bool = False, controller: SpinController | None = None,
         physics_core: str = "auto", command_delay_s: float = 0.0, measured: bool = False,
         wind_m_s: float = 0.0, gusts: bool = False, nmpc_before_s: float = 0.0,
-        trace=None) -> SpinFlight:
+        plant: dict[str, float] | None = None, trace=None) -> SpinFlight:
     """One flight (the module docstring). `measured`: the controller flies on the autopilot's
     estimate (sil_vehicle's ESKF on the `mocap` sensing profile's IMU, barometer, magnetometer and
     pose, aligned on a still hover for `_ALIGN_S` before the flight) instead of the truth; hover
     scenario only. `wind_m_s`: a mean wind from the north (with `gusts`, the simulation file's
     turbulence); the controller knows nothing of it (its trim is calm air's). `nmpc_before_s` > 0
     (hover, on the truth): the project's NMPC (trq_nmpc_eso.yaml's Controller) flies the hover
-    that long before the failure and on until the switch, instead of the held hover commands."""
+    that long before the failure and on until the switch, instead of the held hover commands.
+    `plant`: the airframe perturbed as a campaign's plant (trq_lab.overlays: mass_scale,
+    thrust_scale, ...), the controller's model left nominal. `trace`: a list the control steps
+    append (t_s, plant state, command, SpinInfo) to."""
     from sil_vehicle.config import load_sim
     from sil_vehicle.faults import Faults
     from sil_vehicle.frames import quat_to_dcm, quat_to_euler
@@ -90,7 +93,15 @@ def fly(scenario: str = "orbit", *, seed: int = 0, seconds: float = 2.0, motor: 
     if scenario not in ("orbit", "hover"):
         raise ValueError(f"spin_flight: scenario {scenario!r}, expected 'orbit' or 'hover'")
     rng = np.random.default_rng(seed)
-    sim = load_sim(SIM_FILE).with_changes(physics_core=physics_core, wind_speed_m_s=wind_m_s,
+    vehicle_file = None
+    if plant:
+        import tempfile
+        from pathlib import Path
+
+        from trq_lab.overlays import write_vehicle_overlay
+        vehicle_file = write_vehicle_overlay(trq_params.DIR / "vehicle" / "trq.yaml", plant,
+                                             Path(tempfile.mkdtemp(prefix="spin_plant_")))
+    sim = load_sim(SIM_FILE, vehicle_file).with_changes(physics_core=physics_core, wind_speed_m_s=wind_m_s,
                                            gusts_enabled=gusts)
     vp = sim.vehicle
     if controller is None:
@@ -324,7 +335,15 @@ def step_time_ratio(steps: int = 200, seed: int = 0) -> dict:
     from trq_offboard.controller import Controller
     from trq_offboard.reference import ConstantReference
 
-    sim = load_sim(SIM_FILE).with_changes(wind_speed_m_s=0.0, gusts_enabled=False)
+    vehicle_file = None
+    if plant:
+        import tempfile
+        from pathlib import Path
+
+        from trq_lab.overlays import write_vehicle_overlay
+        vehicle_file = write_vehicle_overlay(trq_params.DIR / "vehicle" / "trq.yaml", plant,
+                                             Path(tempfile.mkdtemp(prefix="spin_plant_")))
+    sim = load_sim(SIM_FILE, vehicle_file).with_changes(wind_speed_m_s=0.0, gusts_enabled=False)
     nmpc = Controller.from_yaml(CONTROLLER_FILE)
     veh = Vehicle(sim, np.random.default_rng(seed))
     veh.armed = True

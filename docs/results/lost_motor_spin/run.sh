@@ -16,3 +16,4 @@ $PY spin_rates.py > spin_rates.jsonl                  # other spin references: 1
 $PY -c "import json; from trq_lab.analysis.spin_flight import step_time_ratio; print(json.dumps(step_time_ratio()))" > step_time.json
 $PY motors.py > motors.jsonl                          # each motor lost in turn
 $PY seeds10.py > seeds10.jsonl                        # 10 seeds, held 20 ms and NMPC 50 ms
+$PY plants.py > plants.jsonl                          # the plant heavier or weaker
