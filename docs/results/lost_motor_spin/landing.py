@@ -1,3 +1,5 @@
+"""(a) and (b) + (c): from the orbit, and from hover with the commands held 20 and 50 ms, to
+touchdown; `python landing.py N` for N seeds."""
 import json, sys
 from dataclasses import asdict
 from trq_lab.analysis.spin_flight import fly, CONTROLLER_FILE

@@ -1,3 +1,5 @@
+"""The commands applied 10, 20, 30 ms after the state they answer, the controller built with
+`delay_s` equal to it: the orbit, and the transition (held 20 ms)."""
 import json, sys
 from dataclasses import asdict
 from trq_lab.analysis.spin_flight import fly, CONTROLLER_FILE

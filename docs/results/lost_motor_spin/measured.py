@@ -1,3 +1,5 @@
+"""The controller on the autopilot's ESKF (mocap profile) instead of the truth: hover, held
+20 ms; `python measured.py N [land]`."""
 import json, sys
 from dataclasses import asdict
 from trq_lab.analysis.spin_flight import fly, CONTROLLER_FILE

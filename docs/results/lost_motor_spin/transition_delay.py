@@ -1,3 +1,5 @@
+"""(b) Hover at 5 m on the hover commands, motor 1 off at 0, the commands held until the switch
+(0 to 100 ms later); 3 seeds, 3 s each."""
 import json
 from dataclasses import asdict
 from trq_lab.analysis.spin_flight import fly, CONTROLLER_FILE
