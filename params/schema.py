@@ -542,6 +542,49 @@ class ReferenceFile(Strict):
     land: Flag
 
 
+class SpinWeights(Strict):
+    """The lost-motor spin controller's LQR weights (trq_offboard/spin.py): states in rad/s, the
+    primary axis in rad, the actuators in % / 100 and rad, the force along the axis in N."""
+    rates: Vec(2, 0.0, 1e6)               # the rates normal to the axis (nutation)
+    spin: Num(0.0, 1e6)                   # the spin rate's error
+    axis: Num(0.0, 1e6)                   # the primary axis' direction error
+    force: Num(0.0, 1e6)                  # the force along the axis' error
+    actuator: Vec(2, 0.0, 1e6)            # throttle, tilt (the lagged outputs' deviation)
+    input: Vec(2, 1e-9, 1e6)              # throttle, tilt (the commands' deviation)
+
+
+class SpinPosition(Strict):
+    """Its position loop (a cascade outside the LQR): accelerations per m, per m/s, per m s."""
+    kp_s2: Vec(2, 0.0, 100.0)             # horizontal, vertical
+    kd_s: Vec(2, 0.0, 100.0)
+    ki_s3: Vec(2, 0.0, 100.0)
+    max_lean_deg: Num(0.0, 60.0)          # the axis' largest lean asked for
+    climb_force_N: Num(0.0, 50.0)         # the largest force along the axis above the trim's
+    sink_force_N: Num(0.0, 50.0)          # the largest force below it
+    max_integral_m_s2: Num(0.0, 20.0)
+
+
+class SpinLanding(Strict):
+    """Its descent reference (trq_offboard/spin.py landing_reference) and touchdown."""
+    hold_s: Num(0.0, 600.0)               # position held at the failure point first
+    descent_speed_m_s: Num(0.05, 5.0)
+    final_height_m: Num(0.0, 20.0)        # below it, the slower final speed
+    final_speed_m_s: Num(0.05, 5.0)
+    contact_height_m: Num(0.0, 1.0)       # motors off within it of the ground, when still
+    contact_speed_m_s: Num(0.0, 5.0)
+    final_spin_rate_rad_s: Num(5.0, 60.0)  # the spin below final_height_m (a smaller cone)
+
+
+class Spin(Strict):
+    """The lost-motor spinning controller (trq_offboard/spin.py; docs/decisions/
+    2026-12-05-lost-motor-spin-controller.md)."""
+    spin_rate_rad_s: Num(5.0, 60.0)
+    control_rate_hz: Int(20, 1000)
+    weights: SpinWeights
+    position: SpinPosition
+    landing: SpinLanding
+
+
 _ON_OFF_AUTO = Choice("on", "off", "auto")
 
 
@@ -564,6 +607,7 @@ class ControllerFile(Strict):
     constraints: Constraints
     solver: SolverFile
     reference: ReferenceFile
+    spin: Optional[Spin] = None           # the lost-motor controller (trq_offboard/spin.py)
 
     @model_validator(mode="after")
     def _consistent(self) -> "ControllerFile":

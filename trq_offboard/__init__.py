@@ -16,6 +16,8 @@ cache) comes from trq_wire.
     nmpc/           the OCP and its solvers (ocp, base, rti, nlp, factory; hpipm, hpipm_fetch,
                     feedback, cache)
     controller      Controller: the parts composed; step, prepare, the fallback
+    spin            the lost-motor controller: a spinning relaxed hover on three rotors (LQR
+                    about the body-frame orbit under a position loop), its descent and touchdown
     reference       the flight's plan (Reference, ConstantReference)
     records         typed records across module boundaries
     loop            the offboard flight over MAVLink (OffboardFlight)
