@@ -13,6 +13,7 @@ random numbers; time as integer microseconds.
                 EKF2's complementary correction; it sums the IMU samples per filter period too
     predictor.c  its per-sample step in C (the same numbers as the Python one, bit for bit),
                  built once with the system's C compiler and cached
+    lowpass     LowPass2: the published body rates' 2-pole low-pass (PX4's IMU_GYRO_CUTOFF)
     eskf        Eskf: the filter on its delayed horizon (downsampled IMU buffer, measurement
                 buffers, gated Joseph-form fusion, alignment, health) and the Estimate it gives
 
