@@ -286,11 +286,13 @@ def outage_label(outage: dict | None) -> str:
 
 @functools.cache
 def carried_sensors(profile: str) -> frozenset[str]:
-    """The sensors a sensing profile carries (its sections that are not null: imu, mocap, ...);
-    `profile` as `_sensing` returns it, already checked."""
+    """The sensors a sensing profile carries (its sections that are not null: imu, mocap, ...;
+    not its `estimator:`, the autopilot's tuning); `profile` as `_sensing` returns it, already
+    checked."""
     f = load(trq_params.resolve("sensing", profile), SensingFile)
     return frozenset(k for k in SensingFile.model_fields
-                     if k not in ("name", "description") and getattr(f, k) is not None)
+                     if k not in ("name", "description", "estimator")
+                     and getattr(f, k) is not None)
 
 
 def carries(profile: str, outage: dict | None) -> bool:
