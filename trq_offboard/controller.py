@@ -383,10 +383,11 @@ class Controller:
             # no position sample yet (none at all under truth): the state as it came
             if not (sensors.fixes if gnss else sensors.poses_ned_m):
                 return None
-            f.reset(sensors.stamp_us, x[0:3], x[3:6], GNSS_START_STD_M if gnss else None)
+            f.reset(sensors.stamp_us, x[0:3], x[3:6], GNSS_START_STD_M if gnss else None,
+                    x[6:9])
             self._fused_on = True
-        for acc in sensors.accel_frd_m_s2:
-            f.add_imu(acc, x[6:9])
+        for t_us, acc in sensors.accel_frd_m_s2:      # each at its time of validity
+            f.add_imu(t_us, acc)
         if gnss:
             h, v = f.cfg.gnss_std_m
             for fix in sensors.fixes:    # the configured noise, or (0) the fix's own
@@ -403,7 +404,7 @@ class Controller:
                 a_known = a_known + self._eso_d[0:3]
             elif kind == "motors":
                 a_known = a_known + self._motor_share
-            health = f.step(sensors.stamp_us, a_known, x[3:6])
+            health = f.step(sensors.stamp_us, a_known, x[6:9], x[3:6])
         else:
             health = f.health(sensors.stamp_us)
         x[0:6] = f.x[0:6]

@@ -189,11 +189,11 @@ def test_the_gnss_filter_starts_at_the_first_fix():
     ctl = Controller(cfg, solver=Hold(cfg.horizon_steps))
     ref = ConstantReference(ReferenceSample((0.0, 0.0, -2.0), (0.0, 0.0, 0.0), 0.0))
     state = StateEstimate((0.1, 0.0, -2.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
-    pose = SensorSamples(10_000, ((0.0, 0.0, -9.81),), ((5_000, (0.1, 0.0, -2.0)),))
+    pose = SensorSamples(10_000, ((10_000, (0.0, 0.0, -9.81)),), ((5_000, (0.1, 0.0, -2.0)),))
     ctl.step(0.01, state, None, ref, pose)
     assert not ctl._fused_on and ctl._health is None
     fix = PositionFix(0, (0.1, 0.0, -2.0), (0.01, 0.01, 0.01))
-    ctl.step(0.02, state, None, ref, SensorSamples(20_000, ((0.0, 0.0, -9.81),), (), (fix,)))
+    ctl.step(0.02, state, None, ref, SensorSamples(20_000, ((20_000, (0.0, 0.0, -9.81)),), (), (fix,)))
     assert ctl._fused_on and ctl._health is not None
 
 
