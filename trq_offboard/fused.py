@@ -605,7 +605,7 @@ class FusedFilter:
         run = self._candidates
         run.append((q.t_us, q.pos - x_prior[0:3], q.r_pos, np.diag(P_prior)[6:9].copy()))
         if len(run) >= 3 and not self._on_a_line(run[-3:]):
-            del run[:-1]                       # a glitch among them: start again from this one
+            del run[:-2]                 # one of them off the line: the last two go on
         if len(run) >= self.cfg.regain_poses:
             q.kind = _RESET
             t1, nu1, r1, _ = run[0]
