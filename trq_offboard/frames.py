@@ -27,7 +27,9 @@ _SYMBOLIC = (ca.SX, ca.MX, ca.DM)
 def rotation_ned_frd(roll, pitch, yaw):
     """R taking body FRD vectors to world NED for ZYX Euler angles (rad): a CasADi 3x3 when any
     angle is a CasADi expression, else a NumPy (3, 3) array."""
-    symbolic = any(isinstance(a, _SYMBOLIC) for a in (roll, pitch, yaw))
+    symbolic = not (type(roll) is type(pitch) is type(yaw) is float
+                    or type(roll) is type(pitch) is type(yaw) is np.float64) \
+        and any(isinstance(a, _SYMBOLIC) for a in (roll, pitch, yaw))
     cos, sin = (ca.cos, ca.sin) if symbolic else (math.cos, math.sin)
     cr, sr = cos(roll), sin(roll)
     cp, sp = cos(pitch), sin(pitch)

@@ -333,6 +333,7 @@ class _Period:
     poses: list = None
     vel: np.ndarray | None = None
     acc_taken: bool = True               # its accelerometer mean passed the gate (or none)
+    acc: tuple | None = None             # its accelerometer measurement (`_acc`), once formed
 
     def __post_init__(self) -> None:
         if self.w0 is None:
@@ -356,6 +357,7 @@ class FusedFilter:
         self._poses: list[_Pose] = []
         self._imu_last_us: int | None = None
         self._imu_nominal_us = round(1e6 / cfg.imu_rate_hz)
+        self._mocap_std = np.full(3, cfg.mocap_std_m)
         self._candidates: list[tuple[int, np.ndarray, np.ndarray, np.ndarray]] = []
         self.last_pose_us: int | None = None
         self.test_ratio = math.nan
@@ -418,17 +420,16 @@ class FusedFilter:
         """One HIGHRES_IMU accelerometer message: the mean specific force (body FRD) over the
         interval since the message before it, ending at its time of validity t_us (time_usec);
         placed at the next `step` in the periods that interval covers."""
-        f = np.asarray(specific_force_frd_m_s2, float)
-        if np.all(np.isfinite(f)):
+        f = np.array(specific_force_frd_m_s2, float)
+        if math.isfinite(f[0] + f[1] + f[2]):
             self._imu.append((int(t_us), f))
 
     def add_pose(self, t_us: int, pos_ned_m, std_ned_m=None) -> None:
         """One position (motion capture, or a GNSS fix in NED) at its time of validity, with
         its 1-sigma errors per axis (None: mocap_std_m), fused at the next `step`."""
-        p = np.asarray(pos_ned_m, float)
-        std = (np.full(3, self.cfg.mocap_std_m) if std_ned_m is None
-               else np.asarray(std_ned_m, float))
-        if np.all(np.isfinite(p)) and np.all(np.isfinite(std)) and np.all(std > 0.0):
+        p = np.array(pos_ned_m, float)
+        std = (self._mocap_std if std_ned_m is None else np.array(std_ned_m, float))
+        if math.isfinite(p[0] + p[1] + p[2] + std[0] + std[1] + std[2]) and std.min() > 0.0:
             r = std * std
             if self.cfg.autopilot_vel_std_m_s > 0.0:
                 r = 2.0 * r           # covariance intersection with the autopilot's velocity
@@ -494,6 +495,7 @@ class FusedFilter:
                 p.w0 += (dt * (1.0 - s)) * f
                 p.w1 += (dt * s) * f
                 p.covered_s += dt
+                p.acc = None
                 placed = True
                 first = min(first, k)
             if not placed:
@@ -502,16 +504,19 @@ class FusedFilter:
         return first
 
     def _place_poses(self, t_us: int) -> int:
-        """The poses received into the periods of their times of validity (one after t_us
-        taken at t_us; one older than the history dropped): the earliest period touched."""
+        """The poses received into the periods of their times of validity, [start, end)
+        but the newest's end (a pose one period late, at a period's end, goes to the start of
+        the next: the posterior kept at that end stays without it, and the newest period alone
+        runs); one after t_us taken at t_us, one older than the history dropped: the earliest
+        period touched."""
         periods = self._periods
         first = len(periods) - 1
         for pose in self._poses:
             pose.t_us = min(pose.t_us, t_us)
             k = len(periods) - 1
-            while k > 0 and periods[k - 1].t_us >= pose.t_us:
+            while k > 0 and periods[k - 1].t_us > pose.t_us:
                 k -= 1
-            if k == 0:
+            if k == 0 or periods[k - 1].t_us > pose.t_us:
                 self.dropped += 1
                 continue
             periods[k].poses.append(pose)
@@ -528,13 +533,16 @@ class FusedFilter:
         p = self._periods[k]
         if p.covered_s <= 0.0:
             return None
-        z = (self._periods[k - 1].rot @ p.w0 + p.rot @ p.w1) / p.covered_s + self._g_ned
-        var = self.cfg.accel_std_m_s2 ** 2 / (p.covered_s * self.cfg.imu_rate_hz)
-        return z, var
+        if p.acc is None:               # formed once, until a sample is added to the period
+            z = (self._periods[k - 1].rot @ p.w0 + p.rot @ p.w1) / p.covered_s + self._g_ned
+            p.acc = z, self.cfg.accel_std_m_s2 ** 2 / (p.covered_s * self.cfg.imu_rate_hz)
+        return p.acc
 
     def _gate(self, k: int) -> float:
         """Period k's accelerometer gate: accel_gate, or none (inf) after accel_reject_max
         periods rejected in a row (a gate must not lock the accelerometer out)."""
+        if self._periods[k - 1].acc_taken:
+            return self.cfg.accel_gate
         m = self.cfg.accel_reject_max
         prev = self._periods[max(1, k - m):k]
         if len(prev) == m and not any(p.acc_taken for p in prev):
@@ -558,9 +566,14 @@ class FusedFilter:
                 last = i == len(active) - 1
                 out = self._stretch(x, P, q.t_us - t, p.a_known, q, p.t_us - q.t_us if last
                                     else 0, acc if last else None, gate, vel if last else None)
-                x_end, P_end, ratio, nis, taken, x_prior, P_prior = out
+                x_end, P_end, ratio, nis, taken = out
+                prior = None
                 if q.kind == _NEW:
-                    self._decide(q, ratio, x_prior, P_prior)
+                    if ratio > 1.0:
+                        prior = self._prior()
+                    self._decide(q, ratio, prior)
+                if q.kind in (_RESET, _REJECTED, _HELD) and prior is None:
+                    prior = self._prior()
                 if q.kind == _FUSED:
                     if last:
                         x, P, done = x_end, P_end, True
@@ -568,13 +581,13 @@ class FusedFilter:
                     else:
                         x, P = x_end, P_end
                 elif q.kind == _RESET:
-                    x, P = self._reset_to(q, x_prior, P_prior)
+                    x, P = self._reset_to(q, *prior)
                 else:                               # rejected or held: the prior goes on
-                    x, P = x_prior, P_prior
+                    x, P = prior
                 t = q.t_us
             if not done:
-                x, P, _, nis, taken, _, _ = self._stretch(x, P, p.t_us - t, p.a_known, None,
-                                                          0, acc, gate, vel)
+                x, P, _, nis, taken = self._stretch(x, P, p.t_us - t, p.a_known, None, 0, acc,
+                                                    gate, vel)
                 self._acc_result(k, acc, nis, taken, newest)
             p.x, p.P = x, P
 
@@ -584,7 +597,7 @@ class FusedFilter:
         if k == newest and not p.acc_taken:
             self.accel_rejected += 1
 
-    def _decide(self, q: _Pose, ratio: float, x_prior, P_prior) -> None:
+    def _decide(self, q: _Pose, ratio: float, prior) -> None:
         """A new pose's fate from its test ratio against the prior at its time: fused within
         the gate; outside it rejected, or, dead reckoning (no pose fused for dropout_s), held
         as a candidate. `regain_poses` candidates in a row that are mutually consistent (each
@@ -602,6 +615,7 @@ class FusedFilter:
             q.kind = _REJECTED
             self.rejected += 1
             return
+        x_prior, P_prior = prior
         run = self._candidates
         run.append((q.t_us, q.pos - x_prior[0:3], q.r_pos, np.diag(P_prior)[6:9].copy()))
         if len(run) >= 3 and not self._on_a_line(run[-3:]):
@@ -636,7 +650,7 @@ class FusedFilter:
         """The position reset to the pose (its value and variance) and the velocity shifted by
         the candidates' slope (its variance theirs), no correlation of either left."""
         x = x.copy()
-        P = P.copy()
+        P = np.array(P)
         x[0:3] = q.pos
         x[3:6] = x[3:6] + q.vel_shift
         P[0:6, :] = 0.0
@@ -649,7 +663,7 @@ class FusedFilter:
                  gate: float, vel):
         """Predicted dt1 to the pose (if any) and fused, predicted dt2 on, then the
         accelerometer (gated) and the velocity: (x_end, P_end, the pose's test ratio, the
-        accelerometer's NIS, taken, x_prior, P_prior at the pose)."""
+        accelerometer's NIS, taken; the prior at the pose: `_prior`)."""
         fn = self._fn
         if fn is not None:
             args, p_in, res = fn.args, fn.p_in, fn.results
@@ -669,12 +683,10 @@ class FusedFilter:
                 std = self.cfg.autopilot_vel_std_m_s
                 args[12][:], args[13][0], args[14][0] = vel, 2.0 * std * std, 1.0
             fn.evaluate()
-            prior = (res[5].copy(), _matrix(res[6])) if pose is not None else (None, None)
-            return (res[0].copy(), _matrix(res[1]), float(res[2][0]), float(res[3][0]),
-                    bool(res[4][0]), *prior)
+            return (res[0].copy(), _matrix(res[1]), res[2][0], res[3][0], res[4][0] > 0.0)
         ratio, nis, taken = math.nan, math.nan, False
         x, P = _predict(x, P, *self._f(dt1_us), a_known)
-        x_prior, P_prior = x, P
+        self._numpy_prior = x, P
         if pose is not None:
             ratio, x, P = _pose_fusion(x, P, pose.pos, pose.r_pos, self.cfg)
             ratio = float(ratio)
@@ -689,16 +701,23 @@ class FusedFilter:
         if vel is not None:
             std = self.cfg.autopilot_vel_std_m_s
             x, P, _ = _update(x, P, _H_VEL, vel - x[3:6], 2.0 * std * std * _I3)
-        return x, P, ratio, nis, taken, x_prior, P_prior
+        return x, P, ratio, nis, taken
+
+    def _prior(self):
+        """The prior at the pose of the last `_stretch` with one: (x, P)."""
+        fn = self._fn
+        if fn is not None:
+            return fn.results[5].copy(), _matrix(fn.results[6])
+        return self._numpy_prior
 
     def dead_reckoning(self, t_us: int) -> bool:
         return self.last_pose_us is None or \
             t_us - self.last_pose_us > round(self.cfg.dropout_s * 1e6)
 
     def health(self, t_us: int) -> Health:
-        x = self.x
-        return Health(tuple(x[0:3].tolist()), tuple(x[3:6].tolist()), self.test_ratio,
-                      float(np.trace(self.P[0:3, 0:3]) / 3.0), self.dead_reckoning(t_us),
+        x, P = self.x.tolist(), self.P
+        return Health(tuple(x[0:3]), tuple(x[3:6]), self.test_ratio,
+                      float(P[0, 0] + P[1, 1] + P[2, 2]) / 3.0, self.dead_reckoning(t_us),
                       self.rejected, self.resets, self.accel_rejected)
 
 

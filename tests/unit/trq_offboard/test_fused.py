@@ -49,8 +49,8 @@ def _fly(n_steps, *, seed=0, model_error=(0.3, -0.2, 0.1), bias_frd=(0.15, -0.1,
     rng = np.random.default_rng(seed)
     f = FusedFilter(cfg, G)
     p0, v0, _ = _truth(0.0)
-    f.reset(0, p0, v0)
     euler = (0.0, 0.0, 0.4)
+    f.reset(0, p0, v0, euler_rad=euler)
     rot = rotation_ned_frd(*euler)
     rows = []
     for k in range(1, n_steps + 1):
