@@ -1,10 +1,11 @@
-"""The fused filter (issue 34): the companion's own estimate of position and velocity, from the
-motion capture pose, the raw accelerometer and the controller's own model with the observer's
-disturbance as a known input.
+"""The fused filter (issues 34 and 39): the companion's own estimate of position and velocity,
+from the motion capture pose (or a GNSS fix), the raw accelerometer and the controller's own
+model with the observer's disturbance as a known input.
 
 A linear Kalman filter in world NED on x = [p (3) m, v (3) m/s, a_r (3) m/s^2, b (3) m/s^2]
 (12 states: issue 34's nine and the accelerometer's bias, which the nine alone would read as
-the vehicle's acceleration), advanced once per control period h by `FusedFilter.step`:
+the vehicle's acceleration), kept as a history of control periods (t_prev, t] and advanced by
+`FusedFilter.step` to each state's time:
 
     process      p' = v,  v' = a_k + a_r + w_v,  a_r' = w_r
                  a_k: the known input, held over the period: the acceleration the controller's
@@ -19,41 +20,59 @@ the vehicle's acceleration), advanced once per control period h by `FusedFilter.
                  b' = w_b, the accelerometer's bias in NED (a slow random walk of density
                  `accel_bias_walk_density`, `accel_bias_std` at the start: the vehicle flies
                  near level, so the body bias seen in NED changes only with the yaw)
-    accelerometer  z = R(eta) f_frd + g e_z  measures a_k + a_r + b (each period: the mean of
-                 the samples received, variance accel_std^2 / n); the position fixes what the
-                 total acceleration is, so the slow difference is the sensor's bias
+    accelerometer  each HIGHRES_IMU message is the mean specific force over the interval since
+                 the message before it, [previous time_usec, time_usec] (at most
+                 IMU_MAX_SPAN_INTERVALS of the requested interval; a repeated or older stamp
+                 dropped): its interval is split over the periods it covers, each piece
+                 rotated with the attitude of its own time (the attitude interpolated between
+                 the period's ends, which `step` and `reset` are given: two rotations a period,
+                 whatever the number of samples) and weighted by its length. A period's mean,
+                 z = R f + g e_z over the time its pieces cover, measures a_k + a_r + b with
+                 variance accel_std^2 / (covered s x imu_rate_hz); it is taken unless its
+                 normalised squared innovation exceeds `accel_gate` (a touchdown's impulse, a
+                 clipped sample), except after `accel_reject_max` periods rejected in a row (a
+                 gate must not lock a real change out). The position fixes what the total
+                 acceleration is, so the slow difference is the sensor's bias.
     position     z = p at the pose's time of validity (ATT_POS_MOCAP's time_usec, about one
-                 control period before it arrives): the filter keeps its last `history` periods
-                 (posterior, known input, accelerometer measurement), goes back to the period
-                 before that time, predicts to it, fuses the pose and predicts forward again
-                 through the kept periods. A pose whose innovation test ratio (its normalised
-                 squared innovation over the chi-square gate `pose_gate`) exceeds 1 is
-                 rejected, except after a dropout (a gate would then lock the poses out for
-                 good); one older than the history is dropped. The same for a GNSS fix
+                 control period before it arrives), kept in the period it lies in. A pose whose
+                 innovation test ratio (its normalised squared innovation over the chi-square
+                 gate `pose_gate`) exceeds 1 is rejected. Dead reckoning (no pose fused for
+                 `dropout_s`), a pose past the gate is held as a candidate: `regain_poses` in a
+                 row whose innovations lie on one straight line in time (each three
+                 consecutive, within pose_gate: a drifted track is off by a position and a
+                 velocity, which a line absorbs; a glitch is not on it) reset the position to
+                 the last and the velocity by the line's slope, as EKF2 resets to a
+                 measurement, counted in `resets`; a pose within the gate is fused as ever.
+                 One older than the history is dropped. The same for a GNSS fix
                  (`position_source: gnss`: GPS_RAW_INT in NED around home, its time_usec the
                  time of validity, the receiver's delay behind its arrival; its own noise per
-                 axis, an input of the pose's kernel): the history is then sized to cover that
-                 delay (config.py).
-    velocity     optional (`autopilot_vel_std_m_s` > 0): the autopilot's velocity, fused as a
-                 measurement of v at the period's end (its IMU-integrated velocity blended with
-                 the model's)
+                 axis): the history is then sized to cover that delay (config.py).
+    velocity     optional (`autopilot_vel_std_m_s` > 0): the autopilot's velocity, kept with
+                 its period and fused at the period's end. It is not independent of the
+                 position: the autopilot fuses the same fixes (or its own copy of the pose), so
+                 the two are fused by covariance intersection with equal weights, each
+                 variance doubled (consistent whatever their correlation).
+
+Every period keeps what it holds (known input, attitude, accelerometer pieces, poses and what
+became of them, velocity) and its posterior. A sample that lands in a closed period (a pose's
+time of validity, a HIGHRES_IMU interval straddling a period's end) runs the kept periods again
+from the posterior before it, each with all it holds: nothing fused before is lost and nothing
+counted twice, and a late sample gives what the same sample on time gives.
 
 Without a pose for `dropout_s` the filter dead-reckons on the model, the observer's disturbance
 and the accelerometer, and says so (`Health.dead_reckoning`; `HealthReport` turns the changes
-into STATUSTEXT messages). Its health per period: the last pose's test ratio and the position's
-variance (trace / 3, m^2), for controller.csv.
+into STATUSTEXT messages). Its health per period: the last pose's test ratio, the position's
+variance (trace / 3, m^2), the rejections, resets and accelerometer rejections, for
+controller.csv.
 
 The arithmetic is written once, over an array module (`_NUMPY` or `_CASADI`: `_transition`,
 `_predict`, `_accel_update`, `_update`, `_pose_fusion`): NumPy runs it as it is (the pure path,
-`codegen` off or no C compiler), and with `codegen` it is built as two CasADi functions, the
-period's advance (predict over dt, then the accelerometer update when there is one: the
-posterior at the period's end, also each step of the re-prediction after a delayed pose) and
-the pose's fusion (predict to its time of validity, innovation, test ratio, Joseph update, and
-the posterior carried on through the period the pose lies in: the re-prediction's first step,
-for a pose one period late its only one; the gate stays in Python), generated as C and compiled
-once through nmpc/cache.py with the filter's constants baked in as literals and dt an input.
-Sizes come from N_STATES and the measurement matrices.
-tests/unit/trq_offboard/test_fused_compiled.py holds the two paths equal.
+`codegen` off or no C compiler), and with `codegen` a stretch of a period (predict to a pose,
+fuse it, predict on to the stretch's end, there the gated accelerometer and the velocity) is one
+CasADi function generated as C and compiled once through nmpc/cache.py with the filter's
+constants baked in as literals and the times inputs: a period is one call, one more per extra
+pose. The gates' decisions stay in Python. tests/unit/trq_offboard/test_fused_compiled.py holds
+the two paths equal.
 
 Pure: integer microseconds of the vehicle's clock in, no clock read, no I/O, no randomness.
 """

@@ -250,3 +250,12 @@ def test_after_a_dropout_a_glitch_is_not_taken_and_consistent_poses_reset_the_po
         h = f.step(t, np.zeros(3), (0.0, 0.0, 0.0))
     assert h.resets == 1 and h.test_ratio < 1.0
     assert np.linalg.norm(f.x[0:3] - truth(t)) < 0.002
+
+
+def test_fused_config_is_built_by_name_and_checks_its_counts():
+    with pytest.raises(TypeError):
+        FusedConfig(0.0005, 0.3, 0.05, 0.5, 0.2, 0.01, 25.0, 0.05, 125, 100)   # positional
+    with pytest.raises(ValueError, match="regain_poses"):
+        FusedConfig(**{**CFG.__dict__, "regain_poses": 2})
+    with pytest.raises(ValueError, match="accel_gate"):
+        FusedConfig(**{**CFG.__dict__, "accel_gate": 0.0})
