@@ -453,6 +453,13 @@ class Estimator(Strict):
     # the receiver's delay: GPS_RAW_INT is stamped at its arrival (as PX4 stamps it), its time
     # of validity is this much earlier (EKF2_GPS_DELAY's role; PX4's default 110 ms)
     gnss_delay_s: Num(0.0, 1.0) = 0.11
+    # a period's accelerometer mean rejected past this chi-square (3 dof) gate, unless the
+    # last accel_reject_max periods were (then taken); a choice (trq_offboard/fused.py)
+    accel_gate: Num(1.0, 1e9) = 100.0
+    accel_reject_max: Int(1, 100) = 3
+    # after a dropout, poses outside pose_gate: this many mutually consistent in a row reset
+    # the position to the last (as EKF2 resets to a measurement); a choice
+    regain_poses: Int(3, 100) = 3
 
     @model_validator(mode="after")
     def _only_fused(self) -> "Estimator":

@@ -40,16 +40,17 @@ class Ticks:
 
 
 def feed_imu(f, t_us: int, accel_ned_at, euler, bias_frd, rng, std: float, g: float) -> None:
-    """Two accelerometer samples a control period (at t_us - 6 ms and - 2 ms) into a fused
-    filter `f` (trq_offboard.fused.FusedFilter): the specific force of the NED acceleration
-    `accel_ned_at(t_s)` seen at the attitude `euler`, plus the body bias and white noise."""
+    """Two accelerometer messages a control period (at t_us - 6 ms and - 2 ms, time_usec) into
+    a fused filter `f` (trq_offboard.fused.FusedFilter): the specific force of the NED
+    acceleration `accel_ned_at(t_s)` seen at the attitude `euler`, plus the body bias and
+    white noise."""
     import numpy as np
-    from trq_offboard.fused import rotation_ned_frd
+    from trq_offboard.frames import rotation_ned_frd
 
-    rot = rotation_ned_frd(euler)
+    rot = rotation_ned_frd(*euler)
     for s in (t_us - 6000, t_us - 2000):
         f_frd = rot.T @ (accel_ned_at(s * 1e-6) - np.array([0.0, 0.0, g])) + np.asarray(bias_frd)
-        f.add_imu(f_frd + rng.normal(0.0, std, 3), euler)
+        f.add_imu(s, f_frd + rng.normal(0.0, std, 3))
 
 def cli(command: str) -> list[str]:
     """The argv prefix of an installed console script (trq-scenario, ...): the one beside this

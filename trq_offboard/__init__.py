@@ -4,6 +4,7 @@ ends of the wire must compute identically (signing, actuator scaling, log files,
 cache) comes from trq_wire.
 
     config          the controller and vehicle files, loaded and checked (ControllerConfig)
+    frames          the rotations, once: Euler angles, quaternions, R (NED from FRD)
     model/          the prediction model in CasADi (PredictionModel: dynamics, b0)
     allocation      body wrench <-> throttles and tilts (the hover trim)
     eso             the extended state observer (the disturbance d)

@@ -329,11 +329,16 @@ def controller_config(c: schema.ControllerFile, file: str) -> ControllerConfig:
     history = f.history if f.position_source == "mocap" else max(
         f.history, math.ceil(f.gnss_max_age_s * c.control_rate_hz - 1e-9) + 2)
     fused = None if f.kind == "autopilot" else FusedConfig(
-        f.mocap_std_m, f.accel_std_m_s2, f.model_acc_density_m_s2_rthz,
-        f.residual_walk_m_s3_rthz, f.accel_bias_std_m_s2, f.accel_bias_walk_m_s3_rthz,
-        f.pose_gate, f.dropout_s, f.imu_rate_hz, f.mocap_rate_hz, history,
-        f.disturbance_input, f.autopilot_vel_std_m_s, f.position_source,
-        f.gnss_rate_hz, tuple(f.gnss_std_m), gnss_delay_s=f.gnss_delay_s)
+        mocap_std_m=f.mocap_std_m, accel_std_m_s2=f.accel_std_m_s2,
+        model_acc_density=f.model_acc_density_m_s2_rthz,
+        residual_walk_density=f.residual_walk_m_s3_rthz, accel_bias_std=f.accel_bias_std_m_s2,
+        accel_bias_walk_density=f.accel_bias_walk_m_s3_rthz, pose_gate=f.pose_gate,
+        dropout_s=f.dropout_s, imu_rate_hz=f.imu_rate_hz, mocap_rate_hz=f.mocap_rate_hz,
+        history=history, disturbance_input=f.disturbance_input,
+        autopilot_vel_std_m_s=f.autopilot_vel_std_m_s, position_source=f.position_source,
+        gnss_rate_hz=f.gnss_rate_hz, gnss_std_m=tuple(f.gnss_std_m),
+        accel_gate=f.accel_gate, accel_reject_max=f.accel_reject_max,
+        regain_poses=f.regain_poses, gnss_delay_s=f.gnss_delay_s)
     lm = c.lost_motor
     lost_motor = None if lm is None or lm.detect == "off" else LostMotorConfig(
         lm.below, lm.hold_s, lm.min_command_pct, lm.yaw_weight, lm.max_body_rate_rad_s,

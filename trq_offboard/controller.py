@@ -302,9 +302,12 @@ class Controller:
         t_act = t_s + self.delay_s
         t_prev = self._last_t
         path, y_act, y_now = self._walk(x, t_s, t_act)
+        # the model's b0 over the period, once for the fused filter and the observer (at the
+        # state as it came: the filter then replaces its position and velocity)
+        b0 = self._b0(x, t_s, applied, u_applied, path) if t_s > self._last_t else None
         if self.fused is not None and sensors is not None:
-            self._health = self._fuse(x, t_s, sensors, applied, u_applied, path)
-        d, d_obs, out_err = self._observe(x, t_s, applied, u_applied, path)
+            self._health = self._fuse(x, t_s, sensors, b0)
+        d, d_obs, out_err = self._observe(x, t_s, b0)
         self._eso_d = d_obs
         c1 = clock()
         # 4. the motors' effectiveness
@@ -405,18 +408,17 @@ class Controller:
             return None, self.predictor.actuator_walk(t_act, t_act)[1], None
         return None, None, None
 
-    def _observe(self, x: np.ndarray, t_s: float, applied: ActuatorCommand | None,
-                 u_applied: np.ndarray, path) -> tuple[np.ndarray, np.ndarray, float]:
-        """The observer advanced from the last step to t_s with the b0 of the input that acted
-        (the commands in effect over the path, or the vehicle's reported outputs): (d, the
-        observer's own estimate (logged), its output error); zeros without an observer."""
+    def _observe(self, x: np.ndarray, t_s: float, b0: np.ndarray | None
+                 ) -> tuple[np.ndarray, np.ndarray, float]:
+        """The observer advanced from the last step to t_s with b0, the model's accelerations
+        under the input that acted (`_b0`; None: no time has passed): (d, the observer's own
+        estimate (logged), its output error); zeros without an observer."""
         if self.eso is None:
             d = np.zeros(6)
             return d, d, 0.0
         y = self.eso.measurement(x)
-        if t_s > self._last_t:
+        if t_s > self._last_t and b0 is not None:
             dt = t_s - self._last_t         # the true gap: samples can be lost or skipped
-            b0 = self._b0(x, t_s, applied, u_applied, path)
             self.eso.update(y, self.eso.b0_of(b0), dt)
         d = self.eso.disturbance(x[6:9])
         return d, d, self.eso.output_error(y)
@@ -430,8 +432,7 @@ class Controller:
         return self.predictor.b0_delayed(x, self._last_t, t_s, path)
 
     def _fuse(self, x: np.ndarray, t_s: float, sensors: SensorSamples,
-              applied: ActuatorCommand | None, u_applied: np.ndarray,
-              path) -> EstimatorHealth | None:
+              b0: np.ndarray | None) -> EstimatorHealth | None:
         """The fused filter advanced to this state's time on the samples received, its known
         input the model's acceleration over the period (the observer's b0) plus, by
         `disturbance_input`, the motors' share of the observer's d or its whole d (the last
@@ -445,10 +446,11 @@ class Controller:
             # no position sample yet (none at all under truth): the state as it came
             if not (sensors.fixes if gnss else sensors.poses_ned_m):
                 return None
-            f.reset(sensors.stamp_us, x[0:3], x[3:6], GNSS_START_STD_M if gnss else None)
+            f.reset(sensors.stamp_us, x[0:3], x[3:6], GNSS_START_STD_M if gnss else None,
+                    x[6:9])
             self._fused_on = True
-        for acc in sensors.accel_frd_m_s2:
-            f.add_imu(acc, x[6:9])
+        for t_us, acc in sensors.accel_frd_m_s2:      # each at its time of validity
+            f.add_imu(t_us, acc)
         if gnss:
             h, v = f.cfg.gnss_std_m
             for fix in sensors.fixes:    # the configured noise, or (0) the fix's own
@@ -458,14 +460,14 @@ class Controller:
         else:
             for t_us, pos in sensors.poses_ned_m:
                 f.add_pose(t_us, pos)
-        if t_s > self._last_t and sensors.stamp_us > f.t_us:
-            a_known = self._b0(x, t_s, applied, u_applied, path)[0:3]
+        if b0 is not None and sensors.stamp_us > f.t_us:
+            a_known = b0[0:3]
             kind = self.cfg.fused.disturbance_input
             if kind == "observer":
                 a_known = a_known + self._eso_d[0:3]
             elif kind == "motors":
                 a_known = a_known + self._motor_share
-            health = f.step(sensors.stamp_us, a_known, x[3:6])
+            health = f.step(sensors.stamp_us, a_known, x[6:9], x[3:6])
         else:
             health = f.health(sensors.stamp_us)
         x[0:6] = f.x[0:6]

@@ -1,10 +1,11 @@
-"""The fused filter (issue 34): the companion's own estimate of position and velocity, from the
-motion capture pose, the raw accelerometer and the controller's own model with the observer's
-disturbance as a known input.
+"""The fused filter (issues 34 and 39): the companion's own estimate of position and velocity,
+from the motion capture pose (or a GNSS fix), the raw accelerometer and the controller's own
+model with the observer's disturbance as a known input.
 
 A linear Kalman filter in world NED on x = [p (3) m, v (3) m/s, a_r (3) m/s^2, b (3) m/s^2]
 (12 states: issue 34's nine and the accelerometer's bias, which the nine alone would read as
-the vehicle's acceleration), advanced once per control period h by `FusedFilter.step`:
+the vehicle's acceleration), kept as a history of control periods (t_prev, t] and advanced by
+`FusedFilter.step` to each state's time:
 
     process      p' = v,  v' = a_k + a_r + w_v,  a_r' = w_r
                  a_k: the known input, held over the period: the acceleration the controller's
@@ -19,41 +20,59 @@ the vehicle's acceleration), advanced once per control period h by `FusedFilter.
                  b' = w_b, the accelerometer's bias in NED (a slow random walk of density
                  `accel_bias_walk_density`, `accel_bias_std` at the start: the vehicle flies
                  near level, so the body bias seen in NED changes only with the yaw)
-    accelerometer  z = R(eta) f_frd + g e_z  measures a_k + a_r + b (each period: the mean of
-                 the samples received, variance accel_std^2 / n); the position fixes what the
-                 total acceleration is, so the slow difference is the sensor's bias
+    accelerometer  each HIGHRES_IMU message is the mean specific force over the interval since
+                 the message before it, [previous time_usec, time_usec] (at most
+                 IMU_MAX_SPAN_INTERVALS of the requested interval; a repeated or older stamp
+                 dropped): its interval is split over the periods it covers, each piece
+                 rotated with the attitude of its own time (the attitude interpolated between
+                 the period's ends, which `step` and `reset` are given: two rotations a period,
+                 whatever the number of samples) and weighted by its length. A period's mean,
+                 z = R f + g e_z over the time its pieces cover, measures a_k + a_r + b with
+                 variance accel_std^2 / (covered s x imu_rate_hz); it is taken unless its
+                 normalised squared innovation exceeds `accel_gate` (a touchdown's impulse, a
+                 clipped sample), except after `accel_reject_max` periods rejected in a row (a
+                 gate must not lock a real change out). The position fixes what the total
+                 acceleration is, so the slow difference is the sensor's bias.
     position     z = p at the pose's time of validity (ATT_POS_MOCAP's time_usec, about one
-                 control period before it arrives): the filter keeps its last `history` periods
-                 (posterior, known input, accelerometer measurement), goes back to the period
-                 before that time, predicts to it, fuses the pose and predicts forward again
-                 through the kept periods. A pose whose innovation test ratio (its normalised
-                 squared innovation over the chi-square gate `pose_gate`) exceeds 1 is
-                 rejected, except after a dropout (a gate would then lock the poses out for
-                 good); one older than the history is dropped. The same for a GNSS fix
+                 control period before it arrives), kept in the period it lies in. A pose whose
+                 innovation test ratio (its normalised squared innovation over the chi-square
+                 gate `pose_gate`) exceeds 1 is rejected. Dead reckoning (no pose fused for
+                 `dropout_s`), a pose past the gate is held as a candidate: `regain_poses` in a
+                 row whose innovations lie on one straight line in time (each three
+                 consecutive, within pose_gate: a drifted track is off by a position and a
+                 velocity, which a line absorbs; a glitch is not on it) reset the position to
+                 the last and the velocity by the line's slope, as EKF2 resets to a
+                 measurement, counted in `resets`; a pose within the gate is fused as ever.
+                 One older than the history is dropped. The same for a GNSS fix
                  (`position_source: gnss`: GPS_RAW_INT in NED around home, its time_usec the
                  time of validity, the receiver's delay behind its arrival; its own noise per
-                 axis, an input of the pose's kernel): the history is then sized to cover that
-                 delay (config.py).
-    velocity     optional (`autopilot_vel_std_m_s` > 0): the autopilot's velocity, fused as a
-                 measurement of v at the period's end (its IMU-integrated velocity blended with
-                 the model's)
+                 axis): the history is then sized to cover that delay (config.py).
+    velocity     optional (`autopilot_vel_std_m_s` > 0): the autopilot's velocity, kept with
+                 its period and fused at the period's end. It is not independent of the
+                 position: the autopilot fuses the same fixes (or its own copy of the pose), so
+                 the two are fused by covariance intersection with equal weights, each
+                 variance doubled (consistent whatever their correlation).
+
+Every period keeps what it holds (known input, attitude, accelerometer pieces, poses and what
+became of them, velocity) and its posterior. A sample that lands in a closed period (a pose's
+time of validity, a HIGHRES_IMU interval straddling a period's end) runs the kept periods again
+from the posterior before it, each with all it holds: nothing fused before is lost and nothing
+counted twice, and a late sample gives what the same sample on time gives.
 
 Without a pose for `dropout_s` the filter dead-reckons on the model, the observer's disturbance
 and the accelerometer, and says so (`Health.dead_reckoning`; `HealthReport` turns the changes
-into STATUSTEXT messages). Its health per period: the last pose's test ratio and the position's
-variance (trace / 3, m^2), for controller.csv.
+into STATUSTEXT messages). Its health per period: the last pose's test ratio, the position's
+variance (trace / 3, m^2), the rejections, resets and accelerometer rejections, for
+controller.csv.
 
 The arithmetic is written once, over an array module (`_NUMPY` or `_CASADI`: `_transition`,
 `_predict`, `_accel_update`, `_update`, `_pose_fusion`): NumPy runs it as it is (the pure path,
-`codegen` off or no C compiler), and with `codegen` it is built as two CasADi functions, the
-period's advance (predict over dt, then the accelerometer update when there is one: the
-posterior at the period's end, also each step of the re-prediction after a delayed pose) and
-the pose's fusion (predict to its time of validity, innovation, test ratio, Joseph update, and
-the posterior carried on through the period the pose lies in: the re-prediction's first step,
-for a pose one period late its only one; the gate stays in Python), generated as C and compiled
-once through nmpc/cache.py with the filter's constants baked in as literals and dt an input.
-Sizes come from N_STATES and the measurement matrices.
-tests/unit/trq_offboard/test_fused_compiled.py holds the two paths equal.
+`codegen` off or no C compiler), and with `codegen` a stretch of a period (predict to a pose,
+fuse it, predict on to the stretch's end, there the gated accelerometer and the velocity) is one
+CasADi function generated as C and compiled once through nmpc/cache.py with the filter's
+constants baked in as literals and the times inputs: a period is one call, one more per extra
+pose. The gates' decisions stay in Python. tests/unit/trq_offboard/test_fused_compiled.py holds
+the two paths equal.
 
 Pure: integer microseconds of the vehicle's clock in, no clock read, no I/O, no randomness.
 """
@@ -68,9 +87,10 @@ import casadi as ca
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
+from trq_offboard.frames import rotation_ned_frd
 from trq_offboard.records import EstimatorHealth as Health
 
-__all__ = ["FusedConfig", "FusedFilter", "Health", "HealthReport", "rotation_ned_frd"]
+__all__ = ["FusedConfig", "FusedFilter", "Health", "HealthReport"]
 
 _I3 = np.eye(3)
 
@@ -118,11 +138,13 @@ class _CASADI:
         return ca.sparsify(ca.DM(a))
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class FusedConfig:
-    """The fused filter's parameters (controller key `estimator`, kind fused)."""
+    """The fused filter's parameters (controller key `estimator`, kind fused), by name."""
     mocap_std_m: float                    # the pose's position noise, 1 sigma per axis
-    accel_std_m_s2: float                 # one HIGHRES_IMU accelerometer's noise, 1 sigma
+    # one HIGHRES_IMU accelerometer message's noise, 1 sigma, at imu_rate_hz (a message
+    # covering a longer or shorter interval counts in proportion: the noise of a mean)
+    accel_std_m_s2: float
     model_acc_density: float              # w_v: the model's white acceleration error, m/s^2/rtHz
     residual_walk_density: float          # w_r: a_r's random walk, m/s^3/rtHz
     accel_bias_std: float                 # b at the start, 1 sigma per axis, m/s^2
@@ -131,7 +153,7 @@ class FusedConfig:
     dropout_s: float                      # no pose this long: dead reckoning
     imu_rate_hz: int                      # HIGHRES_IMU asked of the vehicle
     mocap_rate_hz: int                    # ATT_POS_MOCAP asked of the vehicle
-    history: int = 8                      # control periods kept for the delayed pose
+    history: int = 8                      # control periods kept (delayed poses and IMU samples)
     disturbance_input: str = "motors"     # added to b0: "motors", "observer" (its d), "none"
     autopilot_vel_std_m_s: float = 0.0    # the autopilot's velocity as a measurement (0: not)
     # the position source: "mocap" (ATT_POS_MOCAP, noise mocap_std_m) or "gnss" (GPS_RAW_INT in
@@ -140,23 +162,31 @@ class FusedConfig:
     gnss_rate_hz: int = 10                # GPS_RAW_INT asked of the vehicle
     gnss_std_m: tuple[float, float] = (0.0, 0.0)
     gnss_delay_s: float = 0.11            # GPS_RAW_INT's stamp less this: its time of validity
+    accel_gate: float = 100.0             # chi-square (3 dof) gate of a period's accelerometer
+    accel_reject_max: int = 3             # periods rejected in a row: the next one taken
+    regain_poses: int = 3                 # after a dropout: mutually consistent poses to reset
+
+    def __post_init__(self) -> None:
+        for name, low in (("imu_rate_hz", 1), ("mocap_rate_hz", 1), ("history", 2),
+                          ("regain_poses", 3), ("accel_reject_max", 1)):
+            if int(getattr(self, name)) < low:
+                raise ValueError(f"FusedConfig.{name} = {getattr(self, name)}: expected an "
+                                 f"integer >= {low}")
+        for name in ("accel_gate", "pose_gate"):
+            if not getattr(self, name) > 0.0:
+                raise ValueError(f"FusedConfig.{name} = {getattr(self, name)}: expected > 0")
 
 
-def rotation_ned_frd(euler_rad) -> np.ndarray:
-    """R taking body FRD vectors to world NED, ZYX Euler angles (roll, pitch, yaw); the NumPy
-    twin of trq_offboard.model.dynamics.rotation_ned_frd."""
-    roll, pitch, yaw = euler_rad
-    cr, sr = math.cos(roll), math.sin(roll)
-    cp, sp = math.cos(pitch), math.sin(pitch)
-    cy, sy = math.cos(yaw), math.sin(yaw)
-    return np.array([[cp * cy, sr * sp * cy - cr * sy, cr * sp * cy + sr * sy],
-                     [cp * sy, sr * sp * sy + cr * cy, cr * sp * sy - sr * cy],
-                     [-sp, sr * cp, cr * cp]])
+# a HIGHRES_IMU message covers the interval since the one before it, at most this many of the
+# requested intervals (a choice: a longer gap is a lost message or an IMU dropout, and the mean
+# a message carries then covers less than the gap)
+IMU_MAX_SPAN_INTERVALS = 2
 
 
 def _transition(dt, cfg: FusedConfig, xp=_NUMPY) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(F (12x12), G (12x3) of the known input, Q (12x12)) over dt s; per axis the constant-
-    acceleration triple and the bias, the axes independent (Kronecker products with I3)."""
+    acceleration triple and the bias, the axes independent (Kronecker products with I3). The
+    discretisation is exact: two transitions over dt1 and dt2 make the one over dt1 + dt2."""
     f1 = xp.array([[1.0, dt, 0.5 * dt * dt], [0.0, 1.0, dt], [0.0, 0.0, 1.0]])
     g1 = xp.array([[0.5 * dt * dt], [dt], [0.0]])
     qr = cfg.residual_walk_density ** 2
@@ -196,9 +226,9 @@ def _predict(x, P, F, G, Q, a_known):
 
 
 def _accel_update(x, P, a_known, z, var, xp=_NUMPY):
-    """The accelerometer's mean z (variance var per axis) as a measurement of a_k + a_r + b."""
-    x, P, _ = _update(x, P, _H_ACC, z - a_known - x[6:9] - x[9:12], var * xp.eye(3), xp)
-    return x, P
+    """The accelerometer's mean z (variance var per axis) as a measurement of a_k + a_r + b:
+    (x, P updated, its normalised squared innovation; the gate is the caller's)."""
+    return _update(x, P, _H_ACC, z - a_known - x[6:9] - x[9:12], var * xp.eye(3), xp)
 
 
 def _pose_fusion(x, P, pos, r_pos, cfg: FusedConfig, xp=_NUMPY):
@@ -212,46 +242,58 @@ def _pose_fusion(x, P, pos, r_pos, cfg: FusedConfig, xp=_NUMPY):
     return ratio, x, P
 
 
+def _period_end(x, P, dt, a_known, z_acc, var_acc, has_acc, gate, z_vel, var_vel, has_vel,
+                cfg: FusedConfig, xp):
+    """Predicted over dt, then at the end the accelerometer's mean (taken when has_acc and its
+    normalised squared innovation is within `gate`) and the autopilot's velocity (has_vel):
+    (x, P, the accelerometer's normalised squared innovation, taken 0/1). CasADi only."""
+    F, G, Q = _transition(dt, cfg, xp)
+    x, P = _predict(x, P, F, G, Q, a_known)
+    xa, Pa, nis = _accel_update(x, P, a_known, z_acc, var_acc, xp)
+    take = ca.logic_and(has_acc, nis <= gate)
+    x, P = ca.if_else(take, xa, x), ca.if_else(take, Pa, P)
+    xv, Pv, _ = _update(x, P, _H_VEL, z_vel - x[3:6], var_vel * xp.eye(3), xp)
+    return ca.if_else(has_vel, xv, x), ca.if_else(has_vel, Pv, P), nis, take
+
+
 @functools.lru_cache(maxsize=8)
-def _kernels(cfg: FusedConfig) -> tuple[ca.Function, ca.Function] | None:
-    """The period's advance and the pose's fusion as compiled functions (module docstring), or
-    None without a C compiler or when a build fails (then the NumPy path runs):
-        advance (x, P, dt, a_known, z_acc, var_acc, has_acc) -> (x, P)
-        pose    (x, P, dt, a_known, pos, dt_rest, z_acc, var_acc, has_acc, r_pos)
-                -> (test ratio, x, P, x_next, P_next)
-    dt in s (the pose's 0 at a kept period's end); P dense, CasADi's column-major order;
-    has_acc 0 or 1: without, the predicted (x, P) exactly. The pose lies in the period after
-    (x, P), under its a_known; the pose's kernel also carries its posterior on to that period's
-    end (dt_rest later, with that period's accelerometer): the first step of the re-prediction,
-    most often the only one (a pose one period late), in the same call. Kept per process (one
-    build a configuration); each filter wraps them in its own buffers."""
+def _kernel(cfg: FusedConfig) -> ca.Function | None:
+    """One stretch of a period as a compiled function (module docstring), or None without a C
+    compiler or when a build fails (then the NumPy path runs):
+        period (x, P, dt1, a_known, pos, r_pos, has_pos, dt2, z_acc, var_acc, has_acc, gate,
+                z_vel, var_vel, has_vel)
+               -> (x_end, P_end, pose test ratio, accel NIS, accel taken, x_prior, P_prior)
+    predicted dt1 to the pose (the prior), the pose fused when has_pos, predicted dt2 on to
+    the stretch's end, there the accelerometer's mean (if has_acc and within `gate`; inf:
+    taken whatever it says) and the autopilot's velocity (has_vel). dt in s; P dense,
+    CasADi's column-major order. Kept per process (one build a configuration); each filter
+    wraps it in its own buffers."""
     from trq_offboard.nmpc.cache import compiled_many, find_compiler
 
     if find_compiler() is None:
         return None
-    n, m = N_STATES, _H_ACC.shape[0]
+    n, m = N_STATES, 3
     x, P = ca.SX.sym("x", n), ca.SX.sym("P", n, n)
-    dt, a, z, var, has = (ca.SX.sym(name, k) for name, k in
-                          (("dt", 1), ("a_known", m), ("z_acc", m), ("var_acc", 1),
-                           ("has_acc", 1)))
-    pos, rest = ca.SX.sym("pos", _H_POS.shape[0]), ca.SX.sym("dt_rest")
-    r_pos = ca.SX.sym("r_pos", _H_POS.shape[0])
-    F, G, Q = _transition(dt, cfg, _CASADI)
+    sym = ca.SX.sym
+    dt1, a, pos, r_pos, has_pos = sym("dt1"), sym("a_known", m), sym("pos", m), \
+        sym("r_pos", m), sym("has_pos")
+    dt2, z, var, has_acc, gate = sym("dt2"), sym("z_acc", m), sym("var_acc"), \
+        sym("has_acc"), sym("gate")
+    zv, varv, has_vel = sym("z_vel", m), sym("var_vel"), sym("has_vel")
+    F, G, Q = _transition(dt1, cfg, _CASADI)
     xp_, Pp = _predict(x, P, F, G, Q, a)
-    xa, Pa = _accel_update(xp_, Pp, a, z, var, _CASADI)
-    advance = ca.Function(f"fused_advance_{n}", [x, P, dt, a, z, var, has],
-                          [ca.if_else(has, xa, xp_), ca.if_else(has, Pa, Pp)])
     ratio, xu, Pu = _pose_fusion(xp_, Pp, pos, r_pos, cfg, _CASADI)
-    x_next, P_next = advance(xu, Pu, rest, a, z, var, has)
-    pose = ca.Function(f"fused_pose_{n}", [x, P, dt, a, pos, rest, z, var, has, r_pos],
-                       [ratio, xu, Pu, x_next, P_next])
-    built = compiled_many([advance, pose])
-    if any(how == "interpreted" for _, how in built):
+    xs, Ps = ca.if_else(has_pos, xu, xp_), ca.if_else(has_pos, Pu, Pp)
+    xe, Pe, nis, take = _period_end(xs, Ps, dt2, a, z, var, has_acc, gate, zv, varv, has_vel,
+                                    cfg, _CASADI)
+    fn = ca.Function(f"fused_period_{n}",
+                     [x, P, dt1, a, pos, r_pos, has_pos, dt2, z, var, has_acc, gate, zv, varv,
+                      has_vel],
+                     [xe, Pe, ratio, nis, take, xp_, Pp])
+    built = compiled_many([fn])
+    if built[0][1] == "interpreted":
         return None
-    return built[0][0], built[1][0]
-
-
-_ZERO3 = np.zeros(3)
+    return built[0][0]
 
 
 class _Kernel:
@@ -279,37 +321,71 @@ def _matrix(flat: np.ndarray) -> np.ndarray:
     return flat.copy().reshape(n, n).T
 
 
+# what became of a position sample: fused; rejected by the gate; held (a candidate after a
+# dropout, not fused); the position reset to it (after regain_poses consistent candidates)
+_NEW, _FUSED, _REJECTED, _HELD, _RESET = range(5)
+
+
+@dataclass
+class _Pose:
+    t_us: int
+    pos: np.ndarray
+    r_pos: np.ndarray          # variances per axis
+    kind: int = _NEW
+    vel_shift: np.ndarray | None = None      # a reset's: the velocity's correction
+    vel_var: np.ndarray | None = None        # and its variance per axis
+
+
 @dataclass
 class _Period:
-    """One kept control period: its end time, the known input over it, the accelerometer's
-    measurement at its end (mean, variance) or None, and the posterior at its end."""
+    """One kept control period (t_prev, t_us]: the known input over it, the attitude at its
+    end, the accelerometer samples integrated into it (weighted toward its start and end
+    attitudes, body FRD), its position samples, the autopilot's velocity at its end (or None),
+    and the posterior at its end."""
     t_us: int
     a_known: np.ndarray
-    acc: tuple[np.ndarray, float] | None
+    rot: np.ndarray                      # R (NED from FRD) at t_us
     x: np.ndarray
     P: np.ndarray
+    w0: np.ndarray = None                # sum of dt (1 - s) f over its samples' pieces
+    w1: np.ndarray = None                # sum of dt s f (s: the piece's midpoint, 0..1)
+    covered_s: float = 0.0               # the time its samples cover
+    poses: list = None
+    vel: np.ndarray | None = None
+    acc_taken: bool = True               # its accelerometer mean passed the gate (or none)
+    acc: tuple | None = None             # its accelerometer measurement (`_acc`), once formed
+
+    def __post_init__(self) -> None:
+        if self.w0 is None:
+            self.w0, self.w1, self.poses = np.zeros(3), np.zeros(3), []
 
 
 class FusedFilter:
     """The filter (module docstring): reset, then per control period `add_imu` / `add_pose`
-    for the samples received and `step` to the period's end. `codegen`: the compiled kernels
+    for the samples received and `step` to the period's end. `codegen`: the compiled kernel
     (when a C compiler is found), else the NumPy path (`compiled` says which runs)."""
 
     def __init__(self, cfg: FusedConfig, gravity_m_s2: float, codegen: bool = True) -> None:
         self.cfg = cfg
         self.g = gravity_m_s2
+        self._g_ned = np.array([0.0, 0.0, gravity_m_s2])
         self._trans: dict[int, tuple] = {}
-        kernels = _kernels(cfg) if codegen else None
-        self._advance_fn, self._pose_fn = ((_Kernel(kernels[0]), _Kernel(kernels[1]))
-                                           if kernels is not None else (None, None))
+        kernel = _kernel(cfg) if codegen else None
+        self._fn = _Kernel(kernel) if kernel is not None else None
         self._periods: list[_Period] = []
-        self._imu: list[np.ndarray] = []          # total accelerations (NED) this period
-        self._poses: list[tuple[int, np.ndarray, np.ndarray]] = []
+        self._imu: list[tuple[int, np.ndarray]] = []       # (time_usec, f FRD) not yet placed
+        self._poses: list[_Pose] = []
+        self._imu_last_us: int | None = None
+        self._imu_nominal_us = round(1e6 / cfg.imu_rate_hz)
+        self._mocap_std = np.full(3, cfg.mocap_std_m)
+        self._candidates: list[tuple[int, np.ndarray, np.ndarray, np.ndarray]] = []
         self.last_pose_us: int | None = None
         self.test_ratio = math.nan
         self.rejected = 0
         self.dropped = 0
-        self._regaining = False          # taking poses back after dead reckoning
+        self.imu_dropped = 0
+        self.accel_rejected = 0
+        self.resets = 0
 
     def _f(self, dt_us: int):
         got = self._trans.get(dt_us)
@@ -319,29 +395,34 @@ class FusedFilter:
                 self._trans[dt_us] = got
         return got
 
-    def reset(self, t_us: int, pos_ned_m, vel_ned_m_s, pos_std_m: float | None = None) -> None:
-        """Start from a position and velocity (the autopilot's), a_r = 0 and b = 0, with the
-        pose's variance on position (or pos_std_m's), generous ones on velocity and a_r,
-        accel_bias_std on b."""
+    def reset(self, t_us: int, pos_ned_m, vel_ned_m_s, pos_std_m: float | None = None,
+              euler_rad=(0.0, 0.0, 0.0)) -> None:
+        """Start from a position and velocity (the autopilot's) and the attitude at t_us,
+        a_r = 0 and b = 0, with the pose's variance on position (or pos_std_m's), generous
+        ones on velocity and a_r, accel_bias_std on b."""
         cfg = self.cfg
         x = np.concatenate([np.asarray(pos_ned_m, float), np.asarray(vel_ned_m_s, float),
                             np.zeros(6)])
         std = cfg.mocap_std_m if pos_std_m is None else pos_std_m
         P = np.diag([std ** 2] * 3 + [0.1 ** 2] * 3 + [1.0] * 3
                     + [cfg.accel_bias_std ** 2] * 3)
-        self._periods = [_Period(int(t_us), np.zeros(3), None, x, P)]
+        self._periods = [_Period(int(t_us), np.zeros(3), rotation_ned_frd(*euler_rad), x, P)]
         self._imu.clear()
         self._poses.clear()
+        self._candidates.clear()
+        self._imu_last_us = None
         self.last_pose_us = int(t_us)
         self.test_ratio = math.nan
         self.rejected = 0
         self.dropped = 0
-        self._regaining = False
+        self.imu_dropped = 0
+        self.accel_rejected = 0
+        self.resets = 0
 
     @property
     def compiled(self) -> bool:
-        """The compiled kernels run (else the NumPy path)."""
-        return self._advance_fn is not None
+        """The compiled kernel runs (else the NumPy path)."""
+        return self._fn is not None
 
     @property
     def t_us(self) -> int:
@@ -355,137 +436,309 @@ class FusedFilter:
     def P(self) -> np.ndarray:
         return self._periods[-1].P
 
-    def add_imu(self, specific_force_frd_m_s2, euler_rad) -> None:
-        """One accelerometer sample (specific force, body FRD) with the attitude it was taken
-        at: kept as a total acceleration in NED for the period's end."""
-        f = np.asarray(specific_force_frd_m_s2, float)
-        if np.all(np.isfinite(f)):
-            self._imu.append(rotation_ned_frd(euler_rad) @ f + np.array([0.0, 0.0, self.g]))
+    def add_imu(self, t_us: int, specific_force_frd_m_s2) -> None:
+        """One HIGHRES_IMU accelerometer message: the mean specific force (body FRD) over the
+        interval since the message before it, ending at its time of validity t_us (time_usec);
+        placed at the next `step` in the periods that interval covers."""
+        f = np.array(specific_force_frd_m_s2, float)
+        if math.isfinite(f[0] + f[1] + f[2]):
+            self._imu.append((int(t_us), f))
 
     def add_pose(self, t_us: int, pos_ned_m, std_ned_m=None) -> None:
         """One position (motion capture, or a GNSS fix in NED) at its time of validity, with
         its 1-sigma errors per axis (None: mocap_std_m), fused at the next `step`."""
-        p = np.asarray(pos_ned_m, float)
-        std = (np.full(3, self.cfg.mocap_std_m) if std_ned_m is None
-               else np.asarray(std_ned_m, float))
-        if np.all(np.isfinite(p)) and np.all(np.isfinite(std)) and np.all(std > 0.0):
-            self._poses.append((int(t_us), p, std * std))
+        p = np.array(pos_ned_m, float)
+        std = (self._mocap_std if std_ned_m is None else np.array(std_ned_m, float))
+        if math.isfinite(p[0] + p[1] + p[2] + std[0] + std[1] + std[2]) and std.min() > 0.0:
+            r = std * std
+            if self.cfg.autopilot_vel_std_m_s > 0.0:
+                r = 2.0 * r           # covariance intersection with the autopilot's velocity
+            self._poses.append(_Pose(int(t_us), p, r))
 
-    def step(self, t_us: int, a_known_ned: np.ndarray, vel_ned_m_s=None) -> Health:
+    def step(self, t_us: int, a_known_ned: np.ndarray, euler_rad=None,
+             vel_ned_m_s=None) -> Health:
         """Advance to t_us (> the last period's end) under the known input a_known (m/s^2 NED,
-        held over the period); fuse this period's accelerometer mean and then the poses received
-        at their times of validity; with autopilot_vel_std_m_s, `vel_ned_m_s` (the
-        autopilot's velocity now) is fused last as a measurement of v."""
-        last = self._periods[-1]
-        dt_us = int(t_us) - last.t_us
-        if dt_us <= 0:
+        held over the period), the attitude at t_us `euler_rad` (None: the last period's);
+        place the accelerometer messages received in the periods they cover and the poses at
+        their times of validity, and run the kept periods again from the earliest one either
+        touched (each with all it holds); with autopilot_vel_std_m_s, `vel_ned_m_s` (the
+        autopilot's velocity now) is kept with the period and fused at its end."""
+        periods = self._periods
+        last = periods[-1]
+        t_us = int(t_us)
+        if t_us <= last.t_us:
             return self.health(t_us)
-        a_known = np.asarray(a_known_ned, float).copy()
-        acc = None
-        if self._imu:
-            n = len(self._imu)
-            acc = (np.mean(self._imu, axis=0), self.cfg.accel_std_m_s2 ** 2 / n)
-            self._imu.clear()
-        x, P = self._advance(last.x, last.P, dt_us, a_known, acc)
-        self._periods.append(_Period(int(t_us), a_known, acc, x, P))
-        del self._periods[:-self.cfg.history]
-        for t_pose, pos, r_pos in sorted(self._poses, key=lambda s: s[0]):
-            self._fuse_pose(min(t_pose, int(t_us)), pos, r_pos)
-        self._poses.clear()
+        rot = last.rot if euler_rad is None else rotation_ned_frd(*euler_rad)
+        period = _Period(t_us, np.asarray(a_known_ned, float).copy(), rot, last.x, last.P)
         std = self.cfg.autopilot_vel_std_m_s
         if std > 0.0 and vel_ned_m_s is not None:
-            top = self._periods[-1]
             v = np.asarray(vel_ned_m_s, float)
-            top.x, top.P, _ = _update(top.x, top.P, _H_VEL, v - top.x[3:6], std * std * _I3)
+            period.vel = v.copy() if np.all(np.isfinite(v)) else None
+        periods.append(period)
+        del periods[:-self.cfg.history]
+        first = len(periods) - 1
+        if self._imu:
+            first = min(first, self._place_imu(t_us))
+        if self._poses:
+            first = min(first, self._place_poses(t_us))
+        self._run(first)
         return self.health(t_us)
 
-    def _advance(self, x, P, dt_us: int, a_known, acc):
-        fn = self._advance_fn
-        if fn is not None:
-            args, p_in, res = fn.args, fn.p_in, fn.results
-            args[0][:], p_in[:], args[2][0], args[3][:] = x, P, dt_us * 1e-6, a_known
-            if acc is None:
-                args[6][0] = 0.0
-            else:
-                args[4][:], args[5][0], args[6][0] = acc[0], acc[1], 1.0
-            fn.evaluate()
-            return res[0].copy(), _matrix(res[1])
-        x, P = _predict(x, P, *self._f(dt_us), a_known)
-        if acc is not None:
-            x, P = _accel_update(x, P, a_known, *acc)
-        return x, P
-
-    def _pose(self, base: _Period, t_pose: int, pos, r_pos, nxt: _Period | None):
-        """The pose at t_pose (variances per axis r_pos) fused into the posterior of the kept
-        period `base`, predicted to
-        it under the input of the period after (`nxt`; None: the pose is at the last period's
-        end): (test ratio, x, P updated, and the compiled kernel's posterior carried on to
-        nxt's end, else None)."""
-        x, P, dt_us = base.x, base.P, t_pose - base.t_us
-        a_known = _ZERO3 if nxt is None else nxt.a_known
-        fn = self._pose_fn
-        if fn is not None:
-            args, p_in, res = fn.args, fn.p_in, fn.results
-            args[0][:], p_in[:], args[2][0], args[3][:], args[4][:] = \
-                x, P, dt_us * 1e-6, a_known, pos
-            args[5][0] = 0.0 if nxt is None else (nxt.t_us - t_pose) * 1e-6
-            if nxt is None or nxt.acc is None:
-                args[8][0] = 0.0
-            else:
-                args[6][:], args[7][0], args[8][0] = nxt.acc[0], nxt.acc[1], 1.0
-            args[9][:] = r_pos
-            fn.evaluate()
-            ahead = None if nxt is None else (res[3].copy(), _matrix(res[4]))
-            return float(res[0][0]), res[1].copy(), _matrix(res[2]), ahead
-        if dt_us > 0:
-            F, G, Q = self._f(dt_us)
-            x, P = _predict(x, P, F, G, Q, a_known)
-        ratio, x, P = _pose_fusion(x, P, pos, r_pos, self.cfg)
-        return float(ratio), x, P, None
-
-    def _fuse_pose(self, t_pose: int, pos: np.ndarray, r_pos: np.ndarray) -> None:
-        """The pose at its time of validity: back to the kept period before it, forward to it,
-        the update, then forward again through the later periods."""
+    def _place_imu(self, t_us: int) -> int:
+        """The accelerometer messages up to t_us into the periods their intervals cover:
+        the earliest period touched (len(periods) - 1 if none)."""
         periods = self._periods
-        k = len(periods) - 1
-        while k >= 0 and periods[k].t_us > t_pose:
-            k -= 1
-        if k < 0:
-            self.dropped += 1
-            return
-        base = periods[k]
-        # forward to the pose under the next period's input (none: the pose is at base's end)
-        nxt = periods[k + 1] if k + 1 < len(periods) else None
-        ratio, x, P, ahead = self._pose(base, t_pose, pos, r_pos, nxt)
+        first = len(periods) - 1
+        later = []
+        span_max = IMU_MAX_SPAN_INTERVALS * self._imu_nominal_us
+        for t, f in sorted(self._imu, key=lambda s: s[0]):
+            if t > t_us:                       # after this state: the next period's
+                later.append((t, f))
+                continue
+            prev = self._imu_last_us
+            if prev is not None and t <= prev:     # a repeat or out of order
+                self.imu_dropped += 1
+                continue
+            self._imu_last_us = t
+            a = t - self._imu_nominal_us if prev is None else max(prev, t - span_max)
+            placed = False
+            for k in range(len(periods) - 1, 0, -1):
+                end, start = periods[k].t_us, periods[k - 1].t_us
+                if start >= t:
+                    continue
+                if end <= a:
+                    break
+                lo, hi = max(a, start), min(t, end)
+                dt = (hi - lo) * 1e-6
+                s = (0.5 * (lo + hi) - start) / (end - start)
+                p = periods[k]
+                p.w0 += (dt * (1.0 - s)) * f
+                p.w1 += (dt * s) * f
+                p.covered_s += dt
+                p.acc = None
+                placed = True
+                first = min(first, k)
+            if not placed:
+                self.imu_dropped += 1
+        self._imu = later
+        return first
+
+    def _place_poses(self, t_us: int) -> int:
+        """The poses received into the periods of their times of validity, [start, end)
+        but the newest's end (a pose one period late, at a period's end, goes to the start of
+        the next: the posterior kept at that end stays without it, and the newest period alone
+        runs); one after t_us taken at t_us, one older than the history dropped: the earliest
+        period touched."""
+        periods = self._periods
+        first = len(periods) - 1
+        for pose in self._poses:
+            pose.t_us = min(pose.t_us, t_us)
+            k = len(periods) - 1
+            while k > 0 and periods[k - 1].t_us > pose.t_us:
+                k -= 1
+            if k == 0 or periods[k - 1].t_us > pose.t_us:
+                self.dropped += 1
+                continue
+            periods[k].poses.append(pose)
+            periods[k].poses.sort(key=lambda p: p.t_us)
+            first = min(first, k)
+        self._poses.clear()
+        return first
+
+    def _acc(self, k: int):
+        """Period k's accelerometer measurement (total acceleration NED, variance per axis),
+        or None: its samples rotated with the attitudes at its start and end, each weighted
+        by where in the period it lies (the attitude interpolated linearly between the two:
+        exact to second order in the rotation over a period)."""
+        p = self._periods[k]
+        if p.covered_s <= 0.0:
+            return None
+        if p.acc is None:               # formed once, until a sample is added to the period
+            z = (self._periods[k - 1].rot @ p.w0 + p.rot @ p.w1) / p.covered_s + self._g_ned
+            p.acc = z, self.cfg.accel_std_m_s2 ** 2 / (p.covered_s * self.cfg.imu_rate_hz)
+        return p.acc
+
+    def _gate(self, k: int) -> float:
+        """Period k's accelerometer gate: accel_gate, or none (inf) after accel_reject_max
+        periods rejected in a row (a gate must not lock the accelerometer out)."""
+        if self._periods[k - 1].acc_taken:
+            return self.cfg.accel_gate
+        m = self.cfg.accel_reject_max
+        prev = self._periods[max(1, k - m):k]
+        if len(prev) == m and not any(p.acc_taken for p in prev):
+            return math.inf
+        return self.cfg.accel_gate
+
+    def _run(self, first: int) -> None:
+        """The kept periods from `first` on run again from the posterior before it, each with
+        its poses (the new ones gated here), accelerometer mean and velocity."""
+        periods = self._periods
+        newest = len(periods) - 1
+        for k in range(max(first, 1), newest + 1):
+            prev, p = periods[k - 1], periods[k]
+            acc = self._acc(k)
+            gate = self._gate(k)
+            vel = p.vel
+            x, P, t = prev.x, prev.P, prev.t_us
+            active = [q for q in p.poses if q.kind in (_NEW, _FUSED, _RESET)]
+            done = False
+            for i, q in enumerate(active):
+                last = i == len(active) - 1
+                out = self._stretch(x, P, q.t_us - t, p.a_known, q, p.t_us - q.t_us if last
+                                    else 0, acc if last else None, gate, vel if last else None)
+                x_end, P_end, ratio, nis, taken = out
+                prior = None
+                if q.kind == _NEW:
+                    if ratio > 1.0:
+                        prior = self._prior()
+                    self._decide(q, ratio, prior)
+                if q.kind in (_RESET, _REJECTED, _HELD) and prior is None:
+                    prior = self._prior()
+                if q.kind == _FUSED:
+                    if last:
+                        x, P, done = x_end, P_end, True
+                        self._acc_result(k, acc, nis, taken, newest)
+                    else:
+                        x, P = x_end, P_end
+                elif q.kind == _RESET:
+                    x, P = self._reset_to(q, *prior)
+                else:                               # rejected or held: the prior goes on
+                    x, P = prior
+                t = q.t_us
+            if not done:
+                x, P, _, nis, taken = self._stretch(x, P, p.t_us - t, p.a_known, None, 0, acc,
+                                                    gate, vel)
+                self._acc_result(k, acc, nis, taken, newest)
+            p.x, p.P = x, P
+
+    def _acc_result(self, k: int, acc, nis: float, taken: bool, newest: int) -> None:
+        p = self._periods[k]
+        p.acc_taken = acc is None or taken
+        if k == newest and not p.acc_taken:
+            self.accel_rejected += 1
+
+    def _decide(self, q: _Pose, ratio: float, prior) -> None:
+        """A new pose's fate from its test ratio against the prior at its time: fused within
+        the gate; outside it rejected, or, dead reckoning (no pose fused for dropout_s), held
+        as a candidate. `regain_poses` candidates in a row that are mutually consistent (each
+        three consecutive ones: their innovations against the dead-reckoned track on one
+        straight line, within pose_gate: the track's position and velocity errors are what a
+        line absorbs, a glitch is not) reset the position to the last and the velocity by the
+        line's slope (as EKF2 resets to a measurement), counted in `resets`."""
         self.test_ratio = ratio
-        # past the gate: rejected, unless the filter has been without a pose for dropout_s
-        # (then the estimate is what is in doubt, and a gate would lock the poses out for good),
-        # or is still taking them back after that: the gate closes again only once a pose
-        # falls inside it (a first pose after an outage may correct only part of the drift)
-        if ratio > 1.0 and not self.dead_reckoning(t_pose) and not self._regaining:
+        if ratio <= 1.0:
+            q.kind = _FUSED
+            self._candidates.clear()
+            self.last_pose_us = max(self.last_pose_us or q.t_us, q.t_us)
+            return
+        if not self.dead_reckoning(q.t_us):
+            q.kind = _REJECTED
             self.rejected += 1
             return
-        self._regaining = ratio > 1.0
-        self.last_pose_us = max(self.last_pose_us or t_pose, t_pose)
-        t = t_pose
-        if t_pose == base.t_us:
-            base.x, base.P = x, P
-        for j in range(k + 1, len(periods)):
-            p = periods[j]
-            x, P = (ahead if j == k + 1 and ahead is not None       # the pose kernel's
-                    else self._advance(x, P, p.t_us - t, p.a_known, p.acc))
-            p.x, p.P = x, P
-            t = p.t_us
+        x_prior, P_prior = prior
+        run = self._candidates
+        run.append((q.t_us, q.pos - x_prior[0:3], q.r_pos, np.diag(P_prior)[6:9].copy()))
+        if len(run) >= 3 and not self._on_a_line(run[-3:]):
+            del run[:-2]                 # one of them off the line: the last two go on
+        if len(run) >= self.cfg.regain_poses:
+            q.kind = _RESET
+            t1, nu1, r1, _ = run[0]
+            span = (q.t_us - t1) * 1e-6
+            q.vel_shift = (run[-1][1] - nu1) / span
+            q.vel_var = (r1 + q.r_pos) / (span * span)
+            run.clear()
+            self.resets += 1
+            self.last_pose_us = max(self.last_pose_us or q.t_us, q.t_us)
+        else:
+            q.kind = _HELD
+            self.rejected += 1
+
+    def _on_a_line(self, three) -> bool:
+        """Three candidates' innovations on one straight line in time: the middle one's
+        distance from the line through the other two, against its variance (the poses' noise
+        and the acceleration error the prior carries, P_aa, over the spacing), within
+        pose_gate (chi-square, 3 dof)."""
+        (t1, n1, r1, _), (t2, n2, r2, paa), (t3, n3, r3, _) = three
+        w = (t2 - t1) / (t3 - t1)
+        d = n2 - ((1.0 - w) * n1 + w * n3)
+        lever = 0.5 * (t2 - t1) * (t3 - t2) * 1e-12
+        var = r2 + (1.0 - w) ** 2 * r1 + w * w * r3 + lever * lever * paa
+        return float(np.sum(d * d / var)) <= self.cfg.pose_gate
+
+    @staticmethod
+    def _reset_to(q: _Pose, x, P):
+        """The position reset to the pose (its value and variance) and the velocity shifted by
+        the candidates' slope (its variance theirs), no correlation of either left."""
+        x = x.copy()
+        P = np.array(P)
+        x[0:3] = q.pos
+        x[3:6] = x[3:6] + q.vel_shift
+        P[0:6, :] = 0.0
+        P[:, 0:6] = 0.0
+        P[0:3, 0:3] = np.diag(q.r_pos)
+        P[3:6, 3:6] = np.diag(q.vel_var)
+        return x, P
+
+    def _stretch(self, x, P, dt1_us: int, a_known, pose: _Pose | None, dt2_us: int, acc,
+                 gate: float, vel):
+        """Predicted dt1 to the pose (if any) and fused, predicted dt2 on, then the
+        accelerometer (gated) and the velocity: (x_end, P_end, the pose's test ratio, the
+        accelerometer's NIS, taken; the prior at the pose: `_prior`)."""
+        fn = self._fn
+        if fn is not None:
+            args, p_in, res = fn.args, fn.p_in, fn.results
+            args[0][:], p_in[:], args[2][0], args[3][:] = x, P, dt1_us * 1e-6, a_known
+            if pose is None:
+                args[6][0] = 0.0
+            else:
+                args[4][:], args[5][:], args[6][0] = pose.pos, pose.r_pos, 1.0
+            args[7][0] = dt2_us * 1e-6
+            if acc is None:
+                args[10][0] = 0.0
+            else:
+                args[8][:], args[9][0], args[10][0], args[11][0] = acc[0], acc[1], 1.0, gate
+            if vel is None:
+                args[14][0] = 0.0
+            else:
+                std = self.cfg.autopilot_vel_std_m_s
+                args[12][:], args[13][0], args[14][0] = vel, 2.0 * std * std, 1.0
+            fn.evaluate()
+            return (res[0].copy(), _matrix(res[1]), res[2][0], res[3][0], res[4][0] > 0.0)
+        ratio, nis, taken = math.nan, math.nan, False
+        x, P = _predict(x, P, *self._f(dt1_us), a_known)
+        self._numpy_prior = x, P
+        if pose is not None:
+            ratio, x, P = _pose_fusion(x, P, pose.pos, pose.r_pos, self.cfg)
+            ratio = float(ratio)
+        if dt2_us:
+            x, P = _predict(x, P, *self._f(dt2_us), a_known)
+        if acc is not None:
+            xa, Pa, nis = _accel_update(x, P, a_known, *acc)
+            nis = float(nis)
+            taken = nis <= gate
+            if taken:
+                x, P = xa, Pa
+        if vel is not None:
+            std = self.cfg.autopilot_vel_std_m_s
+            x, P, _ = _update(x, P, _H_VEL, vel - x[3:6], 2.0 * std * std * _I3)
+        return x, P, ratio, nis, taken
+
+    def _prior(self):
+        """The prior at the pose of the last `_stretch` with one: (x, P)."""
+        fn = self._fn
+        if fn is not None:
+            return fn.results[5].copy(), _matrix(fn.results[6])
+        return self._numpy_prior
 
     def dead_reckoning(self, t_us: int) -> bool:
         return self.last_pose_us is None or \
             t_us - self.last_pose_us > round(self.cfg.dropout_s * 1e6)
 
     def health(self, t_us: int) -> Health:
-        x = self.x
-        return Health(tuple(x[0:3].tolist()), tuple(x[3:6].tolist()), self.test_ratio,
-                      float(np.trace(self.P[0:3, 0:3]) / 3.0), self.dead_reckoning(t_us),
-                      self.rejected)
+        x, P = self.x.tolist(), self.P
+        return Health(tuple(x[0:3]), tuple(x[3:6]), self.test_ratio,
+                      float(P[0, 0] + P[1, 1] + P[2, 2]) / 3.0, self.dead_reckoning(t_us),
+                      self.rejected, self.resets, self.accel_rejected)
 
 
 class HealthReport:
@@ -501,6 +754,7 @@ class HealthReport:
         self._dead = False
         self._rejected: int | None = None     # the count last seen
         self._rejecting = False
+        self._resets = 0
         self.what = what
 
     def messages(self, health: Health) -> list:
@@ -513,6 +767,11 @@ class HealthReport:
             out.append(mavlink.MAVLink_statustext_message(mavlink.MAV_SEVERITY_WARNING,
                                                           text.encode("ascii")))
         self._rejecting = new
+        if health.resets > self._resets:
+            text = f"fused filter: position reset to {self.what}"
+            out.append(mavlink.MAVLink_statustext_message(mavlink.MAV_SEVERITY_NOTICE,
+                                                          text.encode("ascii")))
+        self._resets = health.resets
         if health.dead_reckoning != self._dead:
             self._dead = health.dead_reckoning
             severity, text = ((mavlink.MAV_SEVERITY_WARNING,

@@ -18,9 +18,11 @@ transport's frame parse).
 The state columns (pos_*, vel_*) are the state the controller flew on: the vehicle's estimate,
 or the fused filter's position and velocity (estimator kind fused), whose health follows in
 est_test_ratio (the last pose's innovation test ratio), est_pos_var_m2 (the position's variance),
-est_dead_reckoning (1 without a pose for the filter's dropout_s) and est_rejected (the poses its
-gate has rejected so far); nan without the filter. lost_motor: the motor the controller flies
-as lost (trq_offboard/lost_motor.py), 0 while none is."""
+est_dead_reckoning (1 without a pose for the filter's dropout_s), est_rejected (the poses its
+gate has rejected so far), est_resets (its position resets after a dropout so far) and
+est_accel_rejected (the periods whose accelerometer mean its gate rejected); nan without the
+filter. lost_motor: the motor the controller flies as lost (trq_offboard/lost_motor.py), 0 while
+none is."""
 
 from __future__ import annotations
 
@@ -44,7 +46,8 @@ COLUMNS = (
     + ["solve_ms", "iterations", "status", "source", "output_error", "cost"]
     + [f"eff_motor{i}" for i in range(1, 5)]
     + [f"cpu_{part}_ms" for part in CPU_PARTS]
-    + ["est_test_ratio", "est_pos_var_m2", "est_dead_reckoning", "est_rejected"]
+    + ["est_test_ratio", "est_pos_var_m2", "est_dead_reckoning", "est_rejected", "est_resets",
+       "est_accel_rejected"]
     + ["lost_motor"])
 
 
@@ -94,8 +97,8 @@ class ControllerLog:
                       info.cpu.predictor_ns * 1e-6, info.cpu.feedback_ns * 1e-6] if info
                      else list(nan4))
                   + [_ms(c.prepare_ns), _ms(c.wire_ns), _ms(c.log_ns), _ms(c.period_ns)]
-                  + ([est.test_ratio, est.pos_var_m2, int(est.dead_reckoning), est.rejected]
-                     if est else [math.nan] * 4)
+                  + ([est.test_ratio, est.pos_var_m2, int(est.dead_reckoning), est.rejected,
+                      est.resets, est.accel_rejected] if est else [math.nan] * 6)
                   + [info.lost_motor if info else 0])
 
     def close(self) -> None:

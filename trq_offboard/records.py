@@ -105,7 +105,9 @@ class SensorSamples:
     """The raw sensors the flight loop received since the last step, for the fused filter
     (trq_offboard/fused.py), with the vehicle's time of the state the step answers."""
     stamp_us: int                                    # the state's time (ODOMETRY time_usec)
-    accel_frd_m_s2: tuple[Vec3, ...] = ()            # HIGHRES_IMU specific forces, body FRD
+    # HIGHRES_IMU: (time_usec, the mean specific force, body FRD, over the interval since
+    # the message before it)
+    accel_frd_m_s2: tuple[tuple[int, Vec3], ...] = ()
     poses_ned_m: tuple[tuple[int, Vec3], ...] = ()   # ATT_POS_MOCAP: (time of validity us, pos)
     fixes: tuple[PositionFix, ...] = ()              # GPS_RAW_INT, 3D fix or better, in NED
 
@@ -119,6 +121,8 @@ class EstimatorHealth:
     pos_var_m2: float                  # the position's variance, trace / 3
     dead_reckoning: bool               # no pose for the filter's dropout_s
     rejected: int                      # poses rejected by the gate so far
+    resets: int = 0                    # position resets to a pose after a dropout so far
+    accel_rejected: int = 0            # periods whose accelerometer mean the gate rejected
 
 
 @dataclass(frozen=True)

@@ -49,12 +49,14 @@ SIGNED = mavlink.MAVLINK_IFLAG_SIGNED
 _BYTE = [bytes((k,)) for k in range(256)]
 _pack_checksum = struct.Struct("<H").pack
 
-# the vehicle's telemetry on the offboard link (params/sim: telemetry.offboard); any other
-# message takes pymavlink's path
+# the vehicle's telemetry on the offboard link (params/sim: telemetry.offboard) and the raw
+# sensors a companion's fused filter asks for every period (trq_offboard/fused.py: the IMU and
+# the position source); any other message takes pymavlink's path
 HOT = (mavlink.MAVLink_odometry_message, mavlink.MAVLink_actuator_output_status_message,
        mavlink.MAVLink_heartbeat_message, mavlink.MAVLink_sys_status_message,
        mavlink.MAVLink_attitude_message, mavlink.MAVLink_local_position_ned_message,
-       mavlink.MAVLink_servo_output_raw_message)
+       mavlink.MAVLink_servo_output_raw_message, mavlink.MAVLink_highres_imu_message,
+       mavlink.MAVLink_att_pos_mocap_message, mavlink.MAVLink_gps_raw_int_message)
 
 
 def crc(data, crc_extra: int) -> int:

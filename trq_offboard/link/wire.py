@@ -14,6 +14,7 @@ from dataclasses import dataclass
 
 from pymavlink.dialects.v20 import common as mavlink
 
+from trq_offboard.frames import quat_to_euler
 from trq_offboard.records import ActuatorCommand, StateEstimate
 from trq_wire import actuators, frames
 from trq_wire.mocap import VISION_ESTIMATOR_TYPE
@@ -28,13 +29,6 @@ FORCE_DISARM = 21196
 class Odometry:
     stamp_us: int
     state: StateEstimate
-
-
-def quat_to_euler(w: float, x: float, y: float, z: float) -> tuple[float, float, float]:
-    roll = math.atan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y))
-    pitch = math.asin(max(-1.0, min(1.0, 2.0 * (w * y - z * x))))
-    yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
-    return roll, pitch, yaw
 
 
 def parse_odometry(msg) -> Odometry | None:
@@ -120,13 +114,14 @@ ACCEL_UPDATED = (mavlink.HIGHRES_IMU_UPDATED_XACC | mavlink.HIGHRES_IMU_UPDATED_
                  | mavlink.HIGHRES_IMU_UPDATED_ZACC)
 
 
-def parse_highres_accel(msg) -> tuple[float, float, float] | None:
-    """HIGHRES_IMU's specific force (m/s^2 body FRD) if it carries a new accelerometer sample
-    (fields_updated) with finite values, else None."""
+def parse_highres_accel(msg) -> tuple[int, tuple[float, float, float]] | None:
+    """HIGHRES_IMU's (time_usec, specific force m/s^2 body FRD) if it carries a new
+    accelerometer sample (fields_updated) with finite values, else None. The force is the
+    mean over the interval since the message before it (PROTOCOL.md), valid at time_usec."""
     if (msg.fields_updated & ACCEL_UPDATED) != ACCEL_UPDATED:
         return None
     acc = (msg.xacc, msg.yacc, msg.zacc)
-    return acc if all(math.isfinite(v) for v in acc) else None
+    return (int(msg.time_usec), acc) if all(math.isfinite(v) for v in acc) else None
 
 
 def parse_mocap(msg) -> tuple[int, tuple[float, float, float]] | None:

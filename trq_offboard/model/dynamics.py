@@ -25,19 +25,9 @@ import numpy as np
 from trq_params.schema import throttle_curve
 
 from trq_offboard.config import VehicleModel
+from trq_offboard.frames import rotation_ned_frd
 
 NX, ND = 12, 6
-
-
-def rotation_ned_frd(roll, pitch, yaw):
-    """R (3x3 SX/MX/DM) taking body FRD vectors to world NED, ZYX Euler angles."""
-    cr, sr = ca.cos(roll), ca.sin(roll)
-    cp, sp = ca.cos(pitch), ca.sin(pitch)
-    cy, sy = ca.cos(yaw), ca.sin(yaw)
-    return ca.vertcat(
-        ca.horzcat(cp * cy, sr * sp * cy - cr * sy, cr * sp * cy + sr * sy),
-        ca.horzcat(cp * sy, sr * sp * sy + cr * cy, cr * sp * sy - sr * cy),
-        ca.horzcat(-sp, sr * cp, cr * cp))
 
 
 def euler_rate_matrix(roll, pitch):

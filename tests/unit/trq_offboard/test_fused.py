@@ -12,7 +12,8 @@ import yaml
 from pymavlink.dialects.v20 import common as mavlink
 
 from trq_offboard.config import ConfigError, load_controller
-from trq_offboard.fused import FusedConfig, FusedFilter, HealthReport, rotation_ned_frd
+from trq_offboard.frames import rotation_ned_frd
+from trq_offboard.fused import FusedConfig, FusedFilter, HealthReport
 from trq_params.loader import read_yaml
 
 from conftest import ROOT, feed_imu
@@ -48,9 +49,9 @@ def _fly(n_steps, *, seed=0, model_error=(0.3, -0.2, 0.1), bias_frd=(0.15, -0.1,
     rng = np.random.default_rng(seed)
     f = FusedFilter(cfg, G)
     p0, v0, _ = _truth(0.0)
-    f.reset(0, p0, v0)
     euler = (0.0, 0.0, 0.4)
-    rot = rotation_ned_frd(euler)
+    f.reset(0, p0, v0, euler_rad=euler)
+    rot = rotation_ned_frd(*euler)
     rows = []
     for k in range(1, n_steps + 1):
         t_us = k * H_US
@@ -62,7 +63,7 @@ def _fly(n_steps, *, seed=0, model_error=(0.3, -0.2, 0.1), bias_frd=(0.15, -0.1,
         # the known input over the period: the truth at its middle, less the model's error
         a_known = _truth((t_us - H_US / 2) * 1e-6)[2] - np.asarray(model_error)
         p, v, _ = _truth(t_us * 1e-6)
-        health = f.step(t_us, a_known, v + rng.normal(0.0, vel_noise_m_s or 1.0, 3))
+        health = f.step(t_us, a_known, euler, v + rng.normal(0.0, vel_noise_m_s or 1.0, 3))
         truth = np.concatenate([p, v, np.asarray(model_error), rot @ np.asarray(bias_frd)])
         rows.append((t_us, f.x - truth, np.diag(f.P).copy(), health))
     return f, rows
@@ -277,7 +278,7 @@ def test_without_a_pose_the_fused_controller_flies_the_state_as_it_came():
     for k in range(1, 30):
         state = StateEstimate((0.01 * k, 0.0, -2.0), (0.1 * math.sin(k), 0.05, 0.0),
                               (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
-        imu = SensorSamples(10_000 * k, ((0.0, 0.0, -9.81),), ())
+        imu = SensorSamples(10_000 * k, ((10_000 * k, (0.0, 0.0, -9.81)),), ())
         plain.step(0.01 * k, state, None, ref)
         fused.step(0.01 * k, state, None, ref, imu)
         np.testing.assert_array_equal(fused.eso.z, plain.eso.z)
