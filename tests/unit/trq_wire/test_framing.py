@@ -176,7 +176,8 @@ def test_serial_budget_by_hand():
     size = {"HEARTBEAT": 9, "SYS_STATUS": 43, "ODOMETRY": 233, "ATTITUDE": 28,
             "LOCAL_POSITION_NED": 28, "SERVO_OUTPUT_RAW": 37, "ACTUATOR_OUTPUT_STATUS": 140,
             "GLOBAL_POSITION_INT": 28, "GPS_RAW_INT": 52, "HOME_POSITION": 60,
-            "HIGHRES_IMU": 63, "ATT_POS_MOCAP": 120, "ESTIMATOR_STATUS": 42}
+            "HIGHRES_IMU": 63, "ATT_POS_MOCAP": 120, "ESTIMATOR_STATUS": 42,
+                "EXTENDED_SYS_STATE": 2}
     for signed in (False, True):
         expected = sum(rates[s] * (size[s] + 12 + (13 if signed else 0)) for s in rates)
         assert serial_budget(link, signed) == (expected, 92160)
