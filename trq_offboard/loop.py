@@ -441,6 +441,8 @@ class OffboardFlight:
                 ground_z = first.state.pos_ned_m[2]
         t0 = first.stamp_us
         reference = self.make_reference(first.state, airborne)
+        if hasattr(self.controller, "ground_down_m"):    # where a lost-motor landing ends
+            self.controller.ground_down_m = ground_z
         self.controller.reset(0.0, first.state)
         answered = 0
         down_since: float | None = None
@@ -538,7 +540,8 @@ class OffboardFlight:
             if info.lost_motor and not self._lost_motor:
                 # once: what the controller now does (trq_offboard/lost_motor.py)
                 self._lost_motor = info.lost_motor
-                text = lost_motor.status_text(info.lost_motor)
+                text = lost_motor.status_text(
+                    info.lost_motor, getattr(self.controller, "lost_motor_response", "nmpc"))
                 log.error(text)
                 self.link.send(mavlink.MAVLink_statustext_message(
                     mavlink.MAV_SEVERITY_CRITICAL, text.encode("ascii")))
@@ -546,7 +549,7 @@ class OffboardFlight:
                 for msg in self.estimator_report.messages(info.estimator):
                     self.link.send(msg)
             self._solve_ms.append(info.solve.solve_time_s * 1e3)
-            if info.source.value != "nmpc":
+            if info.source.value not in ("nmpc", "spin"):      # the spinning one flies
                 self.summary.fallbacks += 1
         self.summary.steps += 1
         rec = StepRecord(t, odo.stamp_us, odo.state, ref, cmd, applied, info)

@@ -81,6 +81,9 @@ def failed_config(cfg: ControllerConfig) -> ControllerConfig:
         step_s=lm.horizon_step_s or cfg.step_s)
 
 
-def status_text(motor: int) -> str:
-    """The STATUSTEXT announcing the loss and what the controller does (at most 50 chars)."""
+def status_text(motor: int, response: str = "nmpc") -> str:
+    """The STATUSTEXT announcing the loss and what the controller does (at most 50 chars):
+    `response` "nmpc" (the failed NMPC) or "spin" (the spinning controller, spin.py)."""
+    if response == "spin":
+        return f"motor {motor} lost: spinning, holding position, landing"
     return f"motor {motor} lost: yaw given up, descending to land"
