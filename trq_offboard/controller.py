@@ -202,14 +202,15 @@ class Controller:
         self.lost_motor = 0                   # the motor flown as lost (1..4), 0: none
         self._descent: tuple[float, np.ndarray] | None = None   # (t_s, position) at detection
         # the spinning response (lost_motor.response spin): the file's `spin:` controller for each
-        # motor, built now (each its trim's IPOPT and its LQR), one of them flown from a
-        # detection of one motor lost (`_detect`)
+        # motor and each sense of the spin, built now (each its trim's IPOPT and its LQR), one of
+        # them flown from a detection of one motor lost (`_detect`)
         self._spin_cfg = None
-        self._spins: dict[int, SpinController] = {}
+        self._spins: dict[tuple[int, int], SpinController] = {}
         if self.detector is not None and cfg.lost_motor.response == "spin":
             self._spin_cfg = load_spin_config(cfg.file)
-            self._spins = {m: SpinController(self._spin_cfg, vm, m, delay_s=cfg.applied_delay_s)
-                           for m in (1, 2, 3, 4)}
+            self._spins = {(m, d): SpinController(self._spin_cfg, vm, m,
+                                                  delay_s=cfg.applied_delay_s, direction=d)
+                           for m in (1, 2, 3, 4) for d in (1, -1)}
         self.spin: SpinController | None = None      # the spinning controller flying, if any
         self._spin_t0 = 0.0                            # when it took over (s)
         # the ground's NED down, for the spinning controller's landing (the flight loop sets the
@@ -388,8 +389,12 @@ class Controller:
             if self._spins and np.all(others > self.cfg.lost_motor.below):
                 # one motor lost (no other at the detector's threshold): the spinning
                 # controller from here, holding where the loss was declared, its actuators
-                # starting from the last command sent
-                self.spin = self._spins[lost]
+                # starting from the last command sent, spinning the way the body already turns
+                # about the orbit's axis (reversing a started spin passes through no spin at
+                # all, where nothing holds the axis: the record)
+                axis = np.asarray(self._spins[(lost, 1)].trim.axis_frd)
+                sense = 1 if float(x[9:12] @ axis) >= 0.0 else -1
+                self.spin = self._spins[(lost, sense)]
                 self._spin_t0 = float(t_s)
                 self.spin.reset(StateEstimate.from_vector(x),
                                 command=self.allocator.command_of(self._last_u),

@@ -189,7 +189,8 @@ def test_the_switch_hands_over_to_the_spinning_controller():
     cfg = dataclasses.replace(cfg, lost_motor=dataclasses.replace(cfg.lost_motor,
                                                                   response="spin"))
     ctl = Controller(cfg)
-    assert sorted(ctl._spins) == [1, 2, 3, 4] and ctl.spin is None
+    assert sorted(ctl._spins) == [(m, d) for m in (1, 2, 3, 4) for d in (-1, 1)]
+    assert ctl.spin is None
     assert ctl.lost_motor_response == "nmpc"
     state = StateEstimate((1.0, -2.0, -5.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
 
@@ -203,7 +204,7 @@ def test_the_switch_hands_over_to_the_spinning_controller():
     declare([0.1, 0.1, 1.0, 1.0])               # two motors down: today's failed NMPC
     assert ctl.lost_motor == 1 and ctl.spin is None and ctl.solver is ctl._failed_solver
     declare([0.1, 1.0, 1.0, 1.0])
-    assert ctl.lost_motor == 1 and ctl.spin is ctl._spins[1]
+    assert ctl.lost_motor == 1 and ctl.spin is ctl._spins[(1, 1)]     # no spin yet: +1
     assert ctl.lost_motor_response == "spin"
     assert status_text(1, "spin") == "motor 1 lost: spinning, holding position, landing"
     assert len(status_text(4, "spin")) <= 50
@@ -213,7 +214,7 @@ def test_the_switch_hands_over_to_the_spinning_controller():
     assert info.source is CommandSource.SPIN and info.lost_motor == 1
     assert cmd.throttle_pct[0] == ctl._u_lo[ctl._nt]            # the dead rotor idle
     # the live ones: the spinning controller's own command for this estimate
-    spin = ctl._spins[1]
+    spin = ctl._spins[(1, 1)]
     assert max(cmd.throttle_pct[1:]) > 50.0 and spin.info.force_N > 15.0
     assert np.all(np.isfinite(cmd.throttle_pct + cmd.tilt_rad))
     ctl.prepare(ref)                              # a no-op while spinning
