@@ -213,8 +213,8 @@ class Controller:
                            for m in (1, 2, 3, 4) for d in (1, -1)}
         self.spin: SpinController | None = None      # the spinning controller flying, if any
         self._spin_t0 = 0.0                            # when it took over (s)
-        # the ground's NED down, for the spinning controller's landing (the flight loop sets the
-        # one it measured before the reset; the default: PROTOCOL.md's home, on the ground)
+        # the ground's NED down, for the spinning controller's landing: PROTOCOL.md's home, on
+        # the ground (a caller that knows better may set it before the flight)
         self.ground_down_m = HOME_GROUND_DOWN_M
 
     @property

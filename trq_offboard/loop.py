@@ -447,8 +447,6 @@ class OffboardFlight:
                 ground_z = first.state.pos_ned_m[2]
         t0 = first.stamp_us
         reference = self.make_reference(first.state, airborne)
-        if hasattr(self.controller, "ground_down_m"):    # where a lost-motor landing ends
-            self.controller.ground_down_m = ground_z
         self.controller.reset(0.0, first.state)
         answered = 0
         down_since: float | None = None
@@ -565,8 +563,9 @@ class OffboardFlight:
             if info.lost_motor and not self._lost_motor:
                 # once: what the controller now does (trq_offboard/lost_motor.py)
                 self._lost_motor = info.lost_motor
+                # (the spinning controller's steps are its own source: spin.py)
                 text = lost_motor.status_text(
-                    info.lost_motor, getattr(self.controller, "lost_motor_response", "nmpc"))
+                    info.lost_motor, "spin" if info.source.value == "spin" else "nmpc")
                 log.error(text)
                 self.link.send(mavlink.MAVLink_statustext_message(
                     mavlink.MAV_SEVERITY_CRITICAL, text.encode("ascii")))
