@@ -399,7 +399,8 @@ class Effectiveness(Strict):
 
 class LostMotor(Strict):
     """A whole motor lost (trq_offboard/lost_motor.py): detected from the motors' effectiveness
-    estimate (needs motor_effectiveness on), then the NMPC flies the failed configuration."""
+    estimate (needs motor_effectiveness on), then `response` flies it: the NMPC's failed
+    configuration, or the spinning controller of the file's `spin:` section."""
     detect: Choice("on", "off")
     below: Num(0.0, 0.45) = 0.2                # effectiveness at or below: the motor lost
     hold_s: Num(0.0, 2.0) = 0.05               # ... held this long without a break

@@ -24,6 +24,10 @@ that lets the vehicle spin (optionally governed: the yaw rate weighted `spin_wei
 controller switches its grid with the solver), and a descent reference: the horizontal position where the loss was
 detected, down at `descent_speed_m_s` to the ground (Controller._reference_states).
 
+The response (`response`): the failed configuration above (nmpc), or the spinning controller of
+the controller file's `spin:` section (spin: trq_offboard/spin.py, flown by Controller._spin_step
+from the detection of one motor; docs/decisions/2026-12-05-lost-motor-spin-in-the-loop.md).
+
 Pure: no clock, no I/O; the same inputs give the same detection.
 """
 
