@@ -31,6 +31,11 @@ finite. `step` never prints or sleeps, and reads no clock but the injected CPU c
 predictor, feedback) and `prepare` for `last_prepare_cpu_ns`: measurements only, never an input
 of what is computed (the solver measures its own wall time).
 
+A whole motor lost (lost_motor, with the effectiveness observer): the detector runs after step 4;
+from a detection the failed configuration's NMPC flies (response nmpc), or, one motor lost, the
+spinning controller of the file's `spin:` section (response spin: `_spin_step`, the NMPC no
+longer solved; trq_offboard/spin.py).
+
 `prepare` (for solvers with a preparation phase, `Solver.prepares`, such as the real-time
 iteration; a no-op for the others): called after the command of `step` has been sent, it
 linearises the NMPC at the plan expected one control period later, so that the next `step` only
