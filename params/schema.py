@@ -399,7 +399,8 @@ class Effectiveness(Strict):
 
 class LostMotor(Strict):
     """A whole motor lost (trq_offboard/lost_motor.py): detected from the motors' effectiveness
-    estimate (needs motor_effectiveness on), then the NMPC flies the failed configuration."""
+    estimate (needs motor_effectiveness on), then `response` flies it: the NMPC's failed
+    configuration, or the spinning controller of the file's `spin:` section."""
     detect: Choice("on", "off")
     below: Num(0.0, 0.45) = 0.2                # effectiveness at or below: the motor lost
     hold_s: Num(0.0, 2.0) = 0.05               # ... held this long without a break
@@ -414,6 +415,10 @@ class LostMotor(Strict):
     # the failed NMPC's horizon (null: the controller's): a step that resolves the spin
     horizon_steps: Optional[Int(2, 200)] = None
     horizon_step_s: Optional[Num(1e-3, 1.0)] = None
+    # what flies once one motor is lost: the failed NMPC above (nmpc), or the spinning
+    # relaxed-hover controller of the file's `spin:` section (spin; trq_offboard/spin.py), which
+    # holds the position, then lands; two motors lost keep the failed NMPC
+    response: Choice("nmpc", "spin") = "nmpc"
 
 
 class Estimator(Strict):
@@ -633,6 +638,15 @@ class ControllerFile(Strict):
         if lm is not None and lm.detect == "on" and (eff is None or eff.estimate != "on"):
             raise Invalid("lost_motor.detect", "on", "off without motor_effectiveness on (the "
                           "detector reads the motors' effectiveness estimate)")
+        if lm is not None and lm.response == "spin" and self.spin is None:
+            raise Invalid("lost_motor.response", "spin", "nmpc without a `spin:` section (the "
+                          "spinning controller's parameters: see params/controller/"
+                          "trq_nmpc_eso.yaml)")
+        if lm is not None and lm.response == "spin" \
+                and self.spin.control_rate_hz != self.control_rate_hz:
+            raise Invalid("spin.control_rate_hz", self.spin.control_rate_hz,
+                          f"{self.control_rate_hz} (control_rate_hz) with lost_motor.response "
+                          "spin: the spinning controller steps in the controller's period")
         s = self.solver
         if s.hessian == "exact" and s.hpipm_mode == "speed_abs":
             raise Invalid("solver.hpipm_mode", "speed_abs",

@@ -31,6 +31,11 @@ finite. `step` never prints or sleeps, and reads no clock but the injected CPU c
 predictor, feedback) and `prepare` for `last_prepare_cpu_ns`: measurements only, never an input
 of what is computed (the solver measures its own wall time).
 
+A whole motor lost (lost_motor, with the effectiveness observer): the detector runs after step 4;
+from a detection the failed configuration's NMPC flies (response nmpc), or, one motor lost, the
+spinning controller of the file's `spin:` section (response spin: `_spin_step`, the NMPC no
+longer solved; trq_offboard/spin.py).
+
 `prepare` (for solvers with a preparation phase, `Solver.prepares`, such as the real-time
 iteration; a no-op for the others): called after the command of `step` has been sent, it
 linearises the NMPC at the plan expected one control period later, so that the next `step` only
@@ -52,6 +57,7 @@ from trq_offboard.config import ControllerConfig, load_controller
 from trq_offboard.effectiveness import MotorEffectiveness, MotorEffectivenessObserver
 from trq_offboard.eso import ExtendedStateObserver
 from trq_offboard.fused import FusedFilter
+from trq_offboard.link.wire import HOME_GROUND_DOWN_M
 from trq_offboard.lost_motor import LostMotorDetector, failed_config
 from trq_offboard.model import PredictionModel
 from trq_offboard.model.dynamics import NumpyFunction
@@ -71,6 +77,7 @@ from trq_offboard.records import (
     StepTimes,
 )
 from trq_offboard.reference import FlightReference
+from trq_offboard.spin import SpinController, landing_reference, load_spin_config
 
 __all__ = ["Controller"]
 
@@ -199,6 +206,21 @@ class Controller:
                                if self.detector is not None and solver is None else None)
         self.lost_motor = 0                   # the motor flown as lost (1..4), 0: none
         self._descent: tuple[float, np.ndarray] | None = None   # (t_s, position) at detection
+        # the spinning response (lost_motor.response spin): the file's `spin:` controller for each
+        # motor and each sense of the spin, built now (each its trim's IPOPT and its LQR), one of
+        # them flown from a detection of one motor lost (`_detect`)
+        self._spin_cfg = None
+        self._spins: dict[tuple[int, int], SpinController] = {}
+        if self.detector is not None and cfg.lost_motor.response == "spin":
+            self._spin_cfg = load_spin_config(cfg.file)
+            self._spins = {(m, d): SpinController(self._spin_cfg, vm, m,
+                                                  delay_s=cfg.applied_delay_s, direction=d)
+                           for m in (1, 2, 3, 4) for d in (1, -1)}
+        self.spin: SpinController | None = None      # the spinning controller flying, if any
+        self._spin_t0 = 0.0                            # when it took over (s)
+        # the ground's NED down, for the spinning controller's landing: PROTOCOL.md's home, on
+        # the ground (a caller that knows better may set it before the flight)
+        self.ground_down_m = HOME_GROUND_DOWN_M
 
     @property
     def sensor_streams(self) -> dict[str, int]:
@@ -257,6 +279,13 @@ class Controller:
             self._set_horizon(self.solver)
         self.lost_motor = 0
         self._descent = None
+        self.spin = None
+
+    @property
+    def lost_motor_response(self) -> str:
+        """What flies the lost motor: "spin" (the spinning controller) or "nmpc" (the failed
+        NMPC; also before any loss)."""
+        return "spin" if self.spin is not None else "nmpc"
 
     def _euler_rate(self, x: np.ndarray) -> np.ndarray:
         return np.asarray(self.model.f(x, self._last_u, np.zeros(6))).ravel()[6:9]
@@ -327,6 +356,8 @@ class Controller:
         c2 = clock()
         self._last_t = float(t_s)
         self._last_d = d
+        if self.spin is not None:
+            return self._spin_step(t_s, x, d_obs, out_err, (c0, c1, c2))
         # 5. the command computed now acts from t_act: plan from the state predicted for then
         x0 = self.predictor.predict(x, t_s, t_act, d, path) if self.delay_s > 0.0 else x
         c3 = clock()
@@ -362,6 +393,20 @@ class Controller:
         if not self.lost_motor:
             self.lost_motor = lost
             self._descent = (float(t_s), x[0:3].copy())
+            others = np.delete(self._scale[nt:], lost - 1)
+            if self._spins and np.all(others > self.cfg.lost_motor.below):
+                # one motor lost (no other at the detector's threshold): the spinning
+                # controller from here, holding where the loss was declared, its actuators
+                # starting from the last command sent, spinning the way the body already turns
+                # about the orbit's axis (reversing a started spin passes through no spin at
+                # all, where nothing holds the axis: the record)
+                axis = np.asarray(self._spins[(lost, 1)].trim.axis_frd)
+                sense = 1 if float(x[9:12] @ axis) >= 0.0 else -1
+                self.spin = self._spins[(lost, sense)]
+                self._spin_t0 = float(t_s)
+                self.spin.reset(StateEstimate.from_vector(x),
+                                command=self.allocator.command_of(self._last_u),
+                                hold_pos_ned_m=tuple(x[0:3]), ground_down_m=self.ground_down_m)
             if self._failed_solver is not None:
                 self.solver.discard()
                 self.solver = self._failed_solver
@@ -375,6 +420,23 @@ class Controller:
                 self._plan = None
         self._scale[nt + lost - 1] = 0.0
         self.solver.ocp.set_throttle_scale(self._scale[nt:])
+
+    def _spin_step(self, t_s: float, x: np.ndarray, d_obs: np.ndarray, out_err: float,
+                   marks) -> tuple[ActuatorCommand, StepInfo]:
+        """A step of the spinning controller (a motor lost, response spin): its command for
+        `x` (the estimate, the fused position in it) against its landing reference from the
+        switch (hold, then land); the dead rotor, and every rotor once it has cut the motors at
+        touchdown, commanded idle (the throttles' lower limit), as the NMPC's dead rotor is."""
+        spin = self.spin
+        ref = landing_reference(t_s - self._spin_t0, spin.hold_pos_ned_m, self._spin_cfg.landing,
+                                self.ground_down_m)
+        cmd = spin.step(StateEstimate.from_vector(x), ref)
+        c3 = self.cpu_ns()
+        u = self.allocator.command_vector(cmd)
+        nt = self._nt
+        u[nt:] = np.maximum(u[nt:], self._u_lo[nt:])
+        info = SolveInfo(SolveStatus.OK, 0, 0.0, float("nan"), "spin")
+        return self._finish(u, CommandSource.SPIN, info, d_obs, out_err, (*marks, c3))
 
     def _set_horizon(self, solver: Solver) -> None:
         """The controller's horizon grid (N, h, the rollout, the shifts' cache) that of
@@ -484,7 +546,8 @@ class Controller:
             self.last_prepare_cpu_ns = self.cpu_ns() - c0
 
     def _prepare(self, reference: FlightReference) -> None:
-        if not self.solver.prepares or self._plan is None or self._last_t is None:
+        if not self.solver.prepares or self._plan is None or self._last_t is None \
+                or self.spin is not None:
             return
         # when the next step's command acts: the next state's time formed as the flight loop
         # forms a state's (whole microseconds times 1e-6), so that the next step, one period

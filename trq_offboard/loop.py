@@ -65,6 +65,12 @@ COMMAND_TRIES = 6
 # most this long, in vehicle time
 ARM_RETRY_US = 200_000
 ARM_WAIT_US = 10_000_000
+# a disarm refused on the ground (the vehicle not yet at rest: a body still turning on its gear
+# after a lost motor's spinning landing) is asked again every DISARM_RETRY_US of vehicle time, the
+# motors idle, for up to DISARM_WAIT_US (choices: a spin of 30 rad/s stops on the gear within a
+# second, docs/decisions/2026-12-05-lost-motor-spin-in-the-loop.md)
+DISARM_RETRY_US = 200_000
+DISARM_WAIT_US = 5_000_000
 # GPS_RAW_INT kept until HOME_POSITION places it (the newest; the filter's history reaches back
 # no further than a few fixes)
 MAX_UNPLACED_FIXES = 4
@@ -514,13 +520,32 @@ class OffboardFlight:
         for _ in range(IDLE_STEPS_BEFORE_DISARM):
             odo = await self._next_odometry()
             self._answer(odo.stamp_us, IDLE)
-        result = await self._command(wire.arm_command(False), mavlink.MAV_CMD_COMPONENT_ARM_DISARM,
-                                     hold=IDLE)
+        result = await self._disarm()
         self.summary.disarmed = result == mavlink.MAV_RESULT_ACCEPTED
         odo = await self._next_odometry()
         self._answer(odo.stamp_us, IDLE)
         self._finish(t)
         return self.summary
+
+    async def _disarm(self) -> int:
+        """Disarm on the ground, the motors idle meanwhile; a refusal (MAV_RESULT_DENIED or
+        TEMPORARILY_REJECTED: the vehicle not at rest yet) asked again every DISARM_RETRY_US
+        of vehicle time up to DISARM_WAIT_US. The last answer's MAV_RESULT."""
+        start_us = self.odometry.stamp_us if self.odometry is not None else 0
+        while True:
+            result = await self._command(wire.arm_command(False),
+                                         mavlink.MAV_CMD_COMPONENT_ARM_DISARM, hold=IDLE)
+            now_us = self.odometry.stamp_us if self.odometry is not None else start_us
+            if result not in (mavlink.MAV_RESULT_DENIED,
+                              mavlink.MAV_RESULT_TEMPORARILY_REJECTED) \
+                    or now_us - start_us >= DISARM_WAIT_US:
+                return result
+            end = now_us + DISARM_RETRY_US
+            while True:         # IDLE up to `end`; the first state at or after it goes unanswered
+                odo = await self._next_odometry()
+                if odo.stamp_us >= end:
+                    break
+                self._answer(odo.stamp_us, IDLE)
 
     @staticmethod
     def _touched_down(state: StateEstimate, ground_z: float) -> bool:
@@ -538,7 +563,9 @@ class OffboardFlight:
             if info.lost_motor and not self._lost_motor:
                 # once: what the controller now does (trq_offboard/lost_motor.py)
                 self._lost_motor = info.lost_motor
-                text = lost_motor.status_text(info.lost_motor)
+                # (the spinning controller's steps are its own source: spin.py)
+                text = lost_motor.status_text(
+                    info.lost_motor, "spin" if info.source.value == "spin" else "nmpc")
                 log.error(text)
                 self.link.send(mavlink.MAVLink_statustext_message(
                     mavlink.MAV_SEVERITY_CRITICAL, text.encode("ascii")))
@@ -546,7 +573,7 @@ class OffboardFlight:
                 for msg in self.estimator_report.messages(info.estimator):
                     self.link.send(msg)
             self._solve_ms.append(info.solve.solve_time_s * 1e3)
-            if info.source.value != "nmpc":
+            if info.source.value not in ("nmpc", "spin"):      # the spinning one flies
                 self.summary.fallbacks += 1
         self.summary.steps += 1
         rec = StepRecord(t, odo.stamp_us, odo.state, ref, cmd, applied, info)

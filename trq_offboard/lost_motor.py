@@ -24,6 +24,10 @@ that lets the vehicle spin (optionally governed: the yaw rate weighted `spin_wei
 controller switches its grid with the solver), and a descent reference: the horizontal position where the loss was
 detected, down at `descent_speed_m_s` to the ground (Controller._reference_states).
 
+The response (`response`): the failed configuration above (nmpc), or the spinning controller of
+the controller file's `spin:` section (spin: trq_offboard/spin.py, flown by Controller._spin_step
+from the detection of one motor; docs/decisions/2026-12-05-lost-motor-spin-in-the-loop.md).
+
 Pure: no clock, no I/O; the same inputs give the same detection.
 """
 
@@ -81,6 +85,9 @@ def failed_config(cfg: ControllerConfig) -> ControllerConfig:
         step_s=lm.horizon_step_s or cfg.step_s)
 
 
-def status_text(motor: int) -> str:
-    """The STATUSTEXT announcing the loss and what the controller does (at most 50 chars)."""
+def status_text(motor: int, response: str = "nmpc") -> str:
+    """The STATUSTEXT announcing the loss and what the controller does (at most 50 chars):
+    `response` "nmpc" (the failed NMPC) or "spin" (the spinning controller, spin.py)."""
+    if response == "spin":
+        return f"motor {motor} lost: spinning, holding position, landing"
     return f"motor {motor} lost: yaw given up, descending to land"

@@ -65,6 +65,7 @@ class CommandSource(enum.Enum):
     NMPC = "nmpc"                      # first input of this step's solution
     SHIFTED_PLAN = "shifted_plan"      # the solver failed: previous plan, shifted in time
     HOVER = "hover"                    # no usable plan: the allocation's hover command
+    SPIN = "spin"                      # a motor lost: the spinning controller's (spin.py)
 
 
 @dataclass(frozen=True)

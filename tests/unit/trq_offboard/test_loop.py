@@ -569,3 +569,68 @@ def test_a_lost_motor_is_announced_once_and_its_touchdown_lands():
         assert len(link.of_type("STATUSTEXT")) == 1
 
     asyncio.run(scenario())
+
+
+def test_a_refused_disarm_is_asked_again_while_the_vehicle_comes_to_rest():
+    """After a lost motor's landing the body may still turn on its gear: the vehicle refuses the
+    disarm (DENIED); the loop answers idle and asks again after DISARM_RETRY_US of vehicle
+    time, and the flight ends disarmed."""
+    from trq_offboard.loop import DISARM_RETRY_US
+
+    async def scenario():
+        link, ctl = FakeLink(), LostMotorController()
+        ref = FakeReference(done_at_s=1e9)
+        flight = OffboardFlight(link, ctl, lambda state, airborne=False: ref, name="fake",
+                                tilt_limit_rad=LIMIT, connect_timeout_s=1.0, ack_timeout_s=0.5)
+        task = asyncio.create_task(flight.run())
+        await take_off(flight, link)
+        stamp = 10_000
+        while not link.commands(0.0):
+            flight.on_message(odometry(stamp, down_m=-1.0 if stamp < 30_000 else 0.0))
+            await until(lambda: link.targets(stamp) or link.commands(0.0), f"answer to {stamp}")
+            stamp += 10_000
+            assert stamp < 2_000_000, "no disarm"
+        flight.on_message(ack(mavlink.MAV_RESULT_DENIED))
+        refused_at = stamp
+        while len(link.commands(0.0)) < 2:
+            flight.on_message(odometry(stamp, down_m=0.0))
+            await until(lambda: link.targets(stamp) or len(link.commands(0.0)) > 1,
+                        f"answer to {stamp}")
+            stamp += 10_000
+            assert stamp - refused_at <= 2 * DISARM_RETRY_US, "the disarm was not asked again"
+        assert stamp - refused_at >= DISARM_RETRY_US - 10_000
+        assert all(list(m.controls) == [0.0] * 8 for m in link.targets()[-5:])   # idle
+        flight.on_message(ack(mavlink.MAV_RESULT_ACCEPTED))
+        flight.on_message(odometry(stamp, down_m=0.0))
+        summary = await asyncio.wait_for(task, WAIT_S)
+        assert summary.landed and summary.disarmed
+
+    asyncio.run(scenario())
+
+
+class SpinningController(LostMotorController):
+    """Declares motor 1 lost and flies it with the spinning controller (source spin)."""
+
+    def step(self, t_s, state, applied, reference):
+        cmd, info = super().step(t_s, state, applied, reference)
+        return cmd, dataclasses.replace(
+            info, source=CommandSource.SPIN if info.lost_motor else info.source)
+
+
+def test_a_spinning_response_is_announced_as_such():
+    async def scenario():
+        link, ctl = FakeLink(), SpinningController()
+        ref = FakeReference(done_at_s=1e9)
+        flight = OffboardFlight(link, ctl, lambda state, airborne=False: ref, name="fake",
+                                tilt_limit_rad=LIMIT, connect_timeout_s=1.0, ack_timeout_s=0.5)
+        task = asyncio.create_task(flight.run())
+        await take_off(flight, link)
+        for stamp in (10_000, 20_000, 30_000):
+            flight.on_message(odometry(stamp, down_m=-1.0))
+            await until(lambda: link.targets(stamp), f"the target of stamp {stamp}")
+        assert [m.text for m in link.of_type("STATUSTEXT")] == \
+            ["motor 1 lost: spinning, holding position, landing"]
+        assert flight.summary.fallbacks == 0          # the spinning steps are no fallback
+        task.cancel()
+
+    asyncio.run(scenario())

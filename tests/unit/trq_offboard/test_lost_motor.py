@@ -152,3 +152,71 @@ def test_the_spin_may_be_governed():
         cfg.lost_motor, spin_weight=0.2, spin_rate_rad_s=15.0))
     assert failed_config(gov).weights.rates[2] == 0.2
     assert failed_config(gov).weights.euler[2] == cfg.lost_motor.yaw_weight
+
+
+def test_the_response_key_validates(tmp_path):
+    """lost_motor.response: nmpc (the default) or spin; spin needs the file's `spin:` section
+    (clear errors naming the key otherwise)."""
+    from trq_params import loader, schema
+
+    base = PARAMS / "controller/trq_nmpc_eso_lost.yaml"
+    assert load_controller(base).lost_motor.response in ("nmpc", "spin")
+
+    def write(body):
+        p = tmp_path / "c.yaml"
+        p.write_text(f"extends: {base}\n{body}")
+        return p
+    assert load_controller(write("lost_motor: {response: spin}\n")).lost_motor.response == "spin"
+    assert load_controller(write("lost_motor: {response: nmpc}\n")).lost_motor.response == "nmpc"
+    with pytest.raises(loader.ConfigError, match="lost_motor.response"):
+        loader.load(write("lost_motor: {response: tumble}\n"), schema.ControllerFile)
+    with pytest.raises(loader.ConfigError, match="lost_motor.response"):
+        loader.load(write("lost_motor: {response: spin}\nspin: null\n"), schema.ControllerFile)
+
+
+def test_the_switch_hands_over_to_the_spinning_controller():
+    """response spin: the four spinning controllers built with the controller; a synthetic
+    detection of motor 1 hands the steps to motor 1's (source spin, holding where it was
+    declared, the dead rotor idle, the STATUSTEXT saying so); two motors at the threshold keep
+    the failed NMPC."""
+    import dataclasses
+
+    from trq_offboard.controller import Controller
+    from trq_offboard.records import CommandSource, ReferenceSample, StateEstimate
+    from trq_offboard.reference import ConstantReference
+
+    cfg = load_controller(PARAMS / "controller/trq_nmpc_eso_lost.yaml")
+    cfg = dataclasses.replace(cfg, lost_motor=dataclasses.replace(cfg.lost_motor,
+                                                                  response="spin"))
+    ctl = Controller(cfg)
+    assert sorted(ctl._spins) == [(m, d) for m in (1, 2, 3, 4) for d in (-1, 1)]
+    assert ctl.spin is None
+    assert ctl.lost_motor_response == "nmpc"
+    state = StateEstimate((1.0, -2.0, -5.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+
+    def declare(scale):
+        ctl.reset(0.0, state)
+        ctl._scale[ctl._nt:] = scale
+        ctl._last_u[ctl._nt:] = 70.0
+        for k in range(12):
+            ctl._detect(k * DT, state.as_vector())
+
+    declare([0.1, 0.1, 1.0, 1.0])               # two motors down: today's failed NMPC
+    assert ctl.lost_motor == 1 and ctl.spin is None and ctl.solver is ctl._failed_solver
+    declare([0.1, 1.0, 1.0, 1.0])
+    assert ctl.lost_motor == 1 and ctl.spin is ctl._spins[(1, 1)]     # no spin yet: +1
+    assert ctl.lost_motor_response == "spin"
+    assert status_text(1, "spin") == "motor 1 lost: spinning, holding position, landing"
+    assert len(status_text(4, "spin")) <= 50
+    assert ctl.spin.hold_pos_ned_m == (1.0, -2.0, -5.0)
+    ref = ConstantReference(ReferenceSample((0.0, 0.0, -5.0), (0.0, 0.0, 0.0), 0.0, "hover"))
+    cmd, info = ctl.step(0.12, state, None, ref)
+    assert info.source is CommandSource.SPIN and info.lost_motor == 1
+    assert cmd.throttle_pct[0] == ctl._u_lo[ctl._nt]            # the dead rotor idle
+    # the live ones: the spinning controller's own command for this estimate
+    spin = ctl._spins[(1, 1)]
+    assert max(cmd.throttle_pct[1:]) > 50.0 and spin.info.force_N > 15.0
+    assert np.all(np.isfinite(cmd.throttle_pct + cmd.tilt_rad))
+    ctl.prepare(ref)                              # a no-op while spinning
+    ctl.reset(0.0, state)
+    assert ctl.spin is None and ctl.lost_motor == 0
