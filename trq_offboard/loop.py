@@ -181,6 +181,8 @@ class OffboardFlight:
         self.telemetry_lost_s = telemetry_lost_s
         self.ack_timeout_s = ack_timeout_s
         self.heartbeat = None
+        self.vehicle_landed_state = mavlink.MAV_LANDED_STATE_UNDEFINED   # EXTENDED_SYS_STATE's
+        self._airborne_seen = False
         self.odometry: wire.Odometry | None = None
         self.applied: ActuatorCommand | None = None
         self._new_odometry = asyncio.Event()
@@ -264,6 +266,11 @@ class OffboardFlight:
                 fixes = [gnss.fix_of(m, self.home, self._gnss_delay_us) for m in self._unplaced]
                 self._fixes += [f for f in fixes if f is not None]
                 self._unplaced.clear()
+        elif kind == "EXTENDED_SYS_STATE":
+            # the vehicle's land detector (sil_vehicle/PROTOCOL.md): ON_GROUND ends a landing
+            # even when the estimate's height disagrees with the ground's (a GNSS height)
+            self.vehicle_landed_state = msg.landed_state
+            self._airborne_seen |= msg.landed_state == mavlink.MAV_LANDED_STATE_IN_AIR
         elif kind == "HEARTBEAT":
             self.heartbeat = msg
             self._heartbeat_seen.set()
@@ -466,7 +473,8 @@ class OffboardFlight:
             # (the plan aims a little below the ground; pushing on the ground longer only
             # winds the observer up and makes the motors thrash), or the plan is over
             # (a motor lost: the controller descends to land whatever the reference's phase)
-            if self._touched_down(odo.state, ground_z) and (ref.phase == "land"
+            if (self._touched_down(odo.state, ground_z) or self._detector_landed()) and (
+                    ref.phase == "land"
                                                             or reference.done(t)
                                                             or self._lost_motor):
                 down_since = t if down_since is None else down_since
@@ -546,6 +554,12 @@ class OffboardFlight:
                 if odo.stamp_us >= end:
                     break
                 self._answer(odo.stamp_us, IDLE)
+
+    def _detector_landed(self) -> bool:
+        """The vehicle's land detector says ON_GROUND after it had said IN_AIR in this flight
+        (EXTENDED_SYS_STATE; a vehicle that sends none never ends a landing this way)."""
+        return (self._airborne_seen
+                and self.vehicle_landed_state == mavlink.MAV_LANDED_STATE_ON_GROUND)
 
     @staticmethod
     def _touched_down(state: StateEstimate, ground_z: float) -> bool:

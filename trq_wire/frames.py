@@ -56,7 +56,8 @@ HOT = (mavlink.MAVLink_odometry_message, mavlink.MAVLink_actuator_output_status_
        mavlink.MAVLink_heartbeat_message, mavlink.MAVLink_sys_status_message,
        mavlink.MAVLink_attitude_message, mavlink.MAVLink_local_position_ned_message,
        mavlink.MAVLink_servo_output_raw_message, mavlink.MAVLink_highres_imu_message,
-       mavlink.MAVLink_att_pos_mocap_message, mavlink.MAVLink_gps_raw_int_message)
+       mavlink.MAVLink_att_pos_mocap_message, mavlink.MAVLink_gps_raw_int_message,
+       mavlink.MAVLink_extended_sys_state_message)
 
 
 def crc(data, crc_extra: int) -> int:
