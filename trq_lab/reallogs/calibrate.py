@@ -14,18 +14,20 @@ profile run at rest (trq_lab.reallogs.allan.static_recording; `--save-recording 
        rotation frequency where the log has esc_status rpm, and the band's strongest peak per
        1 s window tracked against the rotors' speed (`peak_track`: the harmonic per revolution
        and how much of the peaks' movement the rotors explain); the vibration above
-       VIBRATION_BAND_HZ less the white noise N gives there, scaled to full throttle as the
-       vehicle's model takes it (standard deviation proportional to the mean motor output squared)
+       VIBRATION_BAND_HZ less the white noise's share, scaled to full throttle as the vehicle's
+       model takes it (amplitude proportional to thrust: the mean motor output squared)
     4. the profile: `extends:` a built-in (--extends, default gnss) and overrides the IMU's
        densities (N for the noise densities; K for the random walks only when the record is long
-       enough for them to show, else the built-in's stay) and, from a flight, the vibration;
-       validated by the same loader and schema `--sensing PATH` uses before it is written. Beside
-       it, PROFILE.calibration.json (every estimate, per axis, with the curve) and
-       PROFILE.allan.png. Nothing is written when any step fails.
+       enough for them to show, else the built-in's stay) and, from a flight whose tracked peak
+       follows the rotors, the vibration's lines (`imu.vibration.harmonics`, `vibration_lines`:
+       `of: rotor, times: n` at the multiple found, the band's vibration shared by the lines;
+       else the base's lines stay); validated by the same loader and schema `--sensing PATH`
+       uses before it is written. Beside it, PROFILE.calibration.json (every estimate, per axis,
+       with the curve, the spectra and why lines were or were not written) and PROFILE.allan.png.
+       Nothing is written when any step fails.
 
 The schema has no bias instability field (the vehicle's IMU model has no flicker term): B is in
-the calibration file only. The vibration's harmonics (issue 39 item 2) have no field in this
-branch's schema either: the peaks are in the calibration file, for the profile's author.
+the calibration file only. The figures: docs/decisions/2026-12-05-ulog-replay-calibration.md.
 """
 
 from __future__ import annotations

@@ -3,12 +3,14 @@
 
     1. read the log (trq_lab.reallogs.ulog): IMU, magnetometer, barometer, GNSS or vision; EKF2's
        attitude, local position, innovations and test ratios; its EKF2_* parameters
-    2. set the filter as EKF2 is set (trq_lab.reallogs.ekf2_params: PX4's defaults, the log's own
-       EKF2_* values where it has them; --px4-defaults ignores the log's)
+    2. set the filter as EKF2 is set (trq_lab.reallogs.ekf2_params: the schema's Ekf2, PX4's
+       defaults with the log's own EKF2_* values where it has them, through the vehicle's own
+       EstimatorParams.ekf2; --px4-defaults ignores the log's)
     3. resample the IMU onto the filter's fixed 200 Hz grid (the exact integral of the log's
        samples over each 5 ms interval: a delta angle and delta velocity, as EKF2's own
        downsampler keeps them) and step the filter through the log with each aiding reading at
-       its arrival (GNSS's time of validity its time less EKF2_GPS_DELAY, as EKF2 takes it)
+       its arrival (GNSS's time of validity its arrival less EKF2_GPS_DELAY, as EKF2 takes it;
+       its noise EKF2's floor under the fix's reported eph / epv)
     4. compare after `--settle-s` from the filter's alignment: attitude as the angle between the
        two quaternions, tilt (the angle between the two gravity directions in body axes) and
        heading apart; velocity and position NED (the same origin: the log's EKF2 reference point;
