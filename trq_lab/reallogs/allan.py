@@ -19,8 +19,12 @@ still add; B is the curve's minimum / 0.664 as the standard reads it. The vehicl
 (`model_bias_instability`), and that is what a recording from a profile must give back.
 
 `static_recording` is that model at rest (no rotation, specific force (0, 0, -g), motors off),
-with the same standard normals per sample as `sil_vehicle.sensors.imu.noise_block` and the same
-arithmetic in NumPy over blocks: an hour at 1 kHz in seconds.
+one physics tick per sample: the model's own `sil_vehicle.sensors.imu.noise_block` over blocks of
+standard normals (the same stream as a draw per tick), truth added and the full scales applied as
+`imu.step` does: an hour at 1 kHz in seconds. The vibration lines are the rotors' and their
+amplitude scales with each rotor's thrust fraction (zero with the motors stopped: the vehicle's
+thrust curve is clamped at zero there), so at rest the model is bias plus white noise; the
+vibration is read from a flight's spectra instead (trq_lab.reallogs.calibrate).
 """
 
 from __future__ import annotations
@@ -30,7 +34,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sil_vehicle.sensors.imu import NOISE, ImuParams
+from sil_vehicle.sensors import imu
+from sil_vehicle.sensors.imu import ImuParams
 from sil_vehicle.sensors.truth import STANDARD_GRAVITY_M_S2
 
 __all__ = ["AllanFit", "allan_fit", "model_bias_instability", "static_recording",
@@ -42,26 +47,26 @@ BIAS_INSTABILITY_FACTOR = 0.664     # sqrt(2 ln 2 / pi): IEEE Std 952's flicker 
 
 def static_recording(p: ImuParams, duration_s: float, seed: int) -> tuple[np.ndarray, np.ndarray,
                                                                             np.ndarray]:
-    """(t_us (n,), gyro (n, 3) rad/s, accel (n, 3) m/s^2) of the IMU model at rest, level."""
+    """(t_us (n,), gyro (n, 3) rad/s, accel (n, 3) m/s^2) of the IMU model at rest, level, one
+    physics tick per sample (`p` at its own rate: ticks_per_sample 1; a ValueError otherwise)."""
+    if p.ticks_per_sample != 1:
+        raise ValueError(f"static_recording: the IMU at {p.rate_hz} Hz over a physics rate of "
+                         f"{p.physics_rate_hz} Hz; load the profile at the IMU's rate")
     rng = np.random.default_rng(seed)
     n = int(round(duration_s * p.rate_hz))
-    w0 = rng.standard_normal(6)         # the turn-on biases, as imu.initial draws them
-    bias = np.concatenate((p.gyro_turn_on_bias_rad_s * w0[:3],
-                           p.accel_turn_on_bias_m_s2 * w0[3:]))
+    state = imu.initial(p, rng)         # the turn-on biases
     gyro, accel = np.empty((n, 3)), np.empty((n, 3))
     rest = np.array((0.0, 0.0, 0.0, 0.0, 0.0, -STANDARD_GRAVITY_M_S2))
     for s in range(0, n, _BLOCK):
         k = min(_BLOCK, n - s)
-        w = rng.standard_normal((k, NOISE))
-        steps = np.empty((k + 1, 6))
-        steps[0] = bias
-        steps[1:, :3] = p.gyro_bias_step_rad_s * w[:, 12:15]
-        steps[1:, 3:] = p.accel_bias_step_m_s2 * w[:, 15:18]
-        b = np.add.accumulate(steps, axis=0)
-        # truth + bias + white + vibration (zero at rest: motors off), in imu.measure's order
-        gyro[s:s + k] = (rest[:3] + b[:k, :3]) + p.gyro_white_rad_s * w[:, 0:3] + 0.0
-        accel[s:s + k] = (rest[3:] + b[:k, 3:]) + p.accel_white_m_s2 * w[:, 3:6] + 0.0
-        bias = b[k]
+        # bias plus white noise per tick, the model's own arithmetic (imu.noise_block); the
+        # rotors stopped: no vibration lines (their amplitude scales with thrust, zero at rest)
+        adds, bias = imu.noise_block(p, state, rng.standard_normal((k, imu.NOISE)))
+        g = rest[:3] + (adds[:, :3] + 0.0)
+        a = rest[3:] + (adds[:, 3:] + 0.0)
+        gyro[s:s + k] = np.clip(g, -p.gyro_full_scale_rad_s, p.gyro_full_scale_rad_s)
+        accel[s:s + k] = np.clip(a, -p.accel_full_scale_m_s2, p.accel_full_scale_m_s2)
+        state = imu.ImuState(bias[-1, :3].copy(), bias[-1, 3:].copy())
     t_us = (np.arange(1, n + 1, dtype=np.int64) * p.period_us)
     return t_us, gyro, accel
 

@@ -14,18 +14,20 @@ profile run at rest (trq_lab.reallogs.allan.static_recording; `--save-recording 
        rotation frequency where the log has esc_status rpm, and the band's strongest peak per
        1 s window tracked against the rotors' speed (`peak_track`: the harmonic per revolution
        and how much of the peaks' movement the rotors explain); the vibration above
-       VIBRATION_BAND_HZ less the white noise N gives there, scaled to full throttle as the
-       vehicle's model takes it (standard deviation proportional to the mean motor output squared)
+       VIBRATION_BAND_HZ less the white noise's share, scaled to full throttle as the vehicle's
+       model takes it (amplitude proportional to thrust: the mean motor output squared)
     4. the profile: `extends:` a built-in (--extends, default gnss) and overrides the IMU's
        densities (N for the noise densities; K for the random walks only when the record is long
-       enough for them to show, else the built-in's stay) and, from a flight, the vibration;
-       validated by the same loader and schema `--sensing PATH` uses before it is written. Beside
-       it, PROFILE.calibration.json (every estimate, per axis, with the curve) and
-       PROFILE.allan.png. Nothing is written when any step fails.
+       enough for them to show, else the built-in's stay) and, from a flight whose tracked peak
+       follows the rotors, the vibration's lines (`imu.vibration.harmonics`, `vibration_lines`:
+       `of: rotor, times: n` at the multiple found, the band's vibration shared by the lines;
+       else the base's lines stay); validated by the same loader and schema `--sensing PATH`
+       uses before it is written. Beside it, PROFILE.calibration.json (every estimate, per axis,
+       with the curve, the spectra and why lines were or were not written) and PROFILE.allan.png.
+       Nothing is written when any step fails.
 
 The schema has no bias instability field (the vehicle's IMU model has no flicker term): B is in
-the calibration file only. The vibration's harmonics (issue 39 item 2) have no field in this
-branch's schema either: the peaks are in the calibration file, for the profile's author.
+the calibration file only. The figures: docs/decisions/2026-12-05-ulog-replay-calibration.md.
 """
 
 from __future__ import annotations
@@ -47,13 +49,18 @@ from trq_lab.reallogs.output import write_all
 from trq_lab.reallogs.replay import resample_imu
 from trq_lab.reallogs.ulog import LogError, Series, read_ulog
 
+N_ROTORS = 4            # the vehicle's rotors (sil_vehicle.sensors.suite.N_ROTORS)
+
 __all__ = ["REST_GYRO_STD_RAD_S", "REST_ACCEL_TOL_M_S2", "FLIGHT_MOTOR_FRACTION",
-           "VIBRATION_BAND_HZ", "Recording", "load_recording", "calibrate", "main"]
+           "VIBRATION_BAND_HZ", "TRACK_R2_MIN", "HARMONIC_TOL", "Recording", "load_recording",
+           "vibration_lines", "calibrate", "main"]
 
 REST_GYRO_STD_RAD_S = 0.02      # a choice: a bench IMU's noise is below, a hand's tremor above
 REST_ACCEL_TOL_M_S2 = 0.5       # a choice
 FLIGHT_MOTOR_FRACTION = 0.1     # a choice: motors spinning for flight, not idling armed
 VIBRATION_BAND_HZ = 20.0        # a choice: above a small multirotor's motion
+TRACK_R2_MIN = 0.8              # a choice: a tracked peak the rotors explain (share of variance)
+HARMONIC_TOL = 0.1              # a choice: how near a whole multiple of the rotor's frequency
 _PEAK_OVER_FLOOR = 10.0         # a peak: a local maximum this many times the median PSD (a choice)
 _BUILTIN_PHYSICS_HZ = 1000      # the rate the written profile is validated against (sim default)
 
@@ -216,6 +223,7 @@ def flight_spectra(rec: Recording, fits: dict[str, AllanFit]) -> dict | None:
                 rotor_series = None
     out["rotor_hz"] = rotor_hz
     z2 = float(np.mean(zz ** 2))
+    out["mean_motor_squared"] = z2
     for name, x in (("gyro", rec.gyro), ("accel", rec.accel)):
         fs, ps = [], []
         for a, b in runs:
@@ -225,7 +233,9 @@ def flight_spectra(rec: Recording, fits: dict[str, AllanFit]) -> dict | None:
         band = fs >= VIBRATION_BAND_HZ
         df = fs[1] - fs[0]
         var_band = psd[band].sum(axis=0) * df                  # per axis
-        white = fits[name].n_density ** 2 * band.sum() * df    # the noise's share of the band
+        # the white noise's share of the band: N = sigma / sqrt(rate) (the Allan line, the
+        # model's density) is a two-sided density; the one-sided PSD here is 2 N^2
+        white = 2.0 * fits[name].n_density ** 2 * band.sum() * df
         vib = np.sqrt(np.maximum(var_band - white, 0.0))
         total = psd.sum(axis=1)
         peaks = _peaks(fs, total)
@@ -240,6 +250,52 @@ def flight_spectra(rec: Recording, fits: dict[str, AllanFit]) -> dict | None:
     return out
 
 
+def vibration_lines(spectra: dict | None, period_s: float) -> dict:
+    """The profile's `imu.vibration.harmonics` from a flight's peak tracking, or why none.
+
+    A line is found where a sensor's tracked peak follows the rotors (esc_status rpm: r2 at
+    least TRACK_R2_MIN) at a whole multiple n of their rotation frequency (within HARMONIC_TOL):
+    it becomes `{of: rotor, times: n}`. Each sensor's in-band vibration per axis, scaled to full
+    throttle (`band_std_per_axis` / the mean squared motor output, as the model's amplitude
+    scales with thrust), is shared equally by the lines found (a choice), each line one rotor's
+    amplitude with N_ROTORS rotors' lines adding in power (RMS a sqrt(N_ROTORS / 2) per line), and
+    divided by the log's own averaging over its sample interval at the line's frequency (|sinc|:
+    the log's samples are the IMU's mean over `period_s`, the model's lines are before it).
+    Returns {"harmonics": [...] or None, "found": [...], "why": text}."""
+    if spectra is None:
+        return {"harmonics": None, "found": [], "why": "no flight in the log"}
+    if spectra.get("rotor_hz") is None:
+        return {"harmonics": None, "found": [], "why": "no rotor speed (esc_status rpm) in the "
+                "log: a peak cannot be tied to a multiple of the rotor's frequency"}
+    found = []
+    for name, d in spectra["sensors"].items():
+        t = d["peak_track"]
+        h, r2 = t.get("harmonic_per_rev"), t.get("r2")
+        if h is None or r2 is None or not math.isfinite(h):
+            continue
+        n = int(round(h))
+        if r2 >= TRACK_R2_MIN and n >= 1 and abs(h - n) <= HARMONIC_TOL:
+            found.append({"sensor": name, "harmonic_per_rev": h, "r2": r2, "times": n})
+    times = sorted({f["times"] for f in found})
+    if not times:
+        return {"harmonics": None, "found": [], "why": "no tracked peak follows the rotors "
+                f"(r2 below {TRACK_R2_MIN} or not within {HARMONIC_TOL} of a whole multiple)"}
+    z2 = spectra["mean_motor_squared"]
+    amp = {}
+    for name, d in spectra["sensors"].items():
+        full = np.asarray(d["band_std_per_axis"]) / z2
+        amp[name] = full * math.sqrt(2.0 / (N_ROTORS * len(times)))
+    lines = []
+    for n in times:
+        x = math.pi * n * spectra["rotor_hz"] * period_s
+        gain = abs(math.sin(x) / x) if x else 1.0
+        lines.append({"of": "rotor", "times": n,
+                      "accel_m_s2": [float(f"{v / gain:.4g}") for v in amp["accel"]],
+                      "gyro_rad_s": [float(f"{v / gain:.4g}") for v in amp["gyro"]]})
+    return {"harmonics": lines, "found": found,
+            "why": f"{len(found)} tracked peak(s) follow the rotors"}
+
+
 def _long_enough(fit: AllanFit) -> bool:
     """The bias random walk is read off the record: its longest tau is at least three times the
     curve's minimum, sqrt(3) N / K, where the random walk starts to dominate (a choice)."""
@@ -247,28 +303,25 @@ def _long_enough(fit: AllanFit) -> bool:
     return k > 0 and float(fit.taus_s[-1]) >= 3.0 * math.sqrt(3.0) * n / k
 
 
-def calibrate(rec: Recording, *, extends: str, name: str, min_rest_s: float) -> tuple[dict, dict]:
-    """(the profile's mapping, the calibration record)."""
+def calibrate(rec: Recording, *, extends: str, name: str, min_rest_s: float,
+              base_smear_hz: float = 1.0) -> tuple[dict, dict]:
+    """(the profile's mapping, the calibration record). `base_smear_hz`: the written lines' width
+    (`main` passes the base profile's, or the built-in gnss profile's when the base has none)."""
     a, b = rest_span(rec, min_rest_s)
     fits = {"gyro": allan_fit(rec.gyro[a:b], rec.rate_hz),
             "accel": allan_fit(rec.accel[a:b], rec.rate_hz)}
     spectra = flight_spectra(rec, fits)
     imu: dict = {}
-    keys = {"gyro": ("gyro_noise_density_rad_s_rthz", "gyro_bias_random_walk_rad_s2_rthz",
-                     "gyro_vibration_rad_s"),
-            "accel": ("accel_noise_density_m_s2_rthz", "accel_bias_random_walk_m_s3_rthz",
-                      "accel_vibration_m_s2")}
+    keys = {"gyro": ("gyro_noise_density_rad_s_rthz", "gyro_bias_random_walk_rad_s2_rthz"),
+            "accel": ("accel_noise_density_m_s2_rthz", "accel_bias_random_walk_m_s3_rthz")}
     record: dict = {"source": rec.source, "rate_hz": rec.rate_hz,
                     "rest_s": (b - a) / rec.rate_hz, "extends": extends, "imu": {}}
     for s, fit in fits.items():
-        nk, kk, vk = keys[s]
+        nk, kk = keys[s]
         imu[nk] = float(f"{fit.mean('n_density'):.4g}")
         long_enough = _long_enough(fit)
         if long_enough:
             imu[kk] = float(f"{fit.mean('k_random_walk'):.4g}")
-        vib = spectra and spectra["sensors"][s]["vibration_at_full_throttle"]
-        if vib is not None and vib is not False:
-            imu[vk] = float(f"{vib:.4g}")
         record["imu"][s] = {
             "n_density": fit.n_density.tolist(), "k_random_walk": fit.k_random_walk.tolist(),
             "k_written": long_enough, "bias_instability": fit.bias_instability.tolist(),
@@ -277,6 +330,11 @@ def calibrate(rec: Recording, *, extends: str, name: str, min_rest_s: float) -> 
             "bias_instability_upper_bound": bool(np.any(fit.tau_min_s >= fit.taus_s[-1])),
             "taus_s": fit.taus_s.tolist(), "adev": fit.adev.tolist()}
     record["flight"] = spectra
+    vib = vibration_lines(spectra, 1.0 / rec.rate_hz)
+    if vib["harmonics"] is not None:
+        imu["vibration"] = {"harmonics": vib["harmonics"], "smear_hz": base_smear_hz}
+    record["vibration"] = {**vib, "written": vib["harmonics"] is not None,
+                           "smear_hz": base_smear_hz if vib["harmonics"] is not None else None}
     base = extends if extends.startswith("builtin:") or "/" in extends or extends.endswith(
         ".yaml") else f"builtin:sensing/{extends}"
     profile = {"extends": base, "name": name,
@@ -343,7 +401,8 @@ def main(argv: list[str] | None = None) -> int:
         else:
             rec = load_recording(args.log)
         profile, record = calibrate(rec, extends=args.extends, name=args.name or out.stem,
-                                    min_rest_s=args.min_rest_s)
+                                    min_rest_s=args.min_rest_s,
+                                    base_smear_hz=_base_smear_hz(args.extends, out))
         if args.static_from is not None:
             ref = load_sensing(args.static_from, _BUILTIN_PHYSICS_HZ).imu
             record["reference"] = {
@@ -385,6 +444,23 @@ def main(argv: list[str] | None = None) -> int:
               f"{'' if r['k_written'] else ' (record too short: not written)'}")
     print(f"wrote {out}")
     return 0
+
+
+def _base_smear_hz(extends: str, out: Path) -> float:
+    """The base profile's vibration line width (the built-in gnss profile's if it has none)."""
+    if extends.startswith("builtin:sensing/"):
+        ref = extends.removeprefix("builtin:sensing/")
+    elif "/" in extends or extends.endswith((".yaml", ".yml")):
+        ref = str(out.parent / extends)         # as the written `extends:` resolves
+    else:
+        ref = extends
+    try:
+        imu = load_sensing(ref, _BUILTIN_PHYSICS_HZ).imu
+    except ValueError as exc:
+        raise LogError(f"--extends {extends}: {exc}") from exc
+    if imu is None or imu.vibration is None:
+        imu = load_sensing("gnss", _BUILTIN_PHYSICS_HZ).imu
+    return imu.vibration.smear_hz
 
 
 def _validate(text: str, out: Path) -> None:

@@ -3,12 +3,14 @@
 
     1. read the log (trq_lab.reallogs.ulog): IMU, magnetometer, barometer, GNSS or vision; EKF2's
        attitude, local position, innovations and test ratios; its EKF2_* parameters
-    2. set the filter as EKF2 is set (trq_lab.reallogs.ekf2_params: PX4's defaults, the log's own
-       EKF2_* values where it has them; --px4-defaults ignores the log's)
+    2. set the filter as EKF2 is set (trq_lab.reallogs.ekf2_params: the schema's Ekf2, PX4's
+       defaults with the log's own EKF2_* values where it has them, through the vehicle's own
+       EstimatorParams.ekf2; --px4-defaults ignores the log's)
     3. resample the IMU onto the filter's fixed 200 Hz grid (the exact integral of the log's
        samples over each 5 ms interval: a delta angle and delta velocity, as EKF2's own
        downsampler keeps them) and step the filter through the log with each aiding reading at
-       its arrival (GNSS's time of validity its time less EKF2_GPS_DELAY, as EKF2 takes it)
+       its arrival (GNSS's time of validity its arrival less EKF2_GPS_DELAY, as EKF2 takes it;
+       its noise EKF2's floor under the fix's reported eph / epv)
     4. compare after `--settle-s` from the filter's alignment: attitude as the angle between the
        two quaternions, tilt (the angle between the two gravity directions in body axes) and
        heading apart; velocity and position NED (the same origin: the log's EKF2 reference point;
@@ -39,7 +41,7 @@ from sil_vehicle.sensors.gnss import GnssReading
 from sil_vehicle.sensors.imu import ImuReading
 from sil_vehicle.sensors.mag import MagReading
 from sil_vehicle.sensors.mocap import MocapReading
-from trq_lab.reallogs.ekf2_params import Sources, ekf2_values, estimator_params
+from trq_lab.reallogs.ekf2_params import Sources, ekf2_record, estimator_params, extra_values
 from trq_lab.reallogs.output import write_all
 from trq_lab.reallogs.ulog import LogError, Series, UlogData, gnss_to_ned, read_ulog
 
@@ -132,7 +134,10 @@ def _field_ned(log: UlogData, decl_rad: float, t0_us: int) -> tuple[float, float
 def replay(log: UlogData, *, use_log_params: bool = True) -> ReplayResult:
     """The filter through the log (LogError when the log lacks the IMU)."""
     log.require("gyro_rad_s", "accel_m_s2", for_="trq-ulog-replay")
-    ekf2 = ekf2_values(log.params if use_log_params else {})
+    given = log.params if use_log_params else {}
+    ekf2 = ekf2_record(given, file=log.file)
+    extra = extra_values(given)
+    decl = math.radians(extra["EKF2_MAG_DECL"])
     period = 1_000_000 // IMU_RATE_HZ
     tg, gyro = resample_imu(log.gyro_rad_s, period)
     ta, accel = resample_imu(log.accel_m_s2, period)
@@ -152,22 +157,22 @@ def replay(log: UlogData, *, use_log_params: bool = True) -> ReplayResult:
     src = Sources(
         imu_rate_hz=IMU_RATE_HZ, gnss=has_gnss, baro=log.baro_alt_m is not None,
         mag=log.mag_gauss is not None, vision=log.vision is not None and not has_gnss,
-        mag_field_ned_gauss=(_field_ned(log, math.radians(ekf2["EKF2_MAG_DECL"]), int(grid[0]))
+        mag_field_ned_gauss=(_field_ned(log, decl, int(grid[0]))
                              if log.mag_gauss is not None else (0.0, 0.0, 0.0)),
-        init_pos_d_m=z0)
-    params = estimator_params(ekf2, src)
+        init_pos_d_m=z0, mag_declination_rad=decl)
+    params = estimator_params(ekf2, src, noaid_noise_m=extra["EKF2_NOAID_NOISE"])
     events: list[tuple[int, object]] = []
     if src.gnss:
         g = log.gnss
         ned = gnss_to_ned(g.values[:, 0], g.values[:, 1], g.values[:, 2], origin)
-        delay = int(round(ekf2["EKF2_GPS_DELAY"] * 1000))
+        delay = params.gnss_delay_us        # EKF2_GPS_DELAY
         for k in range(len(g)):
             t = int(g.t_us[k]) - base
             events.append((t, GnssReading(t - delay, t, ned[k], g.values[k, 3:6].copy(), 3, 10,
                                           float(g.values[k, 6]), float(g.values[k, 7]), 0.0)))
     elif src.vision:
         v = log.vision
-        delay = int(round(ekf2["EKF2_EV_DELAY"] * 1000))
+        delay = params.ev_delay_us          # EKF2_EV_DELAY
         for k in range(len(v)):
             t = int(v.t_us[k]) - base
             events.append((t, MocapReading(t - delay, t, v.values[k, :3].copy(),
@@ -196,7 +201,7 @@ def replay(log: UlogData, *, use_log_params: bool = True) -> ReplayResult:
     gl, al = gyro.tolist(), accel.tolist()
     for k in range(n):
         t = int(grid[k]) - base
-        rs = [ImuReading(t, gl[k], al[k])]
+        rs = [ImuReading(t, gl[k], al[k], period)]
         while j < len(events) and events[j][0] <= t:
             rs.append(events[j][1])
             j += 1

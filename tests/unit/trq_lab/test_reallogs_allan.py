@@ -31,6 +31,20 @@ def test_the_static_recording_is_the_imu_model_sample_for_sample():
         assert tuple(gyro[k]) == tuple(r.gyro) and tuple(accel[k]) == tuple(r.accel)
 
 
+def test_the_vehicles_imu_with_its_vibration_lines_at_rest_is_the_recording():
+    """The vehicle's own IMU (the sensor suite's, vibration lines on, the airframe's rotors) with
+    the motors stopped: the lines' amplitude is zero, the samples the recording's, bit for bit."""
+    from sil_vehicle.sensors import suite
+    assert IMU.vibration is not None
+    t, gyro, accel = static_recording(IMU, 0.3, seed=5)
+    vehicle_imu = suite._Imu(IMU, np.random.default_rng(5), suite._rotor(None, IMU), "gnss")
+    for k in range(len(t)):
+        truth = Truth(int(t[k]), (0.0,) * 3, (0.0,) * 3, (1.0, 0.0, 0.0, 0.0), (0.0,) * 3,
+                      (0.0, 0.0, -STANDARD_GRAVITY_M_S2), (0.0,) * 4)
+        r = vehicle_imu.step(truth)
+        assert tuple(gyro[k]) == tuple(r.gyro) and tuple(accel[k]) == tuple(r.accel)
+
+
 def test_model_bias_instability_is_the_curves_flat_minimum():
     n, k = IMU.gyro_noise_density_rad_s_rthz, IMU.gyro_bias_random_walk_rad_s2_rthz
     taus = np.logspace(-2, 4, 20001)

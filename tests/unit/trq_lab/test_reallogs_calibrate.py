@@ -69,6 +69,10 @@ def test_a_px4_log_gives_densities_and_its_flight_spectra(tmp_path):
     assert 1e-5 < prof.imu.gyro_noise_density_rad_s_rthz < 1e-2
     assert 1e-4 < prof.imu.accel_noise_density_m_s2_rthz < 1e-1
     assert math.isfinite(prof.imu.accel_vibration_m_s2)
+    # Gazebo's IMU has no rotor vibration: no tracked peak follows the rotors, so the base's
+    # lines stay (its harmonics, not the log's)
+    assert not record["vibration"]["written"] and "vibration" not in out.read_text()
+    assert prof.imu.vibration == load_sensing("gnss", 1000).imu.vibration
 
 
 def test_a_log_never_at_rest_long_enough_is_refused_and_nothing_written(tmp_path, capsys):
@@ -109,12 +113,23 @@ def test_a_vibration_that_follows_the_rotors_is_found_at_its_harmonic():
     rotor_hz = np.where(np.arange(n) < n // 2, 0.0, np.linspace(30.0, 45.0, n))
     phase = 2 * np.pi * np.cumsum(2.0 * rotor_hz) / rate
     rng = np.random.default_rng(1)
-    gyro = rng.normal(0, 1e-3, (n, 3)) + 0.05 * np.sin(phase)[:, None] * (rotor_hz > 0)[:, None]
+    # each sample the tone's mean over its 4 ms interval, as PX4's integrated IMU logs it
+    fi = 2.0 * rotor_hz / rate
+    gyro = rng.normal(0, 1e-3, (n, 3)) + (0.05 * np.sinc(fi) * np.sin(phase - np.pi * fi)
+                                          )[:, None] * (rotor_hz > 0)[:, None]
     accel = rng.normal(0, 1e-2, (n, 3)) + (0.0, 0.0, -9.80665)
     motors = cal.Series(t_us, np.tile(np.where(rotor_hz > 0, 0.5, 0.0)[:, None], (1, 4)))
     rpm = cal.Series(t_us, np.tile(60.0 * rotor_hz[:, None], (1, 4)))
     rec = cal.Recording("synthetic", rate, t_us, gyro, accel, motors, rpm)
-    _, record = cal.calibrate(rec, extends="gnss", name="x", min_rest_s=10.0)
+    profile, record = cal.calibrate(rec, extends="gnss", name="x", min_rest_s=10.0)
     track = record["flight"]["sensors"]["gyro"]["peak_track"]
     assert track["harmonic_per_rev"] == pytest.approx(2.0, abs=0.05) and track["r2"] > 0.9
     assert record["flight"]["rotor_hz"] == pytest.approx(41.25, abs=0.5)
+    # the profile's vibration: one line per rotor at twice its frequency; four rotors' lines at
+    # half thrust (motor output 0.5 squared) make the tone's 0.05 rad/s, so one rotor's at full
+    # speed is 0.05 / (0.25 sqrt(4)) = 0.1 rad/s per axis (the log's averaging undone)
+    (line,) = profile["imu"]["vibration"]["harmonics"]
+    assert line["of"] == "rotor" and line["times"] == 2
+    np.testing.assert_allclose(line["gyro_rad_s"], 0.1, rtol=0.1)
+    assert max(line["accel_m_s2"]) < 0.01           # no accelerometer tone: its noise only
+    assert profile["imu"]["vibration"]["smear_hz"] == 1.0 and record["vibration"]["written"]

@@ -11,8 +11,10 @@ import numpy as np
 import pytest
 
 from trq_lab.reallogs import replay as rp
-from trq_lab.reallogs.ekf2_params import PX4_DEFAULTS, Sources, ekf2_values, estimator_params
-from trq_lab.reallogs.ulog import Series, read_ulog
+from trq_params.schema import Ekf2
+
+from trq_lab.reallogs.ekf2_params import Sources, ekf2_record, estimator_params
+from trq_lab.reallogs.ulog import LogError, Series, read_ulog
 
 DATA = Path(__file__).resolve().parents[2] / "data" / "ulog"
 NEW = DATA / "px4_sitl_takeoff.ulg"
@@ -33,19 +35,30 @@ def test_resampling_keeps_the_integral():
                                          for k in range(len(v))])
 
 
-def test_ekf2_figures_scale_to_the_same_variance_per_period():
-    p = estimator_params(ekf2_values({}), Sources(200, gnss=True, baro=True, mag=False,
-                                                  vision=False))
-    dt = 0.01
-    # EKF2: var(dA) = (EKF2_GYR_NOISE dt)^2; the vehicle's filter: density^2 dt
-    assert p.gyro_noise_rad_s_rthz ** 2 * dt == pytest.approx((PX4_DEFAULTS["EKF2_GYR_NOISE"]
-                                                               * dt) ** 2)
-    assert p.accel_noise_m_s2_rthz ** 2 * dt == pytest.approx((PX4_DEFAULTS["EKF2_ACC_NOISE"]
-                                                               * dt) ** 2)
-    assert p.gnss_pos_noise_ne_m == PX4_DEFAULTS["EKF2_GPS_P_NOISE"] and p.height_ref == "baro"
-    assert p.horizon_us == 110_000                  # EKF2_GPS_DELAY rounded up to periods
-    # the log's value wins over the default
-    assert ekf2_values({"EKF2_BARO_NOISE": 2.0})["EKF2_BARO_NOISE"] == 2.0
+def test_the_logs_ekf2_parameters_tune_the_filter_as_a_profile_would():
+    """The log's EKF2_* values (PX4's defaults where it is silent) build the schema's Ekf2 and the
+    vehicle's own EstimatorParams.ekf2: the same figures, names and scaling as a profile's
+    `estimator:` section gives (EKF2_GYR_NOISE per sample, not a density)."""
+    from sil_vehicle.estimator.params import EstimatorParams
+    from sil_vehicle.sensors.profile import load_sensing
+    ekf2 = ekf2_record({})
+    assert ekf2 == Ekf2()                           # PX4's defaults: the schema's
+    p = estimator_params(ekf2, Sources(200, gnss=True, baro=True, mag=False, vision=False))
+    ref = EstimatorParams.ekf2(load_sensing("gnss", 1000), imu_rate_hz=200)
+    assert p.gyro_noise_rad_s == ref.gyro_noise_rad_s == Ekf2().EKF2_GYR_NOISE
+    assert p.accel_noise_m_s2 == ref.accel_noise_m_s2 == Ekf2().EKF2_ACC_NOISE
+    assert p.gnss_pos_noise_ne_m == Ekf2().EKF2_GPS_P_NOISE and p.use_reported_accuracy
+    assert p.height_ref == "gnss"                   # EKF2_HGT_REF 1, PX4's default
+    assert p.gnss_delay_us == 110_000 and p.horizon_us == 110_000   # rounded up to periods
+    # the log's value wins over the default; an older log's EKF2_HGT_MODE is EKF2_HGT_REF
+    assert ekf2_record({"EKF2_BARO_NOISE": 2.0}).EKF2_BARO_NOISE == 2.0
+    assert ekf2_record({"EKF2_HGT_MODE": 0.0}).EKF2_HGT_REF == 0
+    # unaided: EKF2's fake position, no delay, the barometer the height
+    p = estimator_params(ekf2, Sources(200, gnss=False, baro=True, mag=False, vision=False),
+                         noaid_noise_m=10.0)
+    assert p.gnss_pos_noise_ne_m == 10.0 and p.horizon_us == 0 and p.height_ref == "baro"
+    with pytest.raises(LogError, match="x.ulg.*EKF2_GYR_NOISE"):
+        ekf2_record({"EKF2_GYR_NOISE": 5.0}, file="x.ulg")
 
 
 @pytest.fixture(scope="module")
