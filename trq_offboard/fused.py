@@ -380,6 +380,10 @@ class FusedFilter:
         self._mocap_std = np.full(3, cfg.mocap_std_m)
         self._candidates: list[tuple[int, np.ndarray, np.ndarray, np.ndarray]] = []
         self.last_pose_us: int | None = None
+        self._zero_health()
+
+    def _zero_health(self) -> None:
+        """The health figures a (re)start clears: the last test ratio and the counters."""
         self.test_ratio = math.nan
         self.rejected = 0
         self.dropped = 0
@@ -412,12 +416,7 @@ class FusedFilter:
         self._candidates.clear()
         self._imu_last_us = None
         self.last_pose_us = int(t_us)
-        self.test_ratio = math.nan
-        self.rejected = 0
-        self.dropped = 0
-        self.imu_dropped = 0
-        self.accel_rejected = 0
-        self.resets = 0
+        self._zero_health()
 
     @property
     def compiled(self) -> bool:

@@ -399,11 +399,16 @@ class OffboardFlight:
                 log.info("arming not allowed yet (the vehicle's preflight check): retrying")
             waited = True
             end = issued + ARM_RETRY_US
-            while True:         # IDLE up to `end`; the first state at or after it goes unanswered
-                odo = await self._next_odometry()
-                if odo.stamp_us >= end:
-                    break
-                self._answer(odo.stamp_us, IDLE)
+            await self._idle_until(end)
+
+    async def _idle_until(self, end_us: int) -> None:
+        """IDLE to every state up to `end_us`; the first state at or after it goes unanswered
+        (it is the next attempt's)."""
+        while True:
+            odo = await self._next_odometry()
+            if odo.stamp_us >= end_us:
+                return
+            self._answer(odo.stamp_us, IDLE)
 
     def _answer(self, stamp_us: int, cmd: ActuatorCommand) -> None:
         c0 = self.cpu_ns()
@@ -549,11 +554,7 @@ class OffboardFlight:
                     or now_us - start_us >= DISARM_WAIT_US:
                 return result
             end = now_us + DISARM_RETRY_US
-            while True:         # IDLE up to `end`; the first state at or after it goes unanswered
-                odo = await self._next_odometry()
-                if odo.stamp_us >= end:
-                    break
-                self._answer(odo.stamp_us, IDLE)
+            await self._idle_until(end)
 
     def _detector_landed(self) -> bool:
         """The vehicle's land detector says ON_GROUND after it had said IN_AIR in this flight

@@ -74,21 +74,21 @@ def tip_over_rad(points_frd_m: Sequence[Sequence[float]]) -> float:
     return math.atan2(a, low) if a > 0.0 else 0.0
 
 
+def _dcm(qw: float, qx: float, qy: float, qz: float) -> tuple[float, ...]:
+    """The rotation body FRD -> world NED of a unit quaternion, row by row (9 entries), in the
+    arithmetic tick.c repeats (bit-identical cores)."""
+    return (1 - 2 * (qy * qy + qz * qz), 2 * (qx * qy - qw * qz), 2 * (qx * qz + qw * qy),
+            2 * (qx * qy + qw * qz), 1 - 2 * (qx * qx + qz * qz), 2 * (qy * qz - qw * qx),
+            2 * (qx * qz - qw * qy), 2 * (qy * qz + qw * qx), 1 - 2 * (qx * qx + qy * qy))
+
+
 def contact_wrench(x: Sequence[float], gear: Gear,
                    anchors_ne_m: Sequence[float]) -> tuple[float, float, float, float, float,
                                                            float]:
     """The ground's force (world NED, N) and moment about the centre of mass (body FRD, N m);
     `anchors_ne_m`: each point's stick anchor, north and east (2 per point)."""
     pn0, pe0, pd, vn, ve, vd, qw, qx, qy, qz, p, q, r = x[0:13]
-    r00 = 1 - 2 * (qy * qy + qz * qz)
-    r01 = 2 * (qx * qy - qw * qz)
-    r02 = 2 * (qx * qz + qw * qy)
-    r10 = 2 * (qx * qy + qw * qz)
-    r11 = 1 - 2 * (qx * qx + qz * qz)
-    r12 = 2 * (qy * qz - qw * qx)
-    r20 = 2 * (qx * qz - qw * qy)
-    r21 = 2 * (qy * qz + qw * qx)
-    r22 = 1 - 2 * (qx * qx + qy * qy)
+    r00, r01, r02, r10, r11, r12, r20, r21, r22 = _dcm(qw, qx, qy, qz)
     k, c, mu = gear.stiffness_N_m, gear.damping_N_s_m, gear.friction
     kt, ct = gear.stick_stiffness_N_m, gear.stick_damping_N_s_m
     ground = gear.ground_down_m
@@ -132,12 +132,7 @@ def contact_wrench(x: Sequence[float], gear: Gear,
 def feet_ne_m(x: Sequence[float], gear: Gear) -> tuple[float, ...]:
     """Each point's north and east position (2 per point): the anchors of a vehicle set down."""
     pn, pe, _, _, _, _, qw, qx, qy, qz = x[0:10]
-    r00 = 1 - 2 * (qy * qy + qz * qz)
-    r01 = 2 * (qx * qy - qw * qz)
-    r02 = 2 * (qx * qz + qw * qy)
-    r10 = 2 * (qx * qy + qw * qz)
-    r11 = 1 - 2 * (qx * qx + qz * qz)
-    r12 = 2 * (qy * qz - qw * qx)
+    r00, r01, r02, r10, r11, r12 = _dcm(qw, qx, qy, qz)[0:6]
     out: list[float] = []
     for px, py, pz in gear.points_frd_m:
         out += (pn + r00 * px + r01 * py + r02 * pz, pe + r10 * px + r11 * py + r12 * pz)
