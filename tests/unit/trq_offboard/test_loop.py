@@ -528,6 +528,15 @@ def test_gnss_fixes_wait_for_the_home_and_then_come_in_ned():
     assert flight._fixes[1].pos_ned_m == pytest.approx((1.5, 2.0, -3.0), abs=0.006)
 
 
+def never_done_flight(ctl):
+    """A FakeLink and an OffboardFlight of `ctl` on a reference in phase "hold" that is never
+    done (a lost motor's landing ends the flight, not the plan)."""
+    link = FakeLink()
+    ref = FakeReference(done_at_s=1e9)
+    return link, OffboardFlight(link, ctl, lambda state, airborne=False: ref, name="fake",
+                                tilt_limit_rad=LIMIT, connect_timeout_s=1.0, ack_timeout_s=0.5)
+
+
 class LostMotorController(FakeController):
     """Declares motor 1 lost from its second step on (StepInfo.lost_motor)."""
 
@@ -542,10 +551,7 @@ def test_a_lost_motor_is_announced_once_and_its_touchdown_lands():
     from trq_offboard.loop import LAND_DETECT_S
 
     async def scenario():
-        link, ctl = FakeLink(), LostMotorController()
-        ref = FakeReference(done_at_s=1e9)                 # phase "hold", never done
-        flight = OffboardFlight(link, ctl, lambda state, airborne=False: ref, name="fake",
-                                tilt_limit_rad=LIMIT, connect_timeout_s=1.0, ack_timeout_s=0.5)
+        link, flight = never_done_flight(LostMotorController())
         task = asyncio.create_task(flight.run())
         await take_off(flight, link)
         stamp = 10_000
@@ -578,10 +584,7 @@ def test_a_refused_disarm_is_asked_again_while_the_vehicle_comes_to_rest():
     from trq_offboard.loop import DISARM_RETRY_US
 
     async def scenario():
-        link, ctl = FakeLink(), LostMotorController()
-        ref = FakeReference(done_at_s=1e9)
-        flight = OffboardFlight(link, ctl, lambda state, airborne=False: ref, name="fake",
-                                tilt_limit_rad=LIMIT, connect_timeout_s=1.0, ack_timeout_s=0.5)
+        link, flight = never_done_flight(LostMotorController())
         task = asyncio.create_task(flight.run())
         await take_off(flight, link)
         stamp = 10_000
@@ -619,10 +622,7 @@ class SpinningController(LostMotorController):
 
 def test_a_spinning_response_is_announced_as_such():
     async def scenario():
-        link, ctl = FakeLink(), SpinningController()
-        ref = FakeReference(done_at_s=1e9)
-        flight = OffboardFlight(link, ctl, lambda state, airborne=False: ref, name="fake",
-                                tilt_limit_rad=LIMIT, connect_timeout_s=1.0, ack_timeout_s=0.5)
+        link, flight = never_done_flight(SpinningController())
         task = asyncio.create_task(flight.run())
         await take_off(flight, link)
         for stamp in (10_000, 20_000, 30_000):
