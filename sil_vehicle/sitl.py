@@ -194,6 +194,7 @@ class Sitl:
         # ATT_POS_MOCAP of its own and its estimator takes the companion's forwarded copies
         self.mocap_to_companion = "mocap" in has and sim.mocap_wiring == "companion"
         self._visions: list[mocap.MocapReading] = []      # forwarded, for the next tick
+        self._mocap_sent: dict[int, int] = {}     # a pose's stamp -> when the mocap PC sent it
         self._last_vision_us: int | None = None
         # streams the tick loop never sends (not carried, or sent at a reading's arrival)
         self._not_periodic = frozenset(
@@ -346,8 +347,12 @@ class Sitl:
     def _mocap_poses(self) -> list[Outgoing]:
         """The simulated mocap PC: each pose that arrived at this tick, as ATT_POS_MOCAP from
         its own system to the companion (the offboard link's peer)."""
-        return [Outgoing("offboard", codec.att_pos_mocap(r), source=MOCAP_SOURCE)
-                for r in self.readings if type(r) is mocap.MocapReading]
+        out = []
+        for r in self.readings:
+            if type(r) is mocap.MocapReading:
+                self._mocap_sent[r.t_us] = self.t_us
+                out.append(Outgoing("offboard", codec.att_pos_mocap(r), source=MOCAP_SOURCE))
+        return out
 
     def _integrate_imu(self, r: imu.ImuReading) -> None:
         """The IMU's samples summed over each integration interval (the profile's
@@ -828,7 +833,23 @@ class Sitl:
         pos, q = (msg.x, msg.y, msg.z), tuple(msg.q)
         if not all(math.isfinite(v) for v in pos + q):
             return
-        self.vision(self.t_us, int(msg.time_usec), pos, q, tuple(msg.pose_covariance))
+        self.vision(self._vision_arrival_us(int(msg.time_usec)), int(msg.time_usec), pos, q,
+                    tuple(msg.pose_covariance))
+
+    def _vision_arrival_us(self, t_us: int) -> int:
+        """When a forwarded pose stamped t_us counts as arrived. In lockstep over a clean
+        offboard link: the first control tick at or after the simulated mocap PC sent it, the
+        earliest the companion can have answered it, whatever tick the datagram is read at (the
+        companion forwards as it reads, which the vehicle's free-running ticks between two control
+        ticks may see early or late): the same flight replays bit for bit over UDP. Otherwise
+        (real time, or an impaired link, whose delay is the vehicle's own, in vehicle time): now."""
+        sent = self._mocap_sent.pop(t_us, None)
+        for stale in [k for k in self._mocap_sent if k < t_us]:
+            del self._mocap_sent[stale]             # poses the companion never forwarded
+        if self.sim.clock_mode != "lockstep" or sent is None or "offboard" in self._up:
+            return self.t_us
+        period = self.sim.dt_us * self.sim.ticks_per_control
+        return -(-sent // period) * period
 
     def _target(self, link: str, msg: mavlink.MAVLink_message) -> list[Outgoing]:
         counters = self.counters[link]

