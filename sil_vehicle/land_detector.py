@@ -48,6 +48,11 @@ class LandDetector:
     def landed(self) -> bool:
         return self.state == ON_GROUND
 
+    def ground_contact(self, t_s: float) -> bool:
+        """On the ground, or its ground contact held GROUND_CONTACT_S (PX4's ground_contact)."""
+        return self.state == ON_GROUND or (self._contact_since_s is not None
+                                           and t_s - self._contact_since_s >= GROUND_CONTACT_S)
+
     def update(self, t_s: float, armed: bool, vel_ned_m_s, rates_frd_rad_s,
                thrust_over_weight: float) -> int:
         """The new landed state after the inputs at time t_s."""

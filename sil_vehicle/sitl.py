@@ -541,9 +541,11 @@ class Sitl:
             self.lander.active = False
             return self.announce(mavlink.MAV_SEVERITY_WARNING, "failsafe: landed, disarmed")
         v.command = self.lander.update(self._nav_state(s), self.sim.dt_us * 1e-6)
-        if self.land_detector.state in (land_detector.LANDING, land_detector.ON_GROUND):
-            # the land detector's ground contact: thrust off, as PX4's position controller
-            # does on it (otherwise the wind slides a vehicle that its thrust keeps light)
+        if self.mode == MODE_AUTO_LAND and self.land_detector.ground_contact(s.t_us * 1e-6):
+            # landing, the land detector's ground contact held: thrust off, as PX4's position
+            # controller does on it (otherwise the wind slides a vehicle that its thrust keeps
+            # light). Not while the bridge holds a vehicle in the air between two targets: a
+            # hover on less than 0.9 of the weight reads as contact at once
             v.command = ActuatorCommand()
         return out
 
