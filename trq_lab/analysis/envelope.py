@@ -33,25 +33,15 @@ import trq_params
 
 from sil_vehicle.config import VehicleParams, load_vehicle
 from sil_vehicle.frames import wind_from_to_ned
+from trq_lab.analysis import spin_envelope
 
 AXES = ("Fx", "Fy", "Fz", "Mx", "My", "Mz")
 
 
 def wrench_expr(alpha, zeta, factors, vp: VehicleParams):
-    """Body FRD wrench (6) as a CasADi expression (thrust curve without the idle clamp: the
+    """Body FRD wrench (6) as a CasADi MX expression (thrust curve without the idle clamp: the
     throttle is kept above idle, where the curve is positive)."""
-    f_total = ca.MX.zeros(3)
-    m_total = ca.MX.zeros(3)
-    for i, rotor in enumerate(vp.rotors):
-        z = zeta[i] * factors[i]
-        f = vp.thrust_N.c2 * z ** 2 + vp.thrust_N.c1 * z + vp.thrust_N.c0
-        tau = (vp.torque_Nm.c2 * z ** 2 + vp.torque_Nm.c1 * z + vp.torque_Nm.c0) * rotor.spin
-        ax, ay, _ = rotor.tilt_axis_frd
-        n = ca.vertcat(-ay * ca.sin(alpha[i]), ax * ca.sin(alpha[i]), -ca.cos(alpha[i]))
-        r = ca.DM(rotor.position_frd_m)
-        f_total += f * n
-        m_total += ca.cross(r, f * n) - tau * n
-    return ca.vertcat(f_total, m_total)
+    return spin_envelope.rotor_wrench_expr(alpha, zeta, factors, vp)
 
 
 def analyse(vp: VehicleParams, factors: list[float], wind_speed: float, wind_from_deg: float,
@@ -197,7 +187,6 @@ def main(argv: list[str] | None = None) -> int:
             return 2
         factors[motor - 1] = args.eff
     if args.spin:
-        from trq_lab.analysis import spin_envelope
         return spin_envelope.main_spin(vp, factors, args)
     out = analyse(vp, factors, args.wind, args.wind_dir)
     print(f"envelope of {vp.name}: motor factors {factors}, wind {args.wind:g} m/s from "

@@ -91,25 +91,40 @@ def _curve(c, z):
     return ca.fmax(c.c2 * z ** 2 + c.c1 * z + c.c0, 0.0)
 
 
-def wrench_expr(zeta, alpha, factors, vp: VehicleParams):
-    """Body FRD wrench (6) of the rotors as rotors.body_wrench computes it, for throttle commands
-    `zeta` (%) and tilts `alpha` (rad): motor i produces factors[i] * zeta[i] (the plant clamps the
-    command to idle..100 before the factor; the solver keeps it there, the relaxed problem
-    aside)."""
-    f_total = ca.SX.zeros(3)
-    m_total = ca.SX.zeros(3)
+def _polynomial(c, z):
+    """A rotor curve as its quadratic, unclamped."""
+    return c.c2 * z ** 2 + c.c1 * z + c.c0
+
+
+def rotor_wrench_expr(alpha, zeta, factors, vp: VehicleParams, *, curve=_polynomial, sym=ca.MX,
+                skip_dead: bool = False):
+    """Body FRD wrench (6) as a CasADi expression in `sym` (MX or SX): motor i produces
+    factors[i] * zeta[i] through `curve` (by default the thrust and torque quadratics without
+    the idle clamp: the throttle is kept above idle, where the curve is positive); with
+    `skip_dead`, a motor whose factor is 0 gives nothing (a lost motor). The one wrench of both
+    envelopes (trq_lab.analysis.envelope's static trims, this module's spinning equilibria)."""
+    f_total = sym.zeros(3)
+    m_total = sym.zeros(3)
     for i, rotor in enumerate(vp.rotors):
-        if factors[i] == 0.0:
-            continue                                # a dead motor: no thrust, no torque
+        if skip_dead and factors[i] == 0.0:
+            continue
         z = zeta[i] * factors[i]
-        f = _curve(vp.thrust_N, z)
-        tau = _curve(vp.torque_Nm, z) * rotor.spin
+        f = curve(vp.thrust_N, z)
+        tau = curve(vp.torque_Nm, z) * rotor.spin
         ax, ay, _ = rotor.tilt_axis_frd
         n = ca.vertcat(-ay * ca.sin(alpha[i]), ax * ca.sin(alpha[i]), -ca.cos(alpha[i]))
         r = ca.DM(rotor.position_frd_m)
         f_total += f * n
         m_total += ca.cross(r, f * n) - tau * n
     return ca.vertcat(f_total, m_total)
+
+
+def wrench_expr(zeta, alpha, factors, vp: VehicleParams):
+    """Body FRD wrench (6) of the rotors as rotors.body_wrench computes it, for throttle commands
+    `zeta` (%) and tilts `alpha` (rad): motor i produces factors[i] * zeta[i] (the plant clamps the
+    command to idle..100 before the factor; the solver keeps it there, the relaxed problem
+    aside); the curves clamped at zero, a dead motor giving nothing (`rotor_wrench_expr`)."""
+    return rotor_wrench_expr(alpha, zeta, factors, vp, curve=_curve, sym=ca.SX, skip_dead=True)
 
 
 def needed_force_ned(vp: VehicleParams, wind_ned, descent_m_s):
