@@ -212,10 +212,7 @@ def test_arms_then_answers_each_stamp_once_and_lands():
 
         # the plan is over (t >= 0.02 s) and the vehicle is on the ground: idle, then disarm
         stamp = 30_000
-        while not link.commands(0.0):
-            flight.on_message(odometry(stamp, down_m=0.0))
-            await until(lambda: link.targets(stamp) or link.commands(0.0), f"answer to {stamp}")
-            stamp += 10_000
+        stamp = await answer_until_disarm(flight, link, stamp)
         assert len(ctl.steps) == 2, "a command was computed after touchdown"
         idle = [m for m in link.targets() if m.time_usec >= 30_000]
         assert len(idle) == IDLE_STEPS_BEFORE_DISARM
@@ -356,11 +353,9 @@ def test_land_detector_ends_the_landing_once_down_and_still():
             stamp += 10_000
         steps_before = len(ctl.steps)
         first_down = stamp
-        while not link.commands(0.0):
-            flight.on_message(odometry(stamp, down_m=0.0))
-            await until(lambda: link.targets(stamp) or link.commands(0.0), f"answer to {stamp}")
-            stamp += 10_000
-            assert stamp - first_down <= 2e6 * LAND_DETECT_S, "the detector did not fire"
+        stamp = await answer_until_disarm(
+            flight, link, stamp, check=lambda s: s - first_down <= 2e6 * LAND_DETECT_S,
+            why="the detector did not fire")
         # commanded while down for LAND_DETECT_S (0.01 s stamps), then idle only
         down_steps = len(ctl.steps) - steps_before
         assert down_steps == pytest.approx(LAND_DETECT_S / 0.01, abs=1)
@@ -528,6 +523,18 @@ def test_gnss_fixes_wait_for_the_home_and_then_come_in_ned():
     assert flight._fixes[1].pos_ned_m == pytest.approx((1.5, 2.0, -3.0), abs=0.006)
 
 
+async def answer_until_disarm(flight, link, stamp: int, *, down_m=lambda s: 0.0, check=None,
+                              why: str = "") -> int:
+    """States every 10 ms from `stamp` (at down_m(stamp)), each answered, until the flight asks
+    for the disarm; `check(stamp)` must hold after each. Returns the next stamp."""
+    while not link.commands(0.0):
+        flight.on_message(odometry(stamp, down_m=down_m(stamp)))
+        await until(lambda: link.targets(stamp) or link.commands(0.0), f"answer to {stamp}")
+        stamp += 10_000
+        assert check is None or check(stamp), why
+    return stamp
+
+
 def never_done_flight(ctl):
     """A FakeLink and an OffboardFlight of `ctl` on a reference in phase "hold" that is never
     done (a lost motor's landing ends the flight, not the plan)."""
@@ -563,11 +570,9 @@ def test_a_lost_motor_is_announced_once_and_its_touchdown_lands():
         assert texts == ["motor 1 lost: yaw given up, descending to land"]
         assert link.of_type("STATUSTEXT")[0].severity == mavlink.MAV_SEVERITY_CRITICAL
         first_down = stamp
-        while not link.commands(0.0):
-            flight.on_message(odometry(stamp, down_m=0.0))
-            await until(lambda: link.targets(stamp) or link.commands(0.0), f"answer to {stamp}")
-            stamp += 10_000
-            assert stamp - first_down <= 2e6 * LAND_DETECT_S, "the touchdown did not land"
+        stamp = await answer_until_disarm(
+            flight, link, stamp, check=lambda s: s - first_down <= 2e6 * LAND_DETECT_S,
+            why="the touchdown did not land")
         flight.on_message(ack(mavlink.MAV_RESULT_ACCEPTED))
         flight.on_message(odometry(stamp, down_m=0.0))
         summary = await asyncio.wait_for(task, WAIT_S)
@@ -588,11 +593,9 @@ def test_a_refused_disarm_is_asked_again_while_the_vehicle_comes_to_rest():
         task = asyncio.create_task(flight.run())
         await take_off(flight, link)
         stamp = 10_000
-        while not link.commands(0.0):
-            flight.on_message(odometry(stamp, down_m=-1.0 if stamp < 30_000 else 0.0))
-            await until(lambda: link.targets(stamp) or link.commands(0.0), f"answer to {stamp}")
-            stamp += 10_000
-            assert stamp < 2_000_000, "no disarm"
+        stamp = await answer_until_disarm(
+            flight, link, stamp, down_m=lambda s: -1.0 if s < 30_000 else 0.0,
+            check=lambda s: s < 2_000_000, why="no disarm")
         flight.on_message(ack(mavlink.MAV_RESULT_DENIED))
         refused_at = stamp
         while len(link.commands(0.0)) < 2:
