@@ -605,6 +605,7 @@ def main(argv: list[str] | None = None) -> int:
     from sil_vehicle.faultscript import load_script
     from trq_lab import scenario as run_scenario
     from trq_offboard.config import load_controller
+    from trq_lab.overlays import run_dir
 
     ap = argparse.ArgumentParser(prog="trq-inprocess", description=__doc__.splitlines()[0])
     ap.add_argument("scenario", help="a built-in scenario by name or a scenario YAML by path")
@@ -623,7 +624,7 @@ def main(argv: list[str] | None = None) -> int:
     for c in sc.controllers:
         if args.only and c not in args.only:
             continue
-        cfg = load_controller(prepare_controller(c, sc.reference, args.out / c))
+        cfg = load_controller(prepare_controller(c, sc.reference, run_dir(args.out, c)))
         cfg = dataclasses.replace(
             cfg, applied_delay_s=run_scenario.command_delay_s(sc.offboard_impair, False))
         sim = sim_params(cfg.vehicle.file, cfg.control_rate_hz, seed=sc.seed,
@@ -633,7 +634,7 @@ def main(argv: list[str] | None = None) -> int:
         vp = sim.vehicle        # the daemon checks stuck angles against the airframe's range
         ev = load_script(sc.faults, (math.degrees(vp.tilt_min_rad),
                                      math.degrees(vp.tilt_max_rad))) if sc.faults else ()
-        res = fly_inprocess(cfg, sim, ev, out_dir=args.out / c,
+        res = fly_inprocess(cfg, sim, ev, out_dir=run_dir(args.out, c),
                             timeout_s=sc.timeout_s, name=c)
         m = flight_metrics(res.out_dir, c, onset, sc.recovery_threshold_m)
         m.update(status=res.status, wall_s=round(res.wall_s, 2), sim_s=round(res.sim_s, 3),

@@ -20,6 +20,13 @@ def controller_file(controller: str | Path) -> Path:
     return trq_params.resolve("controller", controller)
 
 
+def run_dir(out: Path, controller: str | Path) -> Path:
+    """Where a controller's flight is written under `out`: its name, or for a controller given
+    as a file path the file's stem (a path would otherwise leave `out`)."""
+    c = str(controller)
+    return out / (c if trq_params.is_name(c) else Path(c).stem)
+
+
 def write_controller_overlay(controller: str | Path, reference: dict | None, out_dir: Path,
                              comment: str = "", vehicle: str | Path | None = None) -> Path:
     """Write out_dir/controller.yaml and return its path; raises the controller's ConfigError

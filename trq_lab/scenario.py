@@ -44,7 +44,7 @@ from sil_vehicle.config import load_vehicle, sensing_profile
 from sil_vehicle.faultscript import load_script
 from trq_lab import metrics as metrics_mod
 from trq_lab import procs
-from trq_lab.overlays import write_controller_overlay
+from trq_lab.overlays import run_dir, write_controller_overlay
 from trq_lab.reporting import scenario as report
 
 # what a command waits in real time, about one NMPC step (docs/decisions/
@@ -494,7 +494,7 @@ def main(argv: list[str] | None = None) -> int:
               file=sys.stderr)
         return 2
     args.out.mkdir(parents=True, exist_ok=True)
-    runs = [Run(c, i, args.out / c, s) for i, (c, s) in enumerate(zip(names, sources))]
+    runs = [Run(c, i, run_dir(args.out, c), s) for i, (c, s) in enumerate(zip(names, sources))]
     jobs = max(1, min(args.jobs or os.cpu_count() or 1, len(runs)))
     print(f"trq-scenario: {scenario.name}: {scenario.description}")
     print(f"  {len(runs)} flight(s) {'in real time' if args.realtime else 'in lockstep'} "
