@@ -223,25 +223,27 @@ def test_gnss_key_errors_name_file_key_and_value(tmp_path, estimator, match):
 # --- a closed-loop flight through an outage ------------------------------------------------------
 
 OUTAGE_OFF_S, OUTAGE_S = 5.0, 4.5       # vehicle time
-# the vehicle (truth) against the reference from the outage's start to 2 s after it: the
-# autopilot's own estimate drifts about as far through the same outage (its velocity is blended
-# in); and the largest change of the estimate in one period as the fix comes back, but the
-# position reset's
-FLOWN_BOUND_M = 0.75
+# Through the outage the filter's velocity is the autopilot's (blended in; nothing better is at
+# hand), so its drift is the autopilot's own estimate's, which the same flight logs: the
+# filter's largest error through the outage within DRIFT_FACTOR of the autopilot's (a choice;
+# 1.00 to 1.10 on seeds 1, 2, 5: docs/decisions/2026-12-05-fused-gnss-outage.md), and the
+# vehicle (truth) within the autopilot's drift and FLOWN_MARGIN_M of the reference from the
+# outage's start to 2 s after it (a choice: the tracking in the wind and the vehicle's momentum
+# when the estimate is reset). The autopilot's drift itself is the vehicle's (0.5 to 1.6 m on
+# this flight): no bound of the companion's. And the largest change of the estimate in one
+# period as the fix comes back, but the position reset's.
+DRIFT_FACTOR = 1.25
+FLOWN_MARGIN_M = 0.3
 JUMP_BOUND_M = 0.25
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason=(
-    "a known regression on the vehicle that agrees with an airframe (issue 39's merges: the "
-    "IMU's vibration lines, HIGHRES_IMU's mean since the last message, GPS_RAW_INT as PX4 stamps "
-    "it): about 7 s after the fix is back the filter starts rejecting fixes and dead-reckons; "
-    "not yet traced (docs/decisions/2026-12-05-fidelity-headlines.md, what is left). Strict: "
-    "it fails the suite once it passes again, so that the mark comes off."))
 def test_an_rtk_flight_through_a_gnss_outage(tmp_path):
     """trq_nmpc_eso_fused_gnss hovers under rtk in a 4 m/s wind and loses the receiver for
-    4.5 s: its filter dead-reckons (controller.csv says so through the outage and not after),
-    the vehicle stays within FLOWN_BOUND_M of the reference through it and after, and the
+    4.5 s: its filter dead-reckons (controller.csv says so through the outage and not after:
+    no fix rejected once they are back, as the autopilot's velocity weighted as white 5 mm/s
+    noise made it), drifts no further than the autopilot's own estimate, the vehicle stays
+    within that drift and FLOWN_MARGIN_M of the reference through it and after, and the
     fix comes back through one position reset (issue 39: after regain_poses consistent
     fixes), with no other jump in the estimate past JUMP_BOUND_M.
 
@@ -271,17 +273,23 @@ def test_an_rtk_flight_through_a_gnss_outage(tmp_path):
     off, on = OUTAGE_OFF_S, OUTAGE_OFF_S + OUTAGE_S
     assert dead[(t_vehicle > off + 0.6) & (t_vehicle < on)].all()
     assert not dead[t_vehicle > on + 1.0].any() and not dead[t_vehicle < off].any()
-    flown = np.sqrt(sum((truth[f"pos_{a}_m"][at] - steps[f"ref_pos_{a}_m"]) ** 2
-                        for a in "ned"))
+
+    def off_truth(pos):            # distance from the vehicle (truth), per control step
+        return np.sqrt(sum((truth[f"pos_{a}_m"][at] - pos(a)) ** 2 for a in "ned"))
+
+    flown = off_truth(lambda a: steps[f"ref_pos_{a}_m"])
+    err = off_truth(lambda a: steps[f"pos_{a}_m"])                 # the companion's filter
+    autopilot = off_truth(lambda a: truth[f"est_pos_{a}_m"][at])   # the vehicle's estimate
     window = (t_vehicle > off) & (t_vehicle < on + 2.0)
+    outage = (t_vehicle > off) & (t_vehicle < on)
     step = np.sqrt(sum(np.diff(steps[f"pos_{a}_m"]) ** 2 for a in "ned"))
     near = (t_vehicle[1:] > on - 0.2) & (t_vehicle[1:] < on + 1.0)
-    assert flown[window].max() < FLOWN_BOUND_M
+    assert err[outage].max() < DRIFT_FACTOR * autopilot[outage].max()
+    assert flown[window].max() < autopilot[window].max() + FLOWN_MARGIN_M
     # the fix back: the drift taken out at once by one position reset (counted, as EKF2's
     # reset_counter), after which the estimate is near the truth; no other jump
     resets = steps["est_resets"]
     assert resets[t_vehicle < on].max() == 0 and resets[-1] == 1
     at_reset = np.diff(resets) > 0
     assert step[near & ~at_reset].max() < JUMP_BOUND_M
-    err = np.sqrt(sum((truth[f"pos_{a}_m"][at] - steps[f"pos_{a}_m"]) ** 2 for a in "ned"))
     assert err[(t_vehicle > on + 0.5) & (t_vehicle < on + 2.0)].max() < 0.1
