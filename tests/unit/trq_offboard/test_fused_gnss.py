@@ -225,13 +225,13 @@ def test_gnss_key_errors_name_file_key_and_value(tmp_path, estimator, match):
 OUTAGE_OFF_S, OUTAGE_S = 5.0, 4.5       # vehicle time
 # Through the outage the filter's velocity is the autopilot's (blended in; nothing better is at
 # hand), so its drift is the autopilot's own estimate's, which the same flight logs: the
-# filter's largest error through the outage within DRIFT_FACTOR of the autopilot's (a choice;
-# 1.00 to 1.10 on seeds 1, 2, 5: docs/decisions/2026-12-05-fused-gnss-outage.md), and the
+# filter's largest error through the outage within DRIFT_FACTOR of the autopilot's, and the
 # vehicle (truth) within the autopilot's drift and FLOWN_MARGIN_M of the reference from the
-# outage's start to 2 s after it (a choice: the tracking in the wind and the vehicle's momentum
-# when the estimate is reset). The autopilot's drift itself is the vehicle's (0.5 to 1.6 m on
-# this flight): no bound of the companion's. And the largest change of the estimate in one
-# period as the fix comes back, but the position reset's.
+# outage's start to 2 s after it (the tracking in the wind and the vehicle's momentum when the
+# estimate is reset). Both choices; what they were set against and why the autopilot's drift
+# is no bound of the companion's: docs/decisions/2026-12-05-fused-gnss-outage.md. And the
+# largest change of the estimate in one period as the fix comes back, but the position
+# reset's.
 DRIFT_FACTOR = 1.25
 FLOWN_MARGIN_M = 0.3
 JUMP_BOUND_M = 0.25
