@@ -40,11 +40,13 @@ def _truth(t):
 
 
 def _fly(n_steps, *, seed=0, delay=DELAY, outage=(), cfg=CFG, model_error=(0.05, -0.04, 0.02),
-         bias_frd=(0.1, -0.05, 0.1)):
+         bias_frd=(0.1, -0.05, 0.1), vel_error=None):
     """The filter over n_steps periods: the known input the truth's acceleration less a
     constant model error, two accelerometer samples a period, a fix every FIX_EVERY periods
     (its time of validity) handed over `delay` periods later (none valid in the periods of
-    `outage`). Returns (filter, rows of (t_us, position error (3), health))."""
+    `outage`); with `vel_error` (period index -> NED m/s), the autopilot's velocity, the
+    truth's plus that error, handed to each step. Returns (filter, rows of (t_us, position
+    error (3), health))."""
     rng = np.random.default_rng(seed)
     f = FusedFilter(cfg, G)
     p0, v0, _ = _truth(0.0)
@@ -63,7 +65,8 @@ def _fly(n_steps, *, seed=0, delay=DELAY, outage=(), cfg=CFG, model_error=(0.05,
             f.add_pose(t_fix, pos, STD)
         pending = [p for p in pending if p[0] > k]
         a_known = _truth((t_us - H_US / 2) * 1e-6)[2] - np.asarray(model_error)
-        health = f.step(t_us, a_known, euler)
+        vel = None if vel_error is None else _truth(t_us * 1e-6)[1] + vel_error(k)
+        health = f.step(t_us, a_known, euler, vel)
         rows.append((t_us, f.x[0:3] - _truth(t_us * 1e-6)[0], health))
     return f, rows
 
@@ -139,6 +142,47 @@ def test_an_outage_dead_reckons_says_so_and_takes_the_fix_back():
     assert rows[-1][2].rejected == 0             # the fix back was not gated out
     before = err[(t > 9.0) & (t < 10.0)].max()
     assert err[(t > 15.6)].max() < max(0.05, 2.0 * before)    # back on the fixes
+
+
+# the autopilot's velocity error as the vehicle gives it: a Gauss-Markov wander of this sigma
+# (m/s per axis) and correlation time (s), read off a flight's ODOMETRY against its truth
+# (docs/decisions/2026-12-05-fused-gnss-outage.md)
+AUTOPILOT_VEL_SIGMA, AUTOPILOT_VEL_TAU_S = 0.03, 0.5
+
+
+def _wander(n_steps, seed):
+    """A first-order Gauss-Markov velocity error per period (n_steps + 1, 3), seeded."""
+    rng = np.random.default_rng(seed)
+    a = math.exp(-H_US * 1e-6 / AUTOPILOT_VEL_TAU_S)
+    e = np.zeros((n_steps + 1, 3))
+    e[0] = rng.normal(0.0, AUTOPILOT_VEL_SIGMA, 3)
+    for k in range(1, n_steps + 1):
+        e[k] = a * e[k - 1] + math.sqrt(1.0 - a * a) * rng.normal(0.0, AUTOPILOT_VEL_SIGMA, 3)
+    return e
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_the_autopilots_wandering_velocity_does_not_outweigh_the_fixes(seed):
+    """The autopilot's velocity with a wandering error, fused at the shipped controller's
+    weight (its equivalent white noise a period): every fix taken and the estimate on the
+    fixes. At 5 mm/s, as white noise (the weight before), the velocity outweighs the fixes,
+    the estimate walks off them and the gate rejects them (the outage test's regression)."""
+    import dataclasses
+    shipped = load_controller(ROOT / "params/controller/trq_nmpc_eso_fused_gnss.yaml").fused
+    n = 3000
+    err = _wander(n, seed)
+    rms = {}
+    for std in (shipped.autopilot_vel_std_m_s, 0.005):
+        cfg = dataclasses.replace(CFG, autopilot_vel_std_m_s=std)
+        f, rows = _fly(n, seed=seed, cfg=cfg, vel_error=lambda k: err[k])
+        rms[std] = float(np.sqrt(np.mean(np.array([r[1] for r in rows[200:]]) ** 2)))
+        if std == shipped.autopilot_vel_std_m_s:
+            assert f.rejected == 0 and f.resets == 0, (f.rejected, f.resets)
+            assert not any(r[2].dead_reckoning for r in rows)
+            assert rms[std] < 0.011               # within the fixes' 1 sigma
+        else:
+            assert f.rejected > 0
+    assert rms[0.005] > 2.0 * rms[shipped.autopilot_vel_std_m_s], rms
 
 
 def test_a_wrong_fix_is_gated_while_the_fixes_flow():
