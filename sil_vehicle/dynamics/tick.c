@@ -75,20 +75,44 @@ static double fault_factor(const double *f, double t_s)
 }
 
 /* sil_vehicle/dynamics/contact.py contact_wrench: world force, body moment */
+/* R (NED from FRD) of the unit quaternion q = (w, x, y, z), row by row into r[9]: the one copy
+ * of the rotation here (sil_vehicle/frames.py's formula, term for term) */
+static void rotation(const double *q, double *r)
+{
+    double qw = q[0], qx = q[1], qy = q[2], qz = q[3];
+    r[0] = 1 - 2 * (qy * qy + qz * qz);
+    r[1] = 2 * (qx * qy - qw * qz);
+    r[2] = 2 * (qx * qz + qw * qy);
+    r[3] = 2 * (qx * qy + qw * qz);
+    r[4] = 1 - 2 * (qx * qx + qz * qz);
+    r[5] = 2 * (qy * qz - qw * qx);
+    r[6] = 2 * (qx * qz - qw * qy);
+    r[7] = 2 * (qy * qz + qw * qx);
+    r[8] = 1 - 2 * (qx * qx + qy * qy);
+}
+
+/* a wrench (force, then moment) into w[6] */
+static void put_wrench(double *w, double fx, double fy, double fz, double mx, double my,
+                       double mz)
+{
+    w[0] = fx;
+    w[1] = fy;
+    w[2] = fz;
+    w[3] = mx;
+    w[4] = my;
+    w[5] = mz;
+}
+
 static void contact_wrench(const double *x, const double *p, const double *anchors,
                            double *cw)
 {
     double pn0 = x[0], pe0 = x[1], pd = x[2], vn = x[3], ve = x[4], vd = x[5];
-    double qw = x[6], qx = x[7], qy = x[8], qz = x[9], pr = x[10], qr = x[11], rr = x[12];
-    double r00 = 1 - 2 * (qy * qy + qz * qz);
-    double r01 = 2 * (qx * qy - qw * qz);
-    double r02 = 2 * (qx * qz + qw * qy);
-    double r10 = 2 * (qx * qy + qw * qz);
-    double r11 = 1 - 2 * (qx * qx + qz * qz);
-    double r12 = 2 * (qy * qz - qw * qx);
-    double r20 = 2 * (qx * qz - qw * qy);
-    double r21 = 2 * (qy * qz + qw * qx);
-    double r22 = 1 - 2 * (qx * qx + qy * qy);
+    double pr = x[10], qr = x[11], rr = x[12];
+    double r[9];
+    double r00, r01, r02, r10, r11, r12, r20, r21, r22;
+    rotation(x + 6, r);
+    r00 = r[0], r01 = r[1], r02 = r[2], r10 = r[3], r11 = r[4], r12 = r[5];
+    r20 = r[6], r21 = r[7], r22 = r[8];
     double k = p[P_GEAR_K], c = p[P_GEAR_C], mu = p[P_GEAR_MU], kt = p[P_GEAR_KT];
     double ct = p[P_GEAR_CT];
     double ground = p[P_GROUND];
@@ -132,12 +156,7 @@ static void contact_wrench(const double *x, const double *p, const double *ancho
         m_y += pz * bx - px * bz;
         m_z += px * by - py * bx;
     }
-    cw[0] = f_n;
-    cw[1] = f_e;
-    cw[2] = f_d;
-    cw[3] = m_x;
-    cw[4] = m_y;
-    cw[5] = m_z;
+    put_wrench(cw, f_n, f_e, f_d, m_x, m_y, m_z);
 }
 
 static void derivative(const double *x, const double *w, const double *wind, const double *p,
@@ -146,13 +165,11 @@ static void derivative(const double *x, const double *w, const double *wind, con
     double vn = x[3], ve = x[4], vd = x[5], qw = x[6], qx = x[7], qy = x[8], qz = x[9];
     double pr = x[10], qr = x[11], rr = x[12];
     double fx = w[0], fy = w[1], fz = w[2], mx = w[3], my = w[4], mz = w[5];
-    double fn = (1 - 2 * (qy * qy + qz * qz)) * fx + 2 * (qx * qy - qw * qz) * fy
-                + 2 * (qx * qz + qw * qy) * fz;
-    double fe = 2 * (qx * qy + qw * qz) * fx + (1 - 2 * (qx * qx + qz * qz)) * fy
-                + 2 * (qy * qz - qw * qx) * fz;
-    double fdn = 2 * (qx * qz - qw * qy) * fx + 2 * (qy * qz + qw * qx) * fy
-                 + (1 - 2 * (qx * qx + qy * qy)) * fz;
-    double rx, ry, rz, s, inv_m, ixx, iyy, izz;
+    double r[9], fn, fe, fdn, rx, ry, rz, s, inv_m, ixx, iyy, izz;
+    rotation(x + 6, r);
+    fn = r[0] * fx + r[1] * fy + r[2] * fz;
+    fe = r[3] * fx + r[4] * fy + r[5] * fz;
+    fdn = r[6] * fx + r[7] * fy + r[8] * fz;
     if (x[2] > p[P_REACH]) {                        /* the ground within reach */
         double cw[6];
         contact_wrench(x, p, anchors, cw);
@@ -229,12 +246,7 @@ static void body_wrench(const double *zeta, const double *alpha, const double *p
         my += f * (pz * nx - px * nz) - tau * ny;
         mz += f * (px * ny - py * nx) - tau * nz;
     }
-    w[0] = fx;
-    w[1] = fy;
-    w[2] = fz;
-    w[3] = mx;
-    w[4] = my;
-    w[5] = mz;
+    put_wrench(w, fx, fy, fz, mx, my, mz);
 }
 
 int trq_tick(const double *p, double *s)

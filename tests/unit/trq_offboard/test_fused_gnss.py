@@ -40,11 +40,13 @@ def _truth(t):
 
 
 def _fly(n_steps, *, seed=0, delay=DELAY, outage=(), cfg=CFG, model_error=(0.05, -0.04, 0.02),
-         bias_frd=(0.1, -0.05, 0.1)):
+         bias_frd=(0.1, -0.05, 0.1), vel_error=None):
     """The filter over n_steps periods: the known input the truth's acceleration less a
     constant model error, two accelerometer samples a period, a fix every FIX_EVERY periods
     (its time of validity) handed over `delay` periods later (none valid in the periods of
-    `outage`). Returns (filter, rows of (t_us, position error (3), health))."""
+    `outage`); with `vel_error` (period index -> NED m/s), the autopilot's velocity, the
+    truth's plus that error, handed to each step. Returns (filter, rows of (t_us, position
+    error (3), health))."""
     rng = np.random.default_rng(seed)
     f = FusedFilter(cfg, G)
     p0, v0, _ = _truth(0.0)
@@ -63,7 +65,8 @@ def _fly(n_steps, *, seed=0, delay=DELAY, outage=(), cfg=CFG, model_error=(0.05,
             f.add_pose(t_fix, pos, STD)
         pending = [p for p in pending if p[0] > k]
         a_known = _truth((t_us - H_US / 2) * 1e-6)[2] - np.asarray(model_error)
-        health = f.step(t_us, a_known, euler)
+        vel = None if vel_error is None else _truth(t_us * 1e-6)[1] + vel_error(k)
+        health = f.step(t_us, a_known, euler, vel)
         rows.append((t_us, f.x[0:3] - _truth(t_us * 1e-6)[0], health))
     return f, rows
 
@@ -139,6 +142,47 @@ def test_an_outage_dead_reckons_says_so_and_takes_the_fix_back():
     assert rows[-1][2].rejected == 0             # the fix back was not gated out
     before = err[(t > 9.0) & (t < 10.0)].max()
     assert err[(t > 15.6)].max() < max(0.05, 2.0 * before)    # back on the fixes
+
+
+# the autopilot's velocity error as the vehicle gives it: a Gauss-Markov wander of this sigma
+# (m/s per axis) and correlation time (s), read off a flight's ODOMETRY against its truth
+# (docs/decisions/2026-12-05-fused-gnss-outage.md)
+AUTOPILOT_VEL_SIGMA, AUTOPILOT_VEL_TAU_S = 0.03, 0.5
+
+
+def _wander(n_steps, seed):
+    """A first-order Gauss-Markov velocity error per period (n_steps + 1, 3), seeded."""
+    rng = np.random.default_rng(seed)
+    a = math.exp(-H_US * 1e-6 / AUTOPILOT_VEL_TAU_S)
+    e = np.zeros((n_steps + 1, 3))
+    e[0] = rng.normal(0.0, AUTOPILOT_VEL_SIGMA, 3)
+    for k in range(1, n_steps + 1):
+        e[k] = a * e[k - 1] + math.sqrt(1.0 - a * a) * rng.normal(0.0, AUTOPILOT_VEL_SIGMA, 3)
+    return e
+
+
+def test_the_autopilots_wandering_velocity_does_not_outweigh_the_fixes():
+    """The autopilot's velocity with a wandering error, fused at the shipped controller's
+    weight (its equivalent white noise a period): every fix taken and the estimate on the
+    fixes. At 5 mm/s, as white noise (the weight before), the velocity outweighs the fixes,
+    the estimate walks off them and the gate rejects them (the outage test's regression)."""
+    import dataclasses
+    seed = 1
+    shipped = load_controller(ROOT / "params/controller/trq_nmpc_eso_fused_gnss.yaml").fused
+    n = 3000
+    err = _wander(n, seed)
+    rms = {}
+    for std in (shipped.autopilot_vel_std_m_s, 0.005):
+        cfg = dataclasses.replace(CFG, autopilot_vel_std_m_s=std)
+        f, rows = _fly(n, seed=seed, cfg=cfg, vel_error=lambda k: err[k])
+        rms[std] = float(np.sqrt(np.mean(np.array([r[1] for r in rows[200:]]) ** 2)))
+        if std == shipped.autopilot_vel_std_m_s:
+            assert f.rejected == 0 and f.resets == 0, (f.rejected, f.resets)
+            assert not any(r[2].dead_reckoning for r in rows)
+            assert rms[std] < 0.011               # within the fixes' 1 sigma
+        else:
+            assert f.rejected > 0
+    assert rms[0.005] > 2.0 * rms[shipped.autopilot_vel_std_m_s], rms
 
 
 def test_a_wrong_fix_is_gated_while_the_fixes_flow():
@@ -223,25 +267,27 @@ def test_gnss_key_errors_name_file_key_and_value(tmp_path, estimator, match):
 # --- a closed-loop flight through an outage ------------------------------------------------------
 
 OUTAGE_OFF_S, OUTAGE_S = 5.0, 4.5       # vehicle time
-# the vehicle (truth) against the reference from the outage's start to 2 s after it: the
-# autopilot's own estimate drifts about as far through the same outage (its velocity is blended
-# in); and the largest change of the estimate in one period as the fix comes back, but the
-# position reset's
-FLOWN_BOUND_M = 0.75
+# Through the outage the filter's velocity is the autopilot's (blended in; nothing better is at
+# hand), so its drift is the autopilot's own estimate's, which the same flight logs: the
+# filter's largest error through the outage within DRIFT_FACTOR of the autopilot's, and the
+# vehicle (truth) within the autopilot's drift and FLOWN_MARGIN_M of the reference from the
+# outage's start to 2 s after it (the tracking in the wind and the vehicle's momentum when the
+# estimate is reset). Both choices; what they were set against and why the autopilot's drift
+# is no bound of the companion's: docs/decisions/2026-12-05-fused-gnss-outage.md. And the
+# largest change of the estimate in one period as the fix comes back, but the position
+# reset's.
+DRIFT_FACTOR = 1.25
+FLOWN_MARGIN_M = 0.3
 JUMP_BOUND_M = 0.25
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason=(
-    "a known regression on the vehicle that agrees with an airframe (issue 39's merges: the "
-    "IMU's vibration lines, HIGHRES_IMU's mean since the last message, GPS_RAW_INT as PX4 stamps "
-    "it): about 7 s after the fix is back the filter starts rejecting fixes and dead-reckons; "
-    "not yet traced (docs/decisions/2026-12-05-fidelity-headlines.md, what is left). Strict: "
-    "it fails the suite once it passes again, so that the mark comes off."))
 def test_an_rtk_flight_through_a_gnss_outage(tmp_path):
     """trq_nmpc_eso_fused_gnss hovers under rtk in a 4 m/s wind and loses the receiver for
-    4.5 s: its filter dead-reckons (controller.csv says so through the outage and not after),
-    the vehicle stays within FLOWN_BOUND_M of the reference through it and after, and the
+    4.5 s: its filter dead-reckons (controller.csv says so through the outage and not after:
+    no fix rejected once they are back, as the autopilot's velocity weighted as white 5 mm/s
+    noise made it), drifts no further than the autopilot's own estimate, the vehicle stays
+    within that drift and FLOWN_MARGIN_M of the reference through it and after, and the
     fix comes back through one position reset (issue 39: after regain_poses consistent
     fixes), with no other jump in the estimate past JUMP_BOUND_M.
 
@@ -271,17 +317,23 @@ def test_an_rtk_flight_through_a_gnss_outage(tmp_path):
     off, on = OUTAGE_OFF_S, OUTAGE_OFF_S + OUTAGE_S
     assert dead[(t_vehicle > off + 0.6) & (t_vehicle < on)].all()
     assert not dead[t_vehicle > on + 1.0].any() and not dead[t_vehicle < off].any()
-    flown = np.sqrt(sum((truth[f"pos_{a}_m"][at] - steps[f"ref_pos_{a}_m"]) ** 2
-                        for a in "ned"))
+
+    def off_truth(pos):            # distance from the vehicle (truth), per control step
+        return np.sqrt(sum((truth[f"pos_{a}_m"][at] - pos(a)) ** 2 for a in "ned"))
+
+    flown = off_truth(lambda a: steps[f"ref_pos_{a}_m"])
+    err = off_truth(lambda a: steps[f"pos_{a}_m"])                 # the companion's filter
+    autopilot = off_truth(lambda a: truth[f"est_pos_{a}_m"][at])   # the vehicle's estimate
     window = (t_vehicle > off) & (t_vehicle < on + 2.0)
+    outage = (t_vehicle > off) & (t_vehicle < on)
     step = np.sqrt(sum(np.diff(steps[f"pos_{a}_m"]) ** 2 for a in "ned"))
     near = (t_vehicle[1:] > on - 0.2) & (t_vehicle[1:] < on + 1.0)
-    assert flown[window].max() < FLOWN_BOUND_M
+    assert err[outage].max() < DRIFT_FACTOR * autopilot[outage].max()
+    assert flown[window].max() < autopilot[window].max() + FLOWN_MARGIN_M
     # the fix back: the drift taken out at once by one position reset (counted, as EKF2's
     # reset_counter), after which the estimate is near the truth; no other jump
     resets = steps["est_resets"]
     assert resets[t_vehicle < on].max() == 0 and resets[-1] == 1
     at_reset = np.diff(resets) > 0
     assert step[near & ~at_reset].max() < JUMP_BOUND_M
-    err = np.sqrt(sum((truth[f"pos_{a}_m"][at] - steps[f"pos_{a}_m"]) ** 2 for a in "ned"))
     assert err[(t_vehicle > on + 0.5) & (t_vehicle < on + 2.0)].max() < 0.1
