@@ -144,6 +144,7 @@ def test_observer_too_fast_for_its_substeps_is_refused(tmp_path):
     import yaml
     from trq_offboard.config import ConfigError, load_controller
     data = yaml.safe_load(ESO.read_text())
+    data["rotational"]["omega_o_rad_s"] = 300.0
     data["substeps"] = 2
     eso = tmp_path / "eso.yaml"
     eso.write_text(yaml.safe_dump(data))
