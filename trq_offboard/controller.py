@@ -389,7 +389,8 @@ class Controller:
             u, source = self._fallback(t_act)
         return self._finish(u, source, info, d_obs, out_err, (c0, c1, c2, c3))
 
-    def _detect(self, t_s: float, x: np.ndarray, d_obs: np.ndarray, y_now) -> None:
+    def _detect(self, t_s: float, x: np.ndarray, d_obs: np.ndarray | None = None,
+                y_now=None) -> None:
         """The lost-motor detector on this step's effectiveness and the commands in effect; on
         a detection (once) the failed configuration: its NMPC, the descent from here; then, every
         step, the dead rotor's effective throttle bounded to 0 (trq_offboard/lost_motor.py).
@@ -400,7 +401,7 @@ class Controller:
         if self.pair_detector is not None and (
                 self.pair_detector.lost is not None or not self.lost_motor):
             pair = self.pair_detector.lost
-            if pair is None and y_now is not None:
+            if pair is None and d_obs is not None and y_now is not None:
                 contrib = motor_contributions(self.model.accel, x, y_now)
                 pair = self.pair_detector.update(t_s, d_obs[2:6], contrib, self._last_u[nt:])
             if pair is not None:

@@ -71,9 +71,10 @@ def pair_code(pair: tuple[int, int]) -> int:
 
 def motor_contributions(accel, x, y) -> np.ndarray:
     """Each motor's share of the model's accelerations at the actuators' outputs y: (4, 4),
-    column i what motor i adds (its output against its throttle at 0) to [the vertical (NED
-    down, m/s^2), the body p, q, r accelerations (rad/s^2)]; `accel` the prediction model's
-    (x, u) -> [dv/dt, domega/dt], y its input vector (the throttles last, %)."""
+    column i what motor i adds (its output against its throttle at 0, where the model's curves
+    give c0: 0.19 N less than a stopped rotor's 0 on the TRQ) to [the vertical (NED down,
+    m/s^2), the body p, q, r accelerations (rad/s^2)]; `accel` the prediction model's (x, u) ->
+    [dv/dt, domega/dt], y its input vector (the throttles last, %)."""
     y = np.asarray(y, float)
     nt = len(y) - 4
     base = np.asarray(accel(x, y)).ravel()[2:6]
