@@ -423,7 +423,7 @@ class LostMotor(Strict):
     # observer's vertical deficit beyond the strongest single motor's, averaged over hold_s, at
     # or above this (m/s^2); the angular parts' scale in the pair's least squares (rad/s^2)
     pair_excess_m_s2: Optional[Num(0.1, 20.0)] = None
-    pair_angular_scale_rad_s2: Num(0.1, 1000.0) = 20.0
+    pair_angular_scale_rad_s2: Num(0.1, 1000.0) = 5.0
 
 
 class Estimator(Strict):

@@ -167,7 +167,7 @@ class LostMotorConfig:
     horizon_step_s: float | None = None
     response: str = "nmpc"                # one motor lost: "nmpc" (the failed NMPC) or "spin"
     pair_excess_m_s2: float | None = None   # two motors lost: the vertical excess (None: off)
-    pair_angular_scale_rad_s2: float = 20.0  # the angular parts' scale in the pair's fit
+    pair_angular_scale_rad_s2: float = 5.0   # the angular parts' scale in the pair's fit
 
 
 @dataclass(frozen=True)

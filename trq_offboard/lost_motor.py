@@ -37,8 +37,8 @@ accelerations at its output (`motor_contributions`). The vertical deficit beyond
 strongest single motor could explain, stopped whole,
     excess = d_down - max_i (upward acceleration of motor i at its output)
 averaged over the last `hold_s`, at or above `pair_excess_m_s2`, says more than one motor is
-lost; the pair is the one whose loss best explains d over the same window (least squares on the
-vertical and the three angular parts, the angular ones divided by `pair_angular_scale_rad_s2`:
+lost; the pair is the one whose loss best explains d over the window's steps with an excess
+(least squares on the vertical and the three angular parts, the angular ones divided by `pair_angular_scale_rad_s2`:
 yaw tells the opposite pairs apart, both of one sense), both of its motors commanded at least
 `min_command_pct`. One motor lost gives an excess near or below 0 (its own deficit is one of the
 candidates); the paper's 50 % half a motor's. Latched. What flies it: the failed NMPC with both
@@ -119,7 +119,9 @@ class PairLossDetector:
             return None
         if np.mean([w[1] for w in self._window]) < c.pair_excess_m_s2:
             return None
-        pair = PAIRS[int(np.argmin(np.sum([w[2] for w in self._window], axis=0)))]
+        # the pair: the least squares over the window's steps with an excess (the loss's own)
+        pair = PAIRS[int(np.argmin(np.sum([w[2] for w in self._window if w[1] > 0.0],
+                                          axis=0)))]
         if min(command_pct[pair[0] - 1], command_pct[pair[1] - 1]) < c.min_command_pct:
             return None
         self.lost, self.detected_s = pair, float(t_s)

@@ -20,7 +20,9 @@ for scenario in motors12_lost motors13_lost; do
       "$REPO/params/scenarios/$scenario.yaml" > "$dir/$scenario.yaml"
     only=(--only trq_nmpc_eso_lost)
     [ "$seed" -le 3 ] && only+=(--only trq_nmpc_eso --only quad_nmpc)
-    "$PY/trq-inprocess" "$dir/$scenario.yaml" --out "$dir" "${only[@]}" > "$dir/log.txt" 2>&1
+    # (its exit status is 1 when a flight crashes: every one here does, by the plant's measure)
+    "$PY/trq-inprocess" "$dir/$scenario.yaml" --out "$dir" "${only[@]}" > "$dir/log.txt" 2>&1 \
+      || true
   done
 done
 "$PY/python" "$(dirname "$0")/summary.py" "$OUT" "$(dirname "$0")"

@@ -226,7 +226,7 @@ def test_the_switch_hands_over_to_the_spinning_controller():
 
 PAIR_CFG = LostMotorConfig(below=0.2, hold_s=0.1, min_command_pct=20.0, yaw_weight=0.0,
                            max_body_rate_rad_s=30.0, descent_speed_m_s=1.0,
-                           pair_excess_m_s2=1.5, pair_angular_scale_rad_s2=20.0)
+                           pair_excess_m_s2=1.5, pair_angular_scale_rad_s2=5.0)
 
 
 def _contributions(throttle_pct=100.0, tilts_rad=(0.0, 0.0, 0.0, 0.0)):
@@ -249,7 +249,7 @@ def _pair_detect(d4, contrib, cmd=(100.0,) * 4, seconds=0.3, onset_s=0.05, noise
     for k in range(int(round(seconds / DT))):
         t = k * DT
         d = (np.asarray(d4) if t >= onset_s else np.zeros(4)) + noise * rng.standard_normal(4) \
-            * np.array([1.0, 20.0, 20.0, 20.0])
+            * np.array([1.0, 2.0, 2.0, 2.0])
         pair = det.update(t, d, contrib, np.asarray(cmd))
         if pair is not None:
             return pair, det.detected_s
