@@ -34,7 +34,9 @@ of what is computed (the solver measures its own wall time).
 A whole motor lost (lost_motor, with the effectiveness observer): the detector runs after step 4;
 from a detection the failed configuration's NMPC flies (response nmpc), or, one motor lost, the
 spinning controller of the file's `spin:` section (response spin: `_spin_step`, the NMPC no
-longer solved; trq_offboard/spin.py).
+longer solved; trq_offboard/spin.py). Two motors lost (lost_motor.pair_excess_m_s2): before any
+loss the pair detector reads the observer's d against each motor's share of the model
+(`_detect`); a pair declared flies the failed NMPC with both rotors out (`_detect_pair`).
 
 `prepare` (for solvers with a preparation phase, `Solver.prepares`, such as the real-time
 iteration; a no-op for the others): called after the command of `step` has been sent, it
