@@ -38,11 +38,12 @@ strongest single motor could explain, stopped whole,
     excess = d_down - max_i (upward acceleration of motor i at its output)
 averaged over the last `hold_s`, at or above `pair_excess_m_s2`, says more than one motor is
 lost; the pair is the one whose loss best explains d over the window's steps with an excess
-(least squares on the vertical and the three angular parts, the angular ones divided by `pair_angular_scale_rad_s2`:
-yaw tells the opposite pairs apart, both of one sense), both of its motors commanded at least
-`min_command_pct`. One motor lost gives an excess near or below 0 (its own deficit is one of the
-candidates); the paper's 50 % half a motor's. Latched. What flies it: the failed NMPC with both
-rotors out (the controller); why: docs/decisions/2026-12-05-lost-motor-on-seeds.md.
+(least squares on the vertical and the three angular parts, the angular ones divided by
+`pair_angular_scale_rad_s2`: yaw tells the opposite pairs apart, both of one sense), both of its
+motors commanded at least `min_command_pct`. One motor lost gives an excess near or below 0 (its
+own deficit is one of the candidates); the paper's 50 % less than that by half a motor. Latched.
+What flies it: the failed NMPC with both rotors out (the controller); why:
+docs/decisions/2026-12-05-lost-motor-on-seeds.md.
 
 Pure: no clock, no I/O; the same inputs give the same detection.
 """
