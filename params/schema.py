@@ -419,6 +419,11 @@ class LostMotor(Strict):
     # relaxed-hover controller of the file's `spin:` section (spin; trq_offboard/spin.py), which
     # holds the position, then lands; two motors lost keep the failed NMPC
     response: Choice("nmpc", "spin") = "nmpc"
+    # two motors lost (trq_offboard/lost_motor.py PairLossDetector; null: not looked for): the
+    # observer's vertical deficit beyond the strongest single motor's, averaged over hold_s, at
+    # or above this (m/s^2); the angular parts' scale in the pair's least squares (rad/s^2)
+    pair_excess_m_s2: Optional[Num(0.1, 20.0)] = None
+    pair_angular_scale_rad_s2: Num(0.1, 1000.0) = 5.0
 
 
 class Estimator(Strict):

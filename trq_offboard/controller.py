@@ -34,7 +34,9 @@ of what is computed (the solver measures its own wall time).
 A whole motor lost (lost_motor, with the effectiveness observer): the detector runs after step 4;
 from a detection the failed configuration's NMPC flies (response nmpc), or, one motor lost, the
 spinning controller of the file's `spin:` section (response spin: `_spin_step`, the NMPC no
-longer solved; trq_offboard/spin.py).
+longer solved; trq_offboard/spin.py). Two motors lost (lost_motor.pair_excess_m_s2): before any
+loss the pair detector reads the observer's d against each motor's share of the model
+(`_detect`); a pair declared flies the failed NMPC with both rotors out (`_detect_pair`).
 
 `prepare` (for solvers with a preparation phase, `Solver.prepares`, such as the real-time
 iteration; a no-op for the others): called after the command of `step` has been sent, it
@@ -58,7 +60,8 @@ from trq_offboard.effectiveness import MotorEffectiveness, MotorEffectivenessObs
 from trq_offboard.eso import ExtendedStateObserver
 from trq_offboard.fused import FusedFilter
 from trq_offboard.link.wire import HOME_GROUND_DOWN_M
-from trq_offboard.lost_motor import LostMotorDetector, failed_config
+from trq_offboard.lost_motor import (LostMotorDetector, PairLossDetector, failed_config,
+                                      motor_contributions, pair_code)
 from trq_offboard.model import PredictionModel
 from trq_offboard.model.dynamics import NumpyFunction
 from trq_offboard.nmpc.base import Solver
@@ -204,7 +207,11 @@ class Controller:
         self._nominal_solver = self.solver
         self._failed_solver = (make_solver(failed_config(cfg), self.model, self.u_trim)
                                if self.detector is not None and solver is None else None)
-        self.lost_motor = 0                   # the motor flown as lost (1..4), 0: none
+        # two motors lost (lost_motor.pair_excess_m_s2): the pair detector, before any loss
+        self.pair_detector = (PairLossDetector(cfg.lost_motor)
+                              if self.detector is not None
+                              and cfg.lost_motor.pair_excess_m_s2 is not None else None)
+        self.lost_motor = 0                   # the motor flown as lost (1..4; a pair 10 i + j)
         self._descent: tuple[float, np.ndarray] | None = None   # (t_s, position) at detection
         # the spinning response (lost_motor.response spin): the file's `spin:` controller for each
         # motor and each sense of the spin, built now (each its trim's IPOPT and its LQR), one of
@@ -275,6 +282,8 @@ class Controller:
         self._health = None
         if self.detector is not None:
             self.detector.reset()
+            if self.pair_detector is not None:
+                self.pair_detector.reset()
             self.solver = self._nominal_solver
             self._set_horizon(self.solver)
         self.lost_motor = 0
@@ -352,7 +361,7 @@ class Controller:
                 lim = self.cfg.eso.max_disturbance[0]
                 self._motor_share = share if norm <= lim else share * (lim / norm)
             if self.detector is not None:
-                self._detect(t_s, x)
+                self._detect(t_s, x, d_obs, y_now)
         c2 = clock()
         self._last_t = float(t_s)
         self._last_d = d
@@ -382,11 +391,24 @@ class Controller:
             u, source = self._fallback(t_act)
         return self._finish(u, source, info, d_obs, out_err, (c0, c1, c2, c3))
 
-    def _detect(self, t_s: float, x: np.ndarray) -> None:
+    def _detect(self, t_s: float, x: np.ndarray, d_obs: np.ndarray | None = None,
+                y_now=None) -> None:
         """The lost-motor detector on this step's effectiveness and the commands in effect; on
         a detection (once) the failed configuration: its NMPC, the descent from here; then, every
-        step, the dead rotor's effective throttle bounded to 0 (trq_offboard/lost_motor.py)."""
+        step, the dead rotor's effective throttle bounded to 0 (trq_offboard/lost_motor.py).
+        Before any loss, the pair detector (when configured) on the observer's d and the
+        motors' shares at their outputs y_now: a pair declared flies the failed NMPC with both
+        rotors out (no spinning controller: it holds one motor lost)."""
         nt = self._nt
+        if self.pair_detector is not None and (
+                self.pair_detector.lost is not None or not self.lost_motor):
+            pair = self.pair_detector.lost
+            if pair is None and d_obs is not None and y_now is not None:
+                contrib = motor_contributions(self.model.accel, x, y_now)
+                pair = self.pair_detector.update(t_s, d_obs[2:6], contrib, self._last_u[nt:])
+            if pair is not None:
+                self._detect_pair(t_s, x, pair)
+                return
         lost = self.detector.update(t_s, self._scale[nt:], self._last_u[nt:])
         if lost is None:
             return
@@ -419,6 +441,28 @@ class Controller:
             else:
                 self._plan = None
         self._scale[nt + lost - 1] = 0.0
+        self.solver.ocp.set_throttle_scale(self._scale[nt:])
+
+    def _detect_pair(self, t_s: float, x: np.ndarray, pair: tuple[int, int]) -> None:
+        """Two motors lost: once, the failed NMPC and the descent from here; every step, both
+        rotors' effective throttles bounded to 0."""
+        nt = self._nt
+        if not self.lost_motor:
+            self.lost_motor = pair_code(pair)
+            self._descent = (float(t_s), x[0:3].copy())
+            if self._failed_solver is not None:
+                self.solver.discard()
+                self.solver = self._failed_solver
+                self._set_horizon(self._failed_solver)
+            if self._plan is not None and self.N == len(self._plan[0]):
+                u_old = self._plan[0].copy()
+                for m in pair:
+                    u_old[:, nt + m - 1] = 0.0
+                self._plan = (u_old, self._plan[1])
+            else:
+                self._plan = None
+        for m in pair:
+            self._scale[nt + m - 1] = 0.0
         self.solver.ocp.set_throttle_scale(self._scale[nt:])
 
     def _spin_step(self, t_s: float, x: np.ndarray, d_obs: np.ndarray, out_err: float,

@@ -21,8 +21,8 @@ est_test_ratio (the last pose's innovation test ratio), est_pos_var_m2 (the posi
 est_dead_reckoning (1 without a pose for the filter's dropout_s), est_rejected (the poses its
 gate has rejected so far), est_resets (its position resets after a dropout so far) and
 est_accel_rejected (the periods whose accelerometer mean its gate rejected); nan without the
-filter. lost_motor: the motor the controller flies as lost (trq_offboard/lost_motor.py), 0 while
-none is."""
+filter. lost_motor: the motor the controller flies as lost (trq_offboard/lost_motor.py; two
+motors i < j: 10 i + j), 0 while none is."""
 
 from __future__ import annotations
 

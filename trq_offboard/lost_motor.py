@@ -28,6 +28,23 @@ The response (`response`): the failed configuration above (nmpc), or the spinnin
 the controller file's `spin:` section (spin: trq_offboard/spin.py, flown by Controller._spin_step
 from the detection of one motor; docs/decisions/2026-12-05-lost-motor-spin-in-the-loop.md).
 
+Two motors lost (`PairLossDetector`, with `pair_excess_m_s2` set). The effectiveness observer
+puts a deficit on one motor at a time and reads no yaw, so two opposite motors (their roll and
+pitch torques cancel) leave every estimate near 1, and two adjacent ones read as one. The
+commanded-against-measured test: per control step the observer's d (the accelerations the
+nominal model misses: vertical NED, body p, q, r) against each motor's share of the model's
+accelerations at its output (`motor_contributions`). The vertical deficit beyond what the
+strongest single motor could explain, stopped whole,
+    excess = d_down - max_i (upward acceleration of motor i at its output)
+averaged over the last `hold_s`, at or above `pair_excess_m_s2`, says more than one motor is
+lost; the pair is the one whose loss best explains d over the window's steps with an excess
+(least squares on the vertical and the three angular parts, the angular ones divided by
+`pair_angular_scale_rad_s2`: yaw tells the opposite pairs apart, both of one sense), both of its
+motors commanded at least `min_command_pct`. One motor lost gives an excess near or below 0 (its
+own deficit is one of the candidates); the paper's 50 % less than that by half a motor. Latched.
+What flies it: the failed NMPC with both rotors out (the controller); why:
+docs/decisions/2026-12-05-lost-motor-on-seeds.md.
+
 Pure: no clock, no I/O; the same inputs give the same detection.
 """
 
@@ -36,9 +53,80 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 
+import numpy as np
+
 from trq_offboard.config import ControllerConfig, LostMotorConfig
 
-__all__ = ["LostMotorDetector", "failed_config", "status_text"]
+__all__ = ["LostMotorDetector", "PairLossDetector", "PAIRS", "motor_contributions",
+           "pair_code", "failed_config", "status_text"]
+
+# the pairs of motors (PX4 quad X: 1 front right, 2 rear left, 3 front left, 4 rear right):
+# the two opposite ones first (1-2 both ccw, 3-4 both cw), then the four adjacent ones
+PAIRS = ((1, 2), (3, 4), (1, 3), (2, 4), (1, 4), (2, 3))
+
+
+def pair_code(pair: tuple[int, int]) -> int:
+    """The controller's `lost_motor` figure of a pair: 10 i + j (12: motors 1 and 2)."""
+    return 10 * pair[0] + pair[1]
+
+
+def motor_contributions(accel, x, y) -> np.ndarray:
+    """Each motor's share of the model's accelerations at the actuators' outputs y: (4, 4),
+    column i what motor i adds (its output against its throttle at 0, where the model's curves
+    give c0: 0.19 N less than a stopped rotor's 0 on the TRQ) to [the vertical (NED down,
+    m/s^2), the body p, q, r accelerations (rad/s^2)]; `accel` the prediction model's (x, u) ->
+    [dv/dt, domega/dt], y its input vector (the throttles last, %)."""
+    y = np.asarray(y, float)
+    nt = len(y) - 4
+    base = np.asarray(accel(x, y)).ravel()[2:6]
+    out = np.zeros((4, 4))
+    for i in range(4):
+        yi = y.copy()
+        yi[nt + i] = 0.0
+        out[:, i] = base - np.asarray(accel(x, yi)).ravel()[2:6]
+    return out
+
+
+@dataclass
+class PairLossDetector:
+    """Two motors lost (the module docstring): `update` per control step, latched."""
+    cfg: LostMotorConfig
+    lost: tuple[int, int] | None = None            # the pair declared lost, latched
+    detected_s: float | None = None
+    _window: list = dataclasses.field(default_factory=list)   # (t_s, excess, residuals (6))
+
+    def reset(self) -> None:
+        self.lost, self.detected_s = None, None
+        self._window = []
+
+    def update(self, t_s: float, d4, contributions, command_pct) -> tuple[int, int] | None:
+        """The pair declared lost, or None. d4: the observer's d (vertical NED down m/s^2, body
+        p, q, r rad/s^2); contributions: `motor_contributions` at this step; command_pct: the
+        four throttles commanded (%)."""
+        if self.lost is not None:
+            return self.lost
+        c = self.cfg
+        d4 = np.asarray(d4, float)
+        contrib = np.asarray(contributions, float)
+        # the strongest single motor's loss: its upward acceleration (contribution < 0: down)
+        excess = float(d4[0] - max(0.0, float(np.max(-contrib[0]))))
+        scale = np.array([1.0] + [c.pair_angular_scale_rad_s2] * 3)
+        resid = np.array([float(np.sum(((d4 + contrib[:, i - 1] + contrib[:, j - 1]) / scale)
+                                       ** 2)) for i, j in PAIRS])
+        self._window.append((float(t_s), excess, resid))
+        t_lo = t_s - c.hold_s - 1e-9
+        self._window = [w for w in self._window if w[0] >= t_lo]
+        if t_s - self._window[0][0] < c.hold_s - 1e-9:
+            return None
+        if np.mean([w[1] for w in self._window]) < c.pair_excess_m_s2:
+            return None
+        # the pair: the least squares over the window's steps with an excess (the loss's own)
+        pair = PAIRS[int(np.argmin(np.sum([w[2] for w in self._window if w[1] > 0.0],
+                                          axis=0)))]
+        if min(command_pct[pair[0] - 1], command_pct[pair[1] - 1]) < c.min_command_pct:
+            return None
+        self.lost, self.detected_s = pair, float(t_s)
+        return pair
 
 
 @dataclass
@@ -87,7 +175,10 @@ def failed_config(cfg: ControllerConfig) -> ControllerConfig:
 
 def status_text(motor: int, response: str = "nmpc") -> str:
     """The STATUSTEXT announcing the loss and what the controller does (at most 50 chars):
-    `response` "nmpc" (the failed NMPC) or "spin" (the spinning controller, spin.py)."""
+    `response` "nmpc" (the failed NMPC) or "spin" (the spinning controller, spin.py); a pair
+    (`motor` 10 i + j: `pair_code`) flies the failed NMPC on the two rotors left."""
+    if motor > 10:
+        return f"motors {motor // 10} and {motor % 10} lost: full thrust, descending"
     if response == "spin":
         return f"motor {motor} lost: spinning, holding position, landing"
     return f"motor {motor} lost: yaw given up, descending to land"

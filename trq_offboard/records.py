@@ -140,4 +140,4 @@ class StepInfo:
     effectiveness: tuple[float, float, float, float] = (1.0, 1.0, 1.0, 1.0)
     cpu: StepTimes = StepTimes()       # the step's CPU time by part
     estimator: EstimatorHealth | None = None   # the fused filter's (None: the autopilot's)
-    lost_motor: int = 0                # the motor declared lost (1..4; lost_motor.py), 0: none
+    lost_motor: int = 0                # the motor declared lost (1..4; a pair 10 i + j), 0: none

@@ -220,3 +220,117 @@ def test_the_switch_hands_over_to_the_spinning_controller():
     ctl.prepare(ref)                              # a no-op while spinning
     ctl.reset(0.0, state)
     assert ctl.spin is None and ctl.lost_motor == 0
+
+
+# --- two motors lost (PairLossDetector) ------------------------------------------------------
+
+PAIR_CFG = LostMotorConfig(below=0.2, hold_s=0.1, min_command_pct=20.0, yaw_weight=0.0,
+                           max_body_rate_rad_s=30.0, descent_speed_m_s=1.0,
+                           pair_excess_m_s2=1.5, pair_angular_scale_rad_s2=5.0)
+
+
+def _contributions(throttle_pct=100.0, tilts_rad=(0.0, 0.0, 0.0, 0.0)):
+    """motor_contributions on the TRQ's prediction model, level, every motor at throttle_pct."""
+    from trq_offboard.config import load_vehicle_model
+    from trq_offboard.lost_motor import motor_contributions
+    from trq_offboard.model import PredictionModel
+
+    model = PredictionModel(load_vehicle_model(PARAMS / "vehicle/trq.yaml"))
+    y = np.concatenate([tilts_rad, [throttle_pct] * 4])
+    return model, motor_contributions(model.accel, np.zeros(12), y)
+
+
+def _pair_detect(d4, contrib, cmd=(100.0,) * 4, seconds=0.3, onset_s=0.05, noise=0.0):
+    """Feed d4 (the loss's d, from onset_s; 0 before) every control period: (pair, time)."""
+    from trq_offboard.lost_motor import PairLossDetector
+
+    det = PairLossDetector(PAIR_CFG)
+    rng = np.random.default_rng(3)
+    for k in range(int(round(seconds / DT))):
+        t = k * DT
+        d = (np.asarray(d4) if t >= onset_s else np.zeros(4)) + noise * rng.standard_normal(4) \
+            * np.array([1.0, 2.0, 2.0, 2.0])
+        pair = det.update(t, d, contrib, np.asarray(cmd))
+        if pair is not None:
+            return pair, det.detected_s
+    return None, None
+
+
+def test_a_motor_s_contribution_is_its_thrust_and_torques():
+    """Level, untilted, 100 %: each motor lifts (f(100) - f(0)) / m (the model's curve: f(0) =
+    c0), the opposite pairs' roll and pitch accelerations cancel, and yaw tells 1-2 (ccw) from
+    3-4 (cw)."""
+    model, c = _contributions()
+    vm = model.vehicle
+    f = vm.thrust_N.c2 * 1e4 + vm.thrust_N.c1 * 100.0
+    assert np.allclose(c[0], -f / vm.mass_kg, rtol=1e-9)
+    assert np.allclose((c[:, 0] + c[:, 1])[1:3], 0.0, atol=1e-9)
+    assert np.allclose((c[:, 2] + c[:, 3])[1:3], 0.0, atol=1e-9)
+    assert (c[:, 0] + c[:, 1])[3] > 0.0 > (c[:, 2] + c[:, 3])[3]
+
+
+@pytest.mark.parametrize("pair", [(1, 2), (3, 4), (1, 3), (2, 4), (1, 4), (2, 3)])
+def test_two_motors_lost_are_told_apart(pair):
+    """d of two motors stopped whole (their shares removed), with the observer's kind of noise:
+    the pair declared within hold_s of the onset (the window's mean: sooner as the excess
+    grows)."""
+    _, c = _contributions()
+    d4 = -(c[:, pair[0] - 1] + c[:, pair[1] - 1])
+    got, t = _pair_detect(d4, c, noise=0.5)
+    assert got == pair
+    assert 0.05 < t <= 0.05 + PAIR_CFG.hold_s + 1e-9
+
+
+def test_one_motor_lost_or_half_a_motor_is_not_a_pair():
+    """One motor stopped whole (its share), or the paper's half: no excess, no pair."""
+    _, c = _contributions()
+    for m in range(4):
+        assert _pair_detect(-c[:, m], c, noise=0.5)[0] is None
+        assert _pair_detect(-0.5 * c[:, m], c, noise=0.5)[0] is None
+
+
+def test_a_pair_commanded_near_idle_is_not_judged():
+    _, c = _contributions()
+    d4 = -(c[:, 0] + c[:, 1])
+    assert _pair_detect(d4, c, cmd=(10.0, 100.0, 100.0, 100.0))[0] is None
+
+
+def test_the_pair_status_text_fits_a_statustext():
+    from trq_offboard.lost_motor import pair_code
+
+    text = status_text(pair_code((1, 2)))
+    assert len(text) <= 50 and text.startswith("motors 1 and 2 lost")
+
+
+def test_a_pair_flies_the_failed_nmpc_with_both_rotors_out():
+    """Before any loss the controller's pair detector reads the observer's d against the
+    motors' shares: two opposite motors' d declares 12, the failed NMPC flies with both rotors'
+    throttles bounded to 0; the single-motor detector is not consulted after it."""
+    from trq_offboard.controller import Controller
+    from trq_offboard.lost_motor import motor_contributions
+    from trq_offboard.records import StateEstimate
+
+    cfg = load_controller(PARAMS / "controller/trq_nmpc_eso_lost.yaml")
+    assert cfg.lost_motor.pair_excess_m_s2 is not None
+    ctl = Controller(cfg)
+    assert ctl.pair_detector is not None
+    state = StateEstimate((0.0, 0.0, -5.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+    ctl.reset(0.0, state)
+    x = state.as_vector()
+    nt = ctl._nt
+    y = ctl._last_u.copy()
+    y[nt:] = 100.0
+    ctl._last_u[nt:] = 100.0
+    c = motor_contributions(ctl.model.accel, x, y)
+    d = np.zeros(6)
+    d[2:6] = -(c[:, 0] + c[:, 1])
+    for k in range(12):
+        ctl._detect(k * DT, x, d, y)
+    assert ctl.lost_motor == 12 and ctl.solver is ctl._failed_solver and ctl.spin is None
+    assert ctl._scale[nt] == 0.0 and ctl._scale[nt + 1] == 0.0
+    ocp = ctl.solver.ocp
+    idx, lo, hi = ocp._c_bounds
+    assert np.all(ocp.ubw[idx[:, 0:2]] == 0.0) and np.all(ocp.ubw[idx[:, 2:]] > 0.9)
+    ctl._scale[nt:] = [0.1, 0.1, 0.1, 1.0]          # a single detection would latch motor 1
+    ctl._detect(0.2, x, d, y)
+    assert ctl.lost_motor == 12 and ctl.detector.lost is None
