@@ -429,19 +429,25 @@ class Controller:
                 self.spin.reset(StateEstimate.from_vector(x),
                                 command=self.allocator.command_of(self._last_u),
                                 hold_pos_ned_m=tuple(x[0:3]), ground_down_m=self.ground_down_m)
-            if self._failed_solver is not None:
-                self.solver.discard()
-                self.solver = self._failed_solver
-                self._set_horizon(self._failed_solver)
-            if self._plan is not None and self.N == len(self._plan[0]):
-                # the warm start: the dead rotor at 0 (another horizon: none, the trim rolled out)
-                u_old = self._plan[0].copy()
-                u_old[:, nt + lost - 1] = 0.0
-                self._plan = (u_old, self._plan[1])
-            else:
-                self._plan = None
+            self._to_failed_solver((lost,))
         self._scale[nt + lost - 1] = 0.0
         self.solver.ocp.set_throttle_scale(self._scale[nt:])
+
+    def _to_failed_solver(self, dead: tuple[int, ...]) -> None:
+        """The failed configuration's NMPC from here (when built), warm-started from the last
+        plan with the dead rotors at 0 (another horizon: none, the trim rolled out)."""
+        nt = self._nt
+        if self._failed_solver is not None:
+            self.solver.discard()
+            self.solver = self._failed_solver
+            self._set_horizon(self._failed_solver)
+        if self._plan is not None and self.N == len(self._plan[0]):
+            u_old = self._plan[0].copy()
+            for m in dead:
+                u_old[:, nt + m - 1] = 0.0
+            self._plan = (u_old, self._plan[1])
+        else:
+            self._plan = None
 
     def _detect_pair(self, t_s: float, x: np.ndarray, pair: tuple[int, int]) -> None:
         """Two motors lost: once, the failed NMPC and the descent from here; every step, both
@@ -450,17 +456,7 @@ class Controller:
         if not self.lost_motor:
             self.lost_motor = pair_code(pair)
             self._descent = (float(t_s), x[0:3].copy())
-            if self._failed_solver is not None:
-                self.solver.discard()
-                self.solver = self._failed_solver
-                self._set_horizon(self._failed_solver)
-            if self._plan is not None and self.N == len(self._plan[0]):
-                u_old = self._plan[0].copy()
-                for m in pair:
-                    u_old[:, nt + m - 1] = 0.0
-                self._plan = (u_old, self._plan[1])
-            else:
-                self._plan = None
+            self._to_failed_solver(pair)
         for m in pair:
             self._scale[nt + m - 1] = 0.0
         self.solver.ocp.set_throttle_scale(self._scale[nt:])
