@@ -612,6 +612,9 @@ class ControllerFile(Strict):
     observer: Observer
     applied_input: Choice("commanded", "outputs")
     applied_delay_s: Num(0.0, 1.0)
+    # the autopilot's low-pass on the body rates it publishes (PX4's IMU_GYRO_CUTOFF, Hz; 0: raw),
+    # which the body-rate observer carries in its output (trq_offboard/rate_observer.py)
+    rates_lowpass_hz: Num(0.0, 1000.0) = 0.0
     delay_compensation: Choice("predict", "none", "auto") = "auto"
     lagged_actuators: _ON_OFF_AUTO = "auto"
     actuator_states: _ON_OFF_AUTO = "auto"

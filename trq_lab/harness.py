@@ -604,8 +604,8 @@ def main(argv: list[str] | None = None) -> int:
 
     from sil_vehicle.faultscript import load_script
     from trq_lab import scenario as run_scenario
-    from trq_offboard.config import load_controller
     from trq_lab.overlays import run_dir
+    from trq_offboard.config import load_controller, with_rates_lowpass
 
     ap = argparse.ArgumentParser(prog="trq-inprocess", description=__doc__.splitlines()[0])
     ap.add_argument("scenario", help="a built-in scenario by name or a scenario YAML by path")
@@ -627,6 +627,7 @@ def main(argv: list[str] | None = None) -> int:
         cfg = load_controller(prepare_controller(c, sc.reference, run_dir(args.out, c)))
         cfg = dataclasses.replace(
             cfg, applied_delay_s=run_scenario.command_delay_s(sc.offboard_impair, False))
+        cfg = with_rates_lowpass(cfg, run_scenario.rates_lowpass_hz(sc.sensing), sc.name)
         sim = sim_params(cfg.vehicle.file, cfg.control_rate_hz, seed=sc.seed,
                          wind_speed_m_s=sc.wind_speed_m_s, wind_from_deg=sc.wind_from_deg,
                          gusts=sc.gusts, offboard_impair=sc.offboard_impair,

@@ -104,6 +104,15 @@ def check_sensing(value: str, where: str, key: str) -> str:
     return resolved
 
 
+def rates_lowpass_hz(sensing: str) -> float:
+    """The low-pass the vehicle puts on the body rates it publishes under the sensing profile
+    `sensing` (a name or an absolute path): its estimator's IMU_GYRO_CUTOFF, none under
+    `truth` (the true rates go out). The controller's rates_lowpass_hz, as a user sets it from
+    their autopilot's parameter."""
+    profile = sensing_profile(sensing, _physics_rate_hz(), "sensing")
+    return 0.0 if profile is None or profile.is_truth else float(profile.estimator.IMU_GYRO_CUTOFF)
+
+
 def command_delay_s(impair: dict[str, float], realtime: bool) -> float:
     """How long a command takes to act after the state it answers was measured: the offboard
     link's round trip (its delay and mean jitter, each way: the telemetry going down, the
@@ -257,9 +266,13 @@ def _fly(scenario: Scenario, run: Run, realtime: bool, ctrl_yaml: Path, sim_yaml
     delay_s = command_delay_s(scenario.offboard_impair, realtime) + (
         serial_delay_s(signing_key_file is not None) if realtime and "--offboard-serial" in vlink
         else 0.0)
+    # the vehicle's published rates' low-pass, as the user sets it from the autopilot's
+    # IMU_GYRO_CUTOFF (without a scenario profile: the controller file's)
+    lowpass = ([] if scenario.sensing is None
+               else ["--rates-lowpass-hz", f"{rates_lowpass_hz(scenario.sensing):g}"])
     ccmd = [sys.executable, "-m", "trq_offboard", "--controller", str(ctrl_yaml), "--connect",
             connect, "--log-dir", str(run.out),
-            "--applied-delay-s", f"{delay_s:g}", *controller_args]
+            "--applied-delay-s", f"{delay_s:g}", *lowpass, *controller_args]
     if signing_key_file is not None:
         vcmd += ["--signing-key-file", str(signing_key_file)]
         ccmd += ["--signing-key-file", str(signing_key_file)]

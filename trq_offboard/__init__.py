@@ -8,6 +8,8 @@ cache) comes from trq_wire.
     model/          the prediction model in CasADi (PredictionModel: dynamics, b0)
     allocation      body wrench <-> throttles and tilts (the hover trim)
     eso             the extended state observer (the disturbance d)
+    rate_observer   the body-rate channels' observer with the autopilot's rate low-pass in its
+                    output (rates_lowpass_hz)
     fused           the fused filter (estimator: fused): position and velocity from the pose,
                     the raw IMU and the model with the observer's d
     predictor       the delay predictor: the commands sent, the actuators' walk, the state when

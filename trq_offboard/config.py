@@ -272,6 +272,7 @@ class ControllerConfig:
     effectiveness: EffectivenessConfig | None = None   # motor_effectiveness (None: off)
     fused: FusedConfig | None = None      # estimator kind fused (None: the autopilot's estimate)
     lost_motor: LostMotorConfig | None = None  # lost_motor (None: no detection)
+    rates_lowpass_hz: float = 0.0         # the published rates' low-pass (IMU_GYRO_CUTOFF; 0: raw)
 
     @property
     def predicts_delay(self) -> bool:
@@ -314,6 +315,7 @@ def controller_config(c: schema.ControllerFile, file: str) -> ControllerConfig:
                     f"expected at most substeps x control_rate_hz = {eso.substeps} x {rate} = "
                     f"{w_max:g} rad/s (explicit Euler substeps of {1e3 / w_max:g} ms; raise "
                     f"substeps for a faster observer) for {file}")
+        check_rates_lowpass(c.rates_lowpass_hz, eso, rate, file)
     w, s, r = c.weights, c.solver, c.reference
     weights = Weights(w.position, w.velocity, w.euler, w.rates, w.terminal_factor, w.tilt,
                       w.throttle, w.tilt_rate, w.output_error)
@@ -352,7 +354,34 @@ def controller_config(c: schema.ControllerFile, file: str) -> ControllerConfig:
                             c.constraints.max_roll_pitch_deg, c.constraints.max_body_rate_rad_s,
                             solver, reference, c.applied_input, c.applied_delay_s,
                             c.delay_compensation, c.lagged_actuators, c.actuator_states,
-                            effectiveness, fused, lost_motor)
+                            effectiveness, fused, lost_motor, c.rates_lowpass_hz)
+
+
+def with_rates_lowpass(cfg: "ControllerConfig", cutoff_hz: float, where: str
+                       ) -> "ControllerConfig":
+    """`cfg` with the published rates' low-pass set to `cutoff_hz` (from the command line or
+    the scenario's sensing profile), checked as the controller file's key is."""
+    import dataclasses
+    if not 0.0 <= cutoff_hz <= 1000.0:
+        raise ConfigError(f"{where}: key 'rates_lowpass_hz': got {cutoff_hz!r}, expected a "
+                          "cutoff in Hz in [0, 1000] (0: raw rates)")
+    check_rates_lowpass(cutoff_hz, cfg.eso, cfg.control_rate_hz, where)
+    return dataclasses.replace(cfg, rates_lowpass_hz=cutoff_hz)
+
+
+def check_rates_lowpass(cutoff_hz: float, eso: EsoConfig | None, control_rate_hz: float,
+                        where: str) -> None:
+    """The body-rate observer integrates the published rates' low-pass with the observer's
+    explicit Euler substeps: its bandwidth 2 pi cutoff_hz at most substeps x control_rate_hz
+    (w h <= 1, as the observer's own). ConfigError naming `where`, the key and the bound."""
+    if eso is None or cutoff_hz <= 0.0:
+        return
+    hz_max = eso.substeps * control_rate_hz / (2.0 * math.pi)
+    if cutoff_hz > hz_max:
+        raise ConfigError(
+            f"{where}: key 'rates_lowpass_hz': got {cutoff_hz!r}, expected at most substeps x "
+            f"control_rate_hz / 2 pi = {hz_max:.4g} Hz (the observer's substeps carry the "
+            f"filter; raise {eso.file}'s substeps), or 0 for raw rates")
 
 
 def load_controller(path: Path | str) -> ControllerConfig:

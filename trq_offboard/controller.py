@@ -68,6 +68,7 @@ from trq_offboard.nmpc.base import Solver
 from trq_offboard.nmpc.cache import compiled_many
 from trq_offboard.nmpc.factory import make_solver
 from trq_offboard.predictor import DelayPredictor
+from trq_offboard.rate_observer import RateObserver
 from trq_offboard.records import (
     ActuatorCommand,
     CommandSource,
@@ -138,6 +139,16 @@ class Controller:
         self.eso = (ExtendedStateObserver(cfg.eso, cfg.control_dt_s,
                                           codegen=cfg.solver.codegen == "auto")
                     if cfg.eso is not None else None)
+        # the body rates published through a low-pass (rates_lowpass_hz, the autopilot's
+        # IMU_GYRO_CUTOFF): their observer carries the filter, so that its lag is not read as a
+        # disturbance (rate_observer.py; the record: docs/decisions/2026-12-05-lossy-link-rates-
+        # lowpass.md); the ESO's own body-rate channels are then not used
+        rot = cfg.eso.rotational if cfg.eso is not None else None
+        self.rate_observer = (RateObserver(cfg.rates_lowpass_hz, rot.omega_o_rad_s,
+                                           cfg.control_dt_s, cfg.eso.substeps,
+                                           cfg.eso.max_disturbance[1])
+                              if rot is not None and rot.output == "rates"
+                              and cfg.rates_lowpass_hz > 0.0 else None)
         self.N, self.h = cfg.horizon_steps, cfg.step_s
         self._rollout = self.model.discrete(self.h, 1)
         # auto: predict, and through the actuator lags, once the delay reaches one control
@@ -265,6 +276,8 @@ class Controller:
         if self.eso is not None:
             eta_dot = np.asarray(self._euler_rate(x)).ravel()
             self.eso.reset(self.eso.measurement(x), np.concatenate([x[3:6], eta_dot]))
+        if self.rate_observer is not None:
+            self.rate_observer.reset(x[9:12])
         self._scale = np.ones(self.model.nu)
         if self.motors is not None:
             self.motors.observer.reset(self._last_u[self._nt:])
@@ -519,10 +532,16 @@ class Controller:
             d = np.zeros(6)
             return d, d, 0.0
         y = self.eso.measurement(x)
+        ro = self.rate_observer
         if t_s > self._last_t and b0 is not None:
             dt = t_s - self._last_t         # the true gap: samples can be lost or skipped
-            self.eso.update(y, self.eso.b0_of(b0), dt)
+            b = self.eso.b0_of(b0)
+            self.eso.update(y, b, dt)
+            if ro is not None:
+                ro.update(x[9:12], b[3:6], dt)
         d = self.eso.disturbance(x[6:9])
+        if ro is not None:
+            d[3:6] = ro.disturbance
         return d, d, self.eso.output_error(y)
 
     def _b0(self, x: np.ndarray, t_s: float, applied: ActuatorCommand | None,

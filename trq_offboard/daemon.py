@@ -25,7 +25,7 @@ from typing import Callable
 
 import trq_params
 
-from trq_offboard.config import ConfigError, ControllerConfig, load_controller
+from trq_offboard.config import ConfigError, ControllerConfig, load_controller, with_rates_lowpass
 from trq_offboard.link.stream import MavlinkStream
 from trq_offboard.link.udp import MavlinkUdp
 from trq_offboard.link.wire import HOME_GROUND_DOWN_M
@@ -68,6 +68,10 @@ def build_parser() -> argparse.ArgumentParser:
                         "delay predictor): 0 in lockstep on a clean link (the default of the "
                         "controller file), the link's round trip on a slow one, plus about "
                         "the solve time in real time")
+    p.add_argument("--rates-lowpass-hz", type=float, default=None,
+                   help="the low-pass the autopilot puts on the body rates it publishes (PX4's "
+                        "IMU_GYRO_CUTOFF, Hz; 0: raw rates), which the body-rate observer "
+                        "carries; default the controller file's rates_lowpass_hz")
     p.add_argument("--signing-key-file", type=Path, default=None,
                    help="MAVLink 2 signing: a file with the 32-byte secret as 64 hex characters; "
                         "everything sent is signed and only signed, fresh telemetry is trusted")
@@ -98,6 +102,8 @@ def main(argv: list[str] | None = None,
                                  "a number of seconds in [0, 1]")
             import dataclasses
             cfg = dataclasses.replace(cfg, applied_delay_s=args.applied_delay_s)
+        if args.rates_lowpass_hz is not None:
+            cfg = with_rates_lowpass(cfg, args.rates_lowpass_hz, "--rates-lowpass-hz")
         connection = Connection.parse(args.connect)
         key = load_key(args.signing_key_file) if args.signing_key_file else None
     except (ConfigError, ValueError) as exc:

@@ -6,7 +6,7 @@ MAVLink bytes, the same flight as the two daemons; about 30 s here).
 It must not crash, must land, and must stay within the fault campaigns' success bar (position RMSE
 after the fault below 0.1 m) with its yaw within 10 deg; and its motor effectiveness observer must
 find motor 1 at about 0.5 and no other motor faulty. What trq_nmpc_eso and the paper's observer
-fly on it, and why the body-rate observer sits below the published rates' low-pass:
+fly on it, and why the body-rate observer carries the published rates' low-pass:
 docs/decisions/2026-12-05-lossy-link-rates-lowpass.md, which also says where the scenario's own
 target (twice the latency bound) stands."""
 

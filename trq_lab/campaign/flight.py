@@ -18,7 +18,7 @@ import time
 import traceback
 from pathlib import Path
 
-from trq_offboard.config import load_controller
+from trq_offboard.config import load_controller, with_rates_lowpass
 from trq_offboard.controller import Controller
 
 from trq_lab import harness as inprocess
@@ -139,6 +139,9 @@ def run_flight(spec: dict, log_dir: str | None = None) -> dict:
                 cfg = dataclasses.replace(
                     cfg, applied_delay_s=run_scenario.command_delay_s(link, False))
             record["applied_delay_s"] = cfg.applied_delay_s
+            if spec.get("sensing") is not None:   # the published rates' low-pass, likewise
+                cfg = with_rates_lowpass(cfg, run_scenario.rates_lowpass_hz(spec["sensing"]),
+                                         "sensing")
             w = spec["wind"]
             if controller == "build":
                 controller = Controller(cfg)
