@@ -953,7 +953,9 @@ FLIGHT_METRICS = ("crashed", "flight_s", "rmse_pos_m", "max_pos_err_m", "rmse_po
                   "est_rmse_pos_m", "est_rmse_att_deg", "diagnosis_s", "max_pos_err_outage_m",
                   # a whole motor lost (issue 40; trq_lab.metrics' lost-motor block)
                   "touchdown_speed_m_s", "touchdown_tilt_deg", "drift_after_fault_m",
-                  "max_thrust_tilt_after_fault_deg", "descent_rate_m_s", "detection_s")
+                  "max_thrust_tilt_after_fault_deg", "descent_rate_m_s", "detection_s",
+                  # the estimator across a touchdown (issue 39; trq_lab.metrics)
+                  "est_jump_touchdown_m")
 # those a flight has only with a sensor outage (a campaign's `outage` axis): flights.csv carries
 # them when the campaign has the axis
 OUTAGE_METRICS = ("max_pos_err_outage_m",)

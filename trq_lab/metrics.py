@@ -31,6 +31,11 @@ the crash, whichever comes first:
                                    largest position error from the outage's start to
                                    OUTAGE_SETTLE_S after its end (None without an outage, or
                                    with no step in that window)
+    est_jump_touchdown_m           the vehicle's estimator across its touchdowns: the largest
+                                   change of its position error (estimate minus truth) from
+                                   TOUCHDOWN_JUMP_PRE_S before a touchdown to TOUCHDOWN_JUMP_POST_S
+                                   after it (`touchdown_estimate_jump`; None under `truth`, or
+                                   without a touchdown)
 """
 
 from __future__ import annotations
@@ -54,6 +59,14 @@ DIAGNOSIS_BAND = 0.1
 # position loop's time constants, and short enough that the flight's own tracking error (the
 # fault's transient, max_pos_err_m) does not stand in for the outage's
 OUTAGE_SETTLE_S = 1.0
+# the window of est_jump_touchdown_m around each touchdown (issue 39: no estimator position jump
+# above 0.1 m across a landing). Before: the error half a second ahead of the contact is the
+# estimate as it flew, before the gear's impulse reaches the IMU (a choice: a few filter time
+# constants of the vision's fusion, short against the landing's descent). After: two seconds
+# hold the impulse, the clipping and what the filter makes of them (a choice); a campaign's log
+# ends when the controller's landing is done, so usually sooner
+TOUCHDOWN_JUMP_PRE_S = 0.5
+TOUCHDOWN_JUMP_POST_S = 2.0
 
 
 @dataclass(frozen=True)
@@ -86,6 +99,7 @@ class RunMetrics:
     touchdown_speed_m_s: float | None = None
     touchdown_tilt_deg: float | None = None
     detection_s: float | None = None
+    est_jump_touchdown_m: float | None = None
 
     def as_dict(self) -> dict:
         return {k: (None if isinstance(v, float) and not math.isfinite(v) else v)
@@ -237,6 +251,7 @@ def compute(controller: str, vehicle: str, truth: dict[str, np.ndarray],
         est_rmse_pos_m=est_pos, est_rmse_att_deg=est_att,
         diagnosis_s=_diagnosis(sm, truth, steps, fault_onset_us),
         max_pos_err_outage_m=outage_error(t_us, err, outage_us),
+        est_jump_touchdown_m=touchdown_estimate_jump(truth),
         **_with_last_touchdown(lost_motor_metrics(truth, steps, fault_onset_us), truth))
 
 
@@ -344,18 +359,51 @@ def touchdown(truth: dict[str, np.ndarray], after_us: int) -> int | None:
     touchdown_tilt_deg (one function, so that there is one)."""
     t = truth["t_us"].astype(np.int64)
     if "touchdown_speed_m_s" in truth:
-        # the plant's own record (sil_vehicle.vehicle, docs/simulator.md): a row where a new
-        # touchdown's speed appears
-        sp = truth["touchdown_speed_m_s"]
-        prev = np.concatenate(([np.nan], sp[:-1]))
-        new = np.isfinite(sp) & ~(sp == prev)
-        hit = np.flatnonzero((t >= after_us) & new)
-        return int(hit[0]) if len(hit) else None
+        hit = [i for i in touchdown_rows(truth) if t[i] >= after_us]
+        return hit[0] if hit else None
     on = truth["pos_d_m"] >= GROUND_DOWN_M + CONTACT_DOWN_M
     if "landed" in truth:
         on |= truth["landed"] > 0.5
     hit = np.flatnonzero((t >= after_us) & on)
     return int(hit[0]) if len(hit) else None
+
+
+def touchdown_rows(truth: dict[str, np.ndarray]) -> list[int]:
+    """Every touchdown's truth row in the plant's own record (sil_vehicle.vehicle,
+    docs/simulator.md): a row where a new touchdown's speed appears in flight.csv's
+    `touchdown_speed_m_s`. Empty without that column (an older log) or without a touchdown."""
+    sp = truth.get("touchdown_speed_m_s")
+    if sp is None:
+        return []
+    prev = np.concatenate(([np.nan], sp[:-1]))
+    return [int(i) for i in np.flatnonzero(np.isfinite(sp) & ~(sp == prev))]
+
+
+def touchdown_estimate_jump(truth: dict[str, np.ndarray], pre_s: float = TOUCHDOWN_JUMP_PRE_S,
+                            post_s: float = TOUCHDOWN_JUMP_POST_S) -> float | None:
+    """How far the vehicle's position estimate jumps across its touchdowns (m): for each
+    touchdown (`touchdown_rows`), the estimate's error e = est_pos - pos (NED) at the last row
+    at or before pre_s ahead of the contact is the reference, and the jump is the largest
+    |e - e_ref| (3-D) over the rows from there to post_s after the contact (or the log's end);
+    the largest over all touchdowns (a bounce is two). A slow drift of the estimate counts as
+    much as a step, since both put the vehicle's idea of where it stands off by that much. Rows
+    without a finite estimate are left out (the reference is the last finite one). None under
+    `truth` (no est_pos_* columns), without a touchdown, or without a finite estimate ahead of
+    any."""
+    if "est_pos_n_m" not in truth:
+        return None
+    t = truth["t_us"].astype(np.int64)
+    err = np.stack([truth[f"est_pos_{a}_m"] - truth[f"pos_{a}_m"] for a in "ned"], axis=1)
+    finite = np.all(np.isfinite(err), axis=1)
+    jumps = []
+    for i in touchdown_rows(truth):
+        before = np.flatnonzero(finite & (t <= t[i] - int(round(pre_s * 1e6))))
+        if not len(before):                  # no estimate ahead of this contact to start from
+            continue
+        i0 = int(before[-1])
+        win = finite & (t >= t[i0]) & (t <= t[i] + int(round(post_s * 1e6)))
+        jumps.append(float(np.linalg.norm(err[win] - err[i0], axis=1).max()))
+    return max(jumps) if jumps else None
 
 
 def lost_motor_metrics(truth: dict[str, np.ndarray], steps: dict[str, np.ndarray],

@@ -5,7 +5,7 @@ default, or an existing cluster).
     trq-campaign smoke --out out/campaign_smoke --workers 2
     trq-campaign CAMPAIGN.yaml --out DIR [--workers N | --scheduler tcp://HOST:8786]
                              [--max-flights N] [--retry-failed] [--keep-logs] [--report-only]
-                             [--dry-run]
+                             [--rescore] [--dry-run]
 
 Each flight is the scenario runner's lockstep vehicle and controller code, flown in one process
 (trq_lab.harness: `Sitl` and `OffboardFlight` joined by an in-memory link carrying the same
@@ -22,6 +22,8 @@ Outputs in DIR:
     success.png, rmse.png   the heat maps
     metrics.json        the report's summary per controller (and the targets missed), which
                         trq-results turns into the README's campaigns row
+    logs/<id>/          with --keep-logs, each flight's flight.csv and controller.csv: what
+                        --rescore measures again when a metric is added after the flights flew
 With a plant axis, report.md also sets every flight against its plant's faulted trim
 (trq_lab.reporting.plant_campaign: envelope classes, rank correlations, paired comparison,
 targets), with

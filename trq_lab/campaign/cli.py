@@ -4,10 +4,10 @@ report (the campaign file and the outputs: `trq_lab.campaign`'s docstring).
     trq-campaign smoke --out out/campaign_smoke --workers 2
     trq-campaign CAMPAIGN.yaml --out DIR [--workers N | --scheduler tcp://HOST:8786]
                              [--max-flights N] [--retry-failed] [--keep-logs] [--report-only]
-                             [--dry-run] [--no-figures]
+                             [--rescore] [--dry-run] [--no-figures]
 
 Dask and tqdm (the `campaign` extra) are imported in one place, `_campaign_extra`: planning
-(--dry-run) and --report-only need neither.
+(--dry-run), --report-only and --rescore need neither.
 
 Exit status: 0 when every flight of the campaign has flown without an error, 1 otherwise, 2 on a
 bad campaign file or command line.
@@ -27,7 +27,7 @@ from pathlib import Path
 import trq_params
 from trq_params import ConfigError
 
-from trq_lab.campaign.flight import run_flight
+from trq_lab.campaign.flight import rescore, run_flight
 from trq_lab.campaign.spec import SENSING_DEFAULT, Campaign, load_campaign
 from trq_lab.campaign.store import flight_inputs, load_results, rows_of, write_csv, write_json
 from trq_lab.reporting.campaign import wind_label, write_report
@@ -151,6 +151,8 @@ SWITCHES = {
     "--keep-logs": "keep each flight's flight.csv and controller.csv in DIR/logs/<id>/ (the "
                    "workers must see DIR)",
     "--report-only": "fly nothing: rewrite flights.csv and report.md from DIR/flights",
+    "--rescore": "fly nothing: measure every flight again from its kept logs (DIR/logs/<id>/, "
+                 "--keep-logs) with the current metrics, then rewrite flights.csv and report.md",
     "--dry-run": "list the flights and exit",
     "--no-figures": "skip the heat-map PNGs",
 }
@@ -199,7 +201,15 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     args.out.mkdir(parents=True, exist_ok=True)
     info = None
-    if not args.report_only:
+    if args.rescore:
+        done = 0
+        for fid, rec in load_results(args.out).items():
+            new = rescore(rec, args.out / "logs")
+            if new is not rec:
+                write_json(args.out / "flights" / f"{fid}.json", new)
+                done += 1
+        print(f"campaign: {done} flights measured again from {args.out / 'logs'}")
+    if not (args.report_only or args.rescore):
         info = run_campaign(campaign, args.out, workers=args.workers, scheduler=args.scheduler,
                             max_flights=args.max_flights, retry_failed=args.retry_failed,
                             keep_logs=args.keep_logs)
@@ -211,7 +221,7 @@ def main(argv: list[str] | None = None) -> int:
                   f"simulated s ({info['cpu_s'] / max(info['flown'], 1):.1f} CPU s a flight); the "
                   f"workers got {info['cpu_share']:.0%} of their cores")
         write_json(args.out / "last_run.json", info)
-    elif (args.out / "last_run.json").is_file():      # --report-only: the last run's figures
+    elif (args.out / "last_run.json").is_file():    # --report-only, --rescore: the last run's
         try:
             info = json.loads((args.out / "last_run.json").read_text())
         except ValueError:

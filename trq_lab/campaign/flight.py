@@ -2,6 +2,7 @@
 
 In: a flight's spec (`spec.load_campaign`). Out: its record (inputs, metrics, status, the error's
 traceback if any); `run_flight` never raises. A worker needs only the installed packages.
+`rescore` measures a flown flight again from its kept logs (a metric added after it flew).
 """
 
 from __future__ import annotations
@@ -170,3 +171,19 @@ def run_flight(spec: dict, log_dir: str | None = None) -> dict:
     record["wall_s"] = round(time.perf_counter() - wall0, 3)
     record["cpu_s"] = round(time.thread_time() - cpu0, 3)    # this worker thread's CPU time
     return record
+
+
+def rescore(record: dict, log_dir: Path) -> dict:
+    """A flown flight's record with its metrics computed again, by the current trq_lab.metrics,
+    from its kept logs (log_dir/<id>/flight.csv and controller.csv: `--keep-logs`), the fault's
+    onset and the outage's window taken from its spec as when it flew. The record as it was when
+    it has no metrics (a failed flight) or its logs are not there; every other field kept."""
+    spec = record["spec"]
+    logs = Path(log_dir) / spec["id"]
+    if record.get("metrics") is None or not all(
+            (logs / name).is_file() for name in ("flight.csv", "controller.csv")):
+        return record
+    _, onset, window = flight_script(spec)
+    metrics = inprocess.flight_metrics(logs, spec["controller"], onset,
+                                       spec["recovery_threshold_m"], outage_us=window)
+    return {**record, "metrics": metrics}

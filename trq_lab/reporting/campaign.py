@@ -327,6 +327,14 @@ def judge_paired_targets(campaign: Campaign, rows: list[dict]
                  f"{' ' + sensing_label(t.sensing) if t.sensing else ''}"
                  f"{' outage ' + t.outage if t.outage else ''} paired ratio "
                  f"{fmt(st and st['median_ratio'], '{:.3f}')} <= {t.max_median_ratio:g}")
+        # a miss the ratio does not explain: say which clause
+        why = [] if st is None else (
+            ([f"crashed {st['crashed']} against {st['other_crashed']}"]
+             if st["crashed"] > st["other_crashed"] else [])
+            + ([f"later diagnosis on {st['later_diagnosis']} of {st['pairs']} pairs"]
+               if t.no_later_diagnosis and st["later_diagnosis"] else []))
+        if not met and why:
+            short += " (" + ", ".join(why) + ")"
         headline.append(f"{short} {'met' if met else 'missed'}")
         if not met:
             failures.append(short)

@@ -53,6 +53,9 @@ FAULTS = {
     "paper_fault50_lossy": "50 %, offboard link 10 % loss, 20 ms each way",
     "nominal": "none",
     "motor1_lost": "0 % (off) from t = 8 s, hovering at 5 m",
+    "mocap_dropout": "50 %; the motion capture off from 14 s to 15 s",
+    "gnss_outage": "50 %, under rtk; the GNSS receiver off from 14 s to 18.5 s",
+    "mocap_lost": "none; the motion capture lost for good at 15 s",
 }
 
 # The controllers' column order (others follow in the order metrics.json lists them).

@@ -97,6 +97,7 @@ def test_a_paired_target_judges_the_median_crashes_and_diagnosis(tmp_path):
     # both profiles: ratios 2, 2, 2, 0.5, 0.7, 0.9: median 1.45 <= 2.5, but the later diagnosis
     assert judged[2]["pairs"] == 6 and judged[2]["median_ratio"] == pytest.approx(1.45)
     assert len(failures) == 2 and "0.700 <= 0.8" in failures[0]
+    assert failures[0].endswith("(later diagnosis on 1 of 3 pairs)")     # the clause missed
     assert any("**missed**" in line for line in lines)
 
 
