@@ -13,6 +13,7 @@ from conftest import ROOT
 from trq_lab.scenario import rates_lowpass_hz
 from trq_offboard.config import ConfigError, load_controller, with_rates_lowpass
 from trq_offboard.daemon import main as offboard_main
+from trq_offboard.rate_observer import RateObserver
 
 CTRL = ROOT / "params" / "controller"
 
@@ -54,7 +55,7 @@ def test_the_controller_hands_the_rate_observers_disturbance_to_the_model():
     cfg = load_controller(CTRL / "trq_nmpc_eso.yaml")
     raw = Controller(dataclasses.replace(cfg, rates_lowpass_hz=0.0))
     filt = Controller(cfg)
-    assert raw.rate_observer is None and filt.rate_observer is not None
+    assert raw.rate_observer is None and isinstance(filt.rate_observer, RateObserver)
     x = np.zeros(12)
     x[2] = -1.0
     for c in (raw, filt):
