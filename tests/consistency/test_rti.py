@@ -132,17 +132,23 @@ def test_the_logged_cost_is_the_nlps(cache_env, name):
                                                  rel=1e-12)
 
 
+def _built_warned_and_solved(cfg, match):
+    """An RTI built under a RuntimeWarning matching `match`, and its first solve from the test
+    problem (its status OK): (the solver, the plan's inputs, its states)."""
+    model, u_trim, x0, x_ref, d, guess = ocp_problem(cfg)
+    with pytest.warns(RuntimeWarning, match=match):
+        rti = RtiSolver(cfg, model, u_trim)
+    u, x, info = rti.solve(x0, x_ref, d, u_trim, guess)
+    assert info.status is SolveStatus.OK
+    return rti, u, x
+
+
 def test_direct_hpipm_missing_falls_back_to_conic(cache_env, monkeypatch):
     """No usable libhpipm (an exotic casadi build): the RTI says so and uses casadi.conic."""
     from trq_offboard.nmpc import hpipm
     monkeypatch.setattr(hpipm, "available", lambda: (False, "libhpipm not found (test)"))
-    cfg = _cfg(codegen="off")
-    model, u_trim, x0, x_ref, d, guess = ocp_problem(cfg)
-    with pytest.warns(RuntimeWarning, match="libhpipm not found"):
-        rti = RtiSolver(cfg, model, u_trim)
+    rti, _, _ = _built_warned_and_solved(_cfg(codegen="off"), "libhpipm not found")
     assert rti.qp_interface == "conic"
-    u, x, info = rti.solve(x0, x_ref, d, u_trim, guess)
-    assert info.status is SolveStatus.OK
 
 
 @pytest.mark.skipif(not _has_compiler(), reason="no C compiler")
@@ -185,13 +191,9 @@ def test_pure_python_fallback_without_compiler(cache_env, monkeypatch):
     monkeypatch.setenv("PATH", "")
     monkeypatch.delenv("CC", raising=False)
     assert cache.find_compiler() is None
-    cfg = _cfg(name="quad_nmpc", hessian="gauss_newton")
-    model, u_trim, x0, x_ref, d, guess = ocp_problem(cfg)
-    with pytest.warns(RuntimeWarning, match="no C compiler"):
-        rti = RtiSolver(cfg, model, u_trim)
+    rti, u, x = _built_warned_and_solved(_cfg(name="quad_nmpc", hessian="gauss_newton"),
+                                         "no C compiler")
     assert rti.build_mode == "interpreted"
-    u, x, info = rti.solve(x0, x_ref, d, u_trim, guess)
-    assert info.status is SolveStatus.OK
     assert np.all(np.isfinite(u)) and np.all(np.isfinite(x))
 
 
