@@ -75,16 +75,28 @@ def motor_contributions(accel, x, y) -> np.ndarray:
     column i what motor i adds (its output against its throttle at 0, where the model's curves
     give c0: 0.19 N less than a stopped rotor's 0 on the TRQ) to [the vertical (NED down,
     m/s^2), the body p, q, r accelerations (rad/s^2)]; `accel` the prediction model's (x, u) ->
-    [dv/dt, domega/dt], y its input vector (the throttles last, %)."""
+    [dv/dt, domega/dt], y its input vector (the throttles last, %). The five inputs (y, and y
+    with each motor at 0) go through one call of `accel` mapped over five columns (it runs every
+    control step before any loss)."""
     y = np.asarray(y, float)
     nt = len(y) - 4
-    base = np.asarray(accel(x, y)).ravel()[2:6]
-    out = np.zeros((4, 4))
+    ys = np.repeat(y[:, None], 5, axis=1)
     for i in range(4):
-        yi = y.copy()
-        yi[nt + i] = 0.0
-        out[:, i] = base - np.asarray(accel(x, yi)).ravel()[2:6]
-    return out
+        ys[nt + i, i + 1] = 0.0
+    xs = np.repeat(np.asarray(x, float).reshape(-1, 1), 5, axis=1)
+    acc = np.asarray(_mapped5(accel)(xs, ys))[2:6]
+    return acc[:, 0:1] - acc[:, 1:]
+
+
+_MAPPED: dict[int, tuple] = {}
+
+
+def _mapped5(accel):
+    """`accel` mapped over five columns, built once per function (kept with it)."""
+    got = _MAPPED.get(id(accel))
+    if got is None or got[0] is not accel:
+        got = _MAPPED[id(accel)] = (accel, accel.map(5))
+    return got[1]
 
 
 @dataclass
