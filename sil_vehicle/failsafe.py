@@ -26,7 +26,12 @@ from sil_vehicle.vehicle import ActuatorCommand, VehicleState
 @dataclass(frozen=True)
 class FailsafeGains:
     hold_s: float = 2.0            # hold altitude before descending
-    descent_m_s: float = 0.5       # descent rate, slowed to a third in the last metre
+    descent_m_s: float = 0.5       # descent rate above the last metre (a choice)
+    # in the last metre: PX4's MPC_LAND_CRWL default. PX4 keeps it above its land detector's
+    # vertical-speed bound (LNDMC_Z_VEL_MAX <= crawl / 1.2, land_detector.Z_VEL_MAX_M_S), so
+    # that a vehicle resting on its gear reads as a descent that stopped; slower, an estimate
+    # sinking on the gear satisfies the descent and the thrust never lets go of the weight
+    crawl_m_s: float = 0.3
     kp_att: float = 432.0          # rad/s^2 per rad (a triple pole at 12 rad/s)
     kd_att: float = 36.0           # rad/s^2 per rad/s
     ki_att: float = 1728.0         # rad/s^2 per rad s
@@ -83,7 +88,7 @@ class FailsafeLander:
         if t < g.hold_s:
             vz_sp = g.kp_z * (self._z_hold - z)
         else:
-            vz_sp = g.descent_m_s * (1.0 if z < -1.0 else 1.0 / 3.0)
+            vz_sp = g.descent_m_s if z < -1.0 else g.crawl_m_s
         e_vz = vz_sp - vz
         self._i_vz = float(np.clip(self._i_vz + e_vz * dt_s, -g.i_limit_vz, g.i_limit_vz))
         az = g.kp_vz * e_vz + g.ki_vz * self._i_vz              # down-positive acceleration

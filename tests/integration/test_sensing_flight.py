@@ -52,13 +52,6 @@ def test_a_mocap_flight_flies_on_the_estimate_and_logs_the_pose(tmp_path):
         assert np.max(np.abs(err)) < 0.03, a
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "a known failure since the body-rate observer changed (trq_nmpc_eso flies another path to the "
-    "same failsafe): the vehicle's lander, on an estimate dead-reckoning without the pose, rests "
-    "on its gear pitched 5-9 deg while the estimate says level and sinking at 0.13 m/s, its "
-    "thrust hovers at 0.87-0.91 of the weight against the land detector's 0.9, and it neither "
-    "declares the ground nor disarms within the flight (docs/decisions/2026-12-05-lossy-link-"
-    "rates-lowpass.md, what is left). Strict: it fails the suite once it passes again."))
 def test_the_motion_capture_lost_in_flight_the_vehicle_descends_on_its_estimate(tmp_path):
     """A sensor fault in a closed-loop flight: the motion capture off for good at 1.5 s. The
     estimator dead-reckons for its no-aid timeout, then the vehicle takes over (position lost:
