@@ -36,6 +36,7 @@ from pymavlink.dialects.v20 import common as mavlink
 from trq_offboard import lost_motor
 from trq_offboard.diagnosis import Diagnosis
 from trq_offboard.fused import HealthReport
+from trq_offboard.landing import GroundContact
 from trq_offboard.link import gnss, wire
 from trq_offboard.link.udp import MavlinkUdp
 from trq_offboard.records import (
@@ -112,6 +113,7 @@ class FlightSummary:
     disarmed: bool = False
     crashed: bool = False
     took_over: bool = False       # started against a flying vehicle
+    ground_by_contact: bool = False   # the landing ended on landing.GroundContact
     offboard: bool = False        # the vehicle granted offboard mode
     errors: list[str] = field(default_factory=list)
 
@@ -462,6 +464,7 @@ class OffboardFlight:
         self.controller.reset(0.0, first.state)
         answered = 0
         down_since: float | None = None
+        contact = GroundContact()
         pending: wire.Odometry | None = first
         prev: StepRecord | None = None       # the last period's record, its period to close
         prev_start = 0
@@ -487,6 +490,12 @@ class OffboardFlight:
                     break
             else:
                 down_since = None
+            # or the plan presses below a vehicle that no longer moves: the ground, whatever
+            # height the estimate gives (trq_offboard/landing.py)
+            if contact.update(t, ref.phase, ref.pos_ned_m[2], odo.state.pos_ned_m[2],
+                              odo.state.vel_ned_m_s[2]):
+                self.summary.ground_by_contact = True
+                break
             applied = self.applied
             wire_rx, self._wire_ns = self._wire_ns, 0     # this state's decode
             if self.streams:
@@ -524,7 +533,8 @@ class OffboardFlight:
                 return self.summary
             if reference.done(t) and not reference.land:
                 break
-        if not self._touched_down(odo.state, ground_z):
+        if not (self._touched_down(odo.state, ground_z) or self._detector_landed()
+                or self.summary.ground_by_contact):
             # a plan without landing ends in the air: never idle the motors or disarm there
             self._finish(t)
             return self.summary

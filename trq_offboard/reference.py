@@ -17,6 +17,8 @@ where the controller takes over (the vehicle on the ground, or already flying):
     hold      [t3, t4)   hover at the manoeuvre's end point for hold_s
     land      [t4, t5)   straight down to the start altitude plus 0.2 m (below the start point: the
                          vehicle touches down gently and stays down), if `land`
+    landed    [t5, ...)  on down at LAND_CRAWL_M_S (a vehicle not down by then is over a ground
+                         its estimate puts too low), until the flight loop sees the ground
     done(t)              true from t5 (from t4 when not landing: the plan then holds forever)
 
 Everything is a pure function of t (float seconds since the same origin as t0_s): no state.
@@ -33,9 +35,14 @@ import numpy as np
 from trq_offboard.config import ReferenceConfig
 from trq_offboard.records import ReferenceSample
 
-__all__ = ["Reference", "LAND_BELOW_M"]
+__all__ = ["Reference", "LAND_BELOW_M", "LAND_CRAWL_M_S"]
 
 LAND_BELOW_M = 0.2
+# after the landing's plan, down on at PX4's MPC_LAND_CRWL until the ground stops it: PX4 lands
+# on a speed, not on a height, so that a height estimate tenths of a metre off still reaches the
+# ground (docs/decisions/2026-12-05-landing-on-a-wrong-height.md)
+LAND_CRAWL_M_S = 0.3
+CRAWL_RAMP_S = 1.0            # a choice: the plan's acceleration stays within the defaults' 0.4 m/s^2
 
 
 def _smoothstep5(s: float) -> tuple[float, float]:
@@ -152,9 +159,17 @@ class Reference:
         if t < self.t4 or not self.cfg.land:
             return (en, ee, ed, 0.0, 0.0, 0.0), "hold"
         dz = self.ground + LAND_BELOW_M - ed
+        if t >= self.t5:
+            # the vehicle not down yet (an estimate whose height is wrong): on down at a crawl,
+            # reached smoothly over CRAWL_RAMP_S
+            x = (t - self.t5) / CRAWL_RAMP_S
+            s, _ = _smoothstep5(x)
+            rise = x ** 4 * (2.5 - 3.0 * x + x * x) if x < 1.0 else x - 0.5   # the integral of s
+            return (en, ee, ed + dz + LAND_CRAWL_M_S * CRAWL_RAMP_S * rise, 0.0, 0.0,
+                    LAND_CRAWL_M_S * s), "landed"
         s, ds = _smoothstep5((t - self.t4) / self.t_land if self.t_land > 0 else 1.0)
         vz = ds * dz / self.t_land if self.t_land > 0 else 0.0
-        return (en, ee, ed + s * dz, 0.0, 0.0, vz), ("land" if t < self.t5 else "landed")
+        return (en, ee, ed + s * dz, 0.0, 0.0, vz), "land"
 
     # --- public -------------------------------------------------------------------------------
     def sample(self, t_s: float) -> ReferenceSample:

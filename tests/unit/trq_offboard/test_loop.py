@@ -369,6 +369,32 @@ def test_land_detector_ends_the_landing_once_down_and_still():
     asyncio.run(scenario())
 
 
+def test_a_landing_on_a_height_the_estimate_gets_wrong_ends_on_the_ground():
+    """Under GNSS the estimate can say 0.7 m up while the vehicle stands on its gear: the
+    touchdown test never fires, and no land detector reports ON_GROUND; the plan pressing 0.9 m
+    below a vehicle that does not move ends the landing (trq_offboard/landing.py), idles the
+    motors and disarms."""
+    from trq_offboard.landing import HOLD_S
+    from trq_offboard.loop import IDLE_STEPS_BEFORE_DISARM
+
+    async def scenario():
+        flight, link, ctl = make_flight(LandingReference(done_at_s=1e9))
+        task = asyncio.create_task(flight.run())
+        await take_off(flight, link)
+        first = 10_000
+        stamp = await answer_until_disarm(
+            flight, link, first, down_m=lambda s: -0.7,
+            check=lambda s: s - first <= 1e6 * HOLD_S + 10_000 * (IDLE_STEPS_BEFORE_DISARM + 3),
+            why="the contact did not fire")
+        assert stamp - first >= 1e6 * HOLD_S
+        flight.on_message(ack(mavlink.MAV_RESULT_ACCEPTED))
+        flight.on_message(odometry(stamp, down_m=-0.7))
+        summary = await asyncio.wait_for(task, WAIT_S)
+        assert summary.landed and summary.disarmed and summary.ground_by_contact
+
+    asyncio.run(scenario())
+
+
 def test_a_lost_arm_is_resent_after_vehicle_time_not_wall_time():
     """In lockstep, answering stamps while ARM waits lets vehicle time run as fast as the
     exchange goes: a lost ARM (a lossy link) must be resent after ACK_TIMEOUT_VEHICLE_US of

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from trq_offboard.config import load_controller
-from trq_offboard.reference import LAND_BELOW_M, Reference
+from trq_offboard.reference import CRAWL_RAMP_S, LAND_BELOW_M, LAND_CRAWL_M_S, Reference
 
 from conftest import ROOT
 
@@ -37,10 +37,14 @@ def test_plan_is_smooth_and_consistent(kind):
     assert speed.max() < 1.0                                       # gentle
     acc = np.gradient(vel, ts, axis=0)
     assert np.linalg.norm(acc, axis=1).max() < 1.0
-    # landing ends below the start point and then holds
-    np.testing.assert_allclose(pos[-1], [pos[-1][0], pos[-1][1], start[2] + LAND_BELOW_M])
+    # landing ends below the start point, then goes on down at a crawl until the ground stops it
+    end = ref.sample(ref.end_time_s)
+    np.testing.assert_allclose(end.pos_ned_m, [pos[-1][0], pos[-1][1], start[2] + LAND_BELOW_M])
     assert not ref.done(ref.end_time_s - 0.01) and ref.done(ref.end_time_s)
-    assert ref.sample(ref.end_time_s + 1).phase == "landed"
+    later = ref.sample(ref.end_time_s + CRAWL_RAMP_S + 1.0)
+    assert later.phase == "landed" and later.vel_ned_m_s[2] == pytest.approx(LAND_CRAWL_M_S)
+    assert later.pos_ned_m[2] == pytest.approx(
+        start[2] + LAND_BELOW_M + LAND_CRAWL_M_S * (CRAWL_RAMP_S / 2 + 1.0))
 
 
 def test_no_landing_holds_forever():
