@@ -22,6 +22,7 @@ cache) comes from trq_wire.
     spin            the lost-motor controller: a spinning relaxed hover on three rotors (LQR
                     about the body-frame orbit under a position loop), its descent and touchdown
     reference       the flight's plan (Reference, ConstantReference)
+    landing         the end of a landing on the ground's contact (GroundContact)
     records         typed records across module boundaries
     loop            the offboard flight over MAVLink (OffboardFlight)
     link/           the MAVLink transport and the wire's arithmetic
