@@ -488,6 +488,7 @@ def load_campaign(path: Path) -> Campaign:
         [top.controller_model]
     flights = []
     seen = set()
+    profile_digests: dict[str, str] = {}
     for fault, wind, traj, link, plant, sensing, outage in cells:
         wind = {**WIND_DEFAULT, **(wind or {})}
         for r in range(repeats):
@@ -507,7 +508,9 @@ def load_campaign(path: Path) -> Campaign:
                 for c in controllers:
                     digest = digests[c]
                     if sensing != SENSING_DEFAULT:      # the profile's files are read too
-                        digest = hashlib.sha256((digest + sensing_digest(sensing)).encode()
+                        if sensing not in profile_digests:      # once a profile, not a flight
+                            profile_digests[sensing] = sensing_digest(sensing)
+                        digest = hashlib.sha256((digest + profile_digests[sensing]).encode()
                                                 ).hexdigest()[:16]
                     spec = {"controller": c, **cell, **extra, "sensing": sensing,
                             "seed": fseed, "timeout_s": timeout,
