@@ -81,7 +81,7 @@ from trq_offboard.records import (
     StepTimes,
 )
 from trq_offboard.reference import FlightReference
-from trq_offboard.spin import SpinController, landing_reference, load_spin_config
+from trq_offboard.spin import SpinController, landing_reference, load_spin_config, spin_sense
 
 __all__ = ["Controller"]
 
@@ -432,11 +432,10 @@ class Controller:
             if self._spins and np.all(others > self.cfg.lost_motor.below):
                 # one motor lost (no other at the detector's threshold): the spinning
                 # controller from here, holding where the loss was declared, its actuators
-                # starting from the last command sent, spinning the way the body already turns
-                # about the orbit's axis (reversing a started spin passes through no spin at
-                # all, where nothing holds the axis: the record)
-                axis = np.asarray(self._spins[(lost, 1)].trim.axis_frd)
-                sense = 1 if float(x[9:12] @ axis) >= 0.0 else -1
+                # starting from the last command sent, spinning the way the body already yaws
+                # (reversing a started spin passes through no spin at all, where nothing holds
+                # the axis: the records; `spin_sense`)
+                sense = spin_sense(x[9:12], self._spins[(lost, 1)].trim.axis_frd)
                 self.spin = self._spins[(lost, sense)]
                 self._spin_t0 = float(t_s)
                 self.spin.reset(StateEstimate.from_vector(x),

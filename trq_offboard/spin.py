@@ -50,7 +50,7 @@ from trq_offboard.records import ActuatorCommand, ReferenceSample, StateEstimate
 
 __all__ = ["SpinWeights", "SpinPosition", "SpinLanding", "SpinConfig", "SpinTrim", "SpinInfo",
            "equilibrium", "SpinController", "landing_reference", "load_spin_config", "spin_config",
-           "load_for_vehicle"]
+           "load_for_vehicle", "spin_sense"]
 
 _IPOPT = {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes", "ipopt.max_iter": 500}
 
@@ -531,6 +531,20 @@ class SpinController:
         for k, i in enumerate(self._live):
             thr[i], til[i] = float(100.0 * u[k]), float(u[3 + k])
         return ActuatorCommand(tuple(thr), tuple(til))
+
+
+# --- the spin's sense at the switch ----------------------------------------------------------
+
+def spin_sense(rates_frd_rad_s, axis_frd) -> int:
+    """The sense of the spin to fly from a switch (omega = sense w n, n the trim's axis, body FRD,
+    pointing up): the way the body already yaws, its rate about body z (r) as it projects on the
+    axis, r n_z (+1 if none). Not the whole rate's projection, omega . n: at the detection the
+    body tumbles towards the dead rotor at 2-4 rad/s about an axis in its x-y plane, whose share
+    along the tilted axis n (up to 1 rad/s) is no spin and, where the yaw rate is small, picked
+    the sense opposite the yaw's and a spin-up through no spin at all (the record:
+    docs/decisions/2026-12-05-lost-motor-axes.md)."""
+    r = float(np.asarray(rates_frd_rad_s, float)[2])
+    return 1 if r * float(axis_frd[2]) >= 0.0 else -1
 
 
 # --- the descent -------------------------------------------------------------------------------
