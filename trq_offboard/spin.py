@@ -441,10 +441,13 @@ class SpinController:
 
     # --- the switch ----------------------------------------------------------------------------
     def reset(self, estimate: StateEstimate | None, *, command: ActuatorCommand | None = None,
-              hold_pos_ned_m=None, ground_down_m: float = 0.0) -> None:
+              hold_pos_ned_m=None, ground_down_m: float = 0.0, integral_m_s2=None) -> None:
         """Start afresh: `command` is the last command sent (the actuators' outputs are taken to
         be there: the lag states start from it; None: from the trim); `hold_pos_ned_m` the point
-        to hold (None: the estimate's position); `ground_down_m` the ground's NED down."""
+        to hold (None: the estimate's position); `ground_down_m` the ground's NED down;
+        `integral_m_s2` the position loop's integral to start from (world NED, m/s^2, bounded by
+        max_integral_m_s2; None: zero): the acceleration the wind asks, which the observer
+        flying before the switch has learnt (its d negated)."""
         if command is None:
             self._act = self._a0.copy()
         else:
@@ -452,7 +455,9 @@ class SpinController:
                                  + [command.tilt_rad[i] for i in self._live])
         self._act = np.clip(self._act, self._lo, self._hi)
         self._in_flight = [self._act.copy() for _ in range(self.delay_steps)]   # oldest first
-        self._integral = np.zeros(3)
+        lim = self.config.position.max_integral_m_s2
+        self._integral = (np.zeros(3) if integral_m_s2 is None
+                          else np.clip(np.asarray(integral_m_s2, float), -lim, lim))
         self._ground = float(ground_down_m)
         if hold_pos_ned_m is None and estimate is not None:
             hold_pos_ned_m = estimate.pos_ned_m

@@ -75,6 +75,18 @@ def test_on_the_orbit_the_command_is_the_trim(controller):
     assert controller.info.axis_error_rad < 1e-6
 
 
+def test_the_position_integral_starts_where_it_is_told(controller):
+    """reset's integral_m_s2 (the wind the observer learnt before the switch, negated) is the
+    position loop's integral's start, bounded by max_integral_m_s2; none: zero."""
+    lim = controller.config.position.max_integral_m_s2
+    controller.reset(None, hold_pos_ned_m=(0.0, 0.0, -5.0), integral_m_s2=(0.95, -0.2, 0.0))
+    assert controller._integral == pytest.approx([0.95, -0.2, 0.0])
+    controller.reset(None, hold_pos_ned_m=(0.0, 0.0, -5.0), integral_m_s2=(9.0, -9.0, 0.0))
+    assert controller._integral == pytest.approx([lim, -lim, 0.0])
+    controller.reset(None, hold_pos_ned_m=(0.0, 0.0, -5.0))
+    assert not np.any(controller._integral)
+
+
 def test_landing_reference_holds_then_descends_then_slows():
     from trq_offboard.spin import SpinLanding
     la = SpinLanding(hold_s=2.0, descent_speed_m_s=1.0, final_height_m=1.0, final_speed_m_s=0.5,
