@@ -545,7 +545,7 @@ def spin_sense(rates_frd_rad_s, axis_frd) -> int:
     pointing up): the way the body already yaws, its rate about body z (r) as it projects on the
     axis, r n_z (+1 if none). Not the whole rate's projection, omega . n: at the detection the
     body tumbles towards the dead rotor at 2-4 rad/s about an axis in its x-y plane, whose share
-    along the tilted axis n (up to 1 rad/s) is no spin and, where the yaw rate is small, picked
+    along the tilted axis n (up to 1.5 rad/s) is no spin and, where the yaw rate is small, picked
     the sense opposite the yaw's and a spin-up through no spin at all (the record:
     docs/decisions/2026-12-05-lost-motor-axes.md)."""
     r = float(np.asarray(rates_frd_rad_s, float)[2])
