@@ -81,7 +81,15 @@ from trq_offboard.records import (
     StepTimes,
 )
 from trq_offboard.reference import FlightReference
-from trq_offboard.spin import SpinController, landing_reference, load_spin_config
+from trq_offboard.spin import SpinController, landing_reference, load_spin_config, spin_sense
+
+# The time constant (s) of the low-pass of the observer's horizontal d (the accelerations the
+# model misses, the motors' share taken out: the wind's drag) carried into the spinning
+# controller's position loop at a switch, its integral's start: without it the loop starts from
+# no wind and the wind pushes the vehicle downwind until the integral has learnt it again.
+# Half a second: longer than the observer's noise, shorter than a gust (a choice; the record:
+# docs/decisions/2026-12-05-lost-motor-axes.md)
+SPIN_WIND_TAU_S = 0.5
 
 __all__ = ["Controller"]
 
@@ -209,6 +217,7 @@ class Controller:
                       if cfg.fused is not None else None)
         self._fused_on = False
         self._eso_d = np.zeros(6)                # the observer's d of the last step
+        self._wind_acc = np.zeros(2)             # the low-pass of d's N, E (SPIN_WIND_TAU_S)
         self._motor_share = np.zeros(3)          # the motors' share of it (effectiveness)
         self._health: EstimatorHealth | None = None
         # a whole motor lost (lost_motor, with the effectiveness observer): the detector, and
@@ -291,6 +300,7 @@ class Controller:
         self.failures = 0
         self._fused_on = False
         self._eso_d = np.zeros(6)
+        self._wind_acc = np.zeros(2)
         self._motor_share = np.zeros(3)
         self._health = None
         if self.detector is not None:
@@ -376,6 +386,9 @@ class Controller:
             if self.detector is not None:
                 self._detect(t_s, x, d_obs, y_now)
         c2 = clock()
+        if self.spin is None and t_s > self._last_t:
+            k = 1.0 - math.exp(-(t_s - self._last_t) / SPIN_WIND_TAU_S)
+            self._wind_acc = self._wind_acc + k * (np.asarray(d[0:2], float) - self._wind_acc)
         self._last_t = float(t_s)
         self._last_d = d
         if self.spin is not None:
@@ -432,16 +445,16 @@ class Controller:
             if self._spins and np.all(others > self.cfg.lost_motor.below):
                 # one motor lost (no other at the detector's threshold): the spinning
                 # controller from here, holding where the loss was declared, its actuators
-                # starting from the last command sent, spinning the way the body already turns
-                # about the orbit's axis (reversing a started spin passes through no spin at
-                # all, where nothing holds the axis: the record)
-                axis = np.asarray(self._spins[(lost, 1)].trim.axis_frd)
-                sense = 1 if float(x[9:12] @ axis) >= 0.0 else -1
+                # starting from the last command sent, spinning the way the body already yaws
+                # (reversing a started spin passes through no spin at all, where nothing holds
+                # the axis: the records; `spin_sense`)
+                sense = spin_sense(x[9:12], self._spins[(lost, 1)].trim.axis_frd)
                 self.spin = self._spins[(lost, sense)]
                 self._spin_t0 = float(t_s)
                 self.spin.reset(StateEstimate.from_vector(x),
                                 command=self.allocator.command_of(self._last_u),
-                                hold_pos_ned_m=tuple(x[0:3]), ground_down_m=self.ground_down_m)
+                                hold_pos_ned_m=tuple(x[0:3]), ground_down_m=self.ground_down_m,
+                                integral_m_s2=(-self._wind_acc[0], -self._wind_acc[1], 0.0))
             self._to_failed_solver((lost,))
         self._scale[nt + lost - 1] = 0.0
         self.solver.ocp.set_throttle_scale(self._scale[nt:])

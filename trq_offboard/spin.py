@@ -50,7 +50,7 @@ from trq_offboard.records import ActuatorCommand, ReferenceSample, StateEstimate
 
 __all__ = ["SpinWeights", "SpinPosition", "SpinLanding", "SpinConfig", "SpinTrim", "SpinInfo",
            "equilibrium", "SpinController", "landing_reference", "load_spin_config", "spin_config",
-           "load_for_vehicle"]
+           "load_for_vehicle", "spin_sense"]
 
 _IPOPT = {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes", "ipopt.max_iter": 500}
 
@@ -441,10 +441,13 @@ class SpinController:
 
     # --- the switch ----------------------------------------------------------------------------
     def reset(self, estimate: StateEstimate | None, *, command: ActuatorCommand | None = None,
-              hold_pos_ned_m=None, ground_down_m: float = 0.0) -> None:
+              hold_pos_ned_m=None, ground_down_m: float = 0.0, integral_m_s2=None) -> None:
         """Start afresh: `command` is the last command sent (the actuators' outputs are taken to
         be there: the lag states start from it; None: from the trim); `hold_pos_ned_m` the point
-        to hold (None: the estimate's position); `ground_down_m` the ground's NED down."""
+        to hold (None: the estimate's position); `ground_down_m` the ground's NED down;
+        `integral_m_s2` the position loop's integral to start from (world NED, m/s^2, bounded by
+        max_integral_m_s2; None: zero): the acceleration the wind asks, which the observer
+        flying before the switch has learnt (its d negated)."""
         if command is None:
             self._act = self._a0.copy()
         else:
@@ -452,7 +455,9 @@ class SpinController:
                                  + [command.tilt_rad[i] for i in self._live])
         self._act = np.clip(self._act, self._lo, self._hi)
         self._in_flight = [self._act.copy() for _ in range(self.delay_steps)]   # oldest first
-        self._integral = np.zeros(3)
+        lim = self.config.position.max_integral_m_s2
+        self._integral = (np.zeros(3) if integral_m_s2 is None
+                          else np.clip(np.asarray(integral_m_s2, float), -lim, lim))
         self._ground = float(ground_down_m)
         if hold_pos_ned_m is None and estimate is not None:
             hold_pos_ned_m = estimate.pos_ned_m
@@ -531,6 +536,20 @@ class SpinController:
         for k, i in enumerate(self._live):
             thr[i], til[i] = float(100.0 * u[k]), float(u[3 + k])
         return ActuatorCommand(tuple(thr), tuple(til))
+
+
+# --- the spin's sense at the switch ----------------------------------------------------------
+
+def spin_sense(rates_frd_rad_s, axis_frd) -> int:
+    """The sense of the spin to fly from a switch (omega = sense w n, n the trim's axis, body FRD,
+    pointing up): the way the body already yaws, its rate about body z (r) as it projects on the
+    axis, r n_z (+1 if none). Not the whole rate's projection, omega . n: at the detection the
+    body tumbles towards the dead rotor at 2-4 rad/s about an axis in its x-y plane, whose share
+    along the tilted axis n (up to 1.5 rad/s) is no spin and, where the yaw rate is small, picked
+    the sense opposite the yaw's and a spin-up through no spin at all (the record:
+    docs/decisions/2026-12-05-lost-motor-axes.md)."""
+    r = float(np.asarray(rates_frd_rad_s, float)[2])
+    return 1 if r * float(axis_frd[2]) >= 0.0 else -1
 
 
 # --- the descent -------------------------------------------------------------------------------

@@ -6,13 +6,20 @@
 # flights.csv and summary.md beside this script. Record:
 # docs/decisions/2026-12-05-lost-motor-on-seeds.md.
 #   nice bash docs/results/lost_motor_pairs/run.sh /tmp/l20/pairs
+# SCENARIOS and SEEDS choose others (motors12_lost_wind on 5 seeds: lost_motor_pairs_wind/,
+# docs/decisions/2026-12-05-lost-motor-axes.md):
+#   SCENARIOS=motors12_lost_wind SEEDS="1 2 3 4 5" nice bash .../run.sh /tmp/pairs_wind \
+#     docs/results/lost_motor_pairs_wind
 set -euo pipefail
 REPO=$(cd "$(dirname "$0")/../../.." && pwd)
 OUT=${1:-/tmp/lost_motor_pairs}
+DEST=${2:-$(dirname "$0")}
+SCENARIOS=${SCENARIOS:-motors12_lost motors13_lost}
+SEEDS=${SEEDS:-$(seq 1 20)}
 PY=${PY:-$REPO/.venv/bin}
 mkdir -p "$OUT"
-for scenario in motors12_lost motors13_lost; do
-  for seed in $(seq 1 20); do
+for scenario in $SCENARIOS; do
+  for seed in $SEEDS; do
     dir="$OUT/$scenario/s$seed"
     [ -f "$dir/metrics.json" ] && continue
     mkdir -p "$dir"
@@ -25,4 +32,4 @@ for scenario in motors12_lost motors13_lost; do
       || true
   done
 done
-"$PY/python" "$(dirname "$0")/summary.py" "$OUT" "$(dirname "$0")"
+"$PY/python" "$(dirname "$0")/summary.py" "$OUT" "$DEST"

@@ -194,8 +194,9 @@ def test_the_switch_hands_over_to_the_spinning_controller():
     assert ctl.lost_motor_response == "nmpc"
     state = StateEstimate((1.0, -2.0, -5.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
 
-    def declare(scale):
+    def declare(scale, wind_acc=(0.0, 0.0)):
         ctl.reset(0.0, state)
+        ctl._wind_acc = np.array(wind_acc)       # the low-pass of the observer's d (N, E)
         ctl._scale[ctl._nt:] = scale
         ctl._last_u[ctl._nt:] = 70.0
         for k in range(12):
@@ -203,8 +204,10 @@ def test_the_switch_hands_over_to_the_spinning_controller():
 
     declare([0.1, 0.1, 1.0, 1.0])               # two motors down: today's failed NMPC
     assert ctl.lost_motor == 1 and ctl.spin is None and ctl.solver is ctl._failed_solver
-    declare([0.1, 1.0, 1.0, 1.0])
+    declare([0.1, 1.0, 1.0, 1.0], wind_acc=(-0.95, 0.2))    # 8 m/s from the north
     assert ctl.lost_motor == 1 and ctl.spin is ctl._spins[(1, 1)]     # no spin yet: +1
+    # the wind the observer learnt is where the spinning controller's position integral starts
+    assert ctl.spin._integral == pytest.approx([0.95, -0.2, 0.0])
     assert ctl.lost_motor_response == "spin"
     assert status_text(1, "spin") == "motor 1 lost: spinning, holding position, landing"
     assert len(status_text(4, "spin")) <= 50

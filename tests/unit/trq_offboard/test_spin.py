@@ -11,7 +11,7 @@ import pytest
 from trq_offboard.config import load_vehicle_model
 from trq_offboard.records import ReferenceSample, StateEstimate
 from trq_offboard.spin import (SpinController, equilibrium, landing_reference,
-                               load_spin_config)
+                               load_spin_config, spin_sense)
 from trq_params.loader import ConfigError
 
 from conftest import PARAMS, TRQ_YAML
@@ -75,6 +75,18 @@ def test_on_the_orbit_the_command_is_the_trim(controller):
     assert controller.info.axis_error_rad < 1e-6
 
 
+def test_the_position_integral_starts_where_it_is_told(controller):
+    """reset's integral_m_s2 (the wind the observer learnt before the switch, negated) is the
+    position loop's integral's start, bounded by max_integral_m_s2; none: zero."""
+    lim = controller.config.position.max_integral_m_s2
+    controller.reset(None, hold_pos_ned_m=(0.0, 0.0, -5.0), integral_m_s2=(0.95, -0.2, 0.0))
+    assert controller._integral == pytest.approx([0.95, -0.2, 0.0])
+    controller.reset(None, hold_pos_ned_m=(0.0, 0.0, -5.0), integral_m_s2=(9.0, -9.0, 0.0))
+    assert controller._integral == pytest.approx([lim, -lim, 0.0])
+    controller.reset(None, hold_pos_ned_m=(0.0, 0.0, -5.0))
+    assert not np.any(controller._integral)
+
+
 def test_landing_reference_holds_then_descends_then_slows():
     from trq_offboard.spin import SpinLanding
     la = SpinLanding(hold_s=2.0, descent_speed_m_s=1.0, final_height_m=1.0, final_speed_m_s=0.5,
@@ -136,6 +148,20 @@ def test_the_spin_turns_the_way_the_live_rotors_push():
     assert SpinController(cfg, vm, 1).direction == 1
     assert SpinController(cfg, vm, 4).direction == -1
     assert SpinController(cfg, vm, 4, direction=1).direction == 1
+
+
+def test_the_sense_at_the_switch_is_the_yaws_not_the_tumbles():
+    """lost_motor_axes' worst flight (motor 3 at 8 s, calm; the record
+    2026-12-05-lost-motor-axes.md): at the detection the body rolls and pitches towards the dead
+    rotor at (-1.27, -3.78) rad/s and yaws at -0.22. The whole rate's projection on motor 3's
+    axis is negative (-0.46 rad/s: the tumble's), the yaw's positive: the sense is the yaw's
+    (+1: omega = +w n turns the body -z, as r < 0 does)."""
+    axis = equilibrium(load_vehicle_model(TRQ_YAML), 3, 20.0).axis_frd
+    rates = (-1.27, -3.78, -0.22)
+    assert float(np.dot(rates, axis)) < -0.3
+    assert spin_sense(rates, axis) == 1
+    assert spin_sense((-1.27, -3.78, 0.22), axis) == -1
+    assert spin_sense((0.0, 0.0, 0.0), axis) == 1
 
 
 def test_a_non_finite_estimate_gives_the_trim(controller):
