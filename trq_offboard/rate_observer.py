@@ -88,15 +88,20 @@ class RateObserver:
         """Advance by dt_s (default one control period) to the measured (filtered) rates,
         with the angular acceleration b0 (3) held."""
         y = np.asarray(rates, float)
-        b0 = np.asarray(b0, float)
         dt = self.dt if dt_s is None else float(dt_s)
         n = max(1, int(math.ceil(self.substeps * dt / self.dt - 1e-9)))
         h = dt / n
         s = self.s
-        step = y - self._y_prev
-        for i in range(n):
-            e = self._y_prev + ((i + 1) / n) * step - s[0]
-            ds = self.a @ s + np.outer(self.b, b0) + np.outer(self.l, e)
+        y_prev = self._y_prev
+        # the measurement at each substep's end (first-order hold), all substeps at once; the
+        # input's term B b0 and the gain as a column formed once: the same figures as forming
+        # them every substep, in fewer NumPy calls
+        # (docs/decisions/2026-12-05-fused-filter-period-cut.md)
+        ys = y_prev + (np.arange(1, n + 1) / n)[:, None] * (y - y_prev)
+        a, l_col = self.a, self.l[:, None]
+        bb = np.outer(self.b, np.asarray(b0, float))
+        for y_i in ys:
+            ds = a @ s + bb + l_col * (y_i - s[0])
             s = s + h * ds
         s[3] = np.clip(s[3], -self.lim, self.lim)
         self.s = s
