@@ -146,7 +146,8 @@ class Controller:
         rot = cfg.eso.rotational if cfg.eso is not None else None
         self.rate_observer = (RateObserver(cfg.rates_lowpass_hz, rot.omega_o_rad_s,
                                            cfg.control_dt_s, cfg.eso.substeps,
-                                           cfg.eso.max_disturbance[1])
+                                           cfg.eso.max_disturbance[1],
+                                           codegen=cfg.solver.codegen == "auto")
                               if rot is not None and rot.output == "rates"
                               and cfg.rates_lowpass_hz > 0.0 else None)
         self.N, self.h = cfg.horizon_steps, cfg.step_s
