@@ -378,6 +378,12 @@ class FusedFilter:
         self._imu_last_us: int | None = None
         self._imu_nominal_us = round(1e6 / cfg.imu_rate_hz)
         self._mocap_std = np.full(3, cfg.mocap_std_m)
+        # the variances a pose of the default noise carries, formed once (None: the noise not
+        # finite and > 0, every such pose dropped, as `add_pose` drops one)
+        r = self._mocap_std * self._mocap_std
+        self._mocap_r = ((2.0 * r if cfg.autopilot_vel_std_m_s > 0.0 else r)
+                         if math.isfinite(cfg.mocap_std_m) and cfg.mocap_std_m > 0.0 else None)
+        self._dropout_us = round(cfg.dropout_s * 1e6)
         self._candidates: list[tuple[int, np.ndarray, np.ndarray, np.ndarray]] = []
         self.last_pose_us: int | None = None
         self._zero_health()
@@ -446,8 +452,13 @@ class FusedFilter:
     def add_pose(self, t_us: int, pos_ned_m, std_ned_m=None) -> None:
         """One position (motion capture, or a GNSS fix in NED) at its time of validity, with
         its 1-sigma errors per axis (None: mocap_std_m), fused at the next `step`."""
+        if std_ned_m is None:          # the default noise: its variances formed once
+            r = self._mocap_r
+            if r is not None and math.isfinite(pos_ned_m[0] + pos_ned_m[1] + pos_ned_m[2]):
+                self._poses.append(_Pose(int(t_us), np.array(pos_ned_m, float), r))
+            return
         p = np.array(pos_ned_m, float)
-        std = (self._mocap_std if std_ned_m is None else np.array(std_ned_m, float))
+        std = np.array(std_ned_m, float)
         if math.isfinite(p[0] + p[1] + p[2] + std[0] + std[1] + std[2]) and std.min() > 0.0:
             r = std * std
             if self.cfg.autopilot_vel_std_m_s > 0.0:
@@ -734,7 +745,7 @@ class FusedFilter:
 
     def dead_reckoning(self, t_us: int) -> bool:
         return self.last_pose_us is None or \
-            t_us - self.last_pose_us > round(self.cfg.dropout_s * 1e6)
+            t_us - self.last_pose_us > self._dropout_us
 
     def health(self, t_us: int) -> Health:
         x, P = self.x.tolist(), self.P
