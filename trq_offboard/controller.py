@@ -371,7 +371,7 @@ class Controller:
             # explains is not a motor's, and unbounded it would throw the filter off
             if self.fused is not None:
                 share = d_obs[0:3] - d[0:3]
-                norm = float(np.linalg.norm(share))
+                norm = math.sqrt(share.dot(share))     # np.linalg.norm's figure, cheaper
                 lim = self.cfg.eso.max_disturbance[0]
                 self._motor_share = share if norm <= lim else share * (lim / norm)
             if self.detector is not None:

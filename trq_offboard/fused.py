@@ -478,7 +478,9 @@ class FusedFilter:
         t_us = int(t_us)
         if t_us <= last.t_us:
             return self.health(t_us)
-        rot = last.rot if euler_rad is None else rotation_ned_frd(*euler_rad)
+        # (the angles as Python floats: the same products as NumPy scalars', cheaper)
+        rot = last.rot if euler_rad is None else \
+            rotation_ned_frd(*np.asarray(euler_rad, float).tolist())
         period = _Period(t_us, np.asarray(a_known_ned, float).copy(), rot, last.x, last.P)
         std = self.cfg.autopilot_vel_std_m_s
         if std > 0.0 and vel_ned_m_s is not None:
@@ -550,8 +552,10 @@ class FusedFilter:
             if k == 0 or periods[k - 1].t_us > pose.t_us:
                 self.dropped += 1
                 continue
-            periods[k].poses.append(pose)
-            periods[k].poses.sort(key=lambda p: p.t_us)
+            kept = periods[k].poses
+            kept.append(pose)
+            if len(kept) > 1:
+                kept.sort(key=lambda p: p.t_us)
             first = min(first, k)
         self._poses.clear()
         return first
@@ -590,10 +594,10 @@ class FusedFilter:
         for k in range(max(first, 1), newest + 1):
             prev, p = periods[k - 1], periods[k]
             acc = self._acc(k)
-            gate = self._gate(k)
+            gate = self.cfg.accel_gate if prev.acc_taken else self._gate(k)
             vel = p.vel
             x, P, t = prev.x, prev.P, prev.t_us
-            active = [q for q in p.poses if q.kind in (_NEW, _FUSED, _RESET)]
+            active = [q for q in p.poses if q.kind in (_NEW, _FUSED, _RESET)] if p.poses else ()
             done = False
             for i, q in enumerate(active):
                 last = i == len(active) - 1
