@@ -611,7 +611,7 @@ class FusedFilter:
         if p.covered_s <= 0.0:
             return None
         if p.acc is None:               # formed once, until a sample is added to the period
-            # (ndarray.dot: the figures of @, in a third of its time)
+            # (ndarray.dot: the figures of @, cheaper: 2026-12-05-fused-filter-period-cut.md)
             z = (self._periods[k - 1].rot.dot(p.w0) + p.rot.dot(p.w1)) / p.covered_s \
                 + self._g_ned
             p.acc = z, self.cfg.accel_std_m_s2 ** 2 / (p.covered_s * self.cfg.imu_rate_hz)
