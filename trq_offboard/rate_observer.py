@@ -74,10 +74,11 @@ def observer_gain(cutoff_hz: float, omega_o_rad_s: float) -> np.ndarray:
 
 def _substep(rows, y_i, b0, h: float, a1: tuple, gain: tuple):
     """One explicit Euler substep of the observer (module docstring) to the measurement y_i:
-    the rows (f, f', w, d) of the next state. Written for NumPy rows (3 axes at once) and for
-    CasADi SX scalars alike, so that both paths do the same arithmetic in the same order."""
+    the rows (f, f', w, d) of the next state, each a list over the axes, worked per axis (CasADi
+    SX scalars for the kernel, Python floats for the pure path): both paths do the same
+    arithmetic in the same order."""
     f, fd, w, d = rows
-    if isinstance(f, list):                 # CasADi: per axis
+    if isinstance(f, list):                 # per axis (CasADi scalars, or floats)
         return [list(r) for r in zip(*(_substep((f[j], fd[j], w[j], d[j]), y_i[j], b0[j], h,
                                                 a1, gain) for j in range(len(f))))]
     e = y_i - f
@@ -146,14 +147,17 @@ class RateObserver:
             self.s = self._period_fn(self.s, self._y_prev, y, b0, dt).reshape(4, 3)
             self._y_prev = y.copy()
             return
+        # per axis in Python floats: the same operations as NumPy's on 3-vectors, cheaper
         h = dt / n
-        y_prev = self._y_prev
-        step = y - y_prev
-        rows = list(self.s)
+        yp, yn, b = self._y_prev.tolist(), y.tolist(), b0.tolist()
+        step = [yn[j] - yp[j] for j in range(3)]
+        rows = self.s.tolist()
         for i in range(n):
-            y_i = y if i == n - 1 else y_prev + ((i + 1) / n) * step
-            rows = _substep(rows, y_i, b0, h, self._a1, self._l)
-        rows[3] = np.minimum(np.maximum(rows[3], -self.lim), self.lim)
+            frac = (i + 1) / n
+            y_i = yn if i == n - 1 else [yp[j] + frac * step[j] for j in range(3)]
+            rows = _substep(rows, y_i, b, h, self._a1, self._l)
+        lim = self.lim
+        rows[3] = [min(max(v, -lim), lim) for v in rows[3]]
         self.s = np.array(rows)
         self._y_prev = y.copy()
 
