@@ -154,7 +154,8 @@ class Controller:
         rot = cfg.eso.rotational if cfg.eso is not None else None
         self.rate_observer = (RateObserver(cfg.rates_lowpass_hz, rot.omega_o_rad_s,
                                            cfg.control_dt_s, cfg.eso.substeps,
-                                           cfg.eso.max_disturbance[1])
+                                           cfg.eso.max_disturbance[1],
+                                           codegen=cfg.solver.codegen == "auto")
                               if rot is not None and rot.output == "rates"
                               and cfg.rates_lowpass_hz > 0.0 else None)
         self.N, self.h = cfg.horizon_steps, cfg.step_s
@@ -380,7 +381,7 @@ class Controller:
             # explains is not a motor's, and unbounded it would throw the filter off
             if self.fused is not None:
                 share = d_obs[0:3] - d[0:3]
-                norm = float(np.linalg.norm(share))
+                norm = math.sqrt(share.dot(share))     # np.linalg.norm's figure, cheaper
                 lim = self.cfg.eso.max_disturbance[0]
                 self._motor_share = share if norm <= lim else share * (lim / norm)
             if self.detector is not None:

@@ -71,8 +71,10 @@ The arithmetic is written once, over an array module (`_NUMPY` or `_CASADI`: `_t
 fuse it, predict on to the stretch's end, there the gated accelerometer and the velocity) is one
 CasADi function generated as C and compiled once through nmpc/cache.py with the filter's
 constants baked in as literals and the times inputs: a period is one call, one more per extra
-pose. The gates' decisions stay in Python. tests/unit/trq_offboard/test_fused_compiled.py holds
-the two paths equal.
+pose; the usual step, which runs the period before again (a HIGHRES_IMU interval straddling its
+end) and then the new one, is one call of the two stretches chained (the same arithmetic: the
+same figures to the bit). The gates' decisions stay in Python.
+tests/unit/trq_offboard/test_fused_compiled.py holds the paths equal.
 
 Pure: integer microseconds of the vehicle's clock in, no clock read, no I/O, no randomness.
 """
@@ -256,44 +258,83 @@ def _period_end(x, P, dt, a_known, z_acc, var_acc, has_acc, gate, z_vel, var_vel
     return ca.if_else(has_vel, xv, x), ca.if_else(has_vel, Pv, P), nis, take
 
 
+def _stretch_symbols(cfg: FusedConfig, x, P, suffix: str = ""):
+    """One stretch's inputs after x and P (dt1, a_known, pos, r_pos, has_pos, dt2, z_acc,
+    var_acc, has_acc, gate, z_vel, var_vel, has_vel) as SX symbols, and the function of them
+    that returns the stretch's outputs (`_kernel`) for a gate given as an expression."""
+    sym = ca.SX.sym
+    m = 3
+    ins = [sym("dt1" + suffix), sym("a_known" + suffix, m), sym("pos" + suffix, m),
+           sym("r_pos" + suffix, m), sym("has_pos" + suffix), sym("dt2" + suffix),
+           sym("z_acc" + suffix, m), sym("var_acc" + suffix), sym("has_acc" + suffix),
+           sym("gate" + suffix), sym("z_vel" + suffix, m), sym("var_vel" + suffix),
+           sym("has_vel" + suffix)]
+
+    def stretch(x, P, gate):
+        dt1, a, pos, r_pos, has_pos, dt2, z, var, has_acc, _, zv, varv, has_vel = ins
+        F, G, Q = _transition(dt1, cfg, _CASADI)
+        xp_, Pp = _predict(x, P, F, G, Q, a)
+        ratio, xu, Pu = _pose_fusion(xp_, Pp, pos, r_pos, cfg, _CASADI)
+        xs, Ps = ca.if_else(has_pos, xu, xp_), ca.if_else(has_pos, Pu, Pp)
+        xe, Pe, nis, take = _period_end(xs, Ps, dt2, a, z, var, has_acc, gate, zv, varv,
+                                        has_vel, cfg, _CASADI)
+        return xe, Pe, ratio, nis, take, xp_, Pp
+
+    return ins, stretch
+
+
 @functools.lru_cache(maxsize=8)
-def _kernel(cfg: FusedConfig) -> ca.Function | None:
-    """One stretch of a period as a compiled function (module docstring), or None without a C
-    compiler or when a build fails (then the NumPy path runs):
+def _kernels(cfg: FusedConfig) -> tuple[ca.Function, ca.Function] | None:
+    """The compiled kernels (`_kernel` and `_kernel_two`), built together, or None without a
+    C compiler or when a build fails (then the NumPy path runs)."""
+    from trq_offboard.nmpc.cache import compiled_many, find_compiler
+
+    if find_compiler() is None:
+        return None
+    built = compiled_many([_kernel(cfg), _kernel_two(cfg)])
+    if any(how == "interpreted" for _, how in built):
+        return None
+    return built[0][0], built[1][0]
+
+
+def _kernel(cfg: FusedConfig) -> ca.Function:
+    """One stretch of a period as a CasADi function (module docstring), compiled by
+    `_kernels`:
         period (x, P, dt1, a_known, pos, r_pos, has_pos, dt2, z_acc, var_acc, has_acc, gate,
                 z_vel, var_vel, has_vel)
                -> (x_end, P_end, pose test ratio, accel NIS, accel taken, x_prior, P_prior)
     predicted dt1 to the pose (the prior), the pose fused when has_pos, predicted dt2 on to
     the stretch's end, there the accelerometer's mean (if has_acc and within `gate`; inf:
     taken whatever it says) and the autopilot's velocity (has_vel). dt in s; P dense,
-    CasADi's column-major order. Kept per process (one build a configuration); each filter
-    wraps it in its own buffers."""
-    from trq_offboard.nmpc.cache import compiled_many, find_compiler
-
-    if find_compiler() is None:
-        return None
-    n, m = N_STATES, 3
+    CasADi's column-major order. Compiled once a process a configuration (`_kernels`); each
+    filter wraps it in its own buffers."""
+    n = N_STATES
     x, P = ca.SX.sym("x", n), ca.SX.sym("P", n, n)
-    sym = ca.SX.sym
-    dt1, a, pos, r_pos, has_pos = sym("dt1"), sym("a_known", m), sym("pos", m), \
-        sym("r_pos", m), sym("has_pos")
-    dt2, z, var, has_acc, gate = sym("dt2"), sym("z_acc", m), sym("var_acc"), \
-        sym("has_acc"), sym("gate")
-    zv, varv, has_vel = sym("z_vel", m), sym("var_vel"), sym("has_vel")
-    F, G, Q = _transition(dt1, cfg, _CASADI)
-    xp_, Pp = _predict(x, P, F, G, Q, a)
-    ratio, xu, Pu = _pose_fusion(xp_, Pp, pos, r_pos, cfg, _CASADI)
-    xs, Ps = ca.if_else(has_pos, xu, xp_), ca.if_else(has_pos, Pu, Pp)
-    xe, Pe, nis, take = _period_end(xs, Ps, dt2, a, z, var, has_acc, gate, zv, varv, has_vel,
-                                    cfg, _CASADI)
-    fn = ca.Function(f"fused_period_{n}",
-                     [x, P, dt1, a, pos, r_pos, has_pos, dt2, z, var, has_acc, gate, zv, varv,
-                      has_vel],
-                     [xe, Pe, ratio, nis, take, xp_, Pp])
-    built = compiled_many([fn])
-    if built[0][1] == "interpreted":
-        return None
-    return built[0][0]
+    ins, stretch = _stretch_symbols(cfg, x, P)
+    return ca.Function(f"fused_period_{n}", [x, P, *ins], list(stretch(x, P, ins[9])))
+
+
+def _kernel_two(cfg: FusedConfig) -> ca.Function:
+    """Two periods' stretches in one function, the second from the first's end: the same
+    arithmetic as two calls of `_kernel` (the first's outputs are the second's inputs), so
+    the same figures to the bit, for the usual step that runs the period before again (a
+    HIGHRES_IMU interval straddling its end) and then the new one (`FusedFilter._run_two`):
+        two (x, P, <the first stretch's inputs after P>, <the second's, its gate the one
+             that holds when the first period's accelerometer was rejected>, gate_taken)
+            -> (x1, P1, nis1, taken1, x2, P2, ratio2, nis2, taken2, x2_prior, P2_prior)
+    The second's gate is gate_taken when the first period's accelerometer was taken (or it
+    had none), as `FusedFilter._gate` has it."""
+    n = N_STATES
+    x, P = ca.SX.sym("x", n), ca.SX.sym("P", n, n)
+    ins1, stretch1 = _stretch_symbols(cfg, x, P)
+    ins2, stretch2 = _stretch_symbols(cfg, x, P, "_2")
+    gate_taken = ca.SX.sym("gate_taken")
+    x1, P1, _, nis1, take1, _, _ = stretch1(x, P, ins1[9])
+    taken1 = ca.logic_or(ca.logic_not(ins1[8]), take1)
+    x2, P2, ratio2, nis2, take2, xp2, Pp2 = stretch2(x1, P1, ca.if_else(taken1, gate_taken,
+                                                                         ins2[9]))
+    return ca.Function(f"fused_two_{n}", [x, P, *ins1, *ins2, gate_taken],
+                       [x1, P1, nis1, take1, x2, P2, ratio2, nis2, take2, xp2, Pp2])
 
 
 class _Kernel:
@@ -370,14 +411,21 @@ class FusedFilter:
         self.g = gravity_m_s2
         self._g_ned = np.array([0.0, 0.0, gravity_m_s2])
         self._trans: dict[int, tuple] = {}
-        kernel = _kernel(cfg) if codegen else None
-        self._fn = _Kernel(kernel) if kernel is not None else None
+        kernels = _kernels(cfg) if codegen else None
+        self._fn = _Kernel(kernels[0]) if kernels is not None else None
+        self._fn2 = _Kernel(kernels[1]) if kernels is not None else None
         self._periods: list[_Period] = []
         self._imu: list[tuple[int, np.ndarray]] = []       # (time_usec, f FRD) not yet placed
         self._poses: list[_Pose] = []
         self._imu_last_us: int | None = None
         self._imu_nominal_us = round(1e6 / cfg.imu_rate_hz)
         self._mocap_std = np.full(3, cfg.mocap_std_m)
+        # the variances a pose of the default noise carries, formed once (None: the noise not
+        # finite and > 0, every such pose dropped, as `add_pose` drops one)
+        r = self._mocap_std * self._mocap_std
+        self._mocap_r = ((2.0 * r if cfg.autopilot_vel_std_m_s > 0.0 else r)
+                         if math.isfinite(cfg.mocap_std_m) and cfg.mocap_std_m > 0.0 else None)
+        self._dropout_us = round(cfg.dropout_s * 1e6)
         self._candidates: list[tuple[int, np.ndarray, np.ndarray, np.ndarray]] = []
         self.last_pose_us: int | None = None
         self._zero_health()
@@ -446,8 +494,13 @@ class FusedFilter:
     def add_pose(self, t_us: int, pos_ned_m, std_ned_m=None) -> None:
         """One position (motion capture, or a GNSS fix in NED) at its time of validity, with
         its 1-sigma errors per axis (None: mocap_std_m), fused at the next `step`."""
+        if std_ned_m is None:          # the default noise: its variances formed once
+            r = self._mocap_r
+            if r is not None and math.isfinite(pos_ned_m[0] + pos_ned_m[1] + pos_ned_m[2]):
+                self._poses.append(_Pose(int(t_us), np.array(pos_ned_m, float), r))
+            return
         p = np.array(pos_ned_m, float)
-        std = (self._mocap_std if std_ned_m is None else np.array(std_ned_m, float))
+        std = np.array(std_ned_m, float)
         if math.isfinite(p[0] + p[1] + p[2] + std[0] + std[1] + std[2]) and std.min() > 0.0:
             r = std * std
             if self.cfg.autopilot_vel_std_m_s > 0.0:
@@ -467,7 +520,9 @@ class FusedFilter:
         t_us = int(t_us)
         if t_us <= last.t_us:
             return self.health(t_us)
-        rot = last.rot if euler_rad is None else rotation_ned_frd(*euler_rad)
+        # (the angles as Python floats: the same products as NumPy scalars', cheaper)
+        rot = last.rot if euler_rad is None else \
+            rotation_ned_frd(*np.asarray(euler_rad, float).tolist())
         period = _Period(t_us, np.asarray(a_known_ned, float).copy(), rot, last.x, last.P)
         std = self.cfg.autopilot_vel_std_m_s
         if std > 0.0 and vel_ned_m_s is not None:
@@ -490,7 +545,8 @@ class FusedFilter:
         first = len(periods) - 1
         later = []
         span_max = IMU_MAX_SPAN_INTERVALS * self._imu_nominal_us
-        for t, f in sorted(self._imu, key=lambda s: s[0]):
+        imu = self._imu if len(self._imu) < 2 else sorted(self._imu, key=lambda s: s[0])
+        for t, f in imu:
             if t > t_us:                       # after this state: the next period's
                 later.append((t, f))
                 continue
@@ -538,8 +594,10 @@ class FusedFilter:
             if k == 0 or periods[k - 1].t_us > pose.t_us:
                 self.dropped += 1
                 continue
-            periods[k].poses.append(pose)
-            periods[k].poses.sort(key=lambda p: p.t_us)
+            kept = periods[k].poses
+            kept.append(pose)
+            if len(kept) > 1:
+                kept.sort(key=lambda p: p.t_us)
             first = min(first, k)
         self._poses.clear()
         return first
@@ -553,7 +611,9 @@ class FusedFilter:
         if p.covered_s <= 0.0:
             return None
         if p.acc is None:               # formed once, until a sample is added to the period
-            z = (self._periods[k - 1].rot @ p.w0 + p.rot @ p.w1) / p.covered_s + self._g_ned
+            # (ndarray.dot: the figures of @, cheaper: 2026-12-05-fused-filter-period-cut.md)
+            z = (self._periods[k - 1].rot.dot(p.w0) + p.rot.dot(p.w1)) / p.covered_s \
+                + self._g_ned
             p.acc = z, self.cfg.accel_std_m_s2 ** 2 / (p.covered_s * self.cfg.imu_rate_hz)
         return p.acc
 
@@ -573,42 +633,107 @@ class FusedFilter:
         its poses (the new ones gated here), accelerometer mean and velocity."""
         periods = self._periods
         newest = len(periods) - 1
-        for k in range(max(first, 1), newest + 1):
-            prev, p = periods[k - 1], periods[k]
-            acc = self._acc(k)
-            gate = self._gate(k)
-            vel = p.vel
-            x, P, t = prev.x, prev.P, prev.t_us
-            active = [q for q in p.poses if q.kind in (_NEW, _FUSED, _RESET)]
-            done = False
-            for i, q in enumerate(active):
-                last = i == len(active) - 1
-                out = self._stretch(x, P, q.t_us - t, p.a_known, q, p.t_us - q.t_us if last
-                                    else 0, acc if last else None, gate, vel if last else None)
-                x_end, P_end, ratio, nis, taken = out
-                prior = None
-                if q.kind == _NEW:
-                    if ratio > 1.0:
-                        prior = self._prior()
-                    self._decide(q, ratio, prior)
-                if q.kind in (_RESET, _REJECTED, _HELD) and prior is None:
+        first = max(first, 1)
+        if first == newest - 1 and self._fn2 is not None and self._run_two(newest):
+            return
+        for k in range(first, newest + 1):
+            self._run_period(k, newest)
+
+    def _run_two(self, k: int) -> bool:
+        """Periods k - 1 and k (the newest) in one call of the two-period kernel (the usual
+        step: a HIGHRES_IMU interval straddled k - 1's end), when k - 1 holds at most one pose,
+        already fused, and k at most one, new: the same figures and decisions as running each
+        (`_run_period`). A new pose past its gate runs period k again the usual way (its prior
+        and the decision's bookkeeping). False, nothing done, when the periods hold more."""
+        periods = self._periods
+        p0, p1, p2 = periods[k - 2], periods[k - 1], periods[k]
+        q1 = q2 = None
+        if p1.poses:
+            active = [q for q in p1.poses if q.kind in (_NEW, _FUSED, _RESET)]
+            if len(active) > 1 or (active and active[0].kind != _FUSED):
+                return False
+            q1 = active[0] if active else None
+        if p2.poses:
+            if len(p2.poses) > 1 or p2.poses[0].kind != _NEW:
+                return False
+            q2 = p2.poses[0]
+        cfg = self.cfg
+        acc1, acc2 = self._acc(k - 1), self._acc(k)
+        gate1 = cfg.accel_gate if p0.acc_taken else self._gate(k - 1)
+        # period k's gate when k - 1's accelerometer is rejected (`_gate` with it rejected)
+        m = cfg.accel_reject_max
+        prev = periods[max(1, k - m):k]
+        gate2_not = math.inf if len(prev) == m and not any(p.acc_taken for p in prev[:-1]) \
+            else cfg.accel_gate
+        fn = self._fn2
+        args, res = fn.args, fn.results
+        args[0][:], fn.p_in[:] = p0.x, p0.P
+        t = p0.t_us
+        if q1 is None:
+            self._set_stretch(args, 2, p1.t_us - t, p1.a_known, None, 0, acc1, gate1, p1.vel)
+        else:
+            self._set_stretch(args, 2, q1.t_us - t, p1.a_known, q1, p1.t_us - q1.t_us, acc1,
+                              gate1, p1.vel)
+        t = p1.t_us
+        if q2 is None:
+            self._set_stretch(args, 15, p2.t_us - t, p2.a_known, None, 0, acc2, gate2_not,
+                              p2.vel)
+        else:
+            self._set_stretch(args, 15, q2.t_us - t, p2.a_known, q2, p2.t_us - q2.t_us, acc2,
+                              gate2_not, p2.vel)
+        args[28][0] = cfg.accel_gate
+        fn.evaluate()
+        p1.x, p1.P = res[0].copy(), _matrix(res[1])
+        self._acc_result(k - 1, acc1, res[2][0], res[3][0] > 0.0, k)
+        if q2 is not None:
+            ratio = res[6][0]
+            if not ratio <= 1.0:            # past the gate (or not a number): the usual way
+                self._run_period(k, k)
+                return True
+            self._decide(q2, ratio, None)
+        p2.x, p2.P = res[4].copy(), _matrix(res[5])
+        self._acc_result(k, acc2, res[7][0], res[8][0] > 0.0, k)
+        return True
+
+    def _run_period(self, k: int, newest: int) -> None:
+        """Period k run again from the posterior before it, with its poses (the new ones
+        gated here), accelerometer mean and velocity."""
+        periods = self._periods
+        prev, p = periods[k - 1], periods[k]
+        acc = self._acc(k)
+        gate = self.cfg.accel_gate if prev.acc_taken else self._gate(k)
+        vel = p.vel
+        x, P, t = prev.x, prev.P, prev.t_us
+        active = [q for q in p.poses if q.kind in (_NEW, _FUSED, _RESET)] if p.poses else ()
+        done = False
+        for i, q in enumerate(active):
+            last = i == len(active) - 1
+            out = self._stretch(x, P, q.t_us - t, p.a_known, q, p.t_us - q.t_us if last
+                                else 0, acc if last else None, gate, vel if last else None)
+            x_end, P_end, ratio, nis, taken = out
+            prior = None
+            if q.kind == _NEW:
+                if ratio > 1.0:
                     prior = self._prior()
-                if q.kind == _FUSED:
-                    if last:
-                        x, P, done = x_end, P_end, True
-                        self._acc_result(k, acc, nis, taken, newest)
-                    else:
-                        x, P = x_end, P_end
-                elif q.kind == _RESET:
-                    x, P = self._reset_to(q, *prior)
-                else:                               # rejected or held: the prior goes on
-                    x, P = prior
-                t = q.t_us
-            if not done:
-                x, P, _, nis, taken = self._stretch(x, P, p.t_us - t, p.a_known, None, 0, acc,
-                                                    gate, vel)
-                self._acc_result(k, acc, nis, taken, newest)
-            p.x, p.P = x, P
+                self._decide(q, ratio, prior)
+            if q.kind in (_RESET, _REJECTED, _HELD) and prior is None:
+                prior = self._prior()
+            if q.kind == _FUSED:
+                if last:
+                    x, P, done = x_end, P_end, True
+                    self._acc_result(k, acc, nis, taken, newest)
+                else:
+                    x, P = x_end, P_end
+            elif q.kind == _RESET:
+                x, P = self._reset_to(q, *prior)
+            else:                               # rejected or held: the prior goes on
+                x, P = prior
+            t = q.t_us
+        if not done:
+            x, P, _, nis, taken = self._stretch(x, P, p.t_us - t, p.a_known, None, 0, acc,
+                                                gate, vel)
+            self._acc_result(k, acc, nis, taken, newest)
+        p.x, p.P = x, P
 
     def _acc_result(self, k: int, acc, nis: float, taken: bool, newest: int) -> None:
         p = self._periods[k]
@@ -685,22 +810,9 @@ class FusedFilter:
         accelerometer's NIS, taken; the prior at the pose: `_prior`)."""
         fn = self._fn
         if fn is not None:
-            args, p_in, res = fn.args, fn.p_in, fn.results
-            args[0][:], p_in[:], args[2][0], args[3][:] = x, P, dt1_us * 1e-6, a_known
-            if pose is None:
-                args[6][0] = 0.0
-            else:
-                args[4][:], args[5][:], args[6][0] = pose.pos, pose.r_pos, 1.0
-            args[7][0] = dt2_us * 1e-6
-            if acc is None:
-                args[10][0] = 0.0
-            else:
-                args[8][:], args[9][0], args[10][0], args[11][0] = acc[0], acc[1], 1.0, gate
-            if vel is None:
-                args[14][0] = 0.0
-            else:
-                std = self.cfg.autopilot_vel_std_m_s
-                args[12][:], args[13][0], args[14][0] = vel, 2.0 * std * std, 1.0
+            res = fn.results
+            fn.args[0][:], fn.p_in[:] = x, P
+            self._set_stretch(fn.args, 2, dt1_us, a_known, pose, dt2_us, acc, gate, vel)
             fn.evaluate()
             return (res[0].copy(), _matrix(res[1]), res[2][0], res[3][0], res[4][0] > 0.0)
         ratio, nis, taken = math.nan, math.nan, False
@@ -722,6 +834,28 @@ class FusedFilter:
             x, P, _ = _update(x, P, _H_VEL, vel - x[3:6], 2.0 * std * std * _I3)
         return x, P, ratio, nis, taken
 
+    def _set_stretch(self, args, i: int, dt1_us: int, a_known, pose: _Pose | None,
+                     dt2_us: int, acc, gate: float, vel) -> None:
+        """A stretch's inputs after x and P into a kernel's args from index i on (`_kernel`'s
+        order: dt1, a_known, pos, r_pos, has_pos, dt2, z_acc, var_acc, has_acc, gate, z_vel,
+        var_vel, has_vel)."""
+        args[i][0], args[i + 1][:] = dt1_us * 1e-6, a_known
+        if pose is None:
+            args[i + 4][0] = 0.0
+        else:
+            args[i + 2][:], args[i + 3][:], args[i + 4][0] = pose.pos, pose.r_pos, 1.0
+        args[i + 5][0] = dt2_us * 1e-6
+        if acc is None:
+            args[i + 8][0] = 0.0
+        else:
+            args[i + 6][:], args[i + 7][0], args[i + 8][0], args[i + 9][0] = \
+                acc[0], acc[1], 1.0, gate
+        if vel is None:
+            args[i + 12][0] = 0.0
+        else:
+            std = self.cfg.autopilot_vel_std_m_s
+            args[i + 10][:], args[i + 11][0], args[i + 12][0] = vel, 2.0 * std * std, 1.0
+
     def _prior(self):
         """The prior at the pose of the last `_stretch` with one: (x, P)."""
         fn = self._fn
@@ -731,7 +865,7 @@ class FusedFilter:
 
     def dead_reckoning(self, t_us: int) -> bool:
         return self.last_pose_us is None or \
-            t_us - self.last_pose_us > round(self.cfg.dropout_s * 1e6)
+            t_us - self.last_pose_us > self._dropout_us
 
     def health(self, t_us: int) -> Health:
         x, P = self.x.tolist(), self.P

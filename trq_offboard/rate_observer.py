@@ -18,8 +18,14 @@ L places the error dynamics' poles at the filter's own pair and a double pole at
 ESO's bandwidth): the filter's modes are as well known as the filter, and the disturbance's are
 what the bandwidth governs. Integrated by explicit Euler substeps over a control period with the
 measurement interpolated linearly between samples (first-order hold), as trq_offboard/eso.py.
+Each substep is written out per row (f' + l0 e; (a10 f + a11 f' + a12 w) + l1 e; (d + b0) +
+l2 e; l3 e), the same arithmetic in the same order on both paths: the update over one control
+period (`substeps` steps, the usual case) is also one CasADi function of (s, y_prev, y, b0, dt),
+generated as C and compiled once through nmpc/cache.py (`codegen`, as the ESO's; without a
+compiler CasADi's interpreter runs it), and the NumPy loop serves any other gap (lost samples)
+and the pure path (docs/decisions/2026-12-05-fused-filter-period-cut.md).
 
-    ro = RateObserver(cutoff_hz, omega_o_rad_s, control_dt_s, substeps)
+    ro = RateObserver(cutoff_hz, omega_o_rad_s, control_dt_s, substeps, codegen=True)
     ro.reset(rates)                                 # at rest on the measured rates
     ro.update(rates_measured, b0_angular, dt_s)     # one control period
     ro.rates, ro.disturbance                        # the present body rate and d (3 each)
@@ -31,6 +37,7 @@ from __future__ import annotations
 
 import math
 
+import casadi as ca
 import numpy as np
 
 __all__ = ["RateObserver", "observer_gain"]
@@ -65,11 +72,28 @@ def observer_gain(cutoff_hz: float, omega_o_rad_s: float) -> np.ndarray:
     return phi @ np.linalg.solve(obs, np.array([0.0, 0.0, 0.0, 1.0]))
 
 
+def _substep(rows, y_i, b0, h: float, a1: tuple, gain: tuple):
+    """One explicit Euler substep of the observer (module docstring) to the measurement y_i:
+    the rows (f, f', w, d) of the next state, each a list over the axes, worked per axis (CasADi
+    SX scalars for the kernel, Python floats for the pure path): both paths do the same
+    arithmetic in the same order."""
+    f, fd, w, d = rows
+    if isinstance(f, list):                 # per axis (CasADi scalars, or floats)
+        return [list(r) for r in zip(*(_substep((f[j], fd[j], w[j], d[j]), y_i[j], b0[j], h,
+                                                a1, gain) for j in range(len(f))))]
+    e = y_i - f
+    return [f + h * (fd + gain[0] * e),
+            fd + h * (a1[0] * f + a1[1] * fd + a1[2] * w + gain[1] * e),
+            w + h * (d + b0 + gain[2] * e),
+            d + h * (gain[3] * e)]
+
+
 class RateObserver:
     """Three body axes, each the 4-state observer above."""
 
     def __init__(self, cutoff_hz: float, omega_o_rad_s: float, control_dt_s: float,
-                 substeps: int, max_disturbance: float = math.inf) -> None:
+                 substeps: int, max_disturbance: float = math.inf, codegen: bool = False
+                 ) -> None:
         self.a, self.b, self.c = _model(cutoff_hz)
         self.l = observer_gain(cutoff_hz, omega_o_rad_s)
         self.dt = control_dt_s
@@ -77,6 +101,34 @@ class RateObserver:
         self.lim = max_disturbance
         self.s = np.zeros((4, 3))           # rows f, f', w, d; columns the body axes
         self._y_prev = np.zeros(3)
+        # the filter row's coefficients (A's second row) and the gain, as plain floats
+        self._a1 = tuple(float(v) for v in self.a[1, 0:3])
+        self._l = tuple(float(v) for v in self.l)
+        self._period_fn = self._build_period() if codegen else None
+
+    def _build_period(self):
+        """update() over one control period as a compiled function (module docstring):
+        (s (4x3 row-major), y_prev, y, b0, dt) -> s (4x3 row-major)."""
+        from trq_offboard.model.dynamics import NumpyFunction
+        from trq_offboard.nmpc.cache import compiled
+
+        n = self.substeps
+        ss, yp, ys, bs, dts = (ca.SX.sym(name, k) for name, k in
+                               (("s", 12), ("y_prev", 3), ("y", 3), ("b0", 3), ("dt", 1)))
+        h = dts[0] / n
+        rows = [[ss[3 * r + j] for j in range(3)] for r in range(4)]
+        step = [ys[j] - yp[j] for j in range(3)]
+        for i in range(n):
+            frac = (i + 1) / n
+            # the last substep's end is the sample itself (CasADi simplifies yp + 1 (y - yp)
+            # to y: the NumPy loop does the same)
+            y_i = [ys[j] if i == n - 1 else yp[j] + frac * step[j] for j in range(3)]
+            rows = _substep(rows, y_i, bs, h, self._a1, self._l)
+        lim = self.lim
+        rows[3] = [ca.fmin(ca.fmax(v, -lim), lim) for v in rows[3]]
+        fn = ca.Function(f"rate_observer_period_{n}", [ss, yp, ys, bs, dts],
+                         [ca.vertcat(*(v for row in rows for v in row))])
+        return NumpyFunction(compiled(fn, True)[0])
 
     def reset(self, rates: np.ndarray, disturbance: np.ndarray | None = None) -> None:
         y = np.asarray(rates, float)
@@ -91,15 +143,22 @@ class RateObserver:
         b0 = np.asarray(b0, float)
         dt = self.dt if dt_s is None else float(dt_s)
         n = max(1, int(math.ceil(self.substeps * dt / self.dt - 1e-9)))
+        if n == self.substeps and self._period_fn is not None:     # one control period
+            self.s = self._period_fn(self.s, self._y_prev, y, b0, dt).reshape(4, 3)
+            self._y_prev = y.copy()
+            return
+        # per axis in Python floats: the same operations as NumPy's on 3-vectors, cheaper
         h = dt / n
-        s = self.s
-        step = y - self._y_prev
+        yp, yn, b = self._y_prev.tolist(), y.tolist(), b0.tolist()
+        step = [yn[j] - yp[j] for j in range(3)]
+        rows = self.s.tolist()
         for i in range(n):
-            e = self._y_prev + ((i + 1) / n) * step - s[0]
-            ds = self.a @ s + np.outer(self.b, b0) + np.outer(self.l, e)
-            s = s + h * ds
-        s[3] = np.clip(s[3], -self.lim, self.lim)
-        self.s = s
+            frac = (i + 1) / n
+            y_i = yn if i == n - 1 else [yp[j] + frac * step[j] for j in range(3)]
+            rows = _substep(rows, y_i, b, h, self._a1, self._l)
+        lim = self.lim
+        rows[3] = [min(max(v, -lim), lim) for v in rows[3]]
+        self.s = np.array(rows)
         self._y_prev = y.copy()
 
     @property

@@ -68,3 +68,24 @@ def test_bad_figures_are_refused():
         observer_gain(0.0, 100.0)
     with pytest.raises(ValueError, match="omega_o_rad_s"):
         observer_gain(40.0, -1.0)
+
+
+@pytest.mark.skipif(__import__("trq_offboard.nmpc.cache", fromlist=["find_compiler"])
+                    .find_compiler() is None, reason="no C compiler")
+def test_the_compiled_period_is_the_numpy_loop_to_the_bit():
+    """One control period as the compiled function (codegen) and as the NumPy loop: the same
+    arithmetic in the same order, so the same bits; other gaps (lost samples) take the loop on
+    both; the clip on d applies to both. A change of the kernel's arithmetic alone fails."""
+    rng = np.random.default_rng(5)
+    loop = RateObserver(CUTOFF_HZ, 100.0, DT, SUBSTEPS, max_disturbance=20.0)
+    kern = RateObserver(CUTOFF_HZ, 100.0, DT, SUBSTEPS, max_disturbance=20.0, codegen=True)
+    assert loop._period_fn is None and kern._period_fn is not None
+    for ro in (loop, kern):
+        ro.reset(np.array([0.1, -0.2, 0.05]))
+    for k in range(400):
+        dt = DT if k % 7 else 2 * DT           # a lost sample now and then
+        y, b0 = rng.normal(size=3), rng.normal(size=3) * 30.0
+        loop.update(y, b0, dt)
+        kern.update(y, b0, dt)
+        assert np.array_equal(loop.s, kern.s), (k, loop.s - kern.s)
+    assert np.any(np.abs(kern.disturbance) == 20.0)     # the clip was reached

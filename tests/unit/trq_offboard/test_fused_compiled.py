@@ -117,6 +117,40 @@ def test_the_compiled_kernels_equal_the_numpy_path_over_a_sequence():
 
 
 @needs_compiler
+def test_the_two_period_kernel_gives_two_single_calls_figures_to_the_bit():
+    """The usual step (the period before run again, then the new one) in one call of the
+    two-period kernel: every period's x and P, and every decision, exactly those of the same
+    filter running each period by itself, over the sequence (which takes both paths, and the
+    way back when a new pose is past its gate)."""
+    two, one = _start(True), _start(True)
+    one._fn2 = None                      # each period by itself
+    calls = {"two": 0, "taken": 0}
+    inner = two._run_two
+
+    def counted(k):
+        calls["two"] += 1
+        done = inner(k)
+        calls["taken"] += done
+        return done
+    two._run_two = counted
+    for t_us, imu, poses, a_known, euler in _sequence(500):
+        health = []
+        for f in (two, one):
+            for t_imu, f_frd in imu:
+                f.add_imu(t_imu, f_frd)
+            for pose in poses:
+                f.add_pose(*pose)
+            health.append(f.step(t_us, a_known, euler))
+        assert health[0] == health[1] or (np.isnan(health[0].test_ratio)
+                                          and np.isnan(health[1].test_ratio)), t_us
+        assert two.accel_rejected == one.accel_rejected and two.dropped == one.dropped
+        for a, b in zip(two._periods, one._periods):
+            assert np.array_equal(a.x, b.x) and np.array_equal(a.P, b.P), t_us
+            assert a.acc_taken == b.acc_taken
+    assert calls["taken"] > 100 and calls["two"] > calls["taken"], calls
+
+
+@needs_compiler
 def test_the_kernels_do_not_change_a_period_without_samples():
     """A period with neither IMU nor pose is the prediction alone, in both paths; a step to
     the same time changes nothing."""
