@@ -80,20 +80,26 @@ def _start(codegen: bool) -> FusedFilter:
     return f
 
 
-@needs_compiler
-def test_the_compiled_kernels_equal_the_numpy_path_over_a_sequence():
-    c, p = _start(True), _start(False)
-    assert c.compiled and not p.compiled
-    flags = []
-    for t_us, imu, poses, a_known, euler in _sequence(500):
+def _fed_in_step(filters, sequence):
+    """Each step of the sequence given to every filter (its IMU samples, its poses, then the
+    step): (t_us, the filters' health records) a step."""
+    for t_us, imu, poses, a_known, euler in sequence:
         health = []
-        for f in (c, p):
+        for f in filters:
             for t_imu, f_frd in imu:
                 f.add_imu(t_imu, f_frd)
             for pose in poses:
                 f.add_pose(*pose)
             health.append(f.step(t_us, a_known, euler))
-        hc, hp = health
+        yield t_us, health
+
+
+@needs_compiler
+def test_the_compiled_kernels_equal_the_numpy_path_over_a_sequence():
+    c, p = _start(True), _start(False)
+    assert c.compiled and not p.compiled
+    flags = []
+    for t_us, (hc, hp) in _fed_in_step((c, p), _sequence(500)):
         assert (hc.dead_reckoning, hc.rejected, c.dropped, c.last_pose_us) == \
             (hp.dead_reckoning, hp.rejected, p.dropped, p.last_pose_us), t_us
         assert hc.test_ratio == pytest.approx(hp.test_ratio, rel=1e-9, abs=1e-12)
@@ -133,14 +139,7 @@ def test_the_two_period_kernel_gives_two_single_calls_figures_to_the_bit():
         calls["taken"] += done
         return done
     two._run_two = counted
-    for t_us, imu, poses, a_known, euler in _sequence(500):
-        health = []
-        for f in (two, one):
-            for t_imu, f_frd in imu:
-                f.add_imu(t_imu, f_frd)
-            for pose in poses:
-                f.add_pose(*pose)
-            health.append(f.step(t_us, a_known, euler))
+    for t_us, health in _fed_in_step((two, one), _sequence(500)):
         assert health[0] == health[1] or (np.isnan(health[0].test_ratio)
                                           and np.isnan(health[1].test_ratio)), t_us
         assert two.accel_rejected == one.accel_rejected and two.dropped == one.dropped
