@@ -42,7 +42,9 @@ LAND_BELOW_M = 0.2
 # on a speed, not on a height, so that a height estimate tenths of a metre off still reaches the
 # ground (docs/decisions/2026-12-05-landing-on-a-wrong-height.md)
 LAND_CRAWL_M_S = 0.3
-CRAWL_RAMP_S = 1.0            # a choice: the plan's acceleration stays within the defaults' 0.4 m/s^2
+# a choice: the crawl reached over a second, at most 1.875 LAND_CRAWL_M_S / CRAWL_RAMP_S of
+# acceleration (the quintic's steepest slope)
+CRAWL_RAMP_S = 1.0
 
 
 def _smoothstep5(s: float) -> tuple[float, float]:
