@@ -10,18 +10,19 @@ gives. The vehicle was left thrashing on its gear until it tipped over
 (docs/decisions/2026-12-05-landing-on-a-wrong-height.md).
 
 This is PX4's multicopter land detector's "hit ground" under climb-rate control: a commanded
-descent with no vertical movement is ground contact. Here the command is the plan's position,
-which in the landing aims LAND_BELOW_M under the ground: `ref_down - est_down` above
-BELOW_MARGIN_M while the estimated vertical speed stays under Z_VEL_MAX_M_S is contact, held
-HOLD_S it is the ground and the motors go to idle. A vehicle in the air cannot stay still with its plan a tenth of a metre
-below it: the controller descends.
+descent with no vertical movement is ground contact. Here the command is the plan's position:
+in the landing it aims LAND_BELOW_M under the ground, then goes on down at a crawl
+(reference.LAND_CRAWL_M_S). `ref_down - est_down` above BELOW_MARGIN_M while the estimated
+vertical speed stays under Z_VEL_MAX_M_S is contact; held HOLD_S, it is the ground and the
+motors go to idle. A vehicle in the air cannot stay still with its plan a tenth of a metre below
+it: the controller descends.
 
-Figures: Z_VEL_MAX_M_S is PX4's LNDMC_Z_VEL_MAX default; HOLD_S PX4's ground-contact stage (a
+Figures: Z_VEL_MAX_M_S is PX4's LNDMC_Z_VEL_MAX default. HOLD_S is PX4's ground-contact stage, a
 third of LNDMC_TRIG_TIME, after which PX4's position controller stops chasing a horizontal
-setpoint: here a tilt on the gear that long already leans the vehicle towards a tip-over); BELOW_MARGIN_M half the plan's LAND_BELOW_M, a choice; a
-vertical speed above RESET_VEL_M_S (PX4 widens its bound 2.5 times once it believes the ground)
-restarts the count, and below it a bounce on the gear does not. Pure: a state machine of its
-inputs.
+setpoint; a tilt on the gear held longer already leans the vehicle towards a tip-over.
+BELOW_MARGIN_M is half the plan's LAND_BELOW_M, a choice. A vertical speed above RESET_VEL_M_S
+(PX4 widens its bound 2.5 times once it believes the ground) restarts the count; below it, a
+bounce on the gear does not. Pure: a state machine of its inputs.
 """
 
 from __future__ import annotations
