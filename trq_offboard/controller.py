@@ -387,7 +387,8 @@ class Controller:
             if self.detector is not None:
                 self._detect(t_s, x, d_obs, y_now)
         c2 = clock()
-        if self.spin is None and t_s > self._last_t:
+        if self.detector is not None and self.spin is None and t_s > self._last_t:
+            # only where a switch can read it (a lost-motor detector), not in every period
             k = 1.0 - math.exp(-(t_s - self._last_t) / SPIN_WIND_TAU_S)
             self._wind_acc = self._wind_acc + k * (np.asarray(d[0:2], float) - self._wind_acc)
         self._last_t = float(t_s)
