@@ -600,6 +600,11 @@ class Spin(Strict):
     weights: SpinWeights
     position: SpinPosition
     landing: SpinLanding
+    # the inner loop about the orbit: the LQR, or an NMPC on the same body-frame model kept
+    # nonlinear, its actuator bounds as constraints, the LQR's P as its terminal cost
+    # (trq_offboard/spin_nmpc.py); its horizon in control periods
+    inner: Choice("lqr", "nmpc") = "lqr"
+    horizon_steps: Int(1, 200) = 20
 
 
 _ON_OFF_AUTO = Choice("on", "off", "auto")

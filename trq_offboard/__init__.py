@@ -21,6 +21,7 @@ cache) comes from trq_wire.
     controller      Controller: the parts composed; step, prepare, the fallback
     spin            the lost-motor controller: a spinning relaxed hover on three rotors (LQR
                     about the body-frame orbit under a position loop), its descent and touchdown
+    spin_nmpc       its optional inner loop (`spin.inner: nmpc`): an NMPC on the orbit's model
     reference       the flight's plan (Reference, ConstantReference)
     landing         the end of a landing on the ground's contact (GroundContact)
     records         typed records across module boundaries

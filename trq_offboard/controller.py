@@ -498,12 +498,18 @@ class Controller:
         spin = self.spin
         ref = landing_reference(t_s - self._spin_t0, spin.hold_pos_ned_m, self._spin_cfg.landing,
                                 self.ground_down_m)
+        t0 = time.perf_counter()
         cmd = spin.step(StateEstimate.from_vector(x), ref)
+        solve_s = time.perf_counter() - t0          # a measurement, as the solvers' own
         c3 = self.cpu_ns()
         u = self.allocator.command_vector(cmd)
         nt = self._nt
         u[nt:] = np.maximum(u[nt:], self._u_lo[nt:])
-        info = SolveInfo(SolveStatus.OK, 0, 0.0, float("nan"), "spin")
+        # the inner LQR solves nothing; the inner NMPC one QP (its iterations; a failed QP flew
+        # the LQR's command that period: the message says so)
+        qp = spin.info.qp_status
+        info = SolveInfo(SolveStatus.OK, spin.info.qp_iterations, solve_s, float("nan"),
+                         "spin" if qp in (-1, 0, 1, 2) else "spin: QP failed, LQR flown")
         return self._finish(u, CommandSource.SPIN, info, d_obs, out_err, (*marks, c3))
 
     def _set_horizon(self, solver: Solver) -> None:

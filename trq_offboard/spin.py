@@ -30,6 +30,10 @@ the plant): a cascade.
   given up; the spin rate is a state regulated to spin_rate_rad_s through the tilts' yaw torque
   (the plant has no yaw damping: without it the spin would drift along the family).
 
+The inner loop may instead be an NMPC on the same body-frame model kept nonlinear, the actuators'
+bounds as constraints, this LQR's Riccati solution as its terminal cost (`inner: nmpc`,
+spin_nmpc.py; the LQR flies a period whose QP fails).
+
 Units: throttles in percent on the wire and in the trim, as fractions (percent / 100) inside the
 LQR; tilts in rad; world NED, body FRD, as the rest of trq_offboard.
 """
@@ -98,6 +102,8 @@ class SpinConfig:
     position: SpinPosition
     landing: SpinLanding
     vehicle_file: str
+    inner: str = "lqr"                  # the inner loop: "lqr", or "nmpc" (spin_nmpc.py)
+    horizon_steps: int = 20             # the NMPC's horizon, in control periods
 
     @property
     def dt_s(self) -> float:
@@ -114,7 +120,7 @@ def spin_config(s: schema.Spin, file: str, vehicle_file: str) -> SpinConfig:
                      p.climb_force_N, p.sink_force_N, p.max_integral_m_s2),
         SpinLanding(la.hold_s, la.descent_speed_m_s, la.final_height_m, la.final_speed_m_s,
                     la.contact_height_m, la.contact_speed_m_s, la.final_spin_rate_rad_s),
-        vehicle_file)
+        vehicle_file, s.inner, s.horizon_steps)
 
 
 def load_spin_config(path: Path | str) -> SpinConfig:
@@ -315,10 +321,10 @@ def _zoh(a: np.ndarray, b: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarra
 
 
 def _lqr_gain(lin: _Linear, cfg: SpinConfig, n: np.ndarray, basis: np.ndarray,
-              delay_steps: int = 0) -> np.ndarray:
+              delay_steps: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """The discrete LQR gain (6 x (11 + 6 delay_steps)) on the state (omega, axis, actuators)
     and, with a delay of `delay_steps` control periods between a command and its effect, the
-    commands still in flight (oldest first)."""
+    commands still in flight (oldest first); and the Riccati solution P it comes from."""
     w = cfg.weights
     q = np.zeros((11, 11))
     q[0:3, 0:3] = w.spin * np.outer(n, n) + basis @ np.diag(w.rates) @ basis.T
@@ -341,7 +347,7 @@ def _lqr_gain(lin: _Linear, cfg: SpinConfig, n: np.ndarray, basis: np.ndarray,
         q_aug[:nx, :nx] = q
         ad, bd, q = a_aug, b_aug, q_aug
     p = _dare(ad, bd, q, r)
-    return np.linalg.solve(r + bd.T @ p @ bd, bd.T @ p @ ad)
+    return np.linalg.solve(r + bd.T @ p @ bd, bd.T @ p @ ad), p
 
 
 # --- the controller ------------------------------------------------------------------------------
@@ -355,6 +361,8 @@ class _Stage:
     gain: np.ndarray                   # 6 x (11 + 6 d)
     a0: np.ndarray                     # the live actuators at the trim (fractions, rad)
     per_newton: np.ndarray             # their move per newton along the axis
+    p_term: np.ndarray | None = None   # inner nmpc: the delay-free LQR's P (11x11), its terminal
+    t_term: np.ndarray | None = None   # cost, on x = t_term (z - z_ref) (11 x 12)
 
 
 @dataclass(frozen=True)
@@ -366,6 +374,8 @@ class SpinInfo:
     saturated: int                     # live commands clipped at a limit
     landed: bool                       # touchdown seen: the motors are off
     fallback: bool = False             # a non-finite estimate: the trim commanded, the state kept
+    qp_status: int = -1                # inner nmpc: HPIPM's status (-1: no QP solved, the LQR)
+    qp_iterations: int = 0
 
 
 def _rotation(euler_rad) -> np.ndarray:
@@ -404,6 +414,8 @@ class SpinController:
         self.direction = direction
         self.delay_steps = int(math.ceil(delay_s / config.dt_s - 1e-9))
         self._live = [i for i in range(4) if i != motor - 1]
+        if config.inner not in ("lqr", "nmpc"):
+            raise ValueError(f"spin: inner {config.inner!r}, expected 'lqr' or 'nmpc'")
         self._stages = [self._stage(config.spin_rate_rad_s)]
         if config.landing.final_spin_rate_rad_s != config.spin_rate_rad_s:
             self._stages.append(self._stage(config.landing.final_spin_rate_rad_s))
@@ -415,6 +427,11 @@ class SpinController:
         self._lag = 1.0 - np.exp(-dt / np.maximum(tau, 1e-9))
         self._rate = np.array([vehicle.motor_rate_limit_pct_s / 100.0] * 3
                               + [vehicle.servo_rate_limit_rad_s] * 3) * dt
+        self._nmpc = None
+        if config.inner == "nmpc":
+            from trq_offboard.spin_nmpc import SpinNmpc
+            self._nmpc = SpinNmpc(vehicle, self._live, dt, config.horizon_steps, config.weights,
+                                  self._lo, self._hi)
         self.reset(None)
 
     def _stage(self, spin_rad_s: float) -> _Stage:
@@ -424,20 +441,30 @@ class SpinController:
         n = np.asarray(trim.axis_frd)
         e = _basis(n)
         lin = _linearise(self.vehicle, trim, live, e, self.direction)
-        gain = _lqr_gain(lin, self.config, n, e, self.delay_steps)     # 6 x (11 + 6 d)
+        gain, _ = _lqr_gain(lin, self.config, n, e, self.delay_steps)  # 6 x (11 + 6 d)
+        p_term = t_term = None
+        if self.config.inner == "nmpc":
+            # the NMPC's terminal cost: the delay-free LQR's P (the NMPC carries the commands in
+            # flight by predicting through them), on x = [omega - w n, E' s, y - a_op]
+            p_term = _lqr_gain(lin, self.config, n, e, 0)[1]
+            t_term = np.zeros((11, 12))
+            t_term[0:3, 0:3] = np.eye(3)
+            t_term[3:5, 3:6] = e.T
+            t_term[5:11, 6:12] = np.eye(6)
         a0 = np.array([trim.throttle_pct[i] / 100.0 for i in live]
                       + [trim.tilt_rad[i] for i in live])
         # the operating point's move per newton of force along the axis with the torque held
         # (the least change in scaled units): the linearised family of equilibria
         sens = np.vstack([lin.m_act, lin.f_act])                         # 4 x 6
         per_newton = np.linalg.pinv(sens) @ np.array([0.0, 0.0, 0.0, 1.0])
-        return _Stage(trim, n, e, gain, a0, per_newton)
+        return _Stage(trim, n, e, gain, a0, per_newton, p_term, t_term)
 
     def _use(self, i: int) -> None:
         st = self._stages[i]
         self._stage_index = i
         self.trim, self._n, self._e, self.gain = st.trim, st.axis, st.basis, st.gain
         self._a0, self._per_newton = st.a0, st.per_newton
+        self._p_term, self._t_term = st.p_term, st.t_term
 
     # --- the switch ----------------------------------------------------------------------------
     def reset(self, estimate: StateEstimate | None, *, command: ActuatorCommand | None = None,
@@ -455,6 +482,8 @@ class SpinController:
                                  + [command.tilt_rad[i] for i in self._live])
         self._act = np.clip(self._act, self._lo, self._hi)
         self._in_flight = [self._act.copy() for _ in range(self.delay_steps)]   # oldest first
+        if self._nmpc is not None:
+            self._nmpc.reset(self._act)
         lim = self.config.position.max_integral_m_s2
         self._integral = (np.zeros(3) if integral_m_s2 is None
                           else np.clip(np.asarray(integral_m_s2, float), -lim, lim))
@@ -521,6 +550,9 @@ class SpinController:
         u_raw = a_op - self.gain @ x
         u = np.clip(u_raw, self._lo, self._hi)
         saturated = int(np.sum(np.abs(u - u_raw) > 1e-12))
+        qp = (-1, 0)
+        if self._nmpc is not None:
+            u, saturated, qp = self._nmpc_command(om, s, a_op, f_des, u, saturated)
         # the actuators' outputs over this period, as the vehicle file's lags and rate limits
         # make them from the command that acts now (the oldest in flight, or this one)
         acting = u
@@ -531,11 +563,24 @@ class SpinController:
         body_axis = rot @ self._n
         self.info = SpinInfo(float(om @ self._n),
                              math.acos(max(-1.0, min(1.0, float(body_axis @ n_des)))), f_des,
-                             saturated, False)
+                             saturated, False, qp_status=qp[0], qp_iterations=qp[1])
         thr, til = [0.0] * 4, [0.0] * 4
         for k, i in enumerate(self._live):
             thr[i], til[i] = float(100.0 * u[k]), float(u[3 + k])
         return ActuatorCommand(tuple(thr), tuple(til))
+
+    def _nmpc_command(self, om, s, a_op, f_des, u_lqr, saturated_lqr):
+        """Inner nmpc: this period's command from the plan (spin_nmpc.py), the state carried
+        through the commands still in flight; the LQR's (clipped) when the QP fails. Returns
+        (command, live commands at a bound, (QP status, QP iterations))."""
+        from trq_offboard.spin_nmpc import SpinReference
+        z0 = self._nmpc.predict(np.concatenate([om, s, self._act]), self._in_flight)
+        ref = SpinReference(self._n, self._e, self.direction * self.trim.spin_rad_s, a_op, f_des)
+        u, info = self._nmpc.solve(z0, ref, self._p_term, self._t_term)
+        if u is None:
+            return u_lqr, saturated_lqr, (info.status, info.iterations)
+        at_bound = (u <= self._lo + 1e-9) | (u >= self._hi - 1e-9)
+        return u, int(np.sum(at_bound)), (info.status, info.iterations)
 
 
 # --- the spin's sense at the switch ----------------------------------------------------------

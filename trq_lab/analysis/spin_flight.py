@@ -324,26 +324,20 @@ class _Sensing:
         self.eskf.step(s1.t_us, self.suite.sample(s1.t_us, truth))
 
 
-def step_time_ratio(steps: int = 200, seed: int = 0) -> dict:
-    """The CPU time per step of the spin controller against the existing NMPC controller
-    (trq_nmpc_eso.yaml's Controller), both stepped in this process on the plant's truth: the
-    NMPC in a level hover at 5 m (no fault), the spin controller on the orbit. Thread CPU time
-    (a measurement: it depends on the machine and its load; the ratio is what is reported)."""
+def step_time_ratio(steps: int = 200, seed: int = 0,
+                    controller: SpinController | None = None) -> dict:
+    """The CPU time per step of the spin controller (`controller`, else the shipped one) against
+    the existing NMPC controller (trq_nmpc_eso.yaml's Controller), both stepped in this process
+    on the plant's truth: the NMPC in a level hover at 5 m (no fault), the spin controller on
+    the orbit. Thread CPU time (a measurement: it depends on the machine and its load; the ratio
+    is what is reported)."""
     from sil_vehicle.config import load_sim
     from sil_vehicle.frames import quat_to_euler
     from sil_vehicle.vehicle import ActuatorCommand, Vehicle, VehicleState
     from trq_offboard.controller import Controller
     from trq_offboard.reference import ConstantReference
 
-    vehicle_file = None
-    if plant:
-        import tempfile
-        from pathlib import Path
-
-        from trq_lab.overlays import write_vehicle_overlay
-        vehicle_file = write_vehicle_overlay(trq_params.DIR / "vehicle" / "trq.yaml", plant,
-                                             Path(tempfile.mkdtemp(prefix="spin_plant_")))
-    sim = load_sim(SIM_FILE, vehicle_file).with_changes(wind_speed_m_s=0.0, gusts_enabled=False)
+    sim = load_sim(SIM_FILE).with_changes(wind_speed_m_s=0.0, gusts_enabled=False)
     nmpc = Controller.from_yaml(CONTROLLER_FILE)
     veh = Vehicle(sim, np.random.default_rng(seed))
     veh.armed = True
@@ -365,7 +359,7 @@ def step_time_ratio(steps: int = 200, seed: int = 0) -> dict:
         for _ in range(ticks):
             veh.step()
     nmpc_us = float(np.median(ns[20:])) / 1e3
-    flight = fly("orbit", seed=seed, seconds=steps / 100.0)
+    flight = fly("orbit", seed=seed, seconds=steps / 100.0, controller=controller)
     return {"nmpc_step_us_median": nmpc_us, "nmpc_control_rate_hz": 1.0 / nmpc.cfg.control_dt_s,
             "spin_step_us_mean": flight.step_us_mean,
             "ratio_spin_over_nmpc": flight.step_us_mean / nmpc_us}

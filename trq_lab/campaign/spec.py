@@ -424,8 +424,7 @@ def load_campaign(path: Path) -> Campaign:
     top = validate(CampaignFile, read_yaml(path), path)
     # a controller given by path is read against the campaign file's folder (as its sensing
     # profiles are), made absolute so that a flight finds it from any working directory
-    controllers = tuple(c if trq_params.is_name(c) else str((path.parent / c).resolve())
-                        for c in top.controllers)
+    controllers = tuple(_controller_ref(c, path) for c in top.controllers)
     digests = {}
     for i, c in enumerate(controllers):
         try:
@@ -529,6 +528,12 @@ def load_campaign(path: Path) -> Campaign:
                                     path))
 
 
+def _controller_ref(c: str, file: Path) -> str:
+    """A controller as the flights carry it: a built-in name, or a path made absolute against
+    the campaign file's folder (targets name it as the campaign's `controllers` list does)."""
+    return c if trq_params.is_name(c) else str((file.parent / c).resolve())
+
+
 def _paired_targets(targets, controllers: tuple[str, ...], sensings: tuple[str, ...],
                     outages: tuple[str, ...], file: Path) -> tuple:
     """The paired targets with `against` set (the first controller when not given) and their
@@ -538,17 +543,20 @@ def _paired_targets(targets, controllers: tuple[str, ...], sensings: tuple[str, 
     flown = {label.split()[0] for label in outages}
     for i, t in enumerate(targets):
         key = f"paired_targets[{i}]"
+        refs = {}
         for field in ("controller", "against"):
             value = getattr(t, field)
-            if value is not None and value not in controllers:
+            refs[field] = None if value is None else _controller_ref(value, file)
+            if value is not None and refs[field] not in controllers:
                 raise ConfigError(f"{file}: key '{key}.{field}': got {value!r}, expected one "
                                   "of the campaign's controllers (" + ", ".join(controllers)
                                   + ")")
-        against = t.against or controllers[0]
-        if against == t.controller:
+        against = refs["against"] or controllers[0]
+        if against == refs["controller"]:
             raise ConfigError(f"{file}: key '{key}.against': got {against!r}, expected another "
                               "controller than the target's own")
-        out.append(_scoped(t, key, sensings, flown, file, against=against))
+        out.append(_scoped(t, key, sensings, flown, file, against=against,
+                           controller=refs["controller"]))
     return tuple(out)
 
 
@@ -566,7 +574,8 @@ def _flight_targets(targets, sensings: tuple[str, ...], outages: tuple[str, ...]
             raise ConfigError(f"{file}: key 'flight_targets[{i}].outage': got {t.outage!r}, "
                               f"expected the outage's sensor ({on} is a metric of the flights "
                               "with an outage)")
-        out.append(_scoped(t, f"flight_targets[{i}]", sensings, flown, file))
+        out.append(_scoped(t, f"flight_targets[{i}]", sensings, flown, file,
+                           controller=_controller_ref(t.controller, file)))
     return tuple(out)
 
 

@@ -55,6 +55,25 @@ def test_a_profile_by_path_is_resolved_as_the_flights_carry_it(tmp_path):
     assert plan.flight_targets[0].sensing in {f["sensing"] for f in plan.flights}
 
 
+def test_a_controller_by_path_is_resolved_as_the_flights_carry_it(tmp_path):
+    """A controller the campaign names by a path (a study's variant beside it) is named the same
+    way by its flight and paired targets, and judged on the flights that carry it (absolute)."""
+    (tmp_path / "v").mkdir()
+    (tmp_path / "v" / "mine.yaml").write_text("extends: builtin:controller/trq_nmpc_eso\n"
+                                              "name: mine\n")
+    path = _with(tmp_path, "  - {controller: v/mine.yaml, metric: crashed, max: 0}\n")
+    path.write_text(path.read_text().replace(
+        "controllers: [trq_nmpc_eso]",
+        "controllers: [trq_nmpc_eso, v/mine.yaml]\n"
+        "paired_targets:\n  - {controller: v/mine.yaml, max_median_ratio: 1.0}"))
+    plan = load_campaign(path)
+    mine = str(tmp_path / "v" / "mine.yaml")
+    assert plan.flight_targets[0].controller == mine
+    assert mine in {f["controller"] for f in plan.flights}
+    assert (plan.paired_targets[0].controller, plan.paired_targets[0].against) == (
+        mine, "trq_nmpc_eso")
+
+
 @pytest.mark.parametrize("target, key, value", [
     ("{controller: trq_nmpc_eso, metric: rmse_after_fault, max: 0.01}",
      "flight_targets[0].metric", "rmse_after_fault"),

@@ -1,0 +1,235 @@
+"""The lost-motor controller's NMPC: the spinning orbit's body-frame model, nonlinear, its actuator
+limits as constraints (issue 40 item 3; spin.py's `inner: nmpc`).
+
+    nmpc = SpinNmpc(vehicle, live, dt_s, horizon_steps, weights, lo, hi)    # build once
+    u0, info = nmpc.solve(z0, ref, terminal)       # one real-time iteration, every control period
+    nmpc.reset(u_guess)                            # at the switch: the plan restarts from a guess
+
+The model is the one spin.py's LQR linearises, kept nonlinear: in the body frame, where the
+relaxed hover is a fixed point,
+
+    z = [omega (3, body FRD rad/s), s (3: R^T n_des, the direction asked for the primary axis,
+         seen from the body), y (6: the live actuators' outputs, 3 throttles / 100, 3 tilts rad)]
+    u = the six live commands (same units)
+    d omega/dt = J^-1 (M(y) - omega x J omega)     M: the live rotors' torque (the wrench of
+    d s/dt     = -omega x s                           spin.py, the prediction model's arithmetic)
+    d y/dt     = (u - y) / T                         T: the vehicle file's motor and servo lags
+
+discretised by one RK4 step per control period (at 20-30 rad/s a step turns the body 0.2-0.3 rad:
+RK4's error is of the order of that to the fifth power). The attitude is reduced (s): yaw is given
+up, as the orbit gives it up; the spin rate is a state and the tilts' yaw torque governs it.
+
+Cost (Gauss-Newton on residuals, the LQR's own weights, so that near the orbit and away from the
+limits the two controllers ask the same):
+
+    sum_k |r(z_k, u_k)|^2 + (z_N - z_ref)' T' P T (z_N - z_ref)
+    r = [sqrt(w_spin) (omega . n - sigma w), sqrt(w_rates) E' omega, sqrt(w_axis) E' s,
+         sqrt(w_act) (y - a_op), sqrt(w_force) (F(y) . s - f_des), sqrt(w_input) (u - a_op)]
+
+n the trim's primary axis, E (3x2) a basis normal to it, sigma w the signed spin rate, a_op the
+operating point for the force asked for f_des (spin.py's family of equilibria), F(y) the live
+rotors' body force. The terminal weight is the LQR's own Riccati solution P on the LQR's state
+x = T (z - z_ref) = [omega - sigma w n, E' s, y - a_op]: with the model linear and no bound
+active the NMPC's first move is the LQR's, at any horizon (a unit test checks it). What the NMPC
+adds: the throttles and tilts bounded in the plan (the LQR clips its answer), and the nonlinear
+model over the horizon (a large axis error, a spin far from the orbit's rate).
+
+Solver: one SQP step a control period (real-time iteration). The previous plan, shifted by one
+period, is rolled out from z0 (single shooting: no gaps); the rollout, the stage Jacobians and
+residuals come from one compiled CasADi function (nmpc/cache.py); the structured QP in the
+increments goes to HPIPM (nmpc/hpipm.py's OcpQp; box bounds on the inputs only). A QP that
+fails (HPIPM status 3, non-finite) returns None: the caller flies its LQR that period.
+
+Pure arithmetic on its inputs (no clock, no I/O); `info` carries the QP's status and iterations.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+
+from trq_offboard.config import VehicleModel
+from trq_offboard.model.dynamics import NumpyFunction
+from trq_offboard.nmpc import hpipm
+from trq_offboard.nmpc.cache import compiled
+
+__all__ = ["SpinNmpc", "SpinReference", "SpinNmpcInfo", "NZ", "NU"]
+
+NZ, NU, NR = 12, 6, 18                 # state, input, residuals
+_NP = 3 + 6 + 1 + 6 + 1                # n, E (column-major), sigma w, a_op, f_des
+# the compiled functions, built once per process for each vehicle, live set, step, horizon and
+# weights: a flight's controller builds one SpinController per motor and sense
+_FUNCTIONS: dict[tuple, tuple] = {}
+_REG = 1e-9                            # on the QP Hessian's diagonal (its s block is singular
+                                       # along n: nothing weighs the axis' own component)
+
+
+@dataclass(frozen=True)
+class SpinReference:
+    """What one period's plan aims at (spin.py builds it from its stage and the position loop)."""
+    axis: np.ndarray                   # n (3), body FRD
+    basis: np.ndarray                  # E (3x2)
+    spin_rad_s: float                  # sigma w: signed (omega = sigma w n on the orbit)
+    a_op: np.ndarray                   # the live actuators' operating point (6)
+    force_N: float                     # f_des, along s
+
+    def params(self) -> np.ndarray:
+        return np.concatenate([self.axis, self.basis.ravel(order="F"), [self.spin_rad_s],
+                               self.a_op, [self.force_N]])
+
+    def z_ref(self) -> np.ndarray:
+        return np.concatenate([self.spin_rad_s * self.axis, self.axis, self.a_op])
+
+
+@dataclass(frozen=True)
+class SpinNmpcInfo:
+    status: int                        # HPIPM's: 0 converged, 1 iteration limit, 2 min step, 3 NaN
+    iterations: int
+    cost: float                        # the linearised plan's model cost at the rollout (before
+                                       # the step)
+
+
+def _model(vm: VehicleModel, live, dt_s: float):
+    """(z, u) -> z after dt_s (RK4), and the live rotors' body force at y (CasADi SX)."""
+    from trq_offboard.spin import _wrench          # the LQR's arithmetic, shared
+
+    z, u = ca.SX.sym("z", NZ), ca.SX.sym("u", NU)
+    tau = np.maximum(np.array([vm.motor_time_constant_s] * 3 + [vm.servo_time_constant_s] * 3),
+                     1e-3)
+    jm = ca.DM(np.diag(vm.inertia_kg_m2))
+
+    def wrench(y):
+        zeta, alpha = [0.0] * 4, [0.0] * 4
+        for k, i in enumerate(live):
+            zeta[i], alpha[i] = 100.0 * y[k], y[3 + k]
+        return _wrench(vm, live, zeta, alpha)
+
+    def rhs(x):
+        om, s, y = x[0:3], x[3:6], x[6:12]
+        _, m = wrench(y)
+        om_dot = ca.solve(jm, m - ca.cross(om, jm @ om))
+        return ca.vertcat(om_dot, -ca.cross(om, s), (u - y) / ca.DM(tau))
+
+    k1 = rhs(z)
+    k2 = rhs(z + dt_s / 2 * k1)
+    k3 = rhs(z + dt_s / 2 * k2)
+    k4 = rhs(z + dt_s * k3)
+    z_next = z + dt_s / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+    force, _ = wrench(z[6:12])
+    return z, u, z_next, force
+
+
+class SpinNmpc:
+    """One lost motor's NMPC (the module docstring). `live`: the three live rotors' indices
+    (0..3); `weights`: spin.py's SpinWeights; `lo`, `hi`: the six commands' bounds."""
+
+    def __init__(self, vm: VehicleModel, live, dt_s: float, horizon_steps: int, weights,
+                 lo, hi, qp_iter_max: int = 30, qp_mode: str = "speed") -> None:
+        if horizon_steps < 1:
+            raise ValueError(f"spin nmpc: horizon_steps {horizon_steps!r}, expected >= 1")
+        self.N, self.dt_s = int(horizon_steps), float(dt_s)
+        self._lo, self._hi = np.asarray(lo, float), np.asarray(hi, float)
+        key = (repr(vm), tuple(live), self.dt_s, self.N, repr(weights))
+        if key not in _FUNCTIONS:
+            _FUNCTIONS[key] = self._functions(vm, live, weights)
+        self._fn, self._step, self.how = _FUNCTIONS[key]
+        self._qp = hpipm.OcpQp(NZ, NU, self.N, np.zeros(0, np.int32), mode=qp_mode,
+                               iter_max=qp_iter_max)
+        self._empty = np.zeros((self.N + 1, 0))
+        self.iterations = 1
+        self.reset(None)
+
+    def _functions(self, vm, live, weights):
+        """The compiled period function (NumpyFunction), the one-step model, how it was built."""
+        z, u, z_next, force = _model(vm, list(live), self.dt_s)
+        p = ca.SX.sym("p", _NP)
+        n, e, sw, a_op, f_des = p[0:3], ca.reshape(p[3:9], 3, 2), p[9], p[10:16], p[16]
+        w = weights
+        sq = np.sqrt
+        r = ca.vertcat(sq(w.spin) * (ca.dot(z[0:3], n) - sw),
+                       ca.diag(ca.DM(sq(np.asarray(w.rates, float)))) @ (e.T @ z[0:3]),
+                       sq(w.axis) * (e.T @ z[3:6]),
+                       ca.DM(sq([w.actuator[0]] * 3 + [w.actuator[1]] * 3)) * (z[6:12] - a_op),
+                       sq(w.force) * (ca.dot(force, z[3:6]) - f_des),
+                       ca.DM(sq([w.input[0]] * 3 + [w.input[1]] * 3)) * (u - a_op))
+        step = ca.Function("spin_step", [z, u], [z_next])
+        stage = ca.Function("spin_stage", [z, u, p],
+                            [ca.jacobian(z_next, z), ca.jacobian(z_next, u), r,
+                             ca.jacobian(r, z), ca.jacobian(r, u)])
+        # one function for the whole period: the rollout of U from z0 and every stage's
+        # linearisation along it (N from the argument shapes: one compiled function per N)
+        z0 = ca.SX.sym("z0", NZ)
+        us = ca.SX.sym("U", NU, self.N)
+        roll = step.mapaccum("spin_roll", self.N)
+        zs = roll(z0, us)                                    # NZ x N: z_1..z_N
+        z_all = ca.horzcat(z0, zs)
+        a, b, res, jz, ju = stage.map(self.N)(z_all[:, 0:self.N], us, ca.repmat(p, 1, self.N))
+        fn = ca.Function(f"spin_rti_{self.N}", [z0, us, p],
+                         [ca.densify(o) for o in (z_all, a, b, res, jz, ju)])
+        compiled_fn, how = compiled(fn)
+        return NumpyFunction(compiled_fn), NumpyFunction(step), how
+
+    def reset(self, u_guess) -> None:
+        """Forget the plan: the next solve starts from `u_guess` (6) held over the horizon
+        (None: the first solve's operating point)."""
+        self._plan = None if u_guess is None else np.tile(np.asarray(u_guess, float),
+                                                          (self.N, 1))
+
+    def predict(self, z0, commands) -> np.ndarray:
+        """z0 carried through `commands` (each one control period, oldest first): the state a
+        plan starts from when commands are still in flight."""
+        z = np.asarray(z0, float)
+        for c in commands:
+            z = self._step(z, c)
+        return z
+
+    def solve(self, z0, ref: SpinReference, p_term: np.ndarray,
+              t_term: np.ndarray) -> tuple[np.ndarray | None, SpinNmpcInfo]:
+        """The first command of this period's plan from z0 (NZ), or None when the QP failed.
+        `p_term`: the LQR's Riccati solution (11x11) on its state x = t_term (z - z_ref),
+        `t_term` (11 x NZ)."""
+        N = self.N
+        plan = self._plan if self._plan is not None else np.tile(ref.a_op, (N, 1))
+        plan = np.clip(plan, self._lo, self._hi)
+        for _ in range(self.iterations):
+            plan, info = self._sqp_step(z0, plan, ref, p_term, t_term)
+            if plan is None:
+                self._plan = None
+                return None, info
+        self._plan = np.vstack([plan[1:], plan[-1:]])         # next period's guess: shifted
+        return plan[0].copy(), info
+
+    def _sqp_step(self, z0, plan, ref, p_term, t_term):
+        N = self.N
+        zs, a, b, res, jz, ju = self._fn.outputs_in_place(z0, plan, ref.params())
+
+        def mat(flat, rows, cols):          # a flat column-major output as [rows, k, cols]:
+            return flat.reshape(N, cols, rows).transpose(2, 0, 1)   # map() puts stage k's
+                                                                    # matrix in columns k*cols..
+        zs = zs.reshape(N + 1, NZ).T                          # NZ x (N+1)
+        res = res.reshape(N, NR).T                            # NR x N, stage k in column k
+        jz, ju = mat(jz, NR, NZ), mat(ju, NR, NU)             # d r_k / d z_k, d r_k / d u_k
+        a, b = mat(a, NZ, NZ), mat(b, NZ, NU)
+        jac = np.concatenate([jz, ju], axis=2)                # NR x N x (NZ + NU)
+        hess = np.einsum("rki,rkj->kij", jac, jac)
+        hess[:, range(NZ + NU), range(NZ + NU)] += _REG
+        grad = np.einsum("rki,rk->ki", jac, res)
+        pt = t_term.T @ p_term @ t_term
+        x_n = zs[:, N] - ref.z_ref()
+        hn = pt + _REG * np.eye(NZ)
+        q = np.zeros((N + 1, NZ))
+        q[1:N] = grad[1:, :NZ]
+        q[N] = pt @ x_n
+        self._qp.set_hessian(hess, hn)
+        at = a.transpose(1, 2, 0)                             # (N, NZ cols, NZ rows): A_k'
+        bt = b.transpose(1, 2, 0)                             # (N, NU, NZ): B_k'
+        lbu, ubu = self._lo - plan, self._hi - plan
+        _, du, _ = self._qp.solve(at, bt, np.zeros((N, NZ)), q, grad[:, NZ:], self._empty,
+                                  self._empty, lbu, ubu)
+        cost = float(np.sum(res ** 2) + x_n @ pt @ x_n)
+        info = SpinNmpcInfo(int(self._qp.status), int(self._qp.iterations), cost)
+        if self._qp.status == 3 or not np.all(np.isfinite(du)):
+            return None, info
+        return np.clip(plan + du, self._lo, self._hi), info
