@@ -483,7 +483,7 @@ class SpinController:
         self._act = np.clip(self._act, self._lo, self._hi)
         self._in_flight = [self._act.copy() for _ in range(self.delay_steps)]   # oldest first
         if self._nmpc is not None:
-            self._nmpc.reset(self._act)
+            self._nmpc.reset()
         lim = self.config.position.max_integral_m_s2
         self._integral = (np.zeros(3) if integral_m_s2 is None
                           else np.clip(np.asarray(integral_m_s2, float), -lim, lim))
@@ -576,7 +576,7 @@ class SpinController:
         from trq_offboard.spin_nmpc import SpinReference
         z0 = self._nmpc.predict(np.concatenate([om, s, self._act]), self._in_flight)
         ref = SpinReference(self._n, self._e, self.direction * self.trim.spin_rad_s, a_op, f_des)
-        u, info = self._nmpc.solve(z0, ref, self._p_term, self._t_term)
+        u, info = self._nmpc.solve(z0, ref, self._p_term, self._t_term, guess=u_lqr)
         if u is None:
             return u_lqr, saturated_lqr, (info.status, info.iterations)
         at_bound = (u <= self._lo + 1e-9) | (u >= self._hi - 1e-9)

@@ -58,7 +58,8 @@ from trq_offboard.nmpc.cache import compiled
 __all__ = ["SpinNmpc", "SpinReference", "SpinNmpcInfo", "NZ", "NU"]
 
 NZ, NU, NR = 12, 6, 18                 # state, input, residuals
-_NP = 3 + 6 + 1 + 6 + 1                # n, E (column-major), sigma w, a_op, f_des
+_NG = 18                               # the live rotors' geometry (`geometry`)
+_NP = 3 + 6 + 1 + 6 + 1 + _NG          # n, E (column-major), sigma w, a_op, f_des, geometry
 # the compiled functions, built once per process for each vehicle, live set, step, horizon and
 # weights: a flight's controller builds one SpinController per motor and sense
 _FUNCTIONS: dict[tuple, tuple] = {}
@@ -91,20 +92,34 @@ class SpinNmpcInfo:
                                        # the step)
 
 
-def _model(vm: VehicleModel, live, dt_s: float):
-    """(z, u) -> z after dt_s (RK4), and the live rotors' body force at y (CasADi SX)."""
-    from trq_offboard.spin import _wrench          # the LQR's arithmetic, shared
+def geometry(vm: VehicleModel, live) -> np.ndarray:
+    """The three live rotors' geometry as the model's parameter (_NG): per rotor its position
+    (body FRD, 3), its tilt arm's x and y (2) and its spin sign (1)."""
+    return np.concatenate([[*vm.rotors[i].position_frd_m, vm.rotors[i].arm_frd[0],
+                            vm.rotors[i].arm_frd[1], vm.rotors[i].spin] for i in live])
 
-    z, u = ca.SX.sym("z", NZ), ca.SX.sym("u", NU)
+
+def _model(vm: VehicleModel, dt_s: float):
+    """(z, u, g) -> z after dt_s (RK4), and the live rotors' body force at y (CasADi SX); g the
+    live rotors' `geometry`, a parameter, so that one compiled function serves every motor lost.
+    The wrench is spin.py's (the prediction model's arithmetic) on that geometry."""
+    z, u, g = ca.SX.sym("z", NZ), ca.SX.sym("u", NU), ca.SX.sym("g", _NG)
     tau = np.maximum(np.array([vm.motor_time_constant_s] * 3 + [vm.servo_time_constant_s] * 3),
                      1e-3)
     jm = ca.DM(np.diag(vm.inertia_kg_m2))
+    th, tq = vm.thrust_N, vm.torque_Nm
 
     def wrench(y):
-        zeta, alpha = [0.0] * 4, [0.0] * 4
-        for k, i in enumerate(live):
-            zeta[i], alpha[i] = 100.0 * y[k], y[3 + k]
-        return _wrench(vm, live, zeta, alpha)
+        force, torque = ca.SX.zeros(3), ca.SX.zeros(3)
+        for k in range(3):
+            pos, ax, ay, spin = g[6 * k:6 * k + 3], g[6 * k + 3], g[6 * k + 4], g[6 * k + 5]
+            zeta, a = 100.0 * y[k], y[3 + k]
+            f = (th.c2 * zeta + th.c1) * zeta + th.c0
+            t = (tq.c2 * zeta + tq.c1) * zeta + tq.c0
+            n = ca.vertcat(-ay * ca.sin(a), ax * ca.sin(a), -ca.cos(a))
+            force += f * n
+            torque += ca.cross(pos, f * n) - spin * t * n
+        return force, torque
 
     def rhs(x):
         om, s, y = x[0:3], x[3:6], x[6:12]
@@ -118,7 +133,7 @@ def _model(vm: VehicleModel, live, dt_s: float):
     k4 = rhs(z + dt_s * k3)
     z_next = z + dt_s / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
     force, _ = wrench(z[6:12])
-    return z, u, z_next, force
+    return z, u, g, z_next, force
 
 
 class SpinNmpc:
@@ -131,21 +146,23 @@ class SpinNmpc:
             raise ValueError(f"spin nmpc: horizon_steps {horizon_steps!r}, expected >= 1")
         self.N, self.dt_s = int(horizon_steps), float(dt_s)
         self._lo, self._hi = np.asarray(lo, float), np.asarray(hi, float)
-        key = (repr(vm), tuple(live), self.dt_s, self.N, repr(weights))
+        self._geometry = geometry(vm, live)
+        key = (repr(vm), self.dt_s, self.N, repr(weights))
         if key not in _FUNCTIONS:
-            _FUNCTIONS[key] = self._functions(vm, live, weights)
+            _FUNCTIONS[key] = self._functions(vm, weights)
         self._fn, self._step, self.how = _FUNCTIONS[key]
         self._qp = hpipm.OcpQp(NZ, NU, self.N, np.zeros(0, np.int32), mode=qp_mode,
                                iter_max=qp_iter_max)
         self._empty = np.zeros((self.N + 1, 0))
-        self.iterations = 1
-        self.reset(None)
+        self.iterations = 1                 # SQP steps a period (1: the real-time iteration)
+        self.reset()
 
-    def _functions(self, vm, live, weights):
+    def _functions(self, vm, weights):
         """The compiled period function (NumpyFunction), the one-step model, how it was built."""
-        z, u, z_next, force = _model(vm, list(live), self.dt_s)
+        z, u, g, z_next, force = _model(vm, self.dt_s)
         p = ca.SX.sym("p", _NP)
         n, e, sw, a_op, f_des = p[0:3], ca.reshape(p[3:9], 3, 2), p[9], p[10:16], p[16]
+        z_next, force = (ca.substitute(v, g, p[17:17 + _NG]) for v in (z_next, force))
         w = weights
         sq = np.sqrt
         r = ca.vertcat(sq(w.spin) * (ca.dot(z[0:3], n) - sw),
@@ -154,7 +171,7 @@ class SpinNmpc:
                        ca.DM(sq([w.actuator[0]] * 3 + [w.actuator[1]] * 3)) * (z[6:12] - a_op),
                        sq(w.force) * (ca.dot(force, z[3:6]) - f_des),
                        ca.DM(sq([w.input[0]] * 3 + [w.input[1]] * 3)) * (u - a_op))
-        step = ca.Function("spin_step", [z, u], [z_next])
+        step = ca.Function("spin_step", [z, u, p], [z_next])
         stage = ca.Function("spin_stage", [z, u, p],
                             [ca.jacobian(z_next, z), ca.jacobian(z_next, u), r,
                              ca.jacobian(r, z), ca.jacobian(r, u)])
@@ -163,7 +180,7 @@ class SpinNmpc:
         z0 = ca.SX.sym("z0", NZ)
         us = ca.SX.sym("U", NU, self.N)
         roll = step.mapaccum("spin_roll", self.N)
-        zs = roll(z0, us)                                    # NZ x N: z_1..z_N
+        zs = roll(z0, us, ca.repmat(p, 1, self.N))            # NZ x N: z_1..z_N
         z_all = ca.horzcat(z0, zs)
         a, b, res, jz, ju = stage.map(self.N)(z_all[:, 0:self.N], us, ca.repmat(p, 1, self.N))
         fn = ca.Function(f"spin_rti_{self.N}", [z0, us, p],
@@ -171,27 +188,32 @@ class SpinNmpc:
         compiled_fn, how = compiled(fn)
         return NumpyFunction(compiled_fn), NumpyFunction(step), how
 
-    def reset(self, u_guess) -> None:
-        """Forget the plan: the next solve starts from `u_guess` (6) held over the horizon
-        (None: the first solve's operating point)."""
-        self._plan = None if u_guess is None else np.tile(np.asarray(u_guess, float),
-                                                          (self.N, 1))
+    def reset(self) -> None:
+        """Forget the plan: the next solve starts afresh from its guess."""
+        self._plan = None
 
     def predict(self, z0, commands) -> np.ndarray:
         """z0 carried through `commands` (each one control period, oldest first): the state a
         plan starts from when commands are still in flight."""
         z = np.asarray(z0, float)
+        p = np.concatenate([np.zeros(17), self._geometry])     # the step reads the geometry only
         for c in commands:
-            z = self._step(z, c)
+            z = self._step(z, c, p)
         return z
 
-    def solve(self, z0, ref: SpinReference, p_term: np.ndarray,
-              t_term: np.ndarray) -> tuple[np.ndarray | None, SpinNmpcInfo]:
+    def solve(self, z0, ref: SpinReference, p_term: np.ndarray, t_term: np.ndarray,
+              guess=None) -> tuple[np.ndarray | None, SpinNmpcInfo]:
         """The first command of this period's plan from z0 (NZ), or None when the QP failed.
         `p_term`: the LQR's Riccati solution (11x11) on its state x = t_term (z - z_ref),
-        `t_term` (11 x NZ)."""
+        `t_term` (11 x NZ). With no plan yet (the first period after `reset`, or after a failed
+        QP) the plan starts from `guess` (6: the LQR's command) held over the horizon (None: the
+        operating point): from the last command sent, in a tumble, one SQP step can land on the
+        wrong side of the axis and flip the vehicle (the record)."""
         N = self.N
-        plan = self._plan if self._plan is not None else np.tile(ref.a_op, (N, 1))
+        if self._plan is None:
+            plan = np.tile(ref.a_op if guess is None else np.asarray(guess, float), (N, 1))
+        else:
+            plan = self._plan
         plan = np.clip(plan, self._lo, self._hi)
         for _ in range(self.iterations):
             plan, info = self._sqp_step(z0, plan, ref, p_term, t_term)
@@ -203,7 +225,8 @@ class SpinNmpc:
 
     def _sqp_step(self, z0, plan, ref, p_term, t_term):
         N = self.N
-        zs, a, b, res, jz, ju = self._fn.outputs_in_place(z0, plan, ref.params())
+        params = np.concatenate([ref.params(), self._geometry])
+        zs, a, b, res, jz, ju = self._fn.outputs_in_place(z0, plan, params)
 
         def mat(flat, rows, cols):          # a flat column-major output as [rows, k, cols]:
             return flat.reshape(N, cols, rows).transpose(2, 0, 1)   # map() puts stage k's

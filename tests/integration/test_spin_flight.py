@@ -64,9 +64,11 @@ def test_the_nmpc_inner_loop_drifts_less_where_the_lqr_saturates(controller):
     most of its commands for the first seconds; the NMPC inner loop (spin.inner nmpc) plans
     within the bounds and drifts less from the failure point over the same 2 s (measured 0.96
     against 1.21 m, seed 0), neither flipping."""
-    nmpc = SpinController(dataclasses.replace(controller.config, inner="nmpc"),
-                          controller.vehicle, 1)
-    lqr_run = fly("hover", seed=0, seconds=2.0, switch_delay_s=0.05, controller=controller)
+    assert controller.config.inner == "nmpc"          # the shipped inner loop
+    lqr = SpinController(dataclasses.replace(controller.config, inner="lqr"),
+                         controller.vehicle, 1)
+    nmpc = controller
+    lqr_run = fly("hover", seed=0, seconds=2.0, switch_delay_s=0.05, controller=lqr)
     nmpc_run = fly("hover", seed=0, seconds=2.0, switch_delay_s=0.05, controller=nmpc)
     assert not lqr_run.crashed and not nmpc_run.crashed
     assert lqr_run.saturated_fraction > 0.5

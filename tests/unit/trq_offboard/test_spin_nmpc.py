@@ -24,7 +24,7 @@ HOLD = ReferenceSample((0.0, 0.0, -5.0), (0.0, 0.0, 0.0), 0.0)
 @pytest.fixture(scope="module")
 def pair():
     """The LQR and the NMPC on the same `spin:` section, motor 1 dead."""
-    cfg = load_spin_config(CONTROLLER)
+    cfg = dataclasses.replace(load_spin_config(CONTROLLER), inner="lqr")
     vm = load_vehicle_model(cfg.vehicle_file)
     return (SpinController(cfg, vm, 1),
             SpinController(dataclasses.replace(cfg, inner="nmpc"), vm, 1))
@@ -100,18 +100,20 @@ def test_a_failed_qp_flies_the_lqr(pair, monkeypatch):
 
 
 def test_the_inner_loop_is_named_in_the_file(tmp_path):
-    """`spin.inner` takes lqr or nmpc (default lqr), `spin.horizon_steps` 1..200; anything else
-    is refused naming the key."""
-    assert load_spin_config(CONTROLLER).inner == "lqr"
+    """`spin.inner` takes lqr or nmpc (the schema's default lqr, the shipped file's nmpc),
+    `spin.horizon_steps` 1..200; anything else is refused naming the key."""
+    assert load_spin_config(CONTROLLER).inner == "nmpc"          # as shipped
     text = (PARAMS / "controller" / "trq_nmpc_eso.yaml").read_text()
     text = text.replace("extends: nmpc.yaml", f"extends: {PARAMS}/controller/nmpc.yaml")
     text = text.replace("vehicle: ../vehicle/", f"vehicle: {PARAMS}/vehicle/")
-    for bad, key in (("  inner: mpc\n", "inner"), ("  horizon_steps: 0\n", "horizon_steps")):
-        f = tmp_path / "c.yaml"
-        f.write_text(text.replace("  spin_rate_rad_s: 20.0", bad + "  spin_rate_rad_s: 20.0"))
-        with pytest.raises(ConfigError, match=key):
+    f = tmp_path / "c.yaml"
+    for old, bad in (("  inner: nmpc", "  inner: mpc"),
+                     ("  horizon_steps: 20", "  horizon_steps: 0")):
+        assert old in text
+        f.write_text(text.replace(old, bad))
+        with pytest.raises(ConfigError, match=bad.split(":")[0].strip()):
             load_spin_config(f)
-    f.write_text(text.replace("  spin_rate_rad_s: 20.0",
-                              "  inner: nmpc\n  horizon_steps: 30\n  spin_rate_rad_s: 20.0"))
+    f.write_text(text.replace("  inner: nmpc", "  inner: lqr").replace("  horizon_steps: 20",
+                                                                      "  horizon_steps: 30"))
     cfg = load_spin_config(f)
-    assert (cfg.inner, cfg.horizon_steps) == ("nmpc", 30)
+    assert (cfg.inner, cfg.horizon_steps) == ("lqr", 30)
