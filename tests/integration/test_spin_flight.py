@@ -54,7 +54,7 @@ def test_lands_slowly_from_5_m(controller):
     within 15 deg of upright (9.1-9.3), then the motors off."""
     r = fly("hover", seed=1, seconds=14.0, switch_delay_s=0.02, land=True, controller=controller)
     assert not r.crashed and r.landed and r.motors_off
-    assert r.touchdown_speed_m_s < 2.0
+    assert 0.1 < r.touchdown_speed_m_s < 2.0       # the gear's contact read, not the rest after
     assert r.touchdown_drift_m < 2.0
     assert r.touchdown_tilt_deg < 15.0
 

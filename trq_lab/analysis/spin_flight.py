@@ -51,8 +51,8 @@ class SpinFlight:
     max_drift_m: float                # horizontal distance from the failure point, largest
     hold_drift_m: float               # the same over the hold's last second (1-period mean)
     touchdown_drift_m: float          # horizontal distance at touchdown (nan: no touchdown)
-    touchdown_speed_m_s: float        # vertical speed on the last tick before contact
-    touchdown_tilt_deg: float         # body -z from the vertical on that tick (the cone + lean)
+    touchdown_speed_m_s: float        # vertical speed at the gear's first contact (the plant's)
+    touchdown_tilt_deg: float         # body -z from the vertical then (the cone + lean)
     max_descent_m_s: float            # the largest downward speed
     spin_mean_rad_s: float            # |omega| over the hold's last second
     max_rate_axis_rad_s: float        # the largest |omega_i| of any body axis (the gyro reads)
@@ -101,8 +101,8 @@ def fly(scenario: str = "orbit", *, seed: int = 0, seconds: float = 2.0, motor: 
         from trq_lab.overlays import write_vehicle_overlay
         vehicle_file = write_vehicle_overlay(trq_params.DIR / "vehicle" / "trq.yaml", plant,
                                              Path(tempfile.mkdtemp(prefix="spin_plant_")))
-    sim = load_sim(SIM_FILE, vehicle_file).with_changes(physics_core=physics_core, wind_speed_m_s=wind_m_s,
-                                           gusts_enabled=gusts)
+    sim = load_sim(SIM_FILE, vehicle_file).with_changes(
+        physics_core=physics_core, wind_speed_m_s=wind_m_s, gusts_enabled=gusts)
     vp = sim.vehicle
     if controller is None:
         cfg = load_spin_config(CONTROLLER_FILE)
@@ -226,13 +226,17 @@ def fly(scenario: str = "orbit", *, seed: int = 0, seconds: float = 2.0, motor: 
             sensing.tick(prev, s)
         if s.crashed:
             break
-        if s.landed:
+        if s.on_ground or s.landed:
+            # the gear's contact (the plant's ground: the body settles on its gear over tens of
+            # ms, `landed` once at rest): the plant's own impact speed and tilt at the contact
             if math.isnan(touchdown_speed):
-                touchdown_speed = last_vz
-                touchdown_tilt = tilt_now
+                touchdown_speed = (s.touchdown_speed_m_s if math.isfinite(s.touchdown_speed_m_s)
+                                   else last_vz)
+                touchdown_tilt = (math.degrees(s.touchdown_tilt_rad)
+                                  if math.isfinite(s.touchdown_tilt_rad) else tilt_now)
                 touchdown_drift = float(np.linalg.norm(np.asarray(s.x[0:2]) - failure_pos[0:2]))
                 touchdown_tick = k
-            if k - touchdown_tick > int(round(0.5 / dt)):
+            if s.landed and k - touchdown_tick > int(round(0.5 / dt)):
                 break
             continue
         r = np.array(quat_to_dcm(*s.x[6:10]))
@@ -346,7 +350,7 @@ def step_time_ratio(steps: int = 200, seed: int = 0,
     veh.state = VehicleState(0, x0, (hover,) * 4, (0.0,) * 4, (0.0, 0.0, 0.0), True, False,
                              False, "")
     ref = ConstantReference(ReferenceSample((0.0, 0.0, -5.0), (0.0, 0.0, 0.0), 0.0))
-    ticks = int(round(1.0 / (nmpc.cfg.control_dt_s * sim.dt_us * 1e-6)))
+    ticks = int(round(nmpc.cfg.control_dt_s / (sim.dt_us * 1e-6)))    # physics ticks a step
     ns = []
     for k in range(steps):
         s = veh.state

@@ -15,8 +15,8 @@ from trq_offboard.spin import SpinController, load_spin_config
 
 cfg = load_spin_config(CONTROLLER_FILE)
 vm = load_vehicle_model(cfg.vehicle_file)
-inner = {"lqr": SpinController(cfg, vm, 1),
-         "nmpc20": SpinController(dataclasses.replace(cfg, inner="nmpc"), vm, 1),
+inner = {"lqr": SpinController(dataclasses.replace(cfg, inner="lqr"), vm, 1),
+         "nmpc20": SpinController(dataclasses.replace(cfg, inner="nmpc", horizon_steps=20), vm, 1),
          "nmpc40x3": SpinController(dataclasses.replace(cfg, inner="nmpc", horizon_steps=40),
                                     vm, 1)}
 inner["nmpc40x3"]._nmpc.iterations = 3
