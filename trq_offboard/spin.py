@@ -51,6 +51,7 @@ from trq_params import loader, schema
 
 from trq_offboard.config import VehicleModel, load_vehicle_model
 from trq_offboard.records import ActuatorCommand, ReferenceSample, StateEstimate
+from trq_offboard.spin_nmpc import SpinNmpc, SpinReference, geometry, live_wrench
 
 __all__ = ["SpinWeights", "SpinPosition", "SpinLanding", "SpinConfig", "SpinTrim", "SpinInfo",
            "equilibrium", "SpinController", "landing_reference", "load_spin_config", "spin_config",
@@ -137,21 +138,10 @@ def load_spin_config(path: Path | str) -> SpinConfig:
 # --- the rotors' wrench (CasADi; the prediction model's arithmetic, live rotors only) ---------
 
 def _wrench(vm: VehicleModel, live, zeta_pct, alpha_rad):
-    """Body FRD force and torque of the live rotors (lists of SX/floats, 4 each)."""
-    force = ca.SX.zeros(3)
-    torque = ca.SX.zeros(3)
-    th, tq = vm.thrust_N, vm.torque_Nm
-    for i, rotor in enumerate(vm.rotors):
-        if i not in live:
-            continue
-        z, a = zeta_pct[i], alpha_rad[i]
-        f = (th.c2 * z + th.c1) * z + th.c0
-        tau = (tq.c2 * z + tq.c1) * z + tq.c0
-        ax, ay, _ = rotor.arm_frd
-        n = ca.vertcat(-ay * ca.sin(a), ax * ca.sin(a), -ca.cos(a))
-        force += f * n
-        torque += ca.cross(ca.DM(rotor.position_frd_m), f * n) - rotor.spin * tau * n
-    return force, torque
+    """Body FRD force and torque of the live rotors (lists of SX/floats, 4 each, the dead
+    rotor's ignored): spin_nmpc.live_wrench on their geometry."""
+    return live_wrench(vm, ca.DM(geometry(vm, live)), [zeta_pct[i] for i in live],
+                       [alpha_rad[i] for i in live])
 
 
 @dataclass(frozen=True)
@@ -429,7 +419,6 @@ class SpinController:
                               + [vehicle.servo_rate_limit_rad_s] * 3) * dt
         self._nmpc = None
         if config.inner == "nmpc":
-            from trq_offboard.spin_nmpc import SpinNmpc
             self._nmpc = SpinNmpc(vehicle, self._live, dt, config.horizon_steps, config.weights,
                                   self._lo, self._hi)
         self.reset(None)
@@ -573,7 +562,6 @@ class SpinController:
         """Inner nmpc: this period's command from the plan (spin_nmpc.py), the state carried
         through the commands still in flight; the LQR's (clipped) when the QP fails. Returns
         (command, live commands at a bound, (QP status, QP iterations))."""
-        from trq_offboard.spin_nmpc import SpinReference
         z0 = self._nmpc.predict(np.concatenate([om, s, self._act]), self._in_flight)
         ref = SpinReference(self._n, self._e, self.direction * self.trim.spin_rad_s, a_op, f_des)
         u, info = self._nmpc.solve(z0, ref, self._p_term, self._t_term, guess=u_lqr)

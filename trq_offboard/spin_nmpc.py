@@ -2,8 +2,8 @@
 limits as constraints (issue 40 item 3; spin.py's `inner: nmpc`).
 
     nmpc = SpinNmpc(vehicle, live, dt_s, horizon_steps, weights, lo, hi)    # build once
-    u0, info = nmpc.solve(z0, ref, terminal)       # one real-time iteration, every control period
-    nmpc.reset(u_guess)                            # at the switch: the plan restarts from a guess
+    u0, info = nmpc.solve(z0, ref, p_term, t_term, guess)   # one real-time iteration a period
+    nmpc.reset()                                   # at the switch: the next plan from its guess
 
 The model is the one spin.py's LQR linearises, kept nonlinear: in the body frame, where the
 relaxed hover is a fixed point,
@@ -11,11 +11,12 @@ relaxed hover is a fixed point,
     z = [omega (3, body FRD rad/s), s (3: R^T n_des, the direction asked for the primary axis,
          seen from the body), y (6: the live actuators' outputs, 3 throttles / 100, 3 tilts rad)]
     u = the six live commands (same units)
-    d omega/dt = J^-1 (M(y) - omega x J omega)     M: the live rotors' torque (the wrench of
-    d s/dt     = -omega x s                           spin.py, the prediction model's arithmetic)
+    d omega/dt = J^-1 (M(y) - omega x J omega)     M: the live rotors' torque (`live_wrench`:
+    d s/dt     = -omega x s                           the prediction model's arithmetic)
     d y/dt     = (u - y) / T                         T: the vehicle file's motor and servo lags
 
-discretised by one RK4 step per control period (at 20-30 rad/s a step turns the body 0.2-0.3 rad:
+(the rate limits are left out, as in the project's OCP and the LQR), discretised by one RK4
+step per control period (at 20-30 rad/s a step turns the body 0.2-0.3 rad:
 RK4's error is of the order of that to the fifth power). The attitude is reduced (s): yaw is given
 up, as the orbit gives it up; the spin rate is a state and the tilts' yaw torque governs it.
 
@@ -55,7 +56,7 @@ from trq_offboard.model.dynamics import NumpyFunction
 from trq_offboard.nmpc import hpipm
 from trq_offboard.nmpc.cache import compiled
 
-__all__ = ["SpinNmpc", "SpinReference", "SpinNmpcInfo", "NZ", "NU"]
+__all__ = ["SpinNmpc", "SpinReference", "SpinNmpcInfo", "NZ", "NU", "geometry", "live_wrench"]
 
 NZ, NU, NR = 12, 6, 18                 # state, input, residuals
 _NG = 18                               # the live rotors' geometry (`geometry`)
@@ -99,6 +100,23 @@ def geometry(vm: VehicleModel, live) -> np.ndarray:
                             vm.rotors[i].arm_frd[1], vm.rotors[i].spin] for i in live])
 
 
+def live_wrench(vm: VehicleModel, g, zeta_pct, alpha_rad):
+    """Body FRD force and torque (CasADi, or numbers) of three live rotors of geometry `g`
+    (`geometry`) at throttles `zeta_pct` (%) and tilts `alpha_rad` (3 each): the prediction
+    model's arithmetic, the rotors' curves and tilt axes. spin.py's trim and LQR use it too."""
+    force, torque = ca.SX.zeros(3), ca.SX.zeros(3)
+    th, tq = vm.thrust_N, vm.torque_Nm
+    for k in range(3):
+        pos, ax, ay, spin = g[6 * k:6 * k + 3], g[6 * k + 3], g[6 * k + 4], g[6 * k + 5]
+        z, a = zeta_pct[k], alpha_rad[k]
+        f = (th.c2 * z + th.c1) * z + th.c0
+        t = (tq.c2 * z + tq.c1) * z + tq.c0
+        n = ca.vertcat(-ay * ca.sin(a), ax * ca.sin(a), -ca.cos(a))
+        force += f * n
+        torque += ca.cross(pos, f * n) - spin * t * n
+    return force, torque
+
+
 def _model(vm: VehicleModel, dt_s: float):
     """(z, u, g) -> z after dt_s (RK4), and the live rotors' body force at y (CasADi SX); g the
     live rotors' `geometry`, a parameter, so that one compiled function serves every motor lost.
@@ -107,19 +125,9 @@ def _model(vm: VehicleModel, dt_s: float):
     tau = np.maximum(np.array([vm.motor_time_constant_s] * 3 + [vm.servo_time_constant_s] * 3),
                      1e-3)
     jm = ca.DM(np.diag(vm.inertia_kg_m2))
-    th, tq = vm.thrust_N, vm.torque_Nm
 
     def wrench(y):
-        force, torque = ca.SX.zeros(3), ca.SX.zeros(3)
-        for k in range(3):
-            pos, ax, ay, spin = g[6 * k:6 * k + 3], g[6 * k + 3], g[6 * k + 4], g[6 * k + 5]
-            zeta, a = 100.0 * y[k], y[3 + k]
-            f = (th.c2 * zeta + th.c1) * zeta + th.c0
-            t = (tq.c2 * zeta + tq.c1) * zeta + tq.c0
-            n = ca.vertcat(-ay * ca.sin(a), ax * ca.sin(a), -ca.cos(a))
-            force += f * n
-            torque += ca.cross(pos, f * n) - spin * t * n
-        return force, torque
+        return live_wrench(vm, g, [100.0 * y[k] for k in range(3)], [y[3 + k] for k in range(3)])
 
     def rhs(x):
         om, s, y = x[0:3], x[3:6], x[6:12]
