@@ -158,9 +158,22 @@ class SpinTrim:
     margin: float
 
 
+# the trims solved in this process (vehicle, motor, spin rate): a controller builds one spinning
+# controller per motor and per sense of the spin, and the trim does not depend on the sense
+_TRIMS: dict[tuple, SpinTrim] = {}
+
+
 def equilibrium(vm: VehicleModel, motor: int, spin_rad_s: float) -> SpinTrim:
     """The largest-margin relaxed hover at `spin_rad_s` with motor `motor` (1..4) dead, in calm
-    air (IPOPT from eight starts, as trq_lab's spin envelope; ValueError if none is found)."""
+    air (IPOPT from eight starts, as trq_lab's spin envelope; ValueError if none is found).
+    Solved once per process for each vehicle, motor and rate (a pure function of them)."""
+    key = (repr(vm), motor, float(spin_rad_s))
+    if key not in _TRIMS:
+        _TRIMS[key] = _equilibrium(vm, motor, spin_rad_s)
+    return _TRIMS[key]
+
+
+def _equilibrium(vm: VehicleModel, motor: int, spin_rad_s: float) -> SpinTrim:
     if motor not in (1, 2, 3, 4):
         raise ValueError(f"spin: motor {motor!r}, expected 1..4 (PX4 quad X numbering)")
     if vm.tilt_locked:
