@@ -61,8 +61,8 @@ __all__ = ["SpinNmpc", "SpinReference", "SpinNmpcInfo", "NZ", "NU", "geometry", 
 NZ, NU, NR = 12, 6, 18                 # state, input, residuals
 _NG = 18                               # the live rotors' geometry (`geometry`)
 _NP = 3 + 6 + 1 + 6 + 1 + _NG          # n, E (column-major), sigma w, a_op, f_des, geometry
-# the compiled functions, built once per process for each vehicle, live set, step, horizon and
-# weights: a flight's controller builds one SpinController per motor and sense
+# the compiled functions, built once per process for each vehicle, step, horizon and weights (the
+# live rotors are a parameter): a flight's controller builds one SpinController per motor and sense
 _FUNCTIONS: dict[tuple, tuple] = {}
 _REG = 1e-9                            # on the QP Hessian's diagonal (its s block is singular
                                        # along n: nothing weighs the axis' own component)
@@ -101,7 +101,7 @@ def geometry(vm: VehicleModel, live) -> np.ndarray:
 
 
 def live_wrench(vm: VehicleModel, g, zeta_pct, alpha_rad):
-    """Body FRD force and torque (CasADi, or numbers) of three live rotors of geometry `g`
+    """Body FRD force and torque (CasADi SX) of three live rotors of geometry `g`
     (`geometry`) at throttles `zeta_pct` (%) and tilts `alpha_rad` (3 each): the prediction
     model's arithmetic, the rotors' curves and tilt axes. spin.py's trim and LQR use it too."""
     force, torque = ca.SX.zeros(3), ca.SX.zeros(3)
@@ -119,8 +119,8 @@ def live_wrench(vm: VehicleModel, g, zeta_pct, alpha_rad):
 
 def _model(vm: VehicleModel, dt_s: float):
     """(z, u, g) -> z after dt_s (RK4), and the live rotors' body force at y (CasADi SX); g the
-    live rotors' `geometry`, a parameter, so that one compiled function serves every motor lost.
-    The wrench is spin.py's (the prediction model's arithmetic) on that geometry."""
+    live rotors' `geometry`, a parameter, so that one compiled function serves every motor lost;
+    the wrench `live_wrench`."""
     z, u, g = ca.SX.sym("z", NZ), ca.SX.sym("u", NU), ca.SX.sym("g", _NG)
     tau = np.maximum(np.array([vm.motor_time_constant_s] * 3 + [vm.servo_time_constant_s] * 3),
                      1e-3)
