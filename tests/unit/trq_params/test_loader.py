@@ -81,6 +81,23 @@ def test_yaml_11_booleans_rejected_by_both_daemons(tmp_path, load, word):
                                "expected true or false")
 
 
+@pytest.mark.parametrize("text, line", [
+    ("name: a\nspin:\n  inner: nmpc\n  horizon_steps: 20\n  inner: lqr\n", 3),
+    ("name: a\nname: b\n", 1),
+    ("faults: [{at_s: 1.0, at_s: 2.0}]\n", 1)])
+def test_a_key_given_twice_is_refused_naming_it_and_its_lines(tmp_path, text, line):
+    """A key twice in one mapping (block or flow) is an error naming the file, the key and the
+    line of its first use (PyYAML alone keeps the last and says nothing); the same key in two
+    mappings is no duplicate."""
+    path = write(tmp_path / "c.yaml", text)
+    with pytest.raises(ConfigError, match="given twice") as info:
+        loader.read_yaml(path)
+    assert str(info.value).startswith(f"{path}: ")
+    assert f"first on line {line})" in str(info.value)
+    assert loader.read_yaml(write(tmp_path / "ok.yaml", "a: {x: 1}\nb: {x: 2}\n")) == {
+        "a": {"x": 1}, "b": {"x": 2}}
+
+
 def test_both_daemons_read_the_same_vehicle(tmp_path):
     path = write(tmp_path / "v.yaml", {"extends": "builtin:vehicle/quad", "mass_kg": 1.9})
     sim, ctrl = sim_config.load_vehicle(path), ctrl_config.load_vehicle_model(path)
