@@ -143,8 +143,12 @@ def update_anchors(x: Sequence[float], gear: Gear,
                    anchors_ne_m: Sequence[float]) -> tuple[float, ...]:
     """The anchors after a tick ending in state x: a point out of contact (or pressing with no
     force) anchors where it is; one whose spring stretches past breakaway (mu N / k_t) drags its
-    anchor along, the stretch kept at breakaway; the others keep theirs."""
+    anchor along, the stretch kept at breakaway; the others keep theirs. No anchors (the tick
+    began out of the ground's reach, where the tick takes them where the points are): the same,
+    from the points where they are now (a fast fall can reach into the ground in one tick)."""
     feet = feet_ne_m(x, gear)
+    if len(anchors_ne_m) != len(feet):
+        anchors_ne_m = feet
     pd, vn, ve, vd, qw, qx, qy, qz, p, q, r = x[2:13]
     r20 = 2 * (qx * qz - qw * qy)
     r21 = 2 * (qy * qz + qw * qx)

@@ -126,3 +126,24 @@ def test_a_crosswind_below_breakaway_does_not_make_it_creep(sim):
     assert abs(states[999].x[0] + lean) < 0.05 * lean               # blown south, by the lean
     assert abs(states[-1].x[0] - states[999].x[0]) < 1e-7           # and no further in 4 s
     assert all(s.landed for s in states[200:])
+
+
+def test_a_fall_that_reaches_into_the_ground_in_one_tick_anchors_where_it_touches(sim):
+    """A tumbling fall whose lowest gear point points straight down: the tick begins out of the
+    ground's reach (no anchors) and ends with that point in the ground. The points anchor where
+    they touch and the tick is judged (an impact at 5 m/s: a crash); it raised an IndexError,
+    which killed a campaign's flight (trq_nmpc_eso, motor 2 lost)."""
+    gear = sim.vehicle.gear
+    p = np.asarray(gear.points_frd_m[0], float)
+    p /= np.linalg.norm(p)
+    axis = np.cross(p, [0.0, 0.0, 1.0])                   # turn the point onto world down
+    angle = math.acos(float(p[2]))
+    axis /= np.linalg.norm(axis)
+    quat = (math.cos(angle / 2), *(math.sin(angle / 2) * axis))
+    v = vehicle(sim, gear.reach_down_m - 0.001, vel=(0.0, 0.0, 5.0))
+    x = list(v.state.x)
+    x[6:10] = quat
+    v.state = dataclasses.replace(v.state, x=tuple(x), anchors_ne_m=())
+    s = v.step()
+    assert s.on_ground and s.crashed and "impact" in s.crash_reason
+    assert s.anchors_ne_m == feet_ne_m(s.x, gear)
