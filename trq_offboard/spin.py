@@ -443,12 +443,13 @@ class SpinController:
         n = np.asarray(trim.axis_frd)
         e = _basis(n)
         lin = _linearise(self.vehicle, trim, live, e, self.direction)
-        gain, _ = _lqr_gain(lin, self.config, n, e, self.delay_steps)  # 6 x (11 + 6 d)
+        gain, p = _lqr_gain(lin, self.config, n, e, self.delay_steps)  # 6 x (11 + 6 d)
         p_term = t_term = None
         if self.config.inner == "nmpc":
             # the NMPC's terminal cost: the delay-free LQR's P (the NMPC carries the commands in
-            # flight by predicting through them), on x = [omega - w n, E' s, y - a_op]
-            p_term = _lqr_gain(lin, self.config, n, e, 0)[1]
+            # flight by predicting through them), on x = [omega - w n, E' s, y - a_op]; without
+            # a delay the gain's own
+            p_term = p if self.delay_steps == 0 else _lqr_gain(lin, self.config, n, e, 0)[1]
             t_term = np.zeros((11, 12))
             t_term[0:3, 0:3] = np.eye(3)
             t_term[3:5, 3:6] = e.T
