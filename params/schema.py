@@ -605,6 +605,15 @@ class Spin(Strict):
     # (trq_offboard/spin_nmpc.py); its horizon in control periods
     inner: Choice("lqr", "nmpc") = "lqr"
     horizon_steps: Int(1, 200) = 20
+    # the observer's estimate of what the model misses (the controller's ESO) fed forward: its
+    # acceleration into the position loop, its angular acceleration into the inner loop's
+    # operating point and model, through a first-order low-pass of this time constant (s); null:
+    # not used (the position loop's integral alone)
+    observer_lowpass_s: Optional[Num(0.0, 10.0)] = None
+    # for this long after the switch the estimate is not taken (the low-pass holds its start):
+    # the observer still carries the lost motor's deficit until it has re-converged on the model
+    # without it
+    observer_settle_s: Num(0.0, 10.0) = 0.1
 
 
 _ON_OFF_AUTO = Choice("on", "off", "auto")

@@ -453,10 +453,15 @@ class Controller:
                 sense = spin_sense(x[9:12], self._spins[(lost, 1)].trim.axis_frd)
                 self.spin = self._spins[(lost, sense)]
                 self._spin_t0 = float(t_s)
+                # the wind learnt before the switch: the position loop's integral starts from
+                # it, or, with the observer's estimate fed forward, that estimate's low-pass
+                wind = (self._wind_acc[0], self._wind_acc[1], 0.0)
+                fed = self._spin_cfg.observer_lowpass_s is not None
                 self.spin.reset(StateEstimate.from_vector(x),
                                 command=self.allocator.command_of(self._last_u),
                                 hold_pos_ned_m=tuple(x[0:3]), ground_down_m=self.ground_down_m,
-                                integral_m_s2=(-self._wind_acc[0], -self._wind_acc[1], 0.0))
+                                integral_m_s2=None if fed else tuple(-w for w in wind),
+                                disturbance_m_s2=wind if fed else None)
             self._to_failed_solver((lost,))
         self._scale[nt + lost - 1] = 0.0
         self.solver.ocp.set_throttle_scale(self._scale[nt:])
@@ -499,7 +504,7 @@ class Controller:
         ref = landing_reference(t_s - self._spin_t0, spin.hold_pos_ned_m, self._spin_cfg.landing,
                                 self.ground_down_m)
         t0 = time.perf_counter()
-        cmd = spin.step(StateEstimate.from_vector(x), ref)
+        cmd = spin.step(StateEstimate.from_vector(x), ref, d_obs)
         solve_s = time.perf_counter() - t0          # a measurement, as the solvers' own
         c3 = self.cpu_ns()
         u = self.allocator.command_vector(cmd)

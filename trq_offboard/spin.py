@@ -105,6 +105,9 @@ class SpinConfig:
     vehicle_file: str
     inner: str = "lqr"                  # the inner loop: "lqr", or "nmpc" (spin_nmpc.py)
     horizon_steps: int = 20             # the NMPC's horizon, in control periods
+    observer_lowpass_s: float | None = None   # the observer's estimate fed forward through a
+                                              # low-pass of this time constant (None: not used)
+    observer_settle_s: float = 0.1            # not taken for this long after the switch
 
     @property
     def dt_s(self) -> float:
@@ -121,7 +124,7 @@ def spin_config(s: schema.Spin, file: str, vehicle_file: str) -> SpinConfig:
                      p.climb_force_N, p.sink_force_N, p.max_integral_m_s2),
         SpinLanding(la.hold_s, la.descent_speed_m_s, la.final_height_m, la.final_speed_m_s,
                     la.contact_height_m, la.contact_speed_m_s, la.final_spin_rate_rad_s),
-        vehicle_file, s.inner, s.horizon_steps)
+        vehicle_file, s.inner, s.horizon_steps, s.observer_lowpass_s, s.observer_settle_s)
 
 
 def load_spin_config(path: Path | str) -> SpinConfig:
@@ -364,6 +367,7 @@ class _Stage:
     gain: np.ndarray                   # 6 x (11 + 6 d)
     a0: np.ndarray                     # the live actuators at the trim (fractions, rad)
     per_newton: np.ndarray             # their move per newton along the axis
+    per_torque: np.ndarray             # 6x3: their move per N m of body torque, the force held
     p_term: np.ndarray | None = None   # inner nmpc: the delay-free LQR's P (11x11), its terminal
     t_term: np.ndarray | None = None   # cost, on x = t_term (z - z_ref) (11 x 12)
 
@@ -430,6 +434,15 @@ class SpinController:
         self._lag = 1.0 - np.exp(-dt / np.maximum(tau, 1e-9))
         self._rate = np.array([vehicle.motor_rate_limit_pct_s / 100.0] * 3
                               + [vehicle.servo_rate_limit_rad_s] * 3) * dt
+        # the dead rotor at idle, tilt 0 (as the controller commands it while spinning): its
+        # body force and torque in the nominal model the observer runs on, which the spinning
+        # model leaves out (the observer's d carries them negated: `_disturbance`)
+        dead = motor - 1
+        f_idle, m_idle = live_wrench(vehicle, ca.DM(geometry(vehicle, [dead])),
+                                     [vehicle.idle_pct], [0.0])
+        self._idle_force = np.array(ca.DM(f_idle)).ravel()
+        self._idle_torque = np.array(ca.DM(m_idle)).ravel()
+        self._inertia = np.asarray(vehicle.inertia_kg_m2, float)
         self._nmpc = None
         if config.inner == "nmpc":
             self._nmpc = SpinNmpc(vehicle, self._live, dt, config.horizon_steps, config.weights,
@@ -458,26 +471,28 @@ class SpinController:
                       + [trim.tilt_rad[i] for i in live])
         # the operating point's move per newton of force along the axis with the torque held
         # (the least change in scaled units): the linearised family of equilibria
-        sens = np.vstack([lin.m_act, lin.f_act])                         # 4 x 6
-        per_newton = np.linalg.pinv(sens) @ np.array([0.0, 0.0, 0.0, 1.0])
-        return _Stage(trim, n, e, gain, a0, per_newton, p_term, t_term)
+        sens_inv = np.linalg.pinv(np.vstack([lin.m_act, lin.f_act]))    # 6 x 4
+        return _Stage(trim, n, e, gain, a0, sens_inv[:, 3], sens_inv[:, 0:3], p_term, t_term)
 
     def _use(self, i: int) -> None:
         st = self._stages[i]
         self._stage_index = i
         self.trim, self._n, self._e, self.gain = st.trim, st.axis, st.basis, st.gain
-        self._a0, self._per_newton = st.a0, st.per_newton
+        self._a0, self._per_newton, self._per_torque = st.a0, st.per_newton, st.per_torque
         self._p_term, self._t_term = st.p_term, st.t_term
 
     # --- the switch ----------------------------------------------------------------------------
     def reset(self, estimate: StateEstimate | None, *, command: ActuatorCommand | None = None,
-              hold_pos_ned_m=None, ground_down_m: float = 0.0, integral_m_s2=None) -> None:
+              hold_pos_ned_m=None, ground_down_m: float = 0.0, integral_m_s2=None,
+              disturbance_m_s2=None) -> None:
         """Start afresh: `command` is the last command sent (the actuators' outputs are taken to
         be there: the lag states start from it; None: from the trim); `hold_pos_ned_m` the point
         to hold (None: the estimate's position); `ground_down_m` the ground's NED down;
         `integral_m_s2` the position loop's integral to start from (world NED, m/s^2, bounded by
         max_integral_m_s2; None: zero): the acceleration the wind asks, which the observer
-        flying before the switch has learnt (its d negated)."""
+        flying before the switch has learnt (its d negated); `disturbance_m_s2` the observer's
+        NED acceleration to start its low-pass from (observer_lowpass_s set; None: zero): the
+        same wind, which the observer's estimate at the switch does not give (`_disturbance`)."""
         if command is None:
             self._act = self._a0.copy()
         else:
@@ -495,14 +510,23 @@ class SpinController:
             hold_pos_ned_m = estimate.pos_ned_m
         self.hold_pos_ned_m = None if hold_pos_ned_m is None else tuple(map(float, hold_pos_ned_m))
         self._landed = False
+        self._d = np.zeros(6)               # the observer's estimate, low-passed
+        if disturbance_m_s2 is not None:
+            self._d[0:3] = np.asarray(disturbance_m_s2, float)
+        self._periods = 0                   # steps since the switch
         self._use(0)
         self.info = SpinInfo(0.0, 0.0, self.trim.force_along_axis_N, 0, False)
 
     # --- one control period --------------------------------------------------------------------
-    def step(self, estimate: StateEstimate, reference: ReferenceSample) -> ActuatorCommand:
+    def step(self, estimate: StateEstimate, reference: ReferenceSample,
+             disturbance=None) -> ActuatorCommand:
         """The command for this period from the estimate (world NED position and velocity, ZYX
         Euler angles, body FRD rates) and the reference (position and velocity, NED; its yaw is
-        ignored: yaw is given up; phase "land" lets the touchdown switch the motors off)."""
+        ignored: yaw is given up; phase "land" lets the touchdown switch the motors off).
+        `disturbance` (6, or None: none this period): the observer's estimate of what the
+        controller's nominal model misses, that model flying the dead rotor at idle and tilt 0
+        (the NED acceleration, m/s^2, then the body FRD angular acceleration, rad/s^2); used
+        when the file's observer_lowpass_s is set (`_disturbance`)."""
         cfg, vm, pos = self.config, self.vehicle, self.config.position
         p = np.asarray(estimate.pos_ned_m, float)
         v = np.asarray(estimate.vel_ned_m_s, float)
@@ -524,7 +548,9 @@ class SpinController:
                 and p[2] >= self._ground - cfg.landing.final_height_m):
             self._use(1)                     # the final descent at the faster spin: less cone
         rot = _rotation(estimate.euler_rad)
-        # the position loop: the force vector asked for (world NED)
+        d_acc, d_ang = self._disturbance(disturbance, rot)
+        # the position loop: the force vector asked for (world NED), the observer's acceleration
+        # taken out (what the rotors must add to the loop's for it)
         e_p = np.asarray(reference.pos_ned_m, float) - p
         e_v = np.asarray(reference.vel_ned_m_s, float) - v
         kp = np.array([pos.kp_s2[0]] * 2 + [pos.kp_s2[1]])
@@ -532,7 +558,7 @@ class SpinController:
         ki = np.array([pos.ki_s3[0]] * 2 + [pos.ki_s3[1]])
         self._integral = np.clip(self._integral + ki * e_p * cfg.dt_s, -pos.max_integral_m_s2,
                                  pos.max_integral_m_s2)
-        acc = kp * e_p + kd * e_v + self._integral
+        acc = kp * e_p + kd * e_v + self._integral - d_acc
         force = vm.mass_kg * (acc - np.array([0.0, 0.0, vm.gravity_m_s2])) \
             + vm.drag_N_s2_m2 * np.linalg.norm(v) * v
         f_up = max(-force[2], 1e-6)
@@ -547,7 +573,10 @@ class SpinController:
         f_des = min(max(f_des, f0 - pos.sink_force_N), f0 + pos.climb_force_N)
         # the inner LQR about the orbit
         s = rot.T @ n_des
-        a_op = self._a0 + self._per_newton * (f_des - f0)
+        # the operating point for that force, and for the torque that cancels the observer's
+        # angular acceleration (the family of equilibria, linearised: the least move)
+        a_op = self._a0 + self._per_newton * (f_des - f0) \
+            - self._per_torque @ (self._inertia * d_ang)
         x = np.concatenate([om - self.direction * self.trim.spin_rad_s * self._n, self._e.T @ s,
                             self._act - a_op, *(u - a_op for u in self._in_flight)])
         u_raw = a_op - self.gain @ x
@@ -555,7 +584,7 @@ class SpinController:
         saturated = int(np.sum(np.abs(u - u_raw) > 1e-12))
         qp = (-1, 0)
         if self._nmpc is not None:
-            u, saturated, qp = self._nmpc_command(om, s, a_op, f_des, u, saturated)
+            u, saturated, qp = self._nmpc_command(om, s, a_op, f_des, u, saturated, d_ang)
         # the actuators' outputs over this period, as the vehicle file's lags and rate limits
         # make them from the command that acts now (the oldest in flight, or this one)
         acting = u
@@ -572,17 +601,40 @@ class SpinController:
             thr[i], til[i] = float(100.0 * u[k]), float(u[3 + k])
         return ActuatorCommand(tuple(thr), tuple(til))
 
-    def _nmpc_command(self, om, s, a_op, f_des, u_lqr, saturated_lqr):
+    def _nmpc_command(self, om, s, a_op, f_des, u_lqr, saturated_lqr, d_ang):
         """Inner nmpc: this period's command from the plan (spin_nmpc.py), the state carried
-        through the commands still in flight; the LQR's (clipped) when the QP fails. Returns
-        (command, live commands at a bound, (QP status, QP iterations))."""
-        z0 = self._nmpc.predict(np.concatenate([om, s, self._act]), self._in_flight)
-        ref = SpinReference(self._n, self._e, self.direction * self.trim.spin_rad_s, a_op, f_des)
+        through the commands still in flight, the observer's angular acceleration d_ang in its
+        model; the LQR's (clipped) when the QP fails. Returns (command, live commands at a
+        bound, (QP status, QP iterations))."""
+        z0 = self._nmpc.predict(np.concatenate([om, s, self._act]), self._in_flight, d_ang)
+        ref = SpinReference(self._n, self._e, self.direction * self.trim.spin_rad_s, a_op, f_des,
+                            d_ang)
         u, info = self._nmpc.solve(z0, ref, self._p_term, self._t_term, guess=u_lqr)
         if u is None:
             return u_lqr, saturated_lqr, (info.status, info.iterations)
         at_bound = (u <= self._lo + 1e-9) | (u >= self._hi - 1e-9)
         return u, int(np.sum(at_bound)), (info.status, info.iterations)
+
+    def _disturbance(self, d, rot: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The observer's estimate as the spinning model misses it, low-passed: (NED
+        acceleration, body FRD angular acceleration); zeros when the file does not use it.
+        The observer's model flies the dead rotor at idle, which the spinning model leaves
+        out: its share, which the observer's d carries negated, is added back. Until
+        observer_settle_s after the switch, and in a period without an estimate (None,
+        non-finite), the low-pass holds."""
+        tau = self.config.observer_lowpass_s
+        if tau is None:
+            return np.zeros(3), np.zeros(3)
+        self._periods += 1
+        settled = self._periods * self.config.dt_s > self.config.observer_settle_s + 1e-9
+        if d is not None and settled:
+            d = np.asarray(d, float)
+            if d.shape == (6,) and np.all(np.isfinite(d)):
+                own = np.concatenate([d[0:3] + rot @ self._idle_force / self.vehicle.mass_kg,
+                                      d[3:6] + self._idle_torque / self._inertia])
+                k = 1.0 - math.exp(-self.config.dt_s / tau) if tau > 0.0 else 1.0
+                self._d = self._d + k * (own - self._d)
+        return self._d[0:3], self._d[3:6]
 
 
 # --- the spin's sense at the switch ----------------------------------------------------------

@@ -11,8 +11,11 @@ relaxed hover is a fixed point,
     z = [omega (3, body FRD rad/s), s (3: R^T n_des, the direction asked for the primary axis,
          seen from the body), y (6: the live actuators' outputs, 3 throttles / 100, 3 tilts rad)]
     u = the six live commands (same units)
-    d omega/dt = J^-1 (M(y) - omega x J omega)     M: the live rotors' torque (`live_wrench`:
-    d s/dt     = -omega x s                           the prediction model's arithmetic)
+    d omega/dt = J^-1 (M(y) - omega x J omega) + d_w  M: the live rotors' torque (`live_wrench`:
+    d s/dt     = -omega x s                           the prediction model's arithmetic); d_w
+                                                      the observer's estimate of what the model
+                                                      misses (body FRD rad/s^2), held over the
+                                                      horizon (0: none)
     d y/dt     = (u - y) / T                         T: the vehicle file's motor and servo lags
 
 (the rate limits are left out, as in the project's OCP and the LQR), discretised by one RK4
@@ -46,7 +49,7 @@ Pure arithmetic on its inputs (no clock, no I/O); `info` carries the QP's status
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import casadi as ca
 import numpy as np
@@ -60,7 +63,8 @@ __all__ = ["SpinNmpc", "SpinReference", "SpinNmpcInfo", "NZ", "NU", "geometry", 
 
 NZ, NU, NR = 12, 6, 18                 # state, input, residuals
 _NG = 18                               # the live rotors' geometry (`geometry`)
-_NP = 3 + 6 + 1 + 6 + 1 + _NG          # n, E (column-major), sigma w, a_op, f_des, geometry
+_NM = 3 + _NG                          # the model's parameter: d_w, geometry
+_NP = 3 + 6 + 1 + 6 + 1 + _NM          # n, E (column-major), sigma w, a_op, f_des, d_w, geometry
 # the compiled functions, built once per process for each vehicle, step, horizon and weights (the
 # live rotors are a parameter): a flight's controller builds one SpinController per motor and sense
 _FUNCTIONS: dict[tuple, tuple] = {}
@@ -76,10 +80,12 @@ class SpinReference:
     spin_rad_s: float                  # sigma w: signed (omega = sigma w n on the orbit)
     a_op: np.ndarray                   # the live actuators' operating point (6)
     force_N: float                     # f_des, along s
+    disturbance: np.ndarray = field(default_factory=lambda: np.zeros(3))   # d_w (body FRD
+                                       # rad/s^2), held over the horizon
 
     def params(self) -> np.ndarray:
         return np.concatenate([self.axis, self.basis.ravel(order="F"), [self.spin_rad_s],
-                               self.a_op, [self.force_N]])
+                               self.a_op, [self.force_N], self.disturbance])
 
     def z_ref(self) -> np.ndarray:
         return np.concatenate([self.spin_rad_s * self.axis, self.axis, self.a_op])
@@ -106,7 +112,7 @@ def live_wrench(vm: VehicleModel, g, zeta_pct, alpha_rad):
     model's arithmetic, the rotors' curves and tilt axes. spin.py's trim and LQR use it too."""
     force, torque = ca.SX.zeros(3), ca.SX.zeros(3)
     th, tq = vm.thrust_N, vm.torque_Nm
-    for k in range(3):
+    for k in range(len(zeta_pct)):
         pos, ax, ay, spin = g[6 * k:6 * k + 3], g[6 * k + 3], g[6 * k + 4], g[6 * k + 5]
         z, a = zeta_pct[k], alpha_rad[k]
         f = (th.c2 * z + th.c1) * z + th.c0
@@ -119,20 +125,22 @@ def live_wrench(vm: VehicleModel, g, zeta_pct, alpha_rad):
 
 def _model(vm: VehicleModel, dt_s: float):
     """(z, u, g) -> z after dt_s (RK4), and the live rotors' body force at y (CasADi SX); g the
-    live rotors' `geometry`, a parameter, so that one compiled function serves every motor lost;
-    the wrench `live_wrench`."""
-    z, u, g = ca.SX.sym("z", NZ), ca.SX.sym("u", NU), ca.SX.sym("g", _NG)
+    model's parameter (_NM): d_w, then the live rotors' `geometry`, a parameter, so that one
+    compiled function serves every motor lost; the wrench `live_wrench`."""
+    z, u, g = ca.SX.sym("z", NZ), ca.SX.sym("u", NU), ca.SX.sym("g", _NM)
+    d_w, geo = g[0:3], g[3:_NM]
     tau = np.maximum(np.array([vm.motor_time_constant_s] * 3 + [vm.servo_time_constant_s] * 3),
                      1e-3)
     jm = ca.DM(np.diag(vm.inertia_kg_m2))
 
     def wrench(y):
-        return live_wrench(vm, g, [100.0 * y[k] for k in range(3)], [y[3 + k] for k in range(3)])
+        return live_wrench(vm, geo, [100.0 * y[k] for k in range(3)],
+                           [y[3 + k] for k in range(3)])
 
     def rhs(x):
         om, s, y = x[0:3], x[3:6], x[6:12]
         _, m = wrench(y)
-        om_dot = ca.solve(jm, m - ca.cross(om, jm @ om))
+        om_dot = ca.solve(jm, m - ca.cross(om, jm @ om)) + d_w
         return ca.vertcat(om_dot, -ca.cross(om, s), (u - y) / ca.DM(tau))
 
     k1 = rhs(z)
@@ -170,7 +178,7 @@ class SpinNmpc:
         z, u, g, z_next, force = _model(vm, self.dt_s)
         p = ca.SX.sym("p", _NP)
         n, e, sw, a_op, f_des = p[0:3], ca.reshape(p[3:9], 3, 2), p[9], p[10:16], p[16]
-        z_next, force = (ca.substitute(v, g, p[17:17 + _NG]) for v in (z_next, force))
+        z_next, force = (ca.substitute(v, g, p[17:17 + _NM]) for v in (z_next, force))
         w = weights
         sq = np.sqrt
         r = ca.vertcat(sq(w.spin) * (ca.dot(z[0:3], n) - sw),
@@ -200,11 +208,13 @@ class SpinNmpc:
         """Forget the plan: the next solve starts afresh from its guess."""
         self._plan = None
 
-    def predict(self, z0, commands) -> np.ndarray:
-        """z0 carried through `commands` (each one control period, oldest first): the state a
-        plan starts from when commands are still in flight."""
+    def predict(self, z0, commands, disturbance=None) -> np.ndarray:
+        """z0 carried through `commands` (each one control period, oldest first) under the
+        disturbance d_w (3, None: 0): the state a plan starts from when commands are still in
+        flight."""
         z = np.asarray(z0, float)
-        p = np.concatenate([np.zeros(17), self._geometry])     # the step reads the geometry only
+        d_w = np.zeros(3) if disturbance is None else np.asarray(disturbance, float)
+        p = np.concatenate([np.zeros(17), d_w, self._geometry])   # the step reads d_w, geometry
         for c in commands:
             z = self._step(z, c, p)
         return z
