@@ -32,19 +32,14 @@ def _curve(c, z):
     return c.c2 * z * z + c.c1 * z + c.c0
 
 
-def solve(horizon_s: float, start: str, vp) -> dict:
-    n = int(round(horizon_s / DT))
+def model(vp) -> ca.Function:
+    """f(x, u, y_dead) -> (dx/dt, the cosine of the tilt from vertical, the live outputs' and
+    tilts' rates): x = v (3, NED), quaternion wxyz (4), omega (3, body FRD), the live rotors'
+    outputs (2, %), their tilts (2, rad); u = their throttles (2) and tilts (2) commanded; y_dead
+    the dead rotors' output (%). The plant's rigid body, drag and rotor curves."""
     m, g, k = vp.mass_kg, vp.gravity_m_s2, vp.drag_N_s2_m2
     J = np.diag(vp.inertia_kg_m2)
-    Tm, rate_m = vp.motor_time_constant_s, vp.motor_rate_limit_pct_s
-    Ts, rate_s = vp.servo_time_constant_s, vp.servo_rate_limit_rad_s
-    hover = vp.thrust_N.inverse(m * g / 4.0)
-    # the dead motors' outputs: the plant's lag and rate limit towards 0 (1 ms steps)
-    y, dead = hover, []
-    for i in range(n * 10 + 1):
-        if i % 10 == 0:
-            dead.append(y)
-        y += max(-rate_m * 1e-3, (0.0 - y) * (1.0 - math.exp(-1e-3 / Tm)))
+    Tm, Ts = vp.motor_time_constant_s, vp.servo_time_constant_s
 
     def f_thrust(z):
         return ca.fmax(0.0, _curve(vp.thrust_N, z))
@@ -81,8 +76,23 @@ def solve(horizon_s: float, start: str, vp) -> dict:
         return ca.vertcat(vdot, qdot, wdot, ydot, adot), R[2, 2], ydot, adot
 
     xs, us, yd = ca.SX.sym("x", 14), ca.SX.sym("u", 4), ca.SX.sym("yd")
-    xdot, c33, ydot, adot = deriv(xs, us, yd)
-    f = ca.Function("f", [xs, us, yd], [xdot, c33, ydot, adot])
+    return ca.Function("f", [xs, us, yd], list(deriv(xs, us, yd)))
+
+
+def solve(horizon_s: float, start: str, vp) -> dict:
+    n = int(round(horizon_s / DT))
+    m, g = vp.mass_kg, vp.gravity_m_s2
+    Tm, rate_m = vp.motor_time_constant_s, vp.motor_rate_limit_pct_s
+    Ts, rate_s = vp.servo_time_constant_s, vp.servo_rate_limit_rad_s
+    hover = vp.thrust_N.inverse(m * g / 4.0)
+    # the dead motors' outputs: the plant's lag and rate limit towards 0 (1 ms steps)
+    y, dead = hover, []
+    for i in range(n * 10 + 1):
+        if i % 10 == 0:
+            dead.append(y)
+        y += max(-rate_m * 1e-3, (0.0 - y) * (1.0 - math.exp(-1e-3 / Tm)))
+
+    f = model(vp)
     opti = ca.Opti()
     X = opti.variable(14, n + 1)
     U = opti.variable(4, n)
