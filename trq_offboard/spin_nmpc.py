@@ -107,9 +107,10 @@ def geometry(vm: VehicleModel, live) -> np.ndarray:
 
 
 def live_wrench(vm: VehicleModel, g, zeta_pct, alpha_rad):
-    """Body FRD force and torque (CasADi SX) of three live rotors of geometry `g`
-    (`geometry`) at throttles `zeta_pct` (%) and tilts `alpha_rad` (3 each): the prediction
-    model's arithmetic, the rotors' curves and tilt axes. spin.py's trim and LQR use it too."""
+    """Body FRD force and torque (CasADi SX) of the rotors of geometry `g` (`geometry`: the
+    three live ones, or any others) at throttles `zeta_pct` (%) and tilts `alpha_rad` (one each):
+    the prediction model's arithmetic, the rotors' curves and tilt axes. spin.py's trim, LQR and
+    the dead rotor's idle wrench use it too."""
     force, torque = ca.SX.zeros(3), ca.SX.zeros(3)
     th, tq = vm.thrust_N, vm.torque_Nm
     for k in range(len(zeta_pct)):
