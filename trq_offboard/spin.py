@@ -548,7 +548,7 @@ class SpinController:
                 and p[2] >= self._ground - cfg.landing.final_height_m):
             self._use(1)                     # the final descent at the faster spin: less cone
         rot = _rotation(estimate.euler_rad)
-        d_acc, d_ang = self._disturbance(disturbance, rot)
+        fed = self._disturbance(disturbance, rot)      # None: the option is off
         # the position loop: the force vector asked for (world NED), the observer's acceleration
         # taken out (what the rotors must add to the loop's for it)
         e_p = np.asarray(reference.pos_ned_m, float) - p
@@ -558,7 +558,9 @@ class SpinController:
         ki = np.array([pos.ki_s3[0]] * 2 + [pos.ki_s3[1]])
         self._integral = np.clip(self._integral + ki * e_p * cfg.dt_s, -pos.max_integral_m_s2,
                                  pos.max_integral_m_s2)
-        acc = kp * e_p + kd * e_v + self._integral - d_acc
+        acc = kp * e_p + kd * e_v + self._integral
+        if fed is not None:
+            acc = acc - fed[0]
         force = vm.mass_kg * (acc - np.array([0.0, 0.0, vm.gravity_m_s2])) \
             + vm.drag_N_s2_m2 * np.linalg.norm(v) * v
         f_up = max(-force[2], 1e-6)
@@ -575,8 +577,11 @@ class SpinController:
         s = rot.T @ n_des
         # the operating point for that force, and for the torque that cancels the observer's
         # angular acceleration (the family of equilibria, linearised: the least move)
-        a_op = self._a0 + self._per_newton * (f_des - f0) \
-            - self._per_torque @ (self._inertia * d_ang)
+        a_op = self._a0 + self._per_newton * (f_des - f0)
+        d_ang = None
+        if fed is not None:
+            d_ang = fed[1]
+            a_op = a_op - self._per_torque @ (self._inertia * d_ang)
         x = np.concatenate([om - self.direction * self.trim.spin_rad_s * self._n, self._e.T @ s,
                             self._act - a_op, *(u - a_op for u in self._in_flight)])
         u_raw = a_op - self.gain @ x
@@ -603,28 +608,29 @@ class SpinController:
 
     def _nmpc_command(self, om, s, a_op, f_des, u_lqr, saturated_lqr, d_ang):
         """Inner nmpc: this period's command from the plan (spin_nmpc.py), the state carried
-        through the commands still in flight, the observer's angular acceleration d_ang in its
-        model; the LQR's (clipped) when the QP fails. Returns (command, live commands at a
-        bound, (QP status, QP iterations))."""
+        through the commands still in flight, the observer's angular acceleration d_ang (None:
+        none) in its model; the LQR's (clipped) when the QP fails. Returns (command, live
+        commands at a bound, (QP status, QP iterations))."""
         z0 = self._nmpc.predict(np.concatenate([om, s, self._act]), self._in_flight, d_ang)
-        ref = SpinReference(self._n, self._e, self.direction * self.trim.spin_rad_s, a_op, f_des,
-                            d_ang)
+        sw = self.direction * self.trim.spin_rad_s
+        ref = (SpinReference(self._n, self._e, sw, a_op, f_des) if d_ang is None
+               else SpinReference(self._n, self._e, sw, a_op, f_des, d_ang))
         u, info = self._nmpc.solve(z0, ref, self._p_term, self._t_term, guess=u_lqr)
         if u is None:
             return u_lqr, saturated_lqr, (info.status, info.iterations)
         at_bound = (u <= self._lo + 1e-9) | (u >= self._hi - 1e-9)
         return u, int(np.sum(at_bound)), (info.status, info.iterations)
 
-    def _disturbance(self, d, rot: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _disturbance(self, d, rot: np.ndarray):
         """The observer's estimate as the spinning model misses it, low-passed: (NED
-        acceleration, body FRD angular acceleration); zeros when the file does not use it.
+        acceleration, body FRD angular acceleration); None when the file does not use it.
         The observer's model flies the dead rotor at idle, which the spinning model leaves
         out: its share, which the observer's d carries negated, is added back. Until
         observer_settle_s after the switch, and in a period without an estimate (None,
         non-finite), the low-pass holds."""
         tau = self.config.observer_lowpass_s
         if tau is None:
-            return np.zeros(3), np.zeros(3)
+            return None
         self._periods += 1
         settled = self._periods * self.config.dt_s > self.config.observer_settle_s + 1e-9
         if d is not None and settled:
