@@ -50,6 +50,7 @@ import numpy as np
 from trq_params import loader, schema
 
 from trq_offboard.config import VehicleModel, load_vehicle_model
+from trq_offboard.frames import rotation_ned_frd
 from trq_offboard.records import ActuatorCommand, ReferenceSample, StateEstimate
 from trq_offboard.spin_nmpc import SpinNmpc, SpinReference, geometry, live_wrench
 
@@ -385,16 +386,6 @@ class SpinInfo:
     qp_iterations: int = 0
 
 
-def _rotation(euler_rad) -> np.ndarray:
-    """Body FRD -> world NED (ZYX)."""
-    r, p, y = euler_rad
-    cr, sr, cp, sp, cy, sy = (math.cos(r), math.sin(r), math.cos(p), math.sin(p), math.cos(y),
-                              math.sin(y))
-    return np.array([[cp * cy, sr * sp * cy - cr * sy, cr * sp * cy + sr * sy],
-                     [cp * sy, sr * sp * sy + cr * cy, cr * sp * sy - sr * cy],
-                     [-sp, sr * cp, cr * cp]])
-
-
 class SpinController:
     """The lost-motor controller for motor `motor` (1..4) dead. Build once (the trim's IPOPT and
     the LQR's Riccati equation: about a second), then `reset` at the switch and `step` every
@@ -547,7 +538,7 @@ class SpinController:
         if (len(self._stages) > 1 and self._stage_index == 0 and reference.phase == "land"
                 and p[2] >= self._ground - cfg.landing.final_height_m):
             self._use(1)                     # the final descent at the faster spin: less cone
-        rot = _rotation(estimate.euler_rad)
+        rot = rotation_ned_frd(*estimate.euler_rad)
         fed = self._disturbance(disturbance, rot)      # None: the option is off
         # the position loop: the force vector asked for (world NED), the observer's acceleration
         # taken out (what the rotors must add to the loop's for it)
