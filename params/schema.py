@@ -1092,7 +1092,7 @@ class ImuHarmonic(Strict):
 class ImuVibration(Strict):
     """The rotors' vibration as the IMU sees it (sil_vehicle.sensors.imu states the model)."""
     harmonics: Annotated[tuple[ImuHarmonic, ...], BeforeValidator(_nonempty_list)]
-    smear_hz: Num(0.0, 100.0)            # each rotor line's width (phase random walk)
+    smear_hz: Num(0.0, 100.0)            # each rotor line's width (the rotor's speed jitter)
 
 
 class Imu(Strict):

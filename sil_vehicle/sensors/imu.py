@@ -20,8 +20,15 @@ and delta velocity over its interval `dt_us` divided by it (`delta_angle_frd_rad
 
 Vibration. Each rotor m turns at omega_m = max_rad_s sqrt(T(z_m) / T(100)) (the vehicle file's
 rotor_speed and thrust curve, thrust proportional to speed squared; z_m the motor's actual
-output), its phase phi_m a random walk around that speed (phase diffusion 2 pi smear_hz rad^2/s:
-a Lorentzian line smear_hz wide at the rotor frequency, n^2 that at its n-th multiple). Each
+output), its phase phi_m wandering around that speed's integral by the rotor's speed jitter
+(`smear_walk`): the jitter a first-order Gauss-Markov process with the rotor's time constant
+tau (the vehicle file's motor.time_constant_s: the rotor cannot change speed faster), its
+phase diffusion 2 pi smear_hz rad^2/s over times longer than tau, so that the line is about
+smear_hz wide at its centre (n^2 that at its n-th multiple) and its skirts fall as 1/df^4
+beyond 1/(2 pi tau) from it. (White speed jitter, a pure phase random walk, gives a Lorentzian
+whose 1/df^2 skirts reach 0 Hz: a 125 Hz line then leaks a sub-hertz acceleration of a few
+hundredths of a m/s^2 that the estimator integrates into millimetres of position,
+docs/decisions/2026-12-06-vibration-line-skirts.md; tau = 0 keeps that walk.) Each
 harmonic h of the profile, at n_h times the rotor frequency (n_h = times, or times * blades for
 blade-pass lines), adds per axis i
 
@@ -57,6 +64,7 @@ from __future__ import annotations
 import cmath
 import math
 from collections.abc import Sequence
+from itertools import accumulate
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -67,7 +75,7 @@ from sil_vehicle.sensors.truth import STANDARD_GRAVITY_M_S2, Truth
 __all__ = ["ImuParams", "ImuHarmonic", "ImuVibration", "RotorModel", "ImuState", "ImuReading",
            "ImuClips", "NOISE", "VIBRATION_BLOCK_US", "AXIS_PHASE_RAD", "initial", "draw",
            "noise_block", "vibration_block", "response", "harmonic_multiples",
-           "check_vibration", "response_table", "smear_lines", "reading", "clip3", "step"]
+           "check_vibration", "response_table", "smear_walk", "smear_lines", "reading", "clip3", "step"]
 
 NOISE = 12      # standard normals per tick: w_g, w_a, w_bg, w_ba (3 each)
 VIBRATION_BLOCK_US = 50_000     # rotor speeds read once per block (a choice)
@@ -100,6 +108,7 @@ class RotorModel:
     c2: float
     c1: float
     c0: float
+    time_constant_s: float = 0.0        # the rotor's speed lag (the speed jitter's band limit)
 
     def thrust_fraction(self, motor_pct: Sequence[float]) -> np.ndarray:
         z = np.asarray(motor_pct, float)
@@ -113,7 +122,8 @@ class RotorModel:
             raise ValueError(f"{v.file}: rotor_speed: missing; the IMU's vibration needs the "
                              "rotors' max_rad_s and blades")
         t = v.thrust_N
-        return cls(v.rotor_max_rad_s, v.rotor_blades, t.c2, t.c1, t.c0)
+        return cls(v.rotor_max_rad_s, v.rotor_blades, t.c2, t.c1, t.c0,
+                   v.motor_time_constant_s)
 
 
 @dataclass(frozen=True)
@@ -327,6 +337,26 @@ def response_table(p: ImuParams, max_hz: float) -> np.ndarray:
     """`response` on a grid of RESPONSE_STEP_HZ from 0 to max_hz (looked up to the nearest
     point: the filter's response moves by far less than a part in a thousand over a step)."""
     return response(p, np.arange(0.0, max_hz + 2 * RESPONSE_STEP_HZ, RESPONSE_STEP_HZ))
+
+
+def smear_walk(w: np.ndarray, walk: np.ndarray, jitter: np.ndarray, smear_hz: float,
+               tau_s: float, dt_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """The rotors' phase wander over a block from its standard normals w (n_motors, K): the
+    speed jitter nu (rad/s) first-order Gauss-Markov with time constant tau_s and std
+    sqrt(pi smear_hz / tau_s) (so that the phase diffuses at 2 pi smear_hz rad^2/s over times
+    longer than tau_s), nu[k] = a nu[k-1] + sqrt(1 - a^2) std w[k] with a = exp(-dt / tau_s),
+    and the phase W[k] = W[k-1] + nu[k] dt; from the block's start values `walk` and `jitter`
+    (n_motors,). Returns (W (n_motors, K), nu at the block's end). tau_s = 0: white jitter, the
+    phase a random walk of step sqrt(2 pi smear_hz dt)."""
+    if tau_s <= 0.0:
+        return np.cumsum(math.sqrt(2.0 * math.pi * smear_hz * dt_s) * w, axis=1) \
+            + walk[:, None], jitter
+    a = math.exp(-dt_s / tau_s)
+    kick = math.sqrt((1.0 - a * a) * math.pi * smear_hz / tau_s)
+    nu = np.empty_like(w)
+    for m, (row, u) in enumerate(zip((kick * w).tolist(), jitter.tolist())):
+        nu[m] = list(accumulate(row, lambda prev, x: a * prev + x, initial=u))[1:]
+    return np.cumsum(nu * dt_s, axis=1) + walk[:, None], nu[:, -1].copy()
 
 
 def smear_lines(multiples: np.ndarray, walk: np.ndarray) -> np.ndarray:

@@ -153,10 +153,10 @@ class _Imu:
                                             / (2 * math.pi)).tolist(), mult.tolist())
             self._vib_rng = vib_rng
             self._phases = vib_rng.uniform(0.0, 2.0 * math.pi, N_ROTORS).tolist()
-            # the smear's phase walk per rotor over the noise block (drawn per block) and its
-            # factor on each line
-            self._smear = math.sqrt(2.0 * math.pi * p.vibration.smear_hz / p.physics_rate_hz)
+            # the smear's phase walk per rotor over the noise block (drawn per block), the
+            # speed jitter it carries across blocks, and its factor on each line
             self._walk = np.zeros(N_ROTORS)
+            self._jitter = np.zeros(N_ROTORS)
             self._lines = np.ones((0, 0), complex)
         self._w = np.empty((0, imu.NOISE))             # the noise block's standard normals
         self._adds = np.empty((0, 6))                  # its bias plus white noise, per tick
@@ -185,8 +185,10 @@ class _Imu:
             self._after = imu.ImuState(self._bias[-1, :3].copy(), self._bias[-1, 3:].copy())
             self._i = 0
             if self._vib is not None:
-                walk = np.cumsum(self._smear * self._vib_rng.standard_normal(
-                    (N_ROTORS, self._k)), axis=1) + self._walk[:, None]
+                walk, self._jitter = imu.smear_walk(
+                    self._vib_rng.standard_normal((N_ROTORS, self._k)), self._walk,
+                    self._jitter, self.params.vibration.smear_hz, self._vib[0].time_constant_s,
+                    1.0 / self._k)
                 self._walk = np.mod(walk[:, -1], 2.0 * math.pi)      # carried to the next
                 self._lines = imu.smear_lines(self._vib[1], walk)
                 self._phases = [x % (2.0 * math.pi) for x in self._phases]
