@@ -138,6 +138,9 @@ def test_resume_flies_only_the_missing_flight(smoke):
     r = run_campaign(SMOKE, "--out", out, "--no-figures")
     assert r.returncode == 0 and "8 already done, 0 to fly" in r.stderr
     assert flight_files(out) == after
+    # which leaves the last run that flew, and the report's throughput from it, as they were
+    assert json.loads((out / "last_run.json").read_text())["flown"] == 1
+    assert "flights/hour" in (out / "report.md").read_text()
 
 
 # --- failures, limits and bad files -----------------------------------------------------------

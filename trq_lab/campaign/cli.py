@@ -209,7 +209,9 @@ def main(argv: list[str] | None = None) -> int:
                 write_json(args.out / "flights" / f"{fid}.json", new)
                 done += 1
         print(f"campaign: {done} flights measured again from {args.out / 'logs'}")
-    if not (args.report_only or args.rescore):
+    last = args.out / "last_run.json"
+    keep_last = args.report_only or args.rescore
+    if not keep_last:
         info = run_campaign(campaign, args.out, workers=args.workers, scheduler=args.scheduler,
                             max_flights=args.max_flights, retry_failed=args.retry_failed,
                             keep_logs=args.keep_logs)
@@ -220,10 +222,13 @@ def main(argv: list[str] | None = None) -> int:
             print(f"campaign: the flights used {info['cpu_s']:.0f} CPU s for {info['sim_s']:.0f} "
                   f"simulated s ({info['cpu_s'] / max(info['flown'], 1):.1f} CPU s a flight); the "
                   f"workers got {info['cpu_share']:.0%} of their cores")
-        write_json(args.out / "last_run.json", info)
-    elif (args.out / "last_run.json").is_file():    # --report-only, --rescore: the last run's
+        if info["flown"] or not last.is_file():
+            write_json(last, info)
+        else:                   # nothing flown: the run that flew the flights stays the report's
+            keep_last = True
+    if keep_last and last.is_file():    # --report-only, --rescore, nothing flown: the last run's
         try:
-            info = json.loads((args.out / "last_run.json").read_text())
+            info = json.loads(last.read_text())
         except ValueError:
             info = None
     results = load_results(args.out)
