@@ -249,6 +249,13 @@ class Controller:
         # the ground's NED down, for the spinning controller's landing: PROTOCOL.md's home, on
         # the ground (a caller that knows better may set it before the flight)
         self.ground_down_m = HOME_GROUND_DOWN_M
+        # on the ground (the caller sets it before each step: the vehicle's land detector says
+        # ON_GROUND, or the companion's own touchdown test in a landing): the observers do not
+        # integrate, as PX4's rate controller does not while landed. On the gear the ground's
+        # reaction and friction are no disturbance to learn: learnt at a spool-up, they turn
+        # the vehicle on its gear and throw it at the lift-off
+        # (docs/decisions/2026-12-06-vibration-line-skirts.md)
+        self.landed = False
 
     @property
     def sensor_streams(self) -> dict[str, int]:
@@ -559,6 +566,12 @@ class Controller:
             return d, d, 0.0
         y = self.eso.measurement(x)
         ro = self.rate_observer
+        if self.landed:              # held at the measured state, no disturbance (`landed`)
+            self.eso.reset(y, np.concatenate([x[3:6], np.asarray(self._euler_rate(x)).ravel()]))
+            if ro is not None:
+                ro.reset(x[9:12])
+            d = np.zeros(6)
+            return d, d, 0.0
         if t_s > self._last_t and b0 is not None:
             dt = t_s - self._last_t         # the true gap: samples can be lost or skipped
             b = self.eso.b0_of(b0)

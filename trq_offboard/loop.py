@@ -497,6 +497,11 @@ class OffboardFlight:
                 self.summary.ground_by_contact = True
                 break
             applied = self.applied
+            # on the ground: the vehicle's land detector before the lift-off, the touchdown
+            # tests here in a landing (the controller's observers hold: Controller.landed)
+            self.controller.landed = (
+                self.vehicle_landed_state == mavlink.MAV_LANDED_STATE_ON_GROUND
+                or down_since is not None or contact.since_s is not None)
             wire_rx, self._wire_ns = self._wire_ns, 0     # this state's decode
             if self.streams:
                 sensors = SensorSamples(odo.stamp_us, tuple(self._accel), tuple(self._poses),
