@@ -201,6 +201,14 @@ class _MeteredController:
     def solver_line(self) -> str:
         return self.inner.solver_line()
 
+    @property
+    def landed(self) -> bool:
+        return self.inner.landed
+
+    @landed.setter
+    def landed(self, value: bool) -> None:      # the loop's, for the controller it wraps
+        self.inner.landed = value
+
     def reset(self, *args, **kwargs):
         return self.inner.reset(*args, **kwargs)
 

@@ -254,7 +254,7 @@ class Controller:
         # integrate, as PX4's rate controller does not while landed. On the gear the ground's
         # reaction and friction are no disturbance to learn: learnt at a spool-up, they turn
         # the vehicle on its gear and throw it at the lift-off
-        # (docs/decisions/2026-12-06-vibration-line-skirts.md)
+        # (docs/decisions/2026-12-06-observer-on-the-gear.md)
         self.landed = False
 
     @property

@@ -136,6 +136,7 @@ class FlightController(Protocol):
     """What the flight loop uses of a controller (trq_offboard.controller.Controller)."""
 
     last_prepare_cpu_ns: int      # the CPU of the last `prepare`
+    landed: bool                  # set before each step: on the ground, the observers hold
 
     def reset(self, t_s: float, state: StateEstimate,
               applied: ActuatorCommand | None = None) -> None: ...

@@ -1,6 +1,6 @@
 """The observers hold on the ground (Controller.landed, set by the flight loop): at a spool-up
 on the gear and after a touchdown the ground's reaction and friction are not learnt as a
-disturbance (docs/decisions/2026-12-06-vibration-line-skirts.md)."""
+disturbance (docs/decisions/2026-12-06-observer-on-the-gear.md)."""
 
 from __future__ import annotations
 
