@@ -64,8 +64,8 @@ from __future__ import annotations
 import cmath
 import math
 from collections.abc import Sequence
-from itertools import accumulate
 from dataclasses import dataclass, field
+from itertools import accumulate
 
 import numpy as np
 
@@ -75,7 +75,8 @@ from sil_vehicle.sensors.truth import STANDARD_GRAVITY_M_S2, Truth
 __all__ = ["ImuParams", "ImuHarmonic", "ImuVibration", "RotorModel", "ImuState", "ImuReading",
            "ImuClips", "NOISE", "VIBRATION_BLOCK_US", "AXIS_PHASE_RAD", "initial", "draw",
            "noise_block", "vibration_block", "response", "harmonic_multiples",
-           "check_vibration", "response_table", "smear_walk", "smear_lines", "reading", "clip3", "step"]
+           "check_vibration", "response_table", "smear_walk", "smear_lines", "reading", "clip3",
+           "step"]
 
 NOISE = 12      # standard normals per tick: w_g, w_a, w_bg, w_ba (3 each)
 VIBRATION_BLOCK_US = 50_000     # rotor speeds read once per block (a choice)
