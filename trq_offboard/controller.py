@@ -290,11 +290,7 @@ class Controller:
         self._last_u = np.clip(self._last_u, self._u_lo, self._u_hi)
         self._prev_u = self._last_u.copy()
         self.predictor.reset(t_s, self._last_u)
-        if self.eso is not None:
-            eta_dot = np.asarray(self._euler_rate(x)).ravel()
-            self.eso.reset(self.eso.measurement(x), np.concatenate([x[3:6], eta_dot]))
-        if self.rate_observer is not None:
-            self.rate_observer.reset(x[9:12])
+        self._reset_observers(x)
         self._scale = np.ones(self.model.nu)
         if self.motors is not None:
             self.motors.observer.reset(self._last_u[self._nt:])
@@ -556,6 +552,14 @@ class Controller:
             return None, self.predictor.actuator_walk(t_act, t_act)[1], None
         return None, None, None
 
+    def _reset_observers(self, x: np.ndarray) -> None:
+        """The ESO and the rate observer started at the measured state x, no disturbance."""
+        if self.eso is not None:
+            eta_dot = np.asarray(self._euler_rate(x)).ravel()
+            self.eso.reset(self.eso.measurement(x), np.concatenate([x[3:6], eta_dot]))
+        if self.rate_observer is not None:
+            self.rate_observer.reset(x[9:12])
+
     def _observe(self, x: np.ndarray, t_s: float, b0: np.ndarray | None
                  ) -> tuple[np.ndarray, np.ndarray, float]:
         """The observer advanced from the last step to t_s with b0, the model's accelerations
@@ -564,14 +568,12 @@ class Controller:
         if self.eso is None:
             d = np.zeros(6)
             return d, d, 0.0
-        y = self.eso.measurement(x)
-        ro = self.rate_observer
         if self.landed:              # held at the measured state, no disturbance (`landed`)
-            self.eso.reset(y, np.concatenate([x[3:6], np.asarray(self._euler_rate(x)).ravel()]))
-            if ro is not None:
-                ro.reset(x[9:12])
+            self._reset_observers(x)
             d = np.zeros(6)
             return d, d, 0.0
+        y = self.eso.measurement(x)
+        ro = self.rate_observer
         if t_s > self._last_t and b0 is not None:
             dt = t_s - self._last_t         # the true gap: samples can be lost or skipped
             b = self.eso.b0_of(b0)
