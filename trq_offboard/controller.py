@@ -82,6 +82,7 @@ from trq_offboard.records import (
 )
 from trq_offboard.reference import FlightReference
 from trq_offboard.spin import SpinController, landing_reference, load_spin_config, spin_sense
+from trq_wire.cache import built_once
 
 # The time constant (s) of the low-pass of the observer's horizontal d (the accelerations the
 # model misses, the motors' share taken out: the wind's drag) carried into the spinning
@@ -186,11 +187,16 @@ class Controller:
                                         lagged, self._last_u)
         self.motors = (MotorEffectiveness(effectiveness, self.model, self.predictor)
                        if effectiveness is not None else None)
-        # their functions, compiled (nmpc/cache.py; in parallel, one per core)
-        fns = {**self.predictor.functions(),
-               **(self.motors.functions() if self.motors is not None else {})}
-        built = {name: NumpyFunction(fn) for name, (fn, _) in
-                 zip(fns, compiled_many(list(fns.values()), cfg.solver.codegen == "auto"))}
+        # their functions, compiled (nmpc/cache.py; in parallel, one per core), once per process
+        # for a configuration (they are functions of the file and `lagged` alone)
+        def build() -> dict:
+            fns = {**self.predictor.functions(),
+                   **(self.motors.functions() if self.motors is not None else {})}
+            return {name: fn for name, (fn, _) in
+                    zip(fns, compiled_many(list(fns.values()), cfg.solver.codegen == "auto"))}
+
+        functions, _ = built_once(("controller functions", cfg, lagged), build)
+        built = {name: NumpyFunction(fn) for name, fn in functions.items()}
         self.predictor.bind(built)
         if self.motors is not None:
             self.motors.bind(built)

@@ -74,14 +74,15 @@ class MotorEffectivenessObserver:
         self.e = np.ones(n_motors)                # estimated effectiveness
         self.y = np.zeros(n_motors)               # estimated motor outputs (throttle %)
         self._y_meas_prev: np.ndarray | None = None
-        self._piece_fn = self._build_piece(codegen)
+        self._piece_fn = self._build_piece(codegen, control_dt_s)
 
-    def _build_piece(self, codegen: bool):
-        """`piece_function`, compiled."""
+    def _build_piece(self, codegen: bool, control_dt_s: float):
+        """`piece_function`, compiled once per process for the observer's figures."""
         from trq_offboard.model.dynamics import NumpyFunction
-        from trq_offboard.nmpc.cache import compiled
+        from trq_offboard.nmpc.cache import compiled_once
 
-        return NumpyFunction(compiled(self.piece_function(), codegen)[0])
+        key = ("effectiveness piece", self.cfg, self.T, control_dt_s, self.n)
+        return NumpyFunction(compiled_once(key, self.piece_function, codegen))
 
     def piece_function(self) -> ca.Function:
         """One piece of `update` (up to `substeps` Euler steps, n of them active) as a CasADi

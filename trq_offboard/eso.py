@@ -109,11 +109,16 @@ class ExtendedStateObserver:
         self._period_fn = self._build_period(codegen)
 
     def _build_period(self, codegen: bool):
-        """update() over one control period as a compiled function (see the module docstring):
-        (z (3x6 row-major), y_prev, y, b0, dt) -> z (3x6 row-major)."""
+        """update() over one control period as a compiled function (see the module docstring),
+        built once per process for a configuration and period."""
         from trq_offboard.model.dynamics import NumpyFunction
-        from trq_offboard.nmpc.cache import compiled
+        from trq_offboard.nmpc.cache import compiled_once
 
+        return NumpyFunction(compiled_once(("eso period", self.cfg, self.dt),
+                                           self._period_function, codegen))
+
+    def _period_function(self) -> ca.Function:
+        """(z (3x6 row-major), y_prev, y, b0, dt) -> z (3x6 row-major)."""
         n = self.cfg.substeps
         zs, yp, ys, bs, dts = (ca.SX.sym(name, k) for name, k in
                                (("z", 18), ("y_prev", 6), ("y", 6), ("b0", 6), ("dt", 1)))
@@ -157,9 +162,8 @@ class ExtendedStateObserver:
         z1 = [wrap(z1[j]) if ang[j] else z1[j] for j in range(6)]
         z3 = [ca.fmin(ca.fmax(z3[j], -self._lim[j]), self._lim[j]) for j in range(6)]
         z2 = [z3[j] + bs[j] if self.reduced[j] else z2[j] for j in range(6)]
-        fn = ca.Function(f"eso_period_{n}", [zs, yp, ys, bs, dts],
-                         [ca.vertcat(*z1, *z2, *z3)])
-        return NumpyFunction(compiled(fn, codegen)[0])
+        return ca.Function(f"eso_period_{n}", [zs, yp, ys, bs, dts],
+                           [ca.vertcat(*z1, *z2, *z3)])
 
     def measurement(self, x: np.ndarray) -> np.ndarray:
         """The channels' measured outputs (6) from a state vector (12: position, velocity NED,

@@ -94,6 +94,7 @@ class RateObserver:
     def __init__(self, cutoff_hz: float, omega_o_rad_s: float, control_dt_s: float,
                  substeps: int, max_disturbance: float = math.inf, codegen: bool = False
                  ) -> None:
+        self._key = (cutoff_hz, omega_o_rad_s, control_dt_s, substeps, max_disturbance)
         self.a, self.b, self.c = _model(cutoff_hz)
         self.l = observer_gain(cutoff_hz, omega_o_rad_s)
         self.dt = control_dt_s
@@ -107,11 +108,16 @@ class RateObserver:
         self._period_fn = self._build_period() if codegen else None
 
     def _build_period(self):
-        """update() over one control period as a compiled function (module docstring):
-        (s (4x3 row-major), y_prev, y, b0, dt) -> s (4x3 row-major)."""
+        """update() over one control period as a compiled function (module docstring), built
+        once per process for the observer's figures."""
         from trq_offboard.model.dynamics import NumpyFunction
-        from trq_offboard.nmpc.cache import compiled
+        from trq_offboard.nmpc.cache import compiled_once
 
+        return NumpyFunction(compiled_once(("rate observer period", self._key),
+                                           self._period_function))
+
+    def _period_function(self) -> ca.Function:
+        """(s (4x3 row-major), y_prev, y, b0, dt) -> s (4x3 row-major)."""
         n = self.substeps
         ss, yp, ys, bs, dts = (ca.SX.sym(name, k) for name, k in
                                (("s", 12), ("y_prev", 3), ("y", 3), ("b0", 3), ("dt", 1)))
@@ -126,9 +132,8 @@ class RateObserver:
             rows = _substep(rows, y_i, bs, h, self._a1, self._l)
         lim = self.lim
         rows[3] = [ca.fmin(ca.fmax(v, -lim), lim) for v in rows[3]]
-        fn = ca.Function(f"rate_observer_period_{n}", [ss, yp, ys, bs, dts],
-                         [ca.vertcat(*(v for row in rows for v in row))])
-        return NumpyFunction(compiled(fn, True)[0])
+        return ca.Function(f"rate_observer_period_{n}", [ss, yp, ys, bs, dts],
+                           [ca.vertcat(*(v for row in rows for v in row))])
 
     def reset(self, rates: np.ndarray, disturbance: np.ndarray | None = None) -> None:
         y = np.asarray(rates, float)

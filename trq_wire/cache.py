@@ -5,6 +5,12 @@ Folder: $TRQ_CACHE_DIR, else ~/.cache/trq-ftc. Compiler: the first of $CC, gcc, 
 on PATH. A library is built under a temporary name in the cache folder and renamed into place,
 so concurrent processes never load a half-written file. What goes into a cache key is each
 caller's business; this module only says where files live and how they land there.
+
+`built_once(key, build)` keeps what a build gave in memory for the rest of the process: a
+controller, an observer or a filter built again with the same inputs (the next flight of a
+campaign worker, the next test) neither rebuilds its symbolic functions nor generates their C
+source again to find the library on disk. The key is the build's inputs; the cache folder and the
+compiler are added to it, since a compiled build also depends on them.
 """
 
 from __future__ import annotations
@@ -14,9 +20,19 @@ import os
 import shutil
 import subprocess
 import tempfile
+from collections import OrderedDict
+from collections.abc import Callable
 from pathlib import Path
+from typing import TypeVar
 
-__all__ = ["cache_dir", "find_compiler", "build_library", "cached_library"]
+__all__ = ["cache_dir", "find_compiler", "build_library", "cached_library", "built_once",
+           "forget_built"]
+
+T = TypeVar("T")
+# builds kept in memory, the least recently used dropped first (a campaign that perturbs the
+# airframe per flight would otherwise keep one per flight)
+BUILT_KEPT = 64
+_BUILT: OrderedDict[tuple, object] = OrderedDict()
 
 
 def cache_dir() -> Path:
@@ -73,3 +89,24 @@ def cached_library(cc: str, flags: list[str], source_file: Path, prefix: str,
     if error is not None:
         raise RuntimeError(f"{cc} failed on {source_file}: {error}")
     return lib
+
+
+def built_once(key: tuple, build: Callable[[], T]) -> tuple[T, bool]:
+    """(build(), True) the first time for `key` (hashable: everything the build is a function
+    of) in this cache folder with this compiler; (the same object, False) after, for as long as
+    the process keeps it. The result is shared: keep in it only what is never written to (the
+    compiled functions, not the buffers they are evaluated into)."""
+    full = (key, str(cache_dir()), find_compiler())
+    if full in _BUILT:
+        _BUILT.move_to_end(full)
+        return _BUILT[full], False
+    out = build()
+    _BUILT[full] = out
+    if len(_BUILT) > BUILT_KEPT:
+        _BUILT.popitem(last=False)
+    return out, True
+
+
+def forget_built() -> None:
+    """Drop every build kept by `built_once` (a benchmark timing a cold process's build)."""
+    _BUILT.clear()

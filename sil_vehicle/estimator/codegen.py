@@ -27,7 +27,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from trq_wire.cache import build_library, cache_dir, find_compiler
+from trq_wire.cache import build_library, built_once, cache_dir, find_compiler
 
 __all__ = ["CFLAGS", "Evaluator", "load"]
 
@@ -90,11 +90,19 @@ class Evaluator:
         return tuple(self._out)
 
 
-def load(fns: dict[str, ca.Function], enabled: bool = True
+def load(fns: dict[str, ca.Function], enabled: bool = True, key: tuple | None = None
          ) -> tuple[dict[str, Evaluator], str]:
     """An Evaluator per function of `fns` (on one compiled, cached library, or on CasADi's
-    interpreter when `enabled` is False or no library can be built), and how it was obtained."""
-    lib_path, how = _library(fns) if enabled else (None, "interpreted")
+    interpreter when `enabled` is False or no library can be built), and how it was obtained.
+    `key`, when given, names what `fns` are a function of: the library is then looked up once
+    per process for it (trq_wire.cache.built_once), not by generating its source each time."""
+    if not enabled:
+        lib_path, how = None, "interpreted"
+    elif key is None:
+        lib_path, how = _library(fns)
+    else:
+        (lib_path, how), fresh = built_once(("estimator library", key), lambda: _library(fns))
+        how = how if fresh or how == "interpreted" else "cached"
     lib = ctypes.CDLL(str(lib_path)) if lib_path is not None else None
     return {k: Evaluator(f, lib) for k, f in fns.items()}, how
 

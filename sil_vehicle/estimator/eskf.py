@@ -197,7 +197,8 @@ class Eskf:
 
     def __init__(self, params: EstimatorParams, *, compiled: bool = True) -> None:
         self.params = p = params
-        self._f, self.how = load(d.functions(p.gravity_m_s2), compiled)
+        self._f, self.how = load(d.functions(p.gravity_m_s2), compiled,
+                                 key=("eskf", p.gravity_m_s2))
         self._configure(p)
         capacity = p.horizon_us // p.filter_period_us + 2
         self._imu_buf: deque = deque()          # (t_end_us, dA (3,), dV (3,), dt_us, clipped)

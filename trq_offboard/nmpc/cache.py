@@ -21,15 +21,16 @@ from __future__ import annotations
 import hashlib
 import os
 import warnings
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import casadi as ca
 
-from trq_wire.cache import build_library, cache_dir, find_compiler
+from trq_wire.cache import build_library, built_once, cache_dir, find_compiler
 
-__all__ = ["cache_dir", "find_compiler", "compiled", "compiled_many", "compiled_c", "COUNTS",
-           "CFLAGS"]
+__all__ = ["cache_dir", "find_compiler", "compiled", "compiled_many", "compiled_once",
+           "compiled_c", "COUNTS", "CFLAGS"]
 
 # -O1 builds faster than -O2 at the same speed (docs/decisions/2026-12-02-figures-from-comments.md)
 CFLAGS = ("-O1", "-fPIC", "-shared")
@@ -89,6 +90,15 @@ def compiled_many(fns: list[ca.Function], enabled: bool = True) -> list[tuple[ca
         return [_build(f, cc) for f in fns]
     with ThreadPoolExecutor(max_workers=min(len(fns), os.cpu_count() or 1)) as ex:
         return list(ex.map(lambda f: _build(f, cc), fns))
+
+
+def compiled_once(key: tuple, build: Callable[[], ca.Function], enabled: bool = True
+                  ) -> ca.Function:
+    """compiled(build(), enabled)'s function, built and compiled once per process for `key`
+    (everything `build` is a function of: trq_wire.cache.built_once); the same function after,
+    without building it again or generating its source to look it up on disk."""
+    (fn, _how), _ = built_once(("compiled", key, enabled), lambda: compiled(build(), enabled))
+    return fn
 
 
 def compiled_c(name: str, source: str, link_args: tuple[str, ...] = ()) -> Path | None:

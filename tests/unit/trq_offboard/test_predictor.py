@@ -155,3 +155,19 @@ def test_interp_rows_matches_np_interp():
     grid = h * np.arange(21)
     want = np.column_stack([np.interp(times, grid, x[:, j]) for j in range(12)])
     np.testing.assert_allclose(_interp_rows(x, h, times), want, rtol=0, atol=1e-12)
+
+
+def test_a_controller_built_again_shares_its_compiled_functions_not_their_buffers():
+    """The second controller of a configuration in a process takes the first's compiled
+    functions (trq_wire.cache.built_once) and evaluates them into buffers of its own: what one
+    evaluates does not change what the other has read."""
+    a, b = controller("auto"), controller("auto")
+    assert a.predictor._chain_fn is not b.predictor._chain_fn
+    assert a.predictor._chain_fn.fn is b.predictor._chain_fn.fn
+    assert a.eso._period_fn.fn is b.eso._period_fn.fn
+    fa, fb = a.eso._period_fn, b.eso._period_fn
+    z, y = np.zeros(18), np.full(6, 0.1)
+    read = fa.outputs_in_place(z, np.zeros(6), y, np.zeros(6), 0.01)[0]
+    before = read.copy()
+    fb.outputs_in_place(z, np.zeros(6), 3.0 * y, np.zeros(6), 0.01)
+    assert np.array_equal(read, before) and np.any(before != 0.0)

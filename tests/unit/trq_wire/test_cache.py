@@ -71,3 +71,36 @@ def test_build_library_lands_the_library(tmp_path):
     import ctypes
     assert ctypes.CDLL(str(lib)).answer() == 42
     assert [p.name for p in lib.parent.iterdir()] == [lib.name]
+
+
+def test_a_build_is_kept_for_its_key_its_folder_and_its_compiler(monkeypatch, tmp_path):
+    monkeypatch.setenv("TRQ_CACHE_DIR", str(tmp_path / "a"))
+    calls = []
+
+    def build(tag):
+        calls.append(tag)
+        return object()
+
+    first, fresh = cache.built_once(("test", 1), lambda: build(1))
+    again, fresh_again = cache.built_once(("test", 1), lambda: build(1))
+    assert fresh and not fresh_again and again is first and calls == [1]
+    assert cache.built_once(("test", 2), lambda: build(2))[0] is not first    # another key
+    monkeypatch.setenv("TRQ_CACHE_DIR", str(tmp_path / "b"))                 # another folder
+    assert cache.built_once(("test", 1), lambda: build(1))[1]
+    monkeypatch.setenv("TRQ_CACHE_DIR", str(tmp_path / "a"))
+    monkeypatch.setenv("PATH", str(tmp_path))                                # no compiler
+    monkeypatch.delenv("CC", raising=False)
+    assert cache.built_once(("test", 1), lambda: build(1))[1]
+    assert calls == [1, 2, 1, 1]
+    cache.forget_built()
+    assert cache.built_once(("test", 1), lambda: build(1))[1]
+
+
+def test_the_builds_kept_are_bounded_the_oldest_dropped(monkeypatch):
+    monkeypatch.setattr(cache, "BUILT_KEPT", 3)
+    cache.forget_built()
+    for k in range(4):
+        cache.built_once(("bounded", k), object)
+    assert not cache.built_once(("bounded", 3), object)[1]
+    assert cache.built_once(("bounded", 0), object)[1]          # the oldest was dropped
+    cache.forget_built()
