@@ -32,6 +32,7 @@ the value and what was expected.
 
 from __future__ import annotations
 
+import functools
 import math
 import re
 import types
@@ -107,12 +108,29 @@ def read_yaml(path: Path | str) -> dict[str, Any]:
     except OSError as exc:
         raise ConfigError(f"{path}: cannot read: {exc.strerror}") from exc
     try:
-        data = yaml.load(text, Loader=_Yaml12Loader)
+        data = _parsed(text)
     except yaml.YAMLError as exc:
         raise ConfigError(f"{path}: not valid YAML: {exc}") from exc
     if not isinstance(data, dict):
         raise ConfigError(f"{path}: expected a mapping at the top level, got {type(data).__name__}")
-    return data
+    return _copied(data)
+
+
+@functools.lru_cache(maxsize=256)
+def _parsed(text: str) -> Any:
+    """The document of `text`, parsed once per process for the same text (a campaign or a test
+    suite reads the same parameter files hundreds of times); callers get `_copied` of it."""
+    return yaml.load(text, Loader=_Yaml12Loader)
+
+
+def _copied(value: Any) -> Any:
+    """A copy of a parsed document that shares nothing mutable with it (mappings and lists
+    copied; scalars, dates included, are immutable)."""
+    if isinstance(value, dict):
+        return {k: _copied(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_copied(v) for v in value]
+    return value
 
 
 def dump(data: Mapping[str, Any]) -> str:

@@ -2,11 +2,15 @@
 working directory), loaded parameter records, a free UDP port finder, and `daemons` (with
 `module_daemons`): the one way a test starts `python -m sil_vehicle` and `python -m trq_offboard`
 (free ports, output to a file in the test's tmp folder, its tail in every failure message, and
-a guaranteed stop: SIGTERM, then SIGKILL after a timeout)."""
+a guaranteed stop: SIGTERM, then SIGKILL after a timeout); `examples(n)`, a property test's
+number of examples: n in the whole suite, a fifth of it in the fast tier (`-m "not slow"`), which
+is for the turn-around of an edit; CI runs them all."""
 
 from __future__ import annotations
 
+import ast
 import contextlib
+import functools
 import os
 import signal
 import socket
@@ -25,6 +29,26 @@ PARAMS = trq_params.DIR
 SIM_DEFAULT = PARAMS / "sim" / "default.yaml"
 TRQ_YAML = PARAMS / "vehicle" / "trq.yaml"
 QUAD_YAML = PARAMS / "vehicle" / "quad.yaml"
+FAST_TIER_MARKEXPR = "not slow"
+FAST_TIER_EXAMPLES = 0.2                # of a property test's examples, in the fast tier
+_fast_tier = False
+
+
+def pytest_configure(config) -> None:
+    global _fast_tier
+    _fast_tier = config.getoption("markexpr", "").strip() == FAST_TIER_MARKEXPR
+
+
+@functools.lru_cache(maxsize=None)
+def source_tree(path: Path) -> ast.Module:
+    """A source file's syntax tree, parsed once per test process (the meta tests each walk
+    every file of the project; none of them changes a tree)."""
+    return ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
+
+
+def examples(n: int) -> int:
+    """A property test's max_examples: n, or a fifth of it (at least 20) in the fast tier."""
+    return max(20, round(n * FAST_TIER_EXAMPLES)) if _fast_tier else n
 
 
 class Ticks:

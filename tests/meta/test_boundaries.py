@@ -18,6 +18,8 @@ from pathlib import Path
 
 import pytest
 
+from conftest import source_tree
+
 ROOT = Path(__file__).resolve().parents[2]
 WALL_CLOCK_ALLOWED = {"daemon.py", "clock.py"}
 BANNED_TIME = {"time", "monotonic", "sleep", "perf_counter", "time_ns", "monotonic_ns"}
@@ -32,7 +34,7 @@ def sources(package: str) -> list[Path]:
 
 
 def parse(path: Path) -> ast.Module:
-    return ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
+    return source_tree(path)
 
 
 def imported_modules(tree: ast.Module) -> list[str]:

@@ -25,6 +25,8 @@ import functools
 import re
 from pathlib import Path
 
+from conftest import source_tree
+
 ROOT = Path(__file__).resolve().parents[2]
 # folder in the checkout -> import name
 PACKAGES = {"params": "trq_params", "trq_wire": "trq_wire", "sil_vehicle": "sil_vehicle",
@@ -59,7 +61,7 @@ def _type_checking_nodes(tree: ast.Module) -> set[int]:
 
 def imports_of(name: str, path: Path, known: dict[str, Path]) -> set[str]:
     """The project's modules that module `name` (at `path`) imports."""
-    tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
+    tree = source_tree(path)
     package = name if path.name == "__init__.py" else name.rpartition(".")[0]
     skipped = _type_checking_nodes(tree)
     found = set()
@@ -188,5 +190,5 @@ def test_probe_finder_sees_probes():
 
 def test_nothing_probes_a_solver_a_controller_or_a_reference():
     offenders = [f"{path.relative_to(ROOT)} {use}" for path in modules().values()
-                 for use in probes(ast.parse(path.read_text(encoding="utf-8")))]
+                 for use in probes(source_tree(path))]
     assert not offenders, offenders

@@ -15,6 +15,8 @@ from pathlib import Path
 
 import pytest
 
+from conftest import source_tree
+
 ROOT = Path(__file__).resolve().parents[2]
 PYPROJECT = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))
 SOURCE_DIRS = ("sil_vehicle", "trq_offboard", "trq_lab", "params", "tests")
@@ -53,7 +55,7 @@ def test_no_sys_path_manipulation():
         for path in (ROOT / top).rglob("*.py"):
             if path.resolve() == Path(__file__).resolve():
                 continue        # this file names what it looks for
-            tree = ast.parse(path.read_text(encoding="utf-8"))
+            tree = source_tree(path)
             for node in ast.walk(tree):
                 if isinstance(node, ast.Attribute) and node.attr == "path" and \
                         isinstance(node.value, ast.Name) and node.value.id == "sys":

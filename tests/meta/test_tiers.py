@@ -57,6 +57,21 @@ def test_integration_modules_that_start_processes_are_marked_slow():
     assert not unmarked, f"start processes but are not marked slow as a module: {unmarked}"
 
 
+def literal_example_counts(tree: ast.Module) -> list[int]:
+    """The lines where a property test's max_examples is a number rather than conftest's
+    `examples(n)` (which the fast tier scales down)."""
+    return [node.lineno for node in ast.walk(tree) if isinstance(node, ast.keyword)
+            and node.arg == "max_examples" and isinstance(node.value, ast.Constant)]
+
+
+def test_property_tests_take_their_example_counts_through_the_tier():
+    fixed = {str(path.relative_to(ROOT)): lines for path in sorted((ROOT / "tests").rglob("*.py"))
+             if (lines := literal_example_counts(ast.parse(path.read_text(), str(path))))}
+    assert not fixed, f"max_examples not through conftest.examples: {fixed}"
+    assert literal_example_counts(ast.parse("settings(max_examples=10)")) == [1]
+    assert not literal_example_counts(ast.parse("settings(max_examples=examples(10))"))
+
+
 def test_the_checks_see_what_they_look_for():
     src = "import subprocess\n"
     assert starts_processes(ast.parse(src)) and not marked_slow(ast.parse(src))

@@ -13,11 +13,13 @@ from sil_vehicle.frames import (EARTH_RADIUS_M, euler_to_quat, geodetic_to_ned, 
                                 quat_to_dcm, quat_to_euler, tilt_from_vertical, wind_from_to_ned,
                                 wrap_pi)
 
+from conftest import examples
+
 angle = st.floats(-math.pi, math.pi, allow_nan=False)
 pitch_ok = st.floats(-1.5, 1.5, allow_nan=False)     # away from gimbal lock
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=examples(200), deadline=None)
 @given(angle, pitch_ok, angle)
 def test_euler_quat_round_trip(roll, pitch, yaw):
     q = euler_to_quat(roll, pitch, yaw)
@@ -28,7 +30,7 @@ def test_euler_quat_round_trip(roll, pitch, yaw):
     assert abs(wrap_pi(y2 - yaw)) < 1e-9
 
 
-@settings(max_examples=100, deadline=None)
+@settings(max_examples=examples(100), deadline=None)
 @given(st.lists(st.floats(-1, 1, allow_nan=False), min_size=4, max_size=4))
 def test_quat_euler_round_trip_up_to_sign(raw):
     n = math.sqrt(sum(c * c for c in raw))
@@ -68,7 +70,7 @@ def test_tilt_from_vertical():
     assert math.isclose(tilt_from_vertical(0, 1, 0, 0), math.pi, rel_tol=1e-12)
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=examples(200), deadline=None)
 @given(st.floats(-2000, 2000), st.floats(-2000, 2000), st.floats(-500, 500),
        st.floats(-80, 80), st.floats(-179, 179), st.floats(-100, 3000))
 def test_ned_geodetic_round_trip(n, e, d, lat0, lon0, alt0):

@@ -18,6 +18,8 @@ from sil_vehicle.mavlink import codec
 from sil_vehicle.mavlink.codec import Codec, Measured
 from trq_wire.signing import SignatureCheck, sign_outgoing
 
+from conftest import examples
+
 LIMIT = math.radians(30.0)
 
 
@@ -108,7 +110,7 @@ def test_unknown_message_id_is_counted():
     assert c.counters.unknown_ids == 1 and c.counters.bad_frames == 0
 
 
-@settings(max_examples=300, deadline=None)
+@settings(max_examples=examples(300), deadline=None)
 @given(st.binary(max_size=600))
 def test_random_bytes_never_raise(data):
     c = Codec()
@@ -119,7 +121,7 @@ def test_random_bytes_never_raise(data):
         assert c.counters.bad_frames >= 1
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=examples(200), deadline=None)
 @given(st.binary(min_size=1, max_size=64), st.integers(0, 400))
 def test_corrupted_valid_frames_never_raise(noise, where):
     frame = bytearray(client_bytes(target_msg([0.5] * 4 + [0.0] * 4)))

@@ -102,17 +102,16 @@ def test_frozen_outputs_follow_the_plants_lag(half_motor):
     assert abs(y1[-1] - target) < 0.01
 
 
-def test_bad_latency_is_a_usage_error(tmp_path):
-    r = subprocess.run([*cli("trq-latency-bound"), str(tmp_path),
-                        "--latency-ms", "10,abc"], capture_output=True, text=True)
-    assert r.returncode == 2 and "--latency-ms" in r.stderr
-    r = subprocess.run([*cli("trq-latency-bound"), str(tmp_path),
-                        "--latency-ms", "5000", "--horizon-s", "2"], capture_output=True,
-                       text=True)
-    assert r.returncode == 2 and "[0, 2000) ms" in r.stderr
-    r = subprocess.run([*cli("trq-latency-bound"), str(tmp_path),
-                        "--step-ms", "3"], capture_output=True, text=True)
-    assert r.returncode == 2 and "--step-ms 3" in r.stderr and "divisor" in r.stderr
+def test_bad_latency_is_a_usage_error(tmp_path, capsys):
+    """In the command's own process (its main: the exit code and stderr the installed command
+    gives; the subprocess path is the next test's)."""
+    assert lb.main([str(tmp_path), "--latency-ms", "10,abc"]) == 2
+    assert "--latency-ms" in capsys.readouterr().err
+    assert lb.main([str(tmp_path), "--latency-ms", "5000", "--horizon-s", "2"]) == 2
+    assert "[0, 2000) ms" in capsys.readouterr().err
+    assert lb.main([str(tmp_path), "--step-ms", "3"]) == 2
+    err = capsys.readouterr().err
+    assert "--step-ms 3" in err and "divisor" in err
 
 
 def test_a_flight_without_fault_is_refused(tmp_path):

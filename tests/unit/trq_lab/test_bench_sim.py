@@ -19,6 +19,7 @@ def test_the_long_run_must_be_longer():
         steady_cpu_per_s(0.1, 2.0, 0.2, 2.0)
 
 
+@pytest.mark.slow
 def test_the_sitl_bench_flies_under_a_sensing_profile():
     """(2) under mocap measures a flying vehicle (its estimator aligns in the air; the estimate
     loss failsafe leaves a vehicle armed before it had a position alone), not a crash."""

@@ -28,7 +28,9 @@ from sil_vehicle.sitl import Sitl
 from trq_lab.stress import frame_v2
 from trq_offboard.link.udp import Connection, MavlinkUdp
 
-FUZZ = settings(max_examples=150, deadline=None,
+from conftest import examples
+
+FUZZ = settings(max_examples=examples(150), deadline=None,
                 suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
 CLIENT = mavlink.MAVLink(None, srcSystem=255, srcComponent=190)
 CLIENT_V1 = mav1.MAVLink(None, srcSystem=255, srcComponent=190)

@@ -97,6 +97,7 @@ def pair(request):
         SpinController(cfg, vm, 1)
 
 
+@pytest.mark.slow
 def test_a_steady_force_is_cancelled(pair):
     """2 N from the north (about what an 8 m/s wind's drag gives), from the switch on: the
     position loop's integral alone still leaves the body tens of centimetres downwind after 3 s;
@@ -109,6 +110,7 @@ def test_a_steady_force_is_cancelled(pair):
     assert on < 0.2 * off
 
 
+@pytest.mark.slow
 def test_a_torque_about_the_axis_is_cancelled(pair):
     """0.01 N m along the primary axis (a reaction torque the rotor curves get wrong): without
     the estimate the spin settles off the rate it settles at undisturbed (the LQR has no

@@ -5,6 +5,7 @@ the value and what was expected."""
 
 from __future__ import annotations
 
+import datetime
 from pathlib import Path
 
 import pytest
@@ -159,3 +160,15 @@ def test_validate_a_mapping_in_hand():
                         "memory", prefix="x")
     with pytest.raises(Exception):
         v.mass_kg = 3.0                     # frozen
+
+
+def test_a_file_read_again_is_a_new_document_and_follows_the_file(tmp_path):
+    """The parse is kept per text (loader._parsed): what a caller does to what it read does
+    not reach the next read, and a file rewritten with other text is read anew."""
+    path = write(tmp_path / "p.yaml", "a: {x: [1, 2]}\nb: 2024-01-02\n")
+    first = loader.read_yaml(path)
+    first["a"]["x"].append(3)
+    first["a"]["y"] = 0
+    assert loader.read_yaml(path) == {"a": {"x": [1, 2]}, "b": datetime.date(2024, 1, 2)}
+    write(path, "a: {x: [5]}\n")
+    assert loader.read_yaml(path) == {"a": {"x": [5]}}

@@ -23,7 +23,9 @@ from trq_offboard.records import ActuatorCommand
 from trq_wire import frames
 from trq_wire.signing import now_10us, sign_outgoing
 
-FUZZ = settings(max_examples=200, deadline=None,
+from conftest import examples
+
+FUZZ = settings(max_examples=examples(200), deadline=None,
                 suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
 KEY = bytes(range(32))
 ODOMETRY = mavlink.MAVLink_odometry_message

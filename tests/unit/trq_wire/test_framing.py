@@ -17,6 +17,8 @@ from sil_vehicle.daemon import serial_budget
 from trq_wire.framing import LinePacer, StreamFramer, frame_size, line_bytes_per_s
 from trq_wire.signing import sign_outgoing
 
+from conftest import examples
+
 KEY = bytes(range(32))
 
 
@@ -250,7 +252,7 @@ def test_pacer_refuses_a_zero_rate():
         LinePacer(0, Clock())
 
 
-@settings(max_examples=300, deadline=None)
+@settings(max_examples=examples(300), deadline=None)
 @given(st.lists(st.one_of(st.binary(max_size=300), st.sampled_from(frames(4) + frames(4, True))),
                 max_size=30), st.lists(st.integers(1, 400), min_size=1, max_size=20))
 def test_any_bytes_in_any_chunks_never_raise_and_give_only_checksummed_frames(parts, sizes):
