@@ -76,6 +76,9 @@ DISARM_WAIT_US = 5_000_000
 # no further than a few fixes)
 MAX_UNPLACED_FIXES = 4
 LAND_DETECT_S = 0.2                # on the ground and still this long while landing: landed
+# in the vehicle's TAKEOFF state the gear still touches until the vehicle climbs: faster than
+# PX4's LNDMC_Z_VEL_MAX (the land detector's own bound on vertical movement) is off the ground
+LIFTOFF_CLIMB_M_S = 0.25
 IDLE = ActuatorCommand((0.0,) * 4, (0.0,) * 4)   # motors at idle, tilts centred
 
 
@@ -502,6 +505,8 @@ class OffboardFlight:
             # tests here in a landing (the controller's observers hold: Controller.landed)
             self.controller.landed = (
                 self.vehicle_landed_state == mavlink.MAV_LANDED_STATE_ON_GROUND
+                or (self.vehicle_landed_state == mavlink.MAV_LANDED_STATE_TAKEOFF
+                    and -odo.state.vel_ned_m_s[2] < LIFTOFF_CLIMB_M_S)
                 or down_since is not None or contact.since_s is not None)
             wire_rx, self._wire_ns = self._wire_ns, 0     # this state's decode
             if self.streams:

@@ -5,6 +5,7 @@ disturbance (docs/decisions/2026-12-06-observer-on-the-gear.md)."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from conftest import ROOT
 from trq_offboard.config import load_controller
@@ -48,10 +49,11 @@ def test_the_observer_does_not_learn_the_ground_while_landed():
     np.testing.assert_array_equal(held, np.zeros(6))
 
 
+@pytest.mark.slow
 def test_a_flight_holds_the_observers_on_the_gear_and_flies_them_in_the_air(tmp_path):
     """A short hover in one process: the steps before the lift-off (the vehicle's land detector
-    says ON_GROUND) and after the touchdown hold the observer (its d logged zero); in between
-    the controller flies it."""
+    says ON_GROUND, then TAKEOFF while the vehicle does not yet climb) and after the touchdown
+    hold the observer (its d logged zero); in between the controller flies it."""
     from trq_lab import harness
     from trq_lab.metrics import read_csv
     reference = {"kind": "hover", "altitude_m": 1.0, "climb_speed_m_s": 0.8, "hold_s": 0.5,
@@ -75,3 +77,8 @@ def test_a_flight_holds_the_observers_on_the_gear_and_flies_them_in_the_air(tmp_
     assert np.all(~landed[air[0]:air[-1] + 1])          # one stretch in the air
     d = np.column_stack([steps[f"d_acc_{a}_m_s2"] for a in "ned"])
     assert np.all(d[landed] == 0.0) and np.abs(d[~landed]).max() > 0.0
+    # through the vehicle's TAKEOFF state the hold lasts until the vehicle climbs: the first
+    # step in the air finds the gear off the ground (the plant's truth)
+    _, truth = read_csv(res.flight_csv)
+    k = np.searchsorted(truth["t_us"], steps["stamp_us"][air[0]])
+    assert truth["on_ground"][k] == 0 and truth["on_ground"][0] == 1
