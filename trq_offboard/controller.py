@@ -256,11 +256,12 @@ class Controller:
         # the ground (a caller that knows better may set it before the flight)
         self.ground_down_m = HOME_GROUND_DOWN_M
         # on the ground (the caller sets it before each step: the vehicle's land detector says
-        # ON_GROUND, or the companion's own touchdown test in a landing): the observers do not
-        # integrate, as PX4's rate controller does not while landed. On the gear the ground's
-        # reaction and friction are no disturbance to learn: learnt at a spool-up, they turn
-        # the vehicle on its gear and throw it at the lift-off
-        # (docs/decisions/2026-12-06-observer-on-the-gear.md)
+        # ON_GROUND, or TAKEOFF before the vehicle climbs, or the companion's own touchdown
+        # test in a landing): the observers do not integrate, as PX4's rate controller does not
+        # while landed. On the gear the ground's reaction and friction are no disturbance to
+        # learn: learnt at a spool-up, they turn the vehicle on its gear and throw it at the
+        # lift-off (docs/decisions/2026-12-06-observer-on-the-gear.md, and
+        # docs/decisions/2026-12-06-observer-through-the-lift-off.md)
         self.landed = False
 
     @property
