@@ -81,7 +81,6 @@ Pure: integer microseconds of the vehicle's clock in, no clock read, no I/O, no 
 
 from __future__ import annotations
 
-import functools
 import math
 from dataclasses import dataclass
 
@@ -283,18 +282,22 @@ def _stretch_symbols(cfg: FusedConfig, x, P, suffix: str = ""):
     return ins, stretch
 
 
-@functools.lru_cache(maxsize=8)
 def _kernels(cfg: FusedConfig) -> tuple[ca.Function, ca.Function] | None:
-    """The compiled kernels (`_kernel` and `_kernel_two`), built together, or None without a
-    C compiler or when a build fails (then the NumPy path runs)."""
+    """The compiled kernels (`_kernel` and `_kernel_two`), built together once a process for a
+    configuration (trq_wire.cache.built_once, as the controller's other compiled parts), or None
+    without a C compiler or when a build fails (then the NumPy path runs)."""
     from trq_offboard.nmpc.cache import compiled_many, find_compiler
+    from trq_wire.cache import built_once
 
-    if find_compiler() is None:
-        return None
-    built = compiled_many([_kernel(cfg), _kernel_two(cfg)])
-    if any(how == "interpreted" for _, how in built):
-        return None
-    return built[0][0], built[1][0]
+    def build() -> tuple[ca.Function, ca.Function] | None:
+        if find_compiler() is None:
+            return None
+        built = compiled_many([_kernel(cfg), _kernel_two(cfg)])
+        if any(how == "interpreted" for _, how in built):
+            return None
+        return built[0][0], built[1][0]
+
+    return built_once(("fused kernels", cfg), build)[0]
 
 
 def _kernel(cfg: FusedConfig) -> ca.Function:
