@@ -28,6 +28,15 @@ a local optimum, at or above the global one. Read the other way, it is a flight 
 (with the fault known) in the window. Against it the tool prints the flown flight's own RMSE, and
 its RMSE counting only the window.
 
+With `--objective tilt` (a motor lost whole, where no controller holds yaw or the point) the same
+optimiser, on the same frozen-then-free flight, minimises the largest tilt of the thrust axis
+over the window instead (`--horizon-s` 1 s by default), with any yaw and no bound on the sink:
+how far over the airframe must go, at least, before an answer that acts `L` after the loss can
+stop it; against it the flown flight's largest tilt in that window. A dead motor's output is
+not a decision: it runs down as the plant's does.
+
+    trq-latency-bound out/motor1_lost/trq_nmpc_eso_lost --objective tilt --latency-ms 0,20,50
+
 Pure function of the logs: no clock, no randomness.
 """
 
@@ -155,17 +164,30 @@ def _plant_outputs(y: np.ndarray, target: np.ndarray, tau: np.ndarray, rate: np.
     return np.array(y)
 
 
-def bound(onset: Onset, vehicle_file: Path, latency_s: float, horizon_s: float,
-          max_yaw_err_rad: float, max_tilt_rad: float = math.radians(80.0),
-          step_s: float = SAMPLE_S, tick_s: float = 0.001,
-          effort_weight: float = 1e-9) -> dict:
+@dataclass
+class _Problem:
+    """The optimal flight's problem before its objective: the frozen part flown, the free part's
+    variables and the plant's constraints on them."""
+    opti: ca.Opti
+    X: ca.MX                  # 20 x (m + 1): the free part's states and actuator outputs
+    V: ca.MX                  # 8 x m: the outputs' rates
+    frozen: np.ndarray        # (n_lat + 1, 20): the frozen part, through the plant's update
+    ref: np.ndarray           # (n + 1, 3) the reference at the optimiser's steps
+    yaw_ref: np.ndarray       # (n + 1,)
+    rate: np.ndarray          # 8: the outputs' rate limits
+    n_lat: int
+    m: int
+    every: int
+
+
+def _problem(onset: Onset, vehicle_file: Path, latency_s: float, horizon_s: float,
+             step_s: float, tick_s: float) -> _Problem:
     vm = load_vehicle_model(vehicle_file)
     model = PredictionModel(vm)
     dt = step_s
     F = _dynamics(model, dt)
     n = int(round(horizon_s / dt))
     n_lat = int(math.ceil(latency_s / dt - 1e-9))
-    every = int(round(SAMPLE_S / dt))          # optimiser steps per controller sample
     tau = np.array([vm.servo_time_constant_s] * 4 + [vm.motor_time_constant_s] * 4)
     rate = np.array([vm.servo_rate_limit_rad_s] * 4 + [vm.motor_rate_limit_pct_s] * 4)
     tau_step = dt / -np.expm1(-dt / tau)        # (target - y) = tau_step * (mean rate)
@@ -194,24 +216,24 @@ def bound(onset: Onset, vehicle_file: Path, latency_s: float, horizon_s: float,
     X = opti.variable(20, m + 1)
     V = opti.variable(8, m)
     opti.subject_to(X[:, 0] == x_free0)
-    cost = 0
+    # a dead output (a motor at 0 %: its range is one point) no command moves: it follows the
+    # plant's own update towards that point, rate limited, which the free part is given as is
+    dead = [int(i) for i in np.flatnonzero(hi - lo <= 0.0)]
+    live = [int(i) for i in np.flatnonzero(hi - lo > 0.0)]
+    y_live = [12 + i for i in live]
+    y_dead = [x_free0[12:20]]
+    for _ in range(m):
+        y_dead.append(_plant_outputs(y_dead[-1], hi, tau, rate, y_lo, y_hi, dt,
+                                     tick_s))
     for k in range(m):
         opti.subject_to(X[:, k + 1] == F(X[:, k], V[:, k], onset.wind))
-        yk = X[12:20, k]
-        opti.subject_to(opti.bounded(-rate, V[:, k], rate))
+        for i in dead:
+            opti.subject_to(V[i, k] == float((y_dead[k + 1][i] - y_dead[k][i]) / dt))
         # the outputs a step can reach: towards any target in [lo, hi] through the exact lag
         # (y + (target - y)(1 - exp(-dt/tau))), at most rate * dt
-        opti.subject_to(opti.bounded(lo, yk + tau_step * V[:, k], hi))
-        e = X[0:3, k + 1] - ref[n_lat + k + 1]
-        # keep yaw (the task), and roll and pitch off the Euler singularity (80 deg: no crash)
-        opti.subject_to(opti.bounded(-max_yaw_err_rad, X[8, k + 1] - yaw_ref[n_lat + k + 1],
-                                     max_yaw_err_rad))
-        opti.subject_to(opti.bounded(-max_tilt_rad, X[6:8, k + 1], max_tilt_rad))
-        cost += ca.sumsqr(e) + effort_weight * ca.sumsqr(V[:, k] / rate)
-    opti.minimize(cost)
-    opti.solver("ipopt", {"print_time": False, "expand": True},
-                {"print_level": 0, "sb": "yes", "max_iter": 3000, "tol": 1e-8,
-                 "acceptable_tol": 1e-6})
+        opti.subject_to(opti.bounded(-rate[live], V[live, k], rate[live]))
+        opti.subject_to(opti.bounded(lo[live], X[y_live, k] + tau_step[live] * V[live, k],
+                                     hi[live]))
     # first guess: the flown flight (state and actuator outputs), its output rates
     t_free = (n_lat + np.arange(m + 1)) * dt
     guess = np.column_stack([np.interp(t_free, onset.flown_t, onset.flown_x[:, c])
@@ -220,18 +242,46 @@ def bound(onset: Onset, vehicle_file: Path, latency_s: float, horizon_s: float,
     opti.set_initial(X, guess)
     opti.set_initial(V, np.clip(np.diff(guess[12:20], axis=1) / dt, -rate[:, None],
                                 rate[:, None]))
+    return _Problem(opti, X, V, np.array(xs), ref, yaw_ref, rate, n_lat, m,
+                    int(round(SAMPLE_S / dt)))
+
+
+def _solve(p: _Problem) -> tuple[np.ndarray, str]:
+    p.opti.solver("ipopt", {"print_time": False, "expand": True},
+                  {"print_level": 0, "sb": "yes", "max_iter": 3000, "tol": 1e-8,
+                   "acceptable_tol": 1e-6})
     try:
-        sol = opti.solve()
+        sol = p.opti.solve()
         status = "optimal"
     except RuntimeError:
-        sol = opti.debug
-        status = f"not converged ({opti.stats().get('return_status')})"
-    Xs = np.asarray(sol.value(X))
-    frozen = np.array(xs)
+        sol = p.opti.debug
+        status = f"not converged ({p.opti.stats().get('return_status')})"
+    return np.asarray(sol.value(p.X)), status
+
+
+def bound(onset: Onset, vehicle_file: Path, latency_s: float, horizon_s: float,
+          max_yaw_err_rad: float, max_tilt_rad: float = math.radians(80.0),
+          step_s: float = SAMPLE_S, tick_s: float = 0.001,
+          effort_weight: float = 1e-9) -> dict:
+    """The least position error after the fault: yaw held within max_yaw_err_rad of the
+    reference, roll and pitch within max_tilt_rad."""
+    p = _problem(onset, vehicle_file, latency_s, horizon_s, step_s, tick_s)
+    opti, X, V, n_lat = p.opti, p.X, p.V, p.n_lat
+    cost = 0
+    for k in range(p.m):
+        e = X[0:3, k + 1] - p.ref[n_lat + k + 1]
+        # keep yaw (the task), and roll and pitch off the Euler singularity (80 deg: no crash)
+        opti.subject_to(opti.bounded(-max_yaw_err_rad, X[8, k + 1] - p.yaw_ref[n_lat + k + 1],
+                                     max_yaw_err_rad))
+        opti.subject_to(opti.bounded(-max_tilt_rad, X[6:8, k + 1], max_tilt_rad))
+        cost += ca.sumsqr(e) + effort_weight * ca.sumsqr(V[:, k] / p.rate)
+    opti.minimize(cost)
+    Xs, status = _solve(p)
+    frozen = p.frozen
     traj = np.concatenate([frozen[:, 0:3], Xs[0:3, 1:].T], axis=0)   # n + 1 samples
-    err = np.linalg.norm(traj - ref, axis=1)
-    window = err[every::every]              # the samples after the onset inside the window
-    down = traj[:, 2] - ref[:, 2]
+    err = np.linalg.norm(traj - p.ref, axis=1)
+    window = err[p.every::p.every]          # the samples after the onset inside the window
+    down = traj[:, 2] - p.ref[:, 2]
     rmse = math.sqrt(float(np.sum(window ** 2)) / onset.n_after)
     ang = np.concatenate([frozen[:, 6:8], Xs[6:8, 1:].T], axis=0)
     return {"latency_ms": latency_s * 1e3, "status": status, "rmse_lower_bound_m": rmse,
@@ -241,13 +291,75 @@ def bound(onset: Onset, vehicle_file: Path, latency_s: float, horizon_s: float,
             "states": Xs, "frozen": frozen}
 
 
+def thrust_tilt_deg(roll: np.ndarray, pitch: np.ndarray) -> np.ndarray:
+    """The body z axis' angle from the vertical (deg) for ZYX Euler roll and pitch: yaw-free,
+    as the metric's max_thrust_tilt_after_fault_deg."""
+    return np.degrees(np.arccos(np.clip(np.cos(roll) * np.cos(pitch), -1.0, 1.0)))
+
+
+def tilt_bound(onset: Onset, vehicle_file: Path, latency_s: float, horizon_s: float,
+               max_euler_rad: float = math.radians(85.0), step_s: float = SAMPLE_S,
+               tick_s: float = 0.001, drift_weight: float = 1e-3) -> dict:
+    """The least largest tilt of the thrust axis after the fault, any yaw (a lost motor's
+    answer gives yaw up): maximise the smallest cos(roll) cos(pitch) over the window, with a
+    small weight on the drift from the onset's point that picks, among the flights with that
+    peak, one that stays near. Roll and pitch within max_euler_rad (off the Euler singularity):
+    a bound that needs more is reported not converged."""
+    p = _problem(onset, vehicle_file, latency_s, horizon_s, step_s, tick_s)
+    opti, X = p.opti, p.X
+    c = opti.variable()                        # cos of the largest tilt in the free part
+    drift = 0
+    for k in range(p.m):
+        opti.subject_to(ca.cos(X[6, k + 1]) * ca.cos(X[7, k + 1]) >= c)
+        opti.subject_to(opti.bounded(-max_euler_rad, X[6:8, k + 1], max_euler_rad))
+        drift += ca.sumsqr(X[0:2, k + 1] - onset.x0[0:2]) / p.m
+    opti.minimize(-c + drift_weight * drift)
+    frozen_cos = np.cos(p.frozen[:, 6]) * np.cos(p.frozen[:, 7])
+    opti.set_initial(c, float(frozen_cos.min()))
+    Xs, status = _solve(p)
+    ang = np.concatenate([p.frozen[:, 6:8], Xs[6:8, 1:].T], axis=0)
+    tilt = thrust_tilt_deg(ang[:, 0], ang[:, 1])
+    traj = np.concatenate([p.frozen[:, 0:3], Xs[0:3, 1:].T], axis=0)
+    drift_m = np.linalg.norm(traj[:, 0:2] - onset.x0[0:2], axis=1)
+    return {"latency_ms": latency_s * 1e3, "status": status,
+            "max_tilt_deg": float(tilt.max()),
+            "tilt_at_answer_deg": float(tilt[p.n_lat]),
+            "peak_s": float(np.argmax(tilt) * step_s),
+            "max_drift_m": float(drift_m.max()),
+            "sink_m": float(traj[-1, 2] - onset.x0[2]),
+            "yaw_rate_end_rad_s": float(Xs[11, -1]),
+            "iterations": int(opti.stats().get("iter_count", -1)),
+            "states": Xs, "frozen": p.frozen, "tilt_deg": tilt}
+
+
 # the command's numeric options: (default, what it sets)
 NUMBER_OPTIONS = {
     "--max-yaw-err-deg": (5.0, "the yaw error the optimal flight may not exceed (without it a "
                                "spinning vehicle is the best answer to a motor loss)"),
     "--step-ms": (10.0, "the optimiser's RK4 step, a divisor of 10 ms"),
-    "--horizon-s": (4.0, "window after the onset the optimiser flies"),
+    "--horizon-s": (None, "window after the onset the optimiser flies (default 4 s for the "
+                          "position, 1 s for the tilt)"),
 }
+HORIZON_S = {"position": 4.0, "tilt": 1.0}
+
+
+def _print_tilt(args, onset: Onset, vehicle_file: Path, lat: list[float], tick_s: float) -> None:
+    """The tilt objective's table, against the flown flight's largest tilt in the window."""
+    rows = onset.flown_t <= args.horizon_s + 1e-9
+    flown = thrust_tilt_deg(onset.flown_x[rows, 6], onset.flown_x[rows, 7])
+    print(f"flight {args.log_dir}: fault at {onset.t0_us * 1e-6:.3f} s, motor factors "
+          f"{onset.factors.tolist()}, wind {onset.wind.round(2).tolist()} m/s")
+    print(f"flown: largest tilt of the thrust axis in the first {args.horizon_s:g} s "
+          f"{flown.max():.1f} deg, at {onset.flown_t[rows][int(np.argmax(flown))]:.2f} s")
+    print("| latency ms | lower bound on the largest tilt deg | at s | tilt when the answer "
+          "acts deg | its drift m | its sink m | IPOPT |")
+    print("|---|---|---|---|---|---|---|")
+    for L in lat:
+        r = tilt_bound(onset, vehicle_file, L, args.horizon_s, step_s=args.step_ms * 1e-3,
+                       tick_s=tick_s)
+        print(f"| {r['latency_ms']:.0f} | {r['max_tilt_deg']:.1f} | {r['peak_s']:.2f} | "
+              f"{r['tilt_at_answer_deg']:.1f} | {r['max_drift_m']:.2f} | {r['sink_m']:.2f} | "
+              f"{r['status']}, {r['iterations']} it |", flush=True)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -255,9 +367,16 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("log_dir", type=Path, help="a flight's directory (flight.csv, controller.csv)")
     ap.add_argument("--latency-ms", default="0,10,20,30,40,50",
                     help="comma-separated reaction latencies (default %(default)s)")
+    ap.add_argument("--objective", choices=sorted(HORIZON_S), default="position",
+                    help="position: the least position RMSE after the fault, yaw held; tilt: "
+                         "the least largest tilt of the thrust axis, any yaw (a lost motor) "
+                         "(default %(default)s)")
     for flag, (default, text) in NUMBER_OPTIONS.items():
-        ap.add_argument(flag, type=float, default=default, help=f"{text} (default %(default)s)")
+        ap.add_argument(flag, type=float, default=default,
+                        help=text if default is None else f"{text} (default %(default)s)")
     args = ap.parse_args(argv)
+    if args.horizon_s is None:
+        args.horizon_s = HORIZON_S[args.objective]
     try:
         lat = [float(s) * 1e-3 for s in args.latency_ms.split(",") if s.strip()]
     except ValueError:
@@ -288,6 +407,10 @@ def main(argv: list[str] | None = None) -> int:
     except LogError as exc:
         print(f"latency_bound: {exc}", file=sys.stderr)
         return 2
+    tick_s = 1.0 / float(meta["physics_rate_hz"])
+    if args.objective == "tilt":
+        _print_tilt(args, onset, vehicle_file, lat, tick_s)
+        return 0
     win = onset.ref_t <= args.horizon_s + 1e-9
     flown = math.sqrt(float(np.mean(onset.flown_err ** 2)))
     flown_win = math.sqrt(float(np.sum(onset.flown_err[win] ** 2)) / onset.n_after)
@@ -301,7 +424,7 @@ def main(argv: list[str] | None = None) -> int:
     print("|---|---|---|---|---|---|")
     for L in lat:
         r = bound(onset, vehicle_file, L, args.horizon_s, math.radians(args.max_yaw_err_deg),
-                  step_s=args.step_ms * 1e-3, tick_s=1.0 / float(meta["physics_rate_hz"]))
+                  step_s=args.step_ms * 1e-3, tick_s=tick_s)
         print(f"| {r['latency_ms']:.0f} | {r['rmse_lower_bound_m']:.4f} | {r['max_err_m']:.3f} | "
               f"{r['max_sink_m']:.3f} | {r['max_tilt_deg']:.1f} | {r['status']}, "
               f"{r['iterations']} it |", flush=True)

@@ -205,3 +205,73 @@ def test_logs_the_bound_cannot_take_are_refused(tmp_path, case, words):
     r = subprocess.run([*cli("trq-latency-bound"), str(tmp_path)],
                        capture_output=True, text=True)
     assert r.returncode == 2 and words in r.stderr
+
+
+# ------------------------------------------------------------------------------------------
+# --objective tilt: a motor lost whole
+
+
+@pytest.fixture(scope="module")
+def lost_motor():
+    onset = hover_onset([0.0, 1.0, 1.0, 1.0])
+    return onset, {L: lb.tilt_bound(onset, TRQ, L, 0.5) for L in (0.0, 0.03, 0.06)}
+
+
+@pytest.mark.slow
+def test_a_lost_motor_seen_at_once_is_answered_nearly_level(lost_motor):
+    _, r = lost_motor
+    assert r[0.0]["status"] == "optimal"
+    assert r[0.0]["max_tilt_deg"] < 10.0, r[0.0]["max_tilt_deg"]
+    # the thrust tilt it reports is the one of its own attitudes
+    X = r[0.0]["states"]
+    np.testing.assert_allclose(r[0.0]["tilt_deg"][1:], lb.thrust_tilt_deg(X[6, 1:], X[7, 1:]))
+
+
+@pytest.mark.slow
+def test_each_millisecond_of_latency_tips_a_lost_motor_further(lost_motor):
+    _, r = lost_motor
+    tilts = [r[L]["max_tilt_deg"] for L in (0.0, 0.03, 0.06)]
+    assert all(r[L]["status"] == "optimal" for L in r)
+    assert tilts[0] < tilts[1] < tilts[2], tilts
+    assert tilts[2] > 3.0 * tilts[0] + 20.0, tilts
+    # the answer cannot act before the latency: the peak comes after it
+    assert r[0.06]["peak_s"] > 0.06
+
+
+@pytest.mark.slow
+def test_the_dead_motors_output_runs_down_as_the_plants(lost_motor):
+    """A motor at 0 % is no decision: its output in the free part follows the plant's own
+    update from where the frozen part left it (rate limited, then the lag), whatever the
+    optimiser would prefer."""
+    onset, r = lost_motor
+    vm = load_vehicle_model(TRQ)
+    X = r[0.0]["states"]
+    y = [float(onset.y0[4])]
+    f = lb.lag_factor(vm.motor_time_constant_s, 1e-3)
+    for _ in range(X.shape[1] - 1):
+        v = y[-1]
+        for _ in range(10):
+            v = lb.first_order_step(v, 0.0, f, vm.motor_rate_limit_pct_s * 1e-3, 0.0, 100.0)
+        y.append(v)
+    np.testing.assert_allclose(X[16], y, atol=1e-6)
+    assert X[16, 3] < onset.y0[4] - 20.0        # it fell at the rate limit, not at once
+
+
+@pytest.mark.slow
+def test_no_fault_no_tilt():
+    r = lb.tilt_bound(hover_onset([1.0, 1.0, 1.0, 1.0]), TRQ, 0.0, 0.3)
+    assert r["status"] == "optimal" and r["max_tilt_deg"] < 0.5
+
+
+@pytest.mark.slow
+def test_the_tilt_objective_from_the_command_line(tmp_path):
+    write_logs(tmp_path, [[1.0] * 4] * 100 + [[0.0, 1.0, 1.0, 1.0]] * 100)
+    r = subprocess.run([*cli("trq-latency-bound"), str(tmp_path), "--objective", "tilt",
+                        "--latency-ms", "0,40", "--horizon-s", "0.4"],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    rows = [ln for ln in r.stdout.splitlines() if ln.startswith("| 0 ") or ln.startswith("| 40 ")]
+    assert len(rows) == 2, r.stdout
+    bound = [float(ln.split("|")[2]) for ln in rows]
+    assert bound[0] < bound[1], r.stdout
+    assert "largest tilt of the thrust axis in the first 0.4 s" in r.stdout
