@@ -404,6 +404,9 @@ class LostMotor(Strict):
     detect: Choice("on", "off")
     below: Num(0.0, 0.45) = 0.2                # effectiveness at or below: the motor lost
     hold_s: Num(0.0, 2.0) = 0.05               # ... held this long without a break
+    # ... or (set) this long in all within the last within_s s: a step back above `below`
+    # no longer restarts the count (null: without a break)
+    within_s: Optional[Num(0.0, 2.0)] = None
     min_command_pct: Num(0.0, 100.0) = 20.0    # ... while commanded at least this
     yaw_weight: Num(0.0, 1e6) = 0.0            # the failed NMPC's weight on yaw and yaw rate
     max_body_rate_rad_s: Num(0.1, 100.0) = 30.0  # the failed NMPC's body-rate bound
@@ -424,6 +427,14 @@ class LostMotor(Strict):
     # or above this (m/s^2); the angular parts' scale in the pair's least squares (rad/s^2)
     pair_excess_m_s2: Optional[Num(0.1, 20.0)] = None
     pair_angular_scale_rad_s2: Num(0.1, 1000.0) = 5.0
+
+    @model_validator(mode="after")
+    def _window_holds_the_hold(self) -> "LostMotor":
+        if self.within_s is not None and self.within_s < self.hold_s:
+            raise Invalid("lost_motor.within_s", self.within_s,
+                          f"at least hold_s ({self.hold_s:g} s): the window the time at or "
+                          "below is counted in")
+        return self
 
 
 class Estimator(Strict):

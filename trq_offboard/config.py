@@ -168,6 +168,7 @@ class LostMotorConfig:
     response: str = "nmpc"                # one motor lost: "nmpc" (the failed NMPC) or "spin"
     pair_excess_m_s2: float | None = None   # two motors lost: the vertical excess (None: off)
     pair_angular_scale_rad_s2: float = 5.0   # the angular parts' scale in the pair's fit
+    within_s: float | None = None         # hold_s counted within this window (None: no break)
 
 
 @dataclass(frozen=True)
@@ -348,7 +349,8 @@ def controller_config(c: schema.ControllerFile, file: str) -> ControllerConfig:
     lost_motor = None if lm is None or lm.detect == "off" else LostMotorConfig(
         lm.below, lm.hold_s, lm.min_command_pct, lm.yaw_weight, lm.max_body_rate_rad_s,
         lm.descent_speed_m_s, lm.spin_weight, lm.spin_rate_rad_s, lm.horizon_steps,
-        lm.horizon_step_s, lm.response, lm.pair_excess_m_s2, lm.pair_angular_scale_rad_s2)
+        lm.horizon_step_s, lm.response, lm.pair_excess_m_s2, lm.pair_angular_scale_rad_s2,
+        lm.within_s)
     return ControllerConfig(file, c.name, vehicle, c.observer.kind, eso, c.control_rate_hz,
                             c.horizon.steps, c.horizon.step_s, weights,
                             c.constraints.max_roll_pitch_deg, c.constraints.max_body_rate_rad_s,

@@ -395,7 +395,7 @@ class Controller:
                 lim = self.cfg.eso.max_disturbance[0]
                 self._motor_share = share if norm <= lim else share * (lim / norm)
             if self.detector is not None:
-                self._detect(t_s, x, d_obs, y_now)
+                self._detect(t_s, x, d_obs, y_now, d, path)
         c2 = clock()
         if self.detector is not None and self.spin is None and t_s > self._last_t:
             # only where a switch can read it (a lost-motor detector), not in every period
@@ -430,7 +430,7 @@ class Controller:
         return self._finish(u, source, info, d_obs, out_err, (c0, c1, c2, c3))
 
     def _detect(self, t_s: float, x: np.ndarray, d_obs: np.ndarray | None = None,
-                y_now=None) -> None:
+                y_now=None, d: np.ndarray | None = None, path=None) -> None:
         """The lost-motor detector on this step's effectiveness and the commands in effect; on
         a detection (once) the failed configuration: its NMPC, the descent from here; then, every
         step, the dead rotor's effective throttle bounded to 0 (trq_offboard/lost_motor.py).
@@ -459,8 +459,13 @@ class Controller:
                 # controller from here, holding where the loss was declared, its actuators
                 # starting from the last command sent, spinning the way the body already yaws
                 # (reversing a started spin passes through no spin at all, where nothing holds
-                # the axis: the records; `spin_sense`)
-                sense = spin_sense(x[9:12], self._spins[(lost, 1)].trim.axis_frd)
+                # the axis: the records; `spin_sense`) when its first command acts: over a
+                # delayed link the yaw rate predicted for then (the NMPC's predictor, the loss in
+                # its effectiveness), which the yaw torque of the rotors left can have turned
+                # from the one measured (docs/decisions/2026-12-06-lost-motor-tilt-bound.md)
+                x_act = (self.predictor.predict(x, t_s, t_s + self.delay_s, d, path)
+                         if self.delay_s > 0.0 and d is not None else x)
+                sense = spin_sense(x_act[9:12], self._spins[(lost, 1)].trim.axis_frd)
                 self.spin = self._spins[(lost, sense)]
                 self._spin_t0 = float(t_s)
                 # the wind learnt before the switch: the position loop's integral starts from

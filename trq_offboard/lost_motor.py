@@ -7,14 +7,20 @@ stops ends) and the throttles commanded (4, %). Out: the motor (1..4) declared l
 Motor n is declared lost once
     e_n <= below                              (the estimate at the observer's floor, near 0)
     and its command >= min_command_pct        (a motor commanded near idle shows no loss)
-has held for `hold_s` without a break (any step above `below` restarts the count). The first
-motor to qualify is latched: a lost motor is not re-armed in flight, and one motor is switched
-at a time (a second motor lost keeps its loss in the observer's d).
+has held for `hold_s` without a break (any step above `below` restarts the count), or, with
+`within_s` set, for `hold_s` in all within the last `within_s` (each step at or below counting
+the time since the step before it, at most half of `hold_s` so that one step after a long gap
+never decides alone; the current step among them): on a lossy link a late or lost command throws
+a lost motor's estimate back above `below` for a period or two, which no longer restarts the
+count. The first motor to qualify is latched: a lost motor is not re-armed in flight, and one
+motor is switched at a time (a second motor lost keeps its loss in the observer's d).
 
 Why this signal and these figures: docs/decisions/2026-12-05-lost-motor-first-flights.md
 (the paper's 50 % fault reads e near 0.5; a 0 % fault drives e to its floor within a few
 control periods; on a lossy link a lost or late command reads, for one to three control periods,
-as a motor's deficit, down to the floor: the hold outlasts these).
+as a motor's deficit, down to the floor: the hold outlasts these). The count within a window,
+and what the link's delay costs any controller of a lost motor:
+docs/decisions/2026-12-06-lost-motor-tilt-bound.md.
 
 The failed configuration (`failed_config`): the controller's NMPC rebuilt with the dead rotor's
 throttle bounded to [0, 0] (its thrust fixed at 0, through Ocp.set_throttle_scale), yaw given up
@@ -147,16 +153,23 @@ class LostMotorDetector:
     lost: int | None = None                       # the motor declared lost (1..4), latched
     detected_s: float | None = None               # when
     _since_s: list = dataclasses.field(default_factory=lambda: [None] * 4)
+    # within_s: the steps at or below per motor in the window, (t_s, the time it counts)
+    _below: list = dataclasses.field(default_factory=lambda: [[] for _ in range(4)])
+    _last_s: float | None = None
 
     def reset(self) -> None:
         self.lost, self.detected_s = None, None
         self._since_s = [None] * 4
+        self._below = [[] for _ in range(4)]
+        self._last_s = None
 
     def update(self, t_s: float, effectiveness, command_pct) -> int | None:
         """The motor declared lost (1..4), latched, or None; see the module docstring."""
         if self.lost is not None:
             return self.lost
         c = self.cfg
+        if c.within_s is not None:
+            return self._update_within(t_s, effectiveness, command_pct)
         for i, (e, u) in enumerate(zip(effectiveness, command_pct)):
             if e <= c.below and u >= c.min_command_pct:
                 if self._since_s[i] is None:
@@ -166,6 +179,22 @@ class LostMotorDetector:
                     return self.lost
             else:
                 self._since_s[i] = None
+        return None
+
+    def _update_within(self, t_s: float, effectiveness, command_pct) -> int | None:
+        c = self.cfg
+        step_s = (0.0 if self._last_s is None
+                  else min(max(0.0, t_s - self._last_s), 0.5 * c.hold_s))
+        self._last_s = t_s
+        for i, (e, u) in enumerate(zip(effectiveness, command_pct)):
+            window = [w for w in self._below[i] if w[0] > t_s - c.within_s + 1e-9]
+            self._below[i] = window
+            if not (e <= c.below and u >= c.min_command_pct):
+                continue
+            window.append((t_s, step_s))
+            if sum(w[1] for w in window) >= c.hold_s - 1e-9:
+                self.lost, self.detected_s = i + 1, t_s
+                return self.lost
         return None
 
 

@@ -76,6 +76,80 @@ def test_a_lossy_link_like_estimate_is_not_lost():
     assert _detect(stream)[0] == 1
 
 
+WITHIN = LostMotorConfig(below=0.2, hold_s=0.05, min_command_pct=20.0, yaw_weight=0.0,
+                         max_body_rate_rad_s=30.0, descent_speed_m_s=1.0, within_s=0.1)
+
+
+def _detect_with(cfg, stream, cmd=CMD):
+    det = LostMotorDetector(cfg)
+    for k, e in enumerate(stream):
+        if det.update(k * DT, e, cmd) is not None:
+            return det.lost, det.detected_s
+    return None, None
+
+
+def test_within_a_window_a_lost_motor_thrown_back_up_still_counts():
+    """A lost motor's estimate on a lossy link (the tilt-bound record's flight): at the floor,
+    thrown back above `below` for one or two periods by late commands. Without a break the
+    count restarts at each; counted within the window it is declared once its steps at or
+    below add up to hold_s."""
+    stream = np.ones((60, 4))
+    # from 0.20 s: floor, floor, up, up, floor, floor, up, floor, floor, floor, ...
+    pattern = [0.1, 0.1, 0.41, 0.32, 0.1, 0.1, 0.35, 0.1, 0.1, 0.1, 0.1, 0.1]
+    stream[20:20 + len(pattern), 0] = pattern
+    stream[20 + len(pattern):, 0] = 0.1
+    lost, t = _detect_with(WITHIN, stream)
+    # five steps at or below (0.05 s): 0.20, 0.21, 0.24, 0.25, 0.27
+    assert lost == 1 and t == pytest.approx(0.27)
+    # the shipped controller's detector counts so
+    shipped = load_controller(PARAMS / "controller/trq_nmpc_eso_lost.yaml").lost_motor
+    assert _detect_with(shipped, stream) == (1, pytest.approx(0.27))
+    no_break = LostMotorConfig(**{**WITHIN.__dict__, "within_s": None})
+    lost, t_no_break = _detect_with(no_break, stream)
+    # without a break: from 0.27 on, 0.05 s later
+    assert lost == 1 and t_no_break == pytest.approx(0.32)
+
+
+def test_within_a_window_isolated_dips_are_not_lost():
+    """The 50 % fault's estimate on the lossy link: dips of one to three periods, the next one
+    more than a window later: never declared with the window's count; three more periods after
+    a dip of two, inside the window, are."""
+    rng = np.random.default_rng(3)
+    stream = np.ones((1000, 4))
+    stream[:, 0] = np.clip(0.5 + 0.04 * rng.standard_normal(1000), 0.1, 1.0)
+    for k in range(20, 1000, 50):
+        stream[k:k + 1 + (k // 50) % 3, 0] = 0.1          # 1, 2 or 3 periods
+    assert _detect_with(WITHIN, stream) == (None, None)
+    assert stream[520:522, 0].max() == 0.1 and stream[522, 0] > 0.2   # a dip of 2 at 0.2 s
+    stream[525:528, 0] = 0.1                              # 3 more: 5 periods within 0.08 s
+    assert _detect_with(WITHIN, stream) == (1, pytest.approx(5.27))
+
+
+def test_within_a_window_one_step_after_a_gap_does_not_decide_alone():
+    """Telemetry lost for 0.3 s, then steps at the floor: the first counts half of hold_s at
+    most, and the steps after it make up the rest (0.025 + 0.01 + 0.01 + 0.01)."""
+    det = LostMotorDetector(WITHIN)
+    low = np.array([0.1, 1.0, 1.0, 1.0])
+    assert det.update(0.0, np.ones(4), CMD) is None
+    assert det.update(0.3, low, CMD) is None
+    assert det.update(0.31, low, CMD) is None
+    assert det.update(0.32, low, CMD) is None
+    assert det.update(0.33, low, CMD) == 1
+
+
+def test_the_window_must_hold_the_hold(tmp_path):
+    from params import schema
+    from trq_offboard.config import loader
+    f = tmp_path / "c.yaml"
+    f.write_text(f"extends: {PARAMS / 'controller/trq_nmpc_eso_lost.yaml'}\n"
+                 "lost_motor: {hold_s: 0.1, within_s: 0.05}\n")
+    with pytest.raises(loader.ConfigError, match="lost_motor.within_s"):
+        loader.load(f, schema.ControllerFile)
+    f.write_text(f"extends: {PARAMS / 'controller/trq_nmpc_eso_lost.yaml'}\n"
+                 "lost_motor: {hold_s: 0.05, within_s: 0.1}\n")
+    assert load_controller(f).lost_motor.within_s == 0.1
+
+
 def test_a_motor_commanded_near_idle_is_not_judged():
     stream = np.ones((100, 4))
     stream[:, 3] = 0.1
@@ -223,6 +297,41 @@ def test_the_switch_hands_over_to_the_spinning_controller():
     ctl.prepare(ref)                              # a no-op while spinning
     ctl.reset(0.0, state)
     assert ctl.spin is None and ctl.lost_motor == 0
+
+
+def test_over_a_delay_the_spin_takes_the_yaw_predicted_for_when_it_acts():
+    """The spin's sense is the body's yaw when the spinning controller's first command acts:
+    in lockstep the yaw rate measured; over a delayed link (applied_delay_s) the one the NMPC's
+    predictor gives for then. Here the body yaws slowly one way, and the observer's d says the
+    rotors left turn it hard the other way: 40 ms later it yaws that other way (the tilt-bound
+    record: a flight that took the measured sense tumbled)."""
+    import dataclasses
+
+    from trq_offboard.controller import Controller
+    from trq_offboard.records import StateEstimate
+    from trq_offboard.spin import spin_sense
+
+    base = load_controller(PARAMS / "controller/trq_nmpc_eso_lost.yaml")
+    state = StateEstimate((0.0, 0.0, -5.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, -0.05))
+    d = np.zeros(6)
+    d[5] = 20.0                                   # rad/s^2 about body z (FRD)
+
+    def declared_sense(delay_s):
+        cfg = dataclasses.replace(base, applied_delay_s=delay_s, lost_motor=dataclasses.replace(
+            base.lost_motor, response="spin"))
+        ctl = Controller(cfg)
+        ctl.reset(0.0, state)
+        ctl._scale[ctl._nt:] = [0.1, 1.0, 1.0, 1.0]
+        ctl._last_u[ctl._nt:] = 70.0
+        for k in range(12):
+            ctl._detect(k * DT, state.as_vector(), d=d)
+        assert ctl.lost_motor == 1 and ctl.spin is not None
+        return ctl.spin.direction, ctl._spins[(1, 1)].trim.axis_frd
+
+    now, axis = declared_sense(0.0)
+    assert now == spin_sense((0.0, 0.0, -0.05), axis)
+    late, _ = declared_sense(0.04)
+    assert late == spin_sense((0.0, 0.0, -0.05 + 0.04 * 20.0), axis) == -now
 
 
 # --- two motors lost (PairLossDetector) ------------------------------------------------------
