@@ -222,9 +222,8 @@ def _problem(onset: Onset, vehicle_file: Path, latency_s: float, horizon_s: floa
     live = [int(i) for i in np.flatnonzero(hi - lo > 0.0)]
     y_live = [12 + i for i in live]
     y_dead = [x_free0[12:20]]
-    for _ in range(m):
-        y_dead.append(_plant_outputs(y_dead[-1], hi, tau, rate, y_lo, y_hi, dt,
-                                     tick_s))
+    for _ in range(m if dead else 0):
+        y_dead.append(_plant_outputs(y_dead[-1], hi, tau, rate, y_lo, y_hi, dt, tick_s))
     for k in range(m):
         opti.subject_to(X[:, k + 1] == F(X[:, k], V[:, k], onset.wind))
         for i in dead:
