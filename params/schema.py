@@ -403,7 +403,7 @@ class LostMotor(Strict):
     configuration, or the spinning controller of the file's `spin:` section."""
     detect: Choice("on", "off")
     below: Num(0.0, 0.45) = 0.2                # effectiveness at or below: the motor lost
-    hold_s: Num(0.0, 2.0) = 0.05               # ... held this long without a break
+    hold_s: Num(0.0, 2.0) = 0.05               # ... held this long, without a break
     # ... or (set) this long in all within the last within_s s: a step back above `below`
     # no longer restarts the count (null: without a break)
     within_s: Optional[Num(0.0, 2.0)] = None

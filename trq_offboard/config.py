@@ -156,7 +156,7 @@ class EffectivenessConfig:
 class LostMotorConfig:
     """A whole motor lost (trq_offboard/lost_motor.py): controller key lost_motor."""
     below: float                          # effectiveness at or below which a motor is lost
-    hold_s: float                         # held this long without a break
+    hold_s: float                         # held this long (without a break, or within within_s)
     min_command_pct: float                # while commanded at least this (throttle %)
     yaw_weight: float                     # the failed NMPC's weight on yaw and yaw rate
     max_body_rate_rad_s: float            # the failed NMPC's body-rate bound
