@@ -290,9 +290,10 @@ def bound(onset: Onset, vehicle_file: Path, latency_s: float, horizon_s: float,
             "states": Xs, "frozen": frozen}
 
 
-def thrust_tilt_deg(roll: np.ndarray, pitch: np.ndarray) -> np.ndarray:
+def euler_tilt_deg(roll: np.ndarray, pitch: np.ndarray) -> np.ndarray:
     """The body z axis' angle from the vertical (deg) for ZYX Euler roll and pitch: yaw-free,
-    as the metric's max_thrust_tilt_after_fault_deg."""
+    the quantity of trq_lab.metrics.thrust_tilt_deg (which reads a truth log's quaternion), for
+    the optimiser's Euler states."""
     return np.degrees(np.arccos(np.clip(np.cos(roll) * np.cos(pitch), -1.0, 1.0)))
 
 
@@ -317,7 +318,7 @@ def tilt_bound(onset: Onset, vehicle_file: Path, latency_s: float, horizon_s: fl
     opti.set_initial(c, float(frozen_cos.min()))
     Xs, status = _solve(p)
     ang = np.concatenate([p.frozen[:, 6:8], Xs[6:8, 1:].T], axis=0)
-    tilt = thrust_tilt_deg(ang[:, 0], ang[:, 1])
+    tilt = euler_tilt_deg(ang[:, 0], ang[:, 1])
     traj = np.concatenate([p.frozen[:, 0:3], Xs[0:3, 1:].T], axis=0)
     drift_m = np.linalg.norm(traj[:, 0:2] - onset.x0[0:2], axis=1)
     return {"latency_ms": latency_s * 1e3, "status": status,
@@ -345,7 +346,7 @@ HORIZON_S = {"position": 4.0, "tilt": 1.0}
 def _print_tilt(args, onset: Onset, vehicle_file: Path, lat: list[float], tick_s: float) -> None:
     """The tilt objective's table, against the flown flight's largest tilt in the window."""
     rows = onset.flown_t <= args.horizon_s + 1e-9
-    flown = thrust_tilt_deg(onset.flown_x[rows, 6], onset.flown_x[rows, 7])
+    flown = euler_tilt_deg(onset.flown_x[rows, 6], onset.flown_x[rows, 7])
     print(f"flight {args.log_dir}: fault at {onset.t0_us * 1e-6:.3f} s, motor factors "
           f"{onset.factors.tolist()}, wind {onset.wind.round(2).tolist()} m/s")
     print(f"flown: largest tilt of the thrust axis in the first {args.horizon_s:g} s "

@@ -224,7 +224,7 @@ def test_a_lost_motor_seen_at_once_is_answered_nearly_level(lost_motor):
     assert r[0.0]["max_tilt_deg"] < 10.0, r[0.0]["max_tilt_deg"]
     # the thrust tilt it reports is the one of its own attitudes
     X = r[0.0]["states"]
-    np.testing.assert_allclose(r[0.0]["tilt_deg"][1:], lb.thrust_tilt_deg(X[6, 1:], X[7, 1:]))
+    np.testing.assert_allclose(r[0.0]["tilt_deg"][1:], lb.euler_tilt_deg(X[6, 1:], X[7, 1:]))
 
 
 @pytest.mark.slow
