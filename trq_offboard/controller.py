@@ -92,7 +92,7 @@ from trq_wire.cache import built_once
 # docs/decisions/2026-12-05-lost-motor-axes.md)
 SPIN_WIND_TAU_S = 0.5
 
-__all__ = ["Controller"]
+__all__ = ["Controller", "sensor_streams_of"]
 
 HOME_RATE_HZ = 1        # HOME_POSITION asked of the vehicle with a GNSS source (a moved home)
 # with a GNSS source the filter starts from the autopilot's position with this 1 sigma: the
@@ -128,6 +128,19 @@ def _interp_with(x: np.ndarray, w) -> np.ndarray:
     i, i1, g, f = w
     return x[i] * g + x[i1] * f
 
+
+
+def sensor_streams_of(cfg: ControllerConfig) -> dict[str, int]:
+    """The raw sensor streams (MAVLink message name: Hz) a controller of this configuration
+    needs from the vehicle: the fused filter's IMU and position source (the motion capture
+    pose, or the GNSS fix and the home it is relative to), none on the autopilot's estimate."""
+    f = cfg.fused
+    if f is None:
+        return {}
+    if f.position_source == "gnss":
+        return {"HIGHRES_IMU": f.imu_rate_hz, "GPS_RAW_INT": f.gnss_rate_hz,
+                "HOME_POSITION": HOME_RATE_HZ}
+    return {"HIGHRES_IMU": f.imu_rate_hz, "ATT_POS_MOCAP": f.mocap_rate_hz}
 
 class Controller:
     """One controller file's controller (see the module docstring): its parts built once
@@ -266,16 +279,9 @@ class Controller:
 
     @property
     def sensor_streams(self) -> dict[str, int]:
-        """The raw sensor streams (MAVLink message name: Hz) this controller needs from the
-        vehicle: the fused filter's IMU and position source (the motion capture pose, or the
-        GNSS fix and the home it is relative to), none on the autopilot's estimate."""
-        f = self.cfg.fused
-        if f is None:
-            return {}
-        if f.position_source == "gnss":
-            return {"HIGHRES_IMU": f.imu_rate_hz, "GPS_RAW_INT": f.gnss_rate_hz,
-                    "HOME_POSITION": HOME_RATE_HZ}
-        return {"HIGHRES_IMU": f.imu_rate_hz, "ATT_POS_MOCAP": f.mocap_rate_hz}
+        """The raw sensor streams this controller needs from the vehicle (`sensor_streams_of`
+        its configuration)."""
+        return sensor_streams_of(self.cfg)
 
     @classmethod
     def from_yaml(cls, path: Path | str) -> "Controller":

@@ -73,6 +73,12 @@ STEP_CPU_COLUMNS = [f"cpu_{p}_ms" for p in ("observer", "effectiveness", "predic
                                             "feedback")]
 # what the loop itself measures: the replay's log differs from the recording only there
 LOOP_COLUMNS = ("cpu_wire_ms", "cpu_log_ms", "cpu_period_ms")
+# what a controller with its own filter (the fused filter) logs of it: the state's position and
+# velocity (the filter's, where the replay, without a filter, logs the autopilot's) and the
+# filter's health
+FILTER_COLUMNS = ("pos_n_m", "pos_e_m", "pos_d_m", "vel_n_m_s", "vel_e_m_s", "vel_d_m_s",
+                  "est_test_ratio", "est_pos_var_m2", "est_dead_reckoning", "est_rejected",
+                  "est_resets", "est_accel_rejected")
 _LOOP_PARTS = ("wire", "log", "period")
 
 
@@ -117,6 +123,10 @@ class ReplayController:
         self.source = source
         self.controller = controller          # the recording's controller name, if it says
         self.last_prepare_cpu_ns = 0
+        # the raw sensor streams the loop asks the vehicle for: the recording's controller's
+        # (replay_daemon sets them from its file), so that the vehicle flies the recorded
+        # flight and the loop receives and decodes what it received; none by default
+        self.sensor_streams: dict[str, int] = {}
 
     def __len__(self) -> int:
         return self._n
@@ -203,16 +213,16 @@ class ReplayController:
         self._i = 0
         self.last_prepare_cpu_ns = 0
 
-    def step(self, t_s: float, state, applied, reference) -> tuple[ActuatorCommand, StepInfo]:
-        """The recorded row of this step (ReplayDiverged past the last or at another time)."""
+    def step(self, t_s: float, state, applied, reference,
+             sensors=None) -> tuple[ActuatorCommand, StepInfo]:
+        """The recorded row of this step (ReplayDiverged past the last or at another time);
+        `sensors` (the raw sensors of a recording that asked for them) received and dropped."""
         i = self._i
         if i >= self._n or t_s != self._t[i]:
             raise self._diverged(i, t_s)
         self._i = i + 1
         return self._steps[i]
 
-    # the replay needs no raw sensor (the recording's controller had its own, replayed as steps)
-    sensor_streams: dict[str, int] = {}
 
     def solver_line(self) -> str:
         """What 'solves' this controller, for the log's header: the recording."""
@@ -262,10 +272,13 @@ def replay_daemon(csv: str, argv: list[str]) -> int:
         return 2
 
     def make_controller(cfg):
+        from trq_offboard.controller import sensor_streams_of
+
         if replay.controller is not None and replay.controller != cfg.name:
             raise RecordingError(f"{csv}: recorded with controller {replay.controller}, "
                                  f"replayed with {cfg.name} ({cfg.file}): the reference and "
                                  "the flight would differ")
+        replay.sensor_streams = sensor_streams_of(cfg)
         return replay
 
     try:
@@ -294,8 +307,9 @@ def same_flight(recorded: Path, replayed: Path) -> tuple[bool, str]:
 
 def replayed_steps(recorded: Path, replayed: Path) -> tuple[bool, str]:
     """Whether a replay's controller.csv is the recording's first rows in every column but
-    the loop's own measurements (LOOP_COLUMNS) and the last row's preparation time (an
-    interrupted flight may not have closed it)."""
+    the loop's own measurements (LOOP_COLUMNS), the last row's preparation time (an
+    interrupted flight may not have closed it) and, when the recording's controller ran its
+    own filter (its est_test_ratio filled), what it logs of it (FILTER_COLUMNS)."""
     from trq_lab import metrics
 
     _, a = metrics.read_csv(recorded)
@@ -303,8 +317,10 @@ def replayed_steps(recorded: Path, replayed: Path) -> tuple[bool, str]:
     n = len(b["t_s"])
     if n > len(a["t_s"]):
         return False, f"{n} steps replayed, {len(a['t_s'])} recorded"
+    ratio = a.get("est_test_ratio")
+    own_filter = ratio is not None and ratio.dtype != object and not np.all(_nan(ratio))
     for name in a:
-        if name in LOOP_COLUMNS:
+        if name in LOOP_COLUMNS or (own_filter and name in FILTER_COLUMNS):
             continue
         x, y = a[name][:n], b[name]
         if name == "cpu_prepare_ms":

@@ -253,3 +253,60 @@ def test_the_summary_puts_the_floor_against_acados_step():
     text = pf.table(s, "-")
     assert "needs acados' step to be at least 1.200 ms" in text
     assert "the floor / the calibration at the end (4.00 ms): 0.150" in text
+
+
+@pytest.mark.parametrize("controller", ["trq_nmpc_eso_fused", "trq_nmpc_eso"])
+def test_the_replay_asks_for_the_recorded_controllers_sensor_streams(
+        tmp_path, monkeypatch, controller):
+    # a recording of the fused filter asked the vehicle for raw sensors, which change what the
+    # vehicle sends and when the flight starts: the replay asks for the same
+    from trq_offboard.config import load_controller
+    from trq_offboard.controller import sensor_streams_of
+
+    _write(tmp_path / "controller.csv", _records(3), meta={**META, "controller": controller})
+    cfg = load_controller(daemon.resolve_controller(controller))
+    built = []
+    monkeypatch.setattr(daemon, "main", lambda argv, make_controller: built.append(
+        make_controller(cfg)) or 0)
+    assert pf.replay_daemon(str(tmp_path / "controller.csv"), []) == 0
+    replay = built[0]
+    assert replay.sensor_streams == sensor_streams_of(cfg)
+    assert bool(replay.sensor_streams) == (controller == "trq_nmpc_eso_fused")
+    assert "HIGHRES_IMU" in sensor_streams_of(cfg) or controller != "trq_nmpc_eso_fused"
+    # the loop hands such a controller the sensors received: taken and dropped
+    r = _records(3)[0]
+    replay.reset(0.0, r.state)
+    assert replay.step(r.t_s, r.state, None, None, object())[0] == r.cmd
+
+
+def _with_column(src, dst, name, values) -> None:
+    lines = src.read_text().splitlines()
+    head = next(i for i, ln in enumerate(lines) if not ln.startswith("#"))
+    j = lines[head].split(",").index(name)
+    for k, v in enumerate(values):
+        row = lines[head + 1 + k].split(",")
+        row[j] = v
+        lines[head + 1 + k] = ",".join(row)
+    dst.write_text("\n".join(lines) + "\n")
+
+
+@pytest.mark.parametrize("own_filter", [True, False])
+def test_a_recording_with_its_own_filter_is_checked_without_what_it_logs_of_it(
+        tmp_path, own_filter):
+    # the fused filter's recording logs the filter's position; its replay (no filter) logs the
+    # autopilot's: the check leaves those columns out only when the recording had a filter
+    recs = _records(3)
+    _write(tmp_path / "base.csv", recs)
+    ratio = ["0.5", "0.7", "0.2"] if own_filter else ["nan"] * 3
+    _with_column(tmp_path / "base.csv", tmp_path / "rec.csv", "est_test_ratio", ratio)
+    _with_column(tmp_path / "rec.csv", tmp_path / "moved.csv", "pos_n_m", ["1.5", "2.5", "3.5"])
+    _with_column(tmp_path / "moved.csv", tmp_path / "replayed.csv", "est_test_ratio",
+                 ["nan"] * 3)
+    ok, why = pf.replayed_steps(tmp_path / "rec.csv", tmp_path / "replayed.csv")
+    assert ok is own_filter, why
+    if not own_filter:
+        assert "pos_n_m differs at row 1" in why
+    # a command still counts with a filter
+    _with_column(tmp_path / "rec.csv", tmp_path / "cmd.csv", "cmd_tilt2_rad", ["0.25"] * 3)
+    ok, why = pf.replayed_steps(tmp_path / "rec.csv", tmp_path / "cmd.csv")
+    assert not ok and "cmd_tilt2_rad differs at row 1" in why
