@@ -129,7 +129,6 @@ def _interp_with(x: np.ndarray, w) -> np.ndarray:
     return x[i] * g + x[i1] * f
 
 
-
 def sensor_streams_of(cfg: ControllerConfig) -> dict[str, int]:
     """The raw sensor streams (MAVLink message name: Hz) a controller of this configuration
     needs from the vehicle: the fused filter's IMU and position source (the motion capture
@@ -141,6 +140,7 @@ def sensor_streams_of(cfg: ControllerConfig) -> dict[str, int]:
         return {"HIGHRES_IMU": f.imu_rate_hz, "GPS_RAW_INT": f.gnss_rate_hz,
                 "HOME_POSITION": HOME_RATE_HZ}
     return {"HIGHRES_IMU": f.imu_rate_hz, "ATT_POS_MOCAP": f.mocap_rate_hz}
+
 
 class Controller:
     """One controller file's controller (see the module docstring): its parts built once

@@ -223,7 +223,6 @@ class ReplayController:
         self._i = i + 1
         return self._steps[i]
 
-
     def solver_line(self) -> str:
         """What 'solves' this controller, for the log's header: the recording."""
         return f"replay of {self.source}"
