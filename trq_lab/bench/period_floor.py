@@ -263,6 +263,7 @@ def replay_daemon(csv: str, argv: list[str]) -> int:
     controller. 2 and a message naming the file on a recording that cannot be replayed, or on
     a controller file other than the recording's."""
     from trq_offboard import daemon
+    from trq_offboard.controller import sensor_streams_of
 
     try:
         replay = ReplayController.from_csv(csv)
@@ -271,8 +272,6 @@ def replay_daemon(csv: str, argv: list[str]) -> int:
         return 2
 
     def make_controller(cfg):
-        from trq_offboard.controller import sensor_streams_of
-
         if replay.controller is not None and replay.controller != cfg.name:
             raise RecordingError(f"{csv}: recorded with controller {replay.controller}, "
                                  f"replayed with {cfg.name} ({cfg.file}): the reference and "
