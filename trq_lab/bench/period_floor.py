@@ -49,6 +49,7 @@ from pathlib import Path
 
 import numpy as np
 
+from trq_offboard.log import COLUMNS as LOG_COLUMNS
 from trq_offboard.loop import FlightError
 from trq_offboard.records import (
     ActuatorCommand,
@@ -75,10 +76,8 @@ STEP_CPU_COLUMNS = [f"cpu_{p}_ms" for p in ("observer", "effectiveness", "predic
 LOOP_COLUMNS = ("cpu_wire_ms", "cpu_log_ms", "cpu_period_ms")
 # what a controller with its own filter (the fused filter) logs of it: the state's position and
 # velocity (the filter's, where the replay, without a filter, logs the autopilot's) and the
-# filter's health
-FILTER_COLUMNS = ("pos_n_m", "pos_e_m", "pos_d_m", "vel_n_m_s", "vel_e_m_s", "vel_d_m_s",
-                  "est_test_ratio", "est_pos_var_m2", "est_dead_reckoning", "est_rejected",
-                  "est_resets", "est_accel_rejected")
+# filter's health (est_*), as the controller's log names them
+FILTER_COLUMNS = tuple(c for c in LOG_COLUMNS if c.startswith(("pos_", "vel_", "est_")))
 _LOOP_PARTS = ("wire", "log", "period")
 
 
