@@ -157,6 +157,28 @@ class FlightController(Protocol):
     sensor_streams: dict[str, int]
 
 
+# the messages `OffboardFlight.on_message` reads, whatever the controller's streams (the raw
+# sensors' it reads when asked for: _SENSOR_READS): the link builds no other message, it only
+# checks and logs their frames (trq_wire.frames.Unread)
+_READS = ("ODOMETRY", "ACTUATOR_OUTPUT_STATUS", "SERVO_OUTPUT_RAW", "ATT_POS_MOCAP",
+          "EXTENDED_SYS_STATE", "HEARTBEAT", "COMMAND_ACK", "STATUSTEXT")
+_SENSOR_READS = ("HIGHRES_IMU", "GPS_RAW_INT", "HOME_POSITION")
+
+
+def _msg_id(name: str) -> int:
+    return getattr(mavlink, f"MAVLINK_MSG_ID_{name}")
+
+
+def read_ids(streams, output_status: bool = False) -> frozenset[int]:
+    """The ids of the messages on_message reads for a controller's sensor streams; once
+    ACTUATOR_OUTPUT_STATUS has been seen (`output_status`) not SERVO_OUTPUT_RAW, which it
+    then ignores."""
+    names = set(_READS) | {n for n in _SENSOR_READS if n in streams}
+    if output_status:
+        names.discard("SERVO_OUTPUT_RAW")
+    return frozenset(_msg_id(n) for n in names)
+
+
 def _streams(controller: FlightController) -> dict[str, int]:
     """The controller's sensor_streams (a copy)."""
     return dict(controller.sensor_streams)
@@ -220,6 +242,7 @@ class OffboardFlight:
         self._yaw_errors: list[float] = []
         self._solve_ms: list[float] = []
         link.on_message = self.on_message
+        link.wanted = read_ids(self.streams)
 
     # --- incoming --------------------------------------------------------------------------
     def on_message(self, msg) -> None:
@@ -250,7 +273,9 @@ class OffboardFlight:
             applied = wire.parse_actuator_outputs(msg, self.tilt_limit)
             if applied is not None:
                 self.applied = applied
-                self._have_output_status |= kind == "ACTUATOR_OUTPUT_STATUS"
+                if kind == "ACTUATOR_OUTPUT_STATUS" and not self._have_output_status:
+                    self._have_output_status = True
+                    self.link.wanted = read_ids(self.streams, output_status=True)
         elif kind == "HIGHRES_IMU" and "HIGHRES_IMU" in self.streams:
             acc = wire.parse_highres_accel(msg)
             if acc is not None:

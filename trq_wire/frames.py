@@ -14,6 +14,10 @@ message object, so a consumer cannot tell the two paths apart.
 - `decode_leading(data)`: the frames at the start of a datagram that `decode` vouches for, and
   the offset where it stopped; pymavlink parses the rest (from a frame boundary a fresh parser
   is where a parser of the whole datagram would be).
+- `wanted` (both): the message ids whose messages the receiver reads. A frame of any other
+  message of the dialect, MAVLink 2 and checked as `decode` checks one (length, incompat flags,
+  checksum with its CRC_EXTRA), comes out as an `Unread`: its bytes and header, its message
+  never built (a companion's link carries telemetry it does not read, which a log still keeps).
 - `Packer(message_class)`: packs a message's field values into the frame pymavlink's `pack`
   makes with the same encoder (seq, system, component, MAVLink 2 trailing-zero truncation of
   the payload, checksum, and the signature of trq_wire.signing when the encoder signs, with
@@ -40,7 +44,7 @@ try:                                     # pymavlink's own accelerator (a declar
 except ImportError:                      # pragma: no cover - without it, pymavlink's pure CRC
     _mcrf4xx = None
 
-__all__ = ["HOT", "ActuatorTarget", "Packer", "crc", "decode", "decode_leading"]
+__all__ = ["HOT", "ActuatorTarget", "Packer", "Unread", "crc", "decode", "decode_leading"]
 
 MAGIC_V2 = 0xFD
 HEADER = struct.Struct("<BBBBBBBHB")        # magic, len, incompat, compat, seq, sys, comp, id
@@ -104,26 +108,74 @@ class _Unpacker:
 
 
 _UNPACKERS = {cls.id: _Unpacker(cls) for cls in HOT}
+# every message of the dialect: (CRC_EXTRA, largest payload, name), for the frames of `Unread`
+_CHECKS = {i: (cls.crc_extra, cls.unpacker.size, cls.msgname)
+           for i, cls in mavlink.mavlink_map.items()}
 _new_header = mavlink.MAVLink_header
 _unpack_header = HEADER.unpack_from
 
 
-def _decode_at(data, i: int, n: int):
+class Unread:
+    """A whole, checked MAVLink 2 frame of a message its receiver does not read (`wanted`):
+    what a link's checks and its log ask of a message (system, component, id, type name, the
+    frame's bytes, signature included), its fields never unpacked."""
+    __slots__ = ("_msgbuf", "_id", "_system", "_component", "_type")
+
+    def __init__(self, msgbuf: bytearray, msg_id: int, system: int, component: int,
+                 name: str) -> None:
+        self._msgbuf, self._id, self._system, self._component, self._type = \
+            msgbuf, msg_id, system, component, name
+
+    def get_msgbuf(self) -> bytearray:
+        return self._msgbuf
+
+    def get_msgId(self) -> int:
+        return self._id
+
+    def get_srcSystem(self) -> int:
+        return self._system
+
+    def get_srcComponent(self) -> int:
+        return self._component
+
+    def get_type(self) -> str:
+        return self._type
+
+
+def _frame_at(data, i: int, n: int, mlen: int, flags: int, crc_extra: int):
+    """The bytes of the frame at data[i:] (its header read: payload length, incompat flags)
+    when it is whole and its checksum right with `crc_extra`, else None."""
+    body = HEADER_LEN + mlen                # the checksum's offset in the frame
+    end = body + CHECKSUM_LEN + (SIGNATURE_LEN if flags else 0)
+    if i + end > n:
+        return None
+    msgbuf = bytearray(data[i:i + end] if i or end != n else data)
+    if crc(msgbuf[1:body], crc_extra) != msgbuf[body] | msgbuf[body + 1] << 8:
+        return None
+    return msgbuf
+
+
+def _decode_at(data, i: int, n: int, wanted=None):
     """The frame at data[i:] and the offset after it, or (None, i)."""
     if n - i < HEADER_LEN + CHECKSUM_LEN or data[i] != MAGIC_V2:
         return None, i
     _, mlen, flags, compat, seq, system, component, id_low, id_high = _unpack_header(data, i)
-    u = _UNPACKERS.get(id_low | id_high << 16)
+    msg_id = id_low | id_high << 16
+    if wanted is not None and msg_id not in wanted:      # checked as the others, not unpacked
+        check = _CHECKS.get(msg_id)
+        if check is None or flags & ~SIGNED or mlen > check[1]:
+            return None, i
+        msgbuf = _frame_at(data, i, n, mlen, flags, check[0])
+        if msgbuf is None:
+            return None, i
+        return Unread(msgbuf, msg_id, system, component, check[2]), i + len(msgbuf)
+    u = _UNPACKERS.get(msg_id)
     if u is None or flags & ~SIGNED or mlen > u.size:
         return None, i
-    tail = CHECKSUM_LEN + (SIGNATURE_LEN if flags else 0)
-    body = HEADER_LEN + mlen                # the checksum's offset in the frame
-    if i + body + tail > n:
+    msgbuf = _frame_at(data, i, n, mlen, flags, u.crc_extra)
+    if msgbuf is None:
         return None, i
-    msgbuf = bytearray(data[i:i + body + tail] if i or body + tail != n else data)
-    checksum = msgbuf[body] | msgbuf[body + 1] << 8
-    if crc(msgbuf[1:body], u.crc_extra) != checksum:
-        return None, i
+    body = HEADER_LEN + mlen
     if mlen == u.size:
         values = u.struct.unpack_from(msgbuf, HEADER_LEN)
     else:                                   # MAVLink 2 dropped the payload's trailing zeros
@@ -134,26 +186,27 @@ def _decode_at(data, i: int, n: int):
         fields[name] = list(values[a:b])
     fields["_header"] = _new_header(u.cls.id, flags, compat, mlen, seq, system, component)
     fields["_msgbuf"] = msgbuf
-    fields["_payload"] = msgbuf[6:-tail]    # as pymavlink's decode sets it
-    fields["_crc"] = checksum
+    fields["_payload"] = msgbuf[6:body]     # as pymavlink's decode sets it
+    fields["_crc"] = msgbuf[body] | msgbuf[body + 1] << 8
     msg = object.__new__(u.cls)
     msg.__dict__ = fields
-    return msg, i + body + tail
+    return msg, i + len(msgbuf)
 
 
-def decode(frame: bytes):
-    """The message of one whole frame, or None if this path does not vouch for it."""
-    msg, end = _decode_at(frame, 0, len(frame))
+def decode(frame: bytes, wanted=None):
+    """The message of one whole frame (an `Unread` for an id outside `wanted`), or None if
+    this path does not vouch for it."""
+    msg, end = _decode_at(frame, 0, len(frame), wanted)
     return msg if end == len(frame) else None
 
 
-def decode_leading(data: bytes) -> tuple[list, int]:
-    """The messages of the frames at the start of `data` that `decode` vouches for, and the
-    offset of the first byte it did not take."""
+def decode_leading(data: bytes, wanted=None) -> tuple[list, int]:
+    """The messages of the frames at the start of `data` that `decode` vouches for (an
+    `Unread` for an id outside `wanted`), and the offset of the first byte it did not take."""
     out = []
     i, n = 0, len(data)
     while i < n:
-        msg, i2 = _decode_at(data, i, n)
+        msg, i2 = _decode_at(data, i, n, wanted)
         if msg is None:
             break
         out.append(msg)

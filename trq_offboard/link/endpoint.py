@@ -14,6 +14,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from trq_wire.mocap import MOCAP_SYSTEM_ID
 from trq_wire.connection import Connection
+from trq_wire.frames import Unread
 from trq_wire.signing import SignatureCheck, sign_outgoing
 
 log = logging.getLogger("trq_offboard.link")
@@ -43,6 +44,10 @@ class MavlinkEndpoint:
         if signing_key is not None:
             sign_outgoing(self._tx, signing_key)
         self.on_frame: Callable[[bytes], None] | None = None   # raw frames in and out (.tlog)
+        # the message ids on_message reads (None: all): another message's frame is checked,
+        # counted and handed to on_frame only, its message not built where the fast path
+        # takes it (trq_wire.frames.Unread)
+        self.wanted: frozenset[int] | None = None
 
     def _trusted(self, msg) -> bool:
         """A message of the vehicle's system or of the motion-capture system (trq_wire.mocap),
@@ -58,6 +63,9 @@ class MavlinkEndpoint:
         self.stats.messages += 1
         if self.on_frame:
             self.on_frame(bytes(msg.get_msgbuf()))
+        if type(msg) is Unread or (self.wanted is not None
+                                   and msg.get_msgId() not in self.wanted):
+            return                         # pymavlink's path builds every message it parses
         try:
             self.on_message(msg)
         except Exception:

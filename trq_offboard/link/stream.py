@@ -106,7 +106,7 @@ class MavlinkStream(MavlinkEndpoint):
         found, skipped = self._one.frames(data)
         self.stats.bad += skipped
         for frame in found:
-            msg = frames.decode(frame) if self.fast_path else None
+            msg = frames.decode(frame, self.wanted) if self.fast_path else None
             if msg is None:
                 try:
                     msg = self._rx.decode(bytearray(frame))

@@ -66,7 +66,7 @@ class MavlinkUdp(MavlinkEndpoint, asyncio.DatagramProtocol):
 
     def datagram_received(self, data: bytes, addr) -> None:
         self.stats.datagrams += 1
-        msgs, done = frames.decode_leading(data) if self.fast_path else ([], 0)
+        msgs, done = frames.decode_leading(data, self.wanted) if self.fast_path else ([], 0)
         if done < len(data):
             try:
                 msgs += parse_datagram(data[done:] if done else data)

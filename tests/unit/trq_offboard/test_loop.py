@@ -663,3 +663,31 @@ def test_a_spinning_response_is_announced_as_such():
         task.cancel()
 
     asyncio.run(scenario())
+
+
+def test_the_link_builds_every_message_the_loop_reads_and_no_other():
+    """The link is told the ids the loop reads (loop.read_ids): every message type named in
+    on_message is among them (with the raw sensors' streams asked for), HIGHRES_IMU only when
+    asked for, and SERVO_OUTPUT_RAW no more once ACTUATOR_OUTPUT_STATUS has come (the loop
+    ignores it from then on)."""
+    import inspect
+    import re
+
+    from trq_offboard.loop import read_ids
+
+    named = set(re.findall(r'"([A-Z_]+)"', inspect.getsource(OffboardFlight.on_message)))
+    named = {n for n in named if hasattr(mavlink, f"MAVLINK_MSG_ID_{n}")}
+    assert {"ODOMETRY", "HIGHRES_IMU", "STATUSTEXT"} <= named
+    every = read_ids({"HIGHRES_IMU": 125, "ATT_POS_MOCAP": 50, "GPS_RAW_INT": 10,
+                      "HOME_POSITION": 1})
+    for n in named:
+        assert getattr(mavlink, f"MAVLINK_MSG_ID_{n}") in every, n
+    flight, link, _ = make_flight()
+    assert link.wanted == read_ids({})
+    assert mavlink.MAVLINK_MSG_ID_HIGHRES_IMU not in link.wanted
+    assert mavlink.MAVLINK_MSG_ID_SERVO_OUTPUT_RAW in link.wanted
+    flight.on_message(from_vehicle(mavlink.MAVLink_actuator_output_status_message(
+        1, 8, [0.5] * 8 + [0.0] * 24)))
+    assert flight.applied is not None
+    assert mavlink.MAVLINK_MSG_ID_SERVO_OUTPUT_RAW not in link.wanted
+    assert mavlink.MAVLINK_MSG_ID_ODOMETRY in link.wanted

@@ -363,6 +363,65 @@ def test_stream_link_delivers_and_counts_as_pymavlink_alone(chunks, signed, cuts
         assert fast_got
 
 
+# the ids the receive paths see in these tests: what a link may be told it reads
+SEEN_IDS = sorted({cls.id for cls in frames.HOT} | {mavlink.MAVLINK_MSG_ID_COMMAND_ACK,
+                                                    mavlink.MAVLINK_MSG_ID_STATUSTEXT})
+
+
+def _logged(link) -> list:
+    got = []
+    link.on_frame = got.append
+    return got
+
+
+@FUZZ
+@given(parts, st.booleans(), st.booleans(), st.frozensets(st.sampled_from(SEEN_IDS)))
+def test_a_link_builds_only_the_messages_it_reads(datagrams, signed, whole, wanted):
+    """A link told the ids it reads (`wanted`): the messages of those ids delivered as without
+    it, every other frame counted and logged as before (on_frame: the same bytes in the same
+    order), its message never built nor handed to on_message."""
+    key = KEY if signed else None
+    fast, fast_got = _record(MavlinkUdp, "udpin:127.0.0.1:14540", key)
+    slow, slow_got = _record(MavlinkUdp, "udpin:127.0.0.1:14540", key)
+    fast.wanted = wanted
+    slow.fast_path = False
+    fast_log, slow_log = _logged(fast), _logged(slow)
+    sent = [b"".join(datagrams)] if whole else datagrams
+    if signed:
+        sent = sent + [signed_by_the_vehicle(OUTPUTS, now_10us())]
+    for d in sent:
+        fast.datagram_received(d, ("127.0.0.1", 14580))
+        slow.datagram_received(d, ("127.0.0.1", 14580))
+    assert vars(fast.stats) == vars(slow.stats)
+    assert fast_log == slow_log
+    read = [m for m in slow_got if m.get_msgId() in wanted]
+    assert len(fast_got) == len(read)
+    for a, b in zip(fast_got, read):
+        assert_same_message(a, b)
+
+
+def test_an_unread_frame_is_checked_and_kept_as_bytes():
+    """A frame outside `wanted` (a text-carrying message too, which the fast path never
+    unpacks): its bytes, system, component, id and name; a bad checksum or a cut refused."""
+    tx = mavlink.MAVLink(None, srcSystem=1, srcComponent=7)
+    text = bytes(mavlink.MAVLink_named_value_float_message(5, b"wind", 3.5).pack(tx))
+    odo = frame(ODOMETRY, bytes(range(1, 200)), system=1, component=1)
+    hb = bytes(mavlink.MAVLink_heartbeat_message(2, 0, 0, 0, 3, 3).pack(tx))
+    wanted = frozenset({mavlink.MAVLINK_MSG_ID_HEARTBEAT})
+    msgs, done = frames.decode_leading(text + odo + hb, wanted)
+    assert done == len(text) + len(odo) + len(hb)
+    unread = [m for m in msgs if isinstance(m, frames.Unread)]
+    assert [(m.get_type(), m.get_srcSystem(), m.get_srcComponent(), m.get_msgId())
+            for m in unread] == [("NAMED_VALUE_FLOAT", 1, 7, mavlink.MAVLINK_MSG_ID_NAMED_VALUE_FLOAT),
+                                 ("ODOMETRY", 1, 1, mavlink.MAVLINK_MSG_ID_ODOMETRY)]
+    assert [bytes(m.get_msgbuf()) for m in unread] == [text, odo]
+    assert msgs[2].get_type() == "HEARTBEAT" and not isinstance(msgs[2], frames.Unread)
+    bad = frame(ODOMETRY, bytes(range(1, 200)), crc_delta=1)
+    assert frames.decode(bad, wanted) is None
+    assert frames.decode(odo[:-1], wanted) is None
+    assert frames.decode_leading(hb + bad, wanted)[1] == len(hb)
+
+
 def test_the_wire_bench_measures_every_pair():
     from trq_lab.bench import wire as bench
 
