@@ -24,9 +24,12 @@ model and the cost are the project's, term for term:
                effectiveness times [idle, 100 %])
     solver     SQP_RTI, preparation and feedback called as two phases (rti_phase 1, 2); exact
                Hessian of the Lagrangian or Gauss-Newton; Levenberg-Marquardt term = the
-               solver's `regularization` (our solver's diagonal term); HPIPM on the 20 stages
-               un-condensed (PARTIAL_CONDENSING_HPIPM, qp_solver_cond_N = N: what our rti-gn
-               does), HPIPM's mode and options as our solver's (`rti.HPIPM_AUTO`), the QP's
+               solver's `regularization` (our solver's diagonal term); the exact Hessian's
+               blocks left as they are (acados' regularize_method NO_REGULARIZE), or, on
+               request (`regularize`, trq-bench-nmpc --anchor-regularize), regularised by one
+               of acados' methods (REGULARIZE_METHODS) with its reg_epsilon; HPIPM on the 20
+               stages un-condensed (PARTIAL_CONDENSING_HPIPM, qp_solver_cond_N = N: what our
+               rti-gn does), HPIPM's mode and options as our solver's (`rti.HPIPM_AUTO`), the QP's
                iteration cap, QP cold-started; code generated with acados' default flags
 
 Replay (`replay`): a flight of ours (trq-bench-nmpc's transient) is recorded per step (x0, the
@@ -57,13 +60,36 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["available", "build_ocp", "AcadosRti", "replay", "Recorder", "ANCHORED_MODES"]
+__all__ = ["available", "build_ocp", "AcadosRti", "replay", "Recorder", "ANCHORED_MODES",
+           "REGULARIZE_METHODS", "check_regularize"]
 
 # our benchmark modes with an acados counterpart: mode -> acados' hessian_approx
 ANCHORED_MODES = {"rti-gn": "gauss_newton", "rti-exact": "exact"}
 _HESSIAN = {"gauss_newton": "GAUSS_NEWTON", "exact": "EXACT"}
 _HPIPM_MODE = {"speed_abs": "SPEED_ABS", "speed": "SPEED", "balance": "BALANCE",
                "robust": "ROBUST"}
+# acados' regularize_method values (acados_template 0.5.1's AcadosOcpOptions): what is done to
+# each stage's Hessian block before the QP. NO_REGULARIZE is acados' default and the anchor's.
+REGULARIZE_METHODS = ("NO_REGULARIZE", "MIRROR", "PROJECT", "PROJECT_REDUC_HESS", "CONVEXIFY",
+                      "GERSHGORIN_LEVENBERG_MARQUARDT")
+# the methods that read reg_epsilon (acados' documentation of the option)
+_WITH_EPSILON = ("MIRROR", "PROJECT", "CONVEXIFY", "GERSHGORIN_LEVENBERG_MARQUARDT")
+
+
+def check_regularize(method: str, epsilon: float | None = None) -> tuple[str, float | None]:
+    """(method, epsilon) checked: a method of REGULARIZE_METHODS (upper case, as acados spells
+    it) and, if given, an epsilon > 0 for a method that reads one; ValueError otherwise."""
+    if method not in REGULARIZE_METHODS:
+        raise ValueError(f"regularize method {method!r}: one of "
+                         f"{', '.join(REGULARIZE_METHODS)}")
+    if epsilon is not None:
+        if method not in _WITH_EPSILON:
+            raise ValueError(f"reg_epsilon {epsilon!r}: {method} does not use one (only "
+                             f"{', '.join(_WITH_EPSILON)})")
+        if not (isinstance(epsilon, (int, float)) and math.isfinite(epsilon) and epsilon > 0):
+            raise ValueError(f"reg_epsilon {epsilon!r}: expected a finite number > 0")
+        epsilon = float(epsilon)
+    return method, epsilon
 
 
 def available() -> tuple[bool, str]:
@@ -184,8 +210,10 @@ def problem(cfg, model, u_trim) -> Problem:
                    cfg.solver.regularization)
 
 
-def build_ocp(cfg, model, u_trim, hessian: str = "exact", name: str | None = None):
-    """The acados_template AcadosOcp of our problem (no code generated yet)."""
+def build_ocp(cfg, model, u_trim, hessian: str = "exact", name: str | None = None,
+              regularize: str = "NO_REGULARIZE", reg_epsilon: float | None = None):
+    """The acados_template AcadosOcp of our problem (no code generated yet). `regularize`,
+    `reg_epsilon`: acados' regularize_method and its epsilon (None: acados' default)."""
     import casadi as ca
     from acados_template import AcadosModel, AcadosOcp
 
@@ -193,6 +221,7 @@ def build_ocp(cfg, model, u_trim, hessian: str = "exact", name: str | None = Non
 
     if hessian not in _HESSIAN:
         raise ValueError(f"hessian {hessian!r}: one of {', '.join(_HESSIAN)}")
+    regularize, reg_epsilon = check_regularize(regularize, reg_epsilon)
     pb = problem(cfg, model, u_trim)
     s, v, d = ca.SX.sym("s", pb.ns), ca.SX.sym("v", pb.nv), ca.SX.sym("d", 6)
     am = AcadosModel()
@@ -234,6 +263,9 @@ def build_ocp(cfg, model, u_trim, hessian: str = "exact", name: str | None = Non
     o.qp_solver_iter_max = int(cfg.solver.qp_max_iterations)
     o.qp_solver_warm_start = 0
     o.levenberg_marquardt = float(pb.regularization)
+    o.regularize_method = regularize
+    if reg_epsilon is not None:
+        o.reg_epsilon = reg_epsilon
     # acados scales the stage costs by the interval length by default ([h, ..., h, 1]): ours
     # are summed unscaled beside the terminal cost
     o.cost_scaling = np.ones(pb.n_steps + 1)
@@ -244,11 +276,13 @@ def build_ocp(cfg, model, u_trim, hessian: str = "exact", name: str | None = Non
 class AcadosRti:
     """acados' RTI of our problem, built once (code generated and compiled in `workdir`)."""
 
-    def __init__(self, cfg, model, u_trim, hessian: str, workdir: Path):
+    def __init__(self, cfg, model, u_trim, hessian: str, workdir: Path,
+                 regularize: str = "NO_REGULARIZE", reg_epsilon: float | None = None):
         from acados_template import AcadosOcpSolver
 
         self.cfg, self.hessian = cfg, hessian
-        self.ocp, self.pb = build_ocp(cfg, model, u_trim, hessian)
+        self.ocp, self.pb = build_ocp(cfg, model, u_trim, hessian, regularize=regularize,
+                                      reg_epsilon=reg_epsilon)
         workdir = Path(workdir)
         workdir.mkdir(parents=True, exist_ok=True)
         gen = getattr(self.ocp, "code_gen_options", self.ocp)   # acados >= 0.5.4: there
@@ -399,10 +433,12 @@ class Recorder:
 
 def replay(recording: Path, hessian: str, controller: str = "trq_nmpc_eso",
            init: str = "shift", workdir: Path | None = None,
-           split_s: float | None = None) -> dict:
+           split_s: float | None = None, regularize: str = "NO_REGULARIZE",
+           reg_epsilon: float | None = None) -> dict:
     """acados' RTI through a recorded flight of ours: per-step times and first commands against
     ours (see the module's docstring). `split_s`: the first commands also compared apart before
-    and after this time of the flight (step k at k control periods; the bench's fault)."""
+    and after this time of the flight (step k at k control periods; the bench's fault).
+    `regularize`, `reg_epsilon`: acados' Hessian regularisation (`build_ocp`)."""
     import trq_params
 
     from trq_offboard.config import load_controller
@@ -411,11 +447,13 @@ def replay(recording: Path, hessian: str, controller: str = "trq_nmpc_eso",
     ok, why = available()
     if not ok:
         raise RuntimeError(why)
-    rec = np.load(recording)
+    with np.load(recording) as f:       # read once (an npz reads an array at each access)
+        rec = {k: f[k] for k in f.files}
     cfg = load_controller(trq_params.resolve("controller", controller))
     model = PredictionModel(cfg.vehicle)
     with tempfile.TemporaryDirectory(prefix="trq-acados-") as tmp:
-        rti = AcadosRti(cfg, model, rec["u_trim"], hessian, Path(workdir or tmp))
+        rti = AcadosRti(cfg, model, rec["u_trim"], hessian, Path(workdir or tmp),
+                        regularize=regularize, reg_epsilon=reg_epsilon)
         pb, dt = rti.pb, cfg.control_dt_s
         K = rec["x0"].shape[0]
         rows = np.zeros((K, 8))    # prep wall, prep CPU, fb wall, fb CPU, acados prep, fb, qp it
@@ -433,10 +471,12 @@ def replay(recording: Path, hessian: str, controller: str = "trq_nmpc_eso",
             st_f, wf, cf = rti.feedback(s0)
             tf = rti.solver.get_stats("time_feedback")
             qp_it = np.atleast_1d(rti.solver.get_stats("qp_iter"))
-            failed = st_p not in (0, 5) or st_f != 0        # 5: ACADOS_READY (prepared)
+            # a step fails in its feedback (the QP); the preparation returns the status acados
+            # holds, the previous feedback's, so that a failure's next step would count again
+            failed = st_f != 0
             failures += int(failed)
             if failed:
-                key = f"prep {st_p}, feedback {st_f}"
+                key = f"feedback {st_f}"
                 statuses[key] = statuses.get(key, 0) + 1
             s, v = rti.solution()
             if not (np.all(np.isfinite(s)) and np.all(np.isfinite(v))):
@@ -469,12 +509,16 @@ def replay(recording: Path, hessian: str, controller: str = "trq_nmpc_eso",
                 f"du_throttle_pct_max{tag}": float(du[:, 4:8].max())})
     first_fail = next((k for k in range(K) if rows[k, 7] != 0), None)
     return dict(
-        name=f"acados-rti-{'exact' if hessian == 'exact' else 'gn'}", hessian=hessian,
+        name=anchor_name(hessian, regularize), hessian=hessian, regularize=regularize,
+        reg_epsilon=float(rti.ocp.solver_options.reg_epsilon),
         init=init, steps=int(K), failures=int(failures), build_s=build_s,
         prep_median_ms=med(rows[:, 0]), prep_p99_ms=p99(rows[:, 0]),
         feedback_median_ms=med(rows[:, 2]), feedback_p99_ms=p99(rows[:, 2]),
         feedback_max_ms=float(rows[:, 2].max() * ms),
         total_median_ms=med(total), total_p99_ms=p99(total),
+        # the same over the steps whose QP solved: the anchor's cost without its failures'
+        total_median_solved_ms=(med(total[rows[:, 7] == 0]) if np.any(rows[:, 7] == 0)
+                                else math.nan),
         total_cpu_median_ms=med(total_cpu), total_cpu_p99_ms=p99(total_cpu),
         internal_prep_median_ms=med(rows[:, 4]), internal_feedback_median_ms=med(rows[:, 5]),
         internal_total_median_ms=med(rows[:, 4] + rows[:, 5]),
@@ -484,6 +528,13 @@ def replay(recording: Path, hessian: str, controller: str = "trq_nmpc_eso",
         first_failure_s=(math.nan if first_fail is None else float(t_s[first_fail])),
         **_ours_solver_step(rec, med, p99),
         acados=_describe(Path(os.environ["ACADOS_SOURCE_DIR"])))
+
+
+def anchor_name(hessian: str, regularize: str = "NO_REGULARIZE") -> str:
+    """The anchor's name in the bench's tables: acados-rti-exact, acados-rti-gn, and the
+    regularisation's method after it when there is one (acados-rti-exact-mirror)."""
+    name = f"acados-rti-{'exact' if hessian == 'exact' else 'gn'}"
+    return name if regularize == "NO_REGULARIZE" else f"{name}-{regularize.lower()}"
 
 
 def _ours_solver_step(rec, med, p99) -> dict:
@@ -509,13 +560,22 @@ def main(argv=None) -> int:
     ap.add_argument("--init", choices=("shift", "ours"), default="shift")
     ap.add_argument("--split-s", type=float, default=None,
                     help="compare the first commands also before and after this time")
+    ap.add_argument("--regularize", choices=REGULARIZE_METHODS, default="NO_REGULARIZE",
+                    help="acados' regularize_method (default NO_REGULARIZE, acados' own)")
+    ap.add_argument("--reg-epsilon", type=float, default=None,
+                    help="acados' reg_epsilon for the methods that read one (default: acados')")
     args = ap.parse_args(argv)
+    try:
+        check_regularize(args.regularize, args.reg_epsilon)
+    except ValueError as exc:
+        ap.error(str(exc))
     ok, why = available()
     if not ok:
         print(why, file=sys.stderr)
         return 2
     print(json.dumps(replay(args.replay, args.hessian, args.controller, args.init,
-                            split_s=args.split_s)), flush=True)
+                            split_s=args.split_s, regularize=args.regularize,
+                            reg_epsilon=args.reg_epsilon)), flush=True)
     return 0
 
 

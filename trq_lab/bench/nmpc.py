@@ -40,7 +40,10 @@ to the fastest mode.
 --anchor acados (trq_lab/bench/acados_anchor.py): the flights of rti-gn and rti-exact are
 recorded (what the solver was handed per step) and acados' real-time iteration on the same OCP,
 Gauss-Newton and exact Hessian, replays each right after it in its own process; its preparation
-and feedback times are printed beside ours with the ratios ours / acados'. With --daemons the
+and feedback times are printed beside ours with the ratios ours / acados'. --anchor-regularize
+METHOD regularises acados' exact Hessian by one of its regularize_method values before each QP
+(the default, NO_REGULARIZE, leaves it as our solver does; what the methods do to the failures
+and to the step: docs/decisions/2026-12-06-acados-exact-regularisation.md). With --daemons the
 controller daemon's CPU per period from outside (trq_lab/bench/period.py) is set against acados'
 step too, and --against CONTROLLER flies a second controller file over the daemons in the same
 run, interleaved, for the ratio of the two (paired run by run).
@@ -63,6 +66,8 @@ from pathlib import Path
 
 import numpy as np
 import trq_params
+
+from trq_lab.bench.acados_anchor import REGULARIZE_METHODS, check_regularize
 
 MODES = {     # name: solver overrides of params/controller/trq_nmpc_eso.yaml (and in "controller"
               # overrides of the controller's own keys)
@@ -203,20 +208,35 @@ def run_mode(mode: str, seconds: float | None, controller: str = "trq_nmpc_eso",
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
-def run_anchor(recording: Path, hessian: str, controller: str, init: str = "shift") -> dict:
+def run_anchor(recording: Path, hessian: str, controller: str, init: str = "shift",
+               regularize: str = "NO_REGULARIZE", reg_epsilon: float | None = None) -> dict:
     """acados' RTI replaying a recorded flight, in its own subprocess (acados' libhpipm and
-    CasADi's share a soname: they cannot be loaded in one process)."""
+    CasADi's share a soname: they cannot be loaded in one process). `regularize`,
+    `reg_epsilon`: acados' Hessian regularisation (acados_anchor.build_ocp)."""
     from trq_lab.bench import acados_anchor
 
+    regularize, reg_epsilon = acados_anchor.check_regularize(regularize, reg_epsilon)
     with tempfile.TemporaryDirectory(prefix="trq-bench-acados-") as work:
         cmd = [sys.executable, "-m", "trq_lab.bench.acados_anchor", "--replay", str(recording),
                "--hessian", hessian, "--controller", controller, "--init", init,
-               "--split-s", str(FAULT_T_S)]
+               "--split-s", str(FAULT_T_S), "--regularize", regularize]
+        if reg_epsilon is not None:
+            cmd += ["--reg-epsilon", repr(reg_epsilon)]
         out = subprocess.run(cmd, env=acados_anchor.library_env(), cwd=work,
                              capture_output=True, text=True)
     if out.returncode != 0:
         raise RuntimeError(f"acados anchor ({hessian}) failed:\n{out.stderr[-2000:]}")
-    return json.loads(out.stdout.strip().splitlines()[-1])
+    return json.loads(_last_json_line(out.stdout))
+
+
+def _last_json_line(stdout: str) -> str:
+    """The child's JSON line: the last line that opens an object (acados' C library prints its
+    QP failures to the same stdout, and flushes what it holds at the process's exit, after the
+    JSON)."""
+    lines = [line for line in stdout.splitlines() if line.startswith("{")]
+    if not lines:
+        raise RuntimeError(f"no JSON line in the child's output:\n{stdout[-2000:]}")
+    return lines[-1]
 
 
 def anchor_table(results: list[dict], anchors: dict[str, dict],
@@ -429,6 +449,14 @@ def main(argv=None) -> int:
     ap.add_argument("--anchor-init", choices=("shift", "ours"), default="shift",
                     help="acados' warm start: its own previous solution shifted by one control "
                          "period (shift, default) or the guess our solver was handed (ours)")
+    ap.add_argument("--anchor-regularize", default="NO_REGULARIZE", metavar="METHOD",
+                    help="acados' regularize_method for the exact-Hessian replay (rti-exact's "
+                         "flight; the Gauss-Newton replay's Hessian is left as it is), one of "
+                         f"{', '.join(REGULARIZE_METHODS)} (default NO_REGULARIZE, acados' own: "
+                         "docs/decisions/2026-12-06-acados-exact-regularisation.md)")
+    ap.add_argument("--anchor-reg-epsilon", type=float, default=None, metavar="EPS",
+                    help="acados' reg_epsilon for --anchor-regularize's MIRROR, PROJECT, "
+                         "CONVEXIFY or GERSHGORIN_LEVENBERG_MARQUARDT (default: acados')")
     ap.add_argument("--child", default=None, help=argparse.SUPPRESS)
     ap.add_argument("--record", type=Path, default=None, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
@@ -439,6 +467,14 @@ def main(argv=None) -> int:
         ap.error("--against compares the controllers over both daemons: add --daemons")
     if args.against == args.controller:
         ap.error(f"--against {args.against}: the same file as --controller")
+    regularize = (args.anchor_regularize, args.anchor_reg_epsilon)
+    if regularize != ("NO_REGULARIZE", None):
+        try:
+            regularize = check_regularize(*regularize)
+        except ValueError as exc:
+            ap.error(f"--anchor-regularize {args.anchor_regularize}: {exc}")
+        if args.anchor != "acados":
+            ap.error("--anchor-regularize regularises acados' replay: add --anchor acados")
     seconds = args.seconds if args.seconds is not None else (16.0 if args.quick else None)
     if args.child:
         print(json.dumps(fly(args.child, seconds, args.controller, args.record, args.sensing)),
@@ -459,12 +495,18 @@ def main(argv=None) -> int:
         if not anchored:
             ap.error("--anchor acados replays the flights of "
                      f"{' and '.join(acados_anchor.ANCHORED_MODES)}: add one to --modes")
+        if regularize != ("NO_REGULARIZE", None) and "exact" not in anchored.values():
+            ap.error("--anchor-regularize regularises the exact Hessian's replay: add "
+                     "rti-exact to --modes")
     print(machine_line(), flush=True)
     print(f"controller: params/controller/{args.controller}.yaml"
           + (f", against params/controller/{args.against}.yaml over the daemons"
              if args.against else ""), flush=True)
     if anchored:
-        print(f"anchor: {why}; warm start {args.anchor_init}", flush=True)
+        reg = "" if regularize == ("NO_REGULARIZE", None) else (
+            f"; exact Hessian regularised by {regularize[0]}"
+            + (f", reg_epsilon {regularize[1]:g}" if regularize[1] is not None else ""))
+        print(f"anchor: {why}; warm start {args.anchor_init}{reg}", flush=True)
     if args.repeat < 1:
         ap.error(f"--repeat {args.repeat}: expected at least 1")
     runs: dict[str, list[dict]] = {m: [] for m in modes}
@@ -487,13 +529,18 @@ def main(argv=None) -> int:
                     rec = Path(rec_dir) / "flight.npz"
                     r = run_mode(m, seconds, args.controller, record=rec,
                                  sensing=args.sensing)
-                    a = run_anchor(rec, anchored[m], args.controller, args.anchor_init)
+                    a = run_anchor(rec, anchored[m], args.controller, args.anchor_init,
+                                   *(regularize if anchored[m] == "exact"
+                                     else ("NO_REGULARIZE", None)))
                 anchor_runs[m].append(a)
                 print(f"  {a['name']} on {m}'s flight{f' (run {k + 1})' if args.repeat > 1 else ''}"
                       f": {a['steps']} steps, failures {a['failures']}, prep/feedback p50 "
                       f"{a['prep_median_ms']:.3f}/{a['feedback_median_ms']:.3f} ms, "
                       f"prep+feedback p50/p99 {a['total_median_ms']:.3f}/"
-                      f"{a['total_p99_ms']:.3f} ms", flush=True)
+                      f"{a['total_p99_ms']:.3f} ms"
+                      + (f" (p50 over the solved steps {a['total_median_solved_ms']:.3f} ms)"
+                         if a['failures'] and 'total_median_solved_ms' in a else ""),
+                      flush=True)
             else:
                 r = run_mode(m, seconds, args.controller, sensing=args.sensing)
             runs[m].append(r)

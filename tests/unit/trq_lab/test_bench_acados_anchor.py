@@ -174,3 +174,126 @@ def test_the_acados_ocp_is_ours(setup):
     ocp_gn, _ = aa.build_ocp(cfg, model, u_trim, "gauss_newton")
     assert ocp_gn.solver_options.hessian_approx == "GAUSS_NEWTON"
     assert ocp_gn.solver_options.hpipm_mode == "SPEED_ABS"
+    assert ocp.solver_options.regularize_method == "NO_REGULARIZE"       # acados' default
+    ocp_r, _ = aa.build_ocp(cfg, model, u_trim, "exact", regularize="PROJECT", reg_epsilon=1e-5)
+    assert ocp_r.solver_options.regularize_method == "PROJECT"
+    assert ocp_r.solver_options.reg_epsilon == 1e-5
+    # every method of ours is one acados_template accepts
+    for method in aa.REGULARIZE_METHODS:
+        ocp_r.solver_options.regularize_method = method
+
+
+# --- the exact Hessian's regularisation (docs/decisions/2026-12-06-acados-exact-regularisation.md)
+
+def test_regularize_is_checked():
+    assert aa.check_regularize("NO_REGULARIZE") == ("NO_REGULARIZE", None)
+    assert aa.check_regularize("MIRROR", 1e-5) == ("MIRROR", 1e-5)
+    assert aa.check_regularize("PROJECT", 1) == ("PROJECT", 1.0)
+    with pytest.raises(ValueError, match="one of NO_REGULARIZE, MIRROR"):
+        aa.check_regularize("mirror")                      # acados spells them upper case
+    with pytest.raises(ValueError, match="NO_REGULARIZE does not use one"):
+        aa.check_regularize("NO_REGULARIZE", 1e-4)
+    with pytest.raises(ValueError, match="PROJECT_REDUC_HESS does not use one"):
+        aa.check_regularize("PROJECT_REDUC_HESS", 1e-4)
+    for bad in (0.0, -1e-4, float("nan"), float("inf")):
+        with pytest.raises(ValueError, match="finite number > 0"):
+            aa.check_regularize("MIRROR", bad)
+
+
+def test_anchor_names_say_the_regularisation():
+    assert aa.anchor_name("exact") == "acados-rti-exact"
+    assert aa.anchor_name("gauss_newton") == "acados-rti-gn"
+    assert aa.anchor_name("exact", "MIRROR") == "acados-rti-exact-mirror"
+
+
+def test_replay_cli_refuses_a_bad_epsilon_before_acados(monkeypatch, capsys):
+    monkeypatch.setitem(sys.modules, "acados_template", None)     # not needed to refuse
+    with pytest.raises(SystemExit) as exc:
+        aa.main(["--replay", "x.npz", "--regularize", "MIRROR", "--reg-epsilon", "-1"])
+    assert exc.value.code == 2 and "finite number > 0" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exc:
+        aa.main(["--replay", "x.npz", "--regularize", "SOMETHING"])
+    assert exc.value.code == 2 and "invalid choice" in capsys.readouterr().err
+
+
+def test_run_anchor_hands_the_regularisation_to_the_child(monkeypatch, tmp_path):
+    """The child's command line carries the method and epsilon; its JSON is found though
+    acados' C output follows it."""
+    calls = []
+
+    def fake_run(cmd, **kwargs):
+        calls.append(cmd)
+        return types.SimpleNamespace(
+            returncode=0, stderr="",
+            stdout='{"name": "acados-rti-exact-mirror"}\n\nSQP_RTI: QP solver returned error\n')
+
+    monkeypatch.setattr(bench.subprocess, "run", fake_run)
+    a = bench.run_anchor(tmp_path / "r.npz", "exact", "trq_nmpc_eso", "shift", "MIRROR", 1e-5)
+    assert a == {"name": "acados-rti-exact-mirror"}
+    cmd = calls[-1]
+    assert cmd[cmd.index("--regularize") + 1] == "MIRROR"
+    assert float(cmd[cmd.index("--reg-epsilon") + 1]) == 1e-5
+    bench.run_anchor(tmp_path / "r.npz", "gauss_newton", "trq_nmpc_eso")
+    assert calls[-1][calls[-1].index("--regularize") + 1] == "NO_REGULARIZE"
+    assert "--reg-epsilon" not in calls[-1]
+    with pytest.raises(ValueError, match="regularize method"):
+        bench.run_anchor(tmp_path / "r.npz", "exact", "trq_nmpc_eso", regularize="BOGUS")
+
+
+def _fake_bench(monkeypatch):
+    """trq-bench-nmpc's main with acados 'available' and no flight flown: run_anchor's
+    arguments kept, per hessian."""
+    anchors = {}
+    monkeypatch.setattr(aa, "available", lambda: (True, "acados (fake)"))
+    flown = dict(steps=1, crashed=False, build_mode="cached", compilations_cold=0,
+                 compilations_cached=0, sensing="truth", qp="-", median_ms=1.0, p99_ms=1.0,
+                 period_median_ms=1.0)
+    monkeypatch.setattr(bench, "run_mode", lambda mode, *a, **k: dict(flown, name=mode))
+
+    def run_anchor(rec, hessian, controller, init="shift", regularize="NO_REGULARIZE",
+                   reg_epsilon=None):
+        anchors[hessian] = (regularize, reg_epsilon)
+        return dict(name=aa.anchor_name(hessian, regularize), hessian=hessian, steps=1,
+                    failures=0, prep_median_ms=1.0, feedback_median_ms=1.0,
+                    total_median_ms=2.0, total_p99_ms=2.0)
+
+    monkeypatch.setattr(bench, "run_anchor", run_anchor)
+    for name in ("table", "anchor_table"):
+        monkeypatch.setattr(bench, name, lambda *a, **k: "")
+    monkeypatch.setattr(bench, "machine_line", lambda: "machine")
+    monkeypatch.setattr(bench, "calibration_ms", lambda repeats=5: 0.0)
+    return anchors
+
+
+def test_bench_regularises_the_exact_replay_only(monkeypatch, capsys):
+    anchors = _fake_bench(monkeypatch)
+    assert bench.main(["--quick", "--modes", "rti-gn,rti-exact", "--anchor", "acados",
+                       "--anchor-regularize", "MIRROR", "--anchor-reg-epsilon", "1e-5"]) == 0
+    assert anchors == {"gauss_newton": ("NO_REGULARIZE", None), "exact": ("MIRROR", 1e-5)}
+    assert "regularised by MIRROR, reg_epsilon 1e-05" in capsys.readouterr().out
+    anchors.clear()
+    assert bench.main(["--quick", "--modes", "rti-exact", "--anchor", "acados"]) == 0
+    assert anchors == {"exact": ("NO_REGULARIZE", None)}          # the default: acados' own
+
+
+@pytest.mark.parametrize("argv, said", [
+    (["--anchor-regularize", "mirror"], "one of NO_REGULARIZE"),
+    (["--anchor-reg-epsilon", "1e-4"], "NO_REGULARIZE does not use one"),
+    (["--anchor-regularize", "MIRROR", "--anchor-reg-epsilon", "0"], "finite number > 0"),
+])
+def test_bench_refuses_a_bad_regularisation(monkeypatch, capsys, argv, said):
+    _fake_bench(monkeypatch)
+    with pytest.raises(SystemExit) as exc:
+        bench.main(["--quick", "--modes", "rti-exact", "--anchor", "acados", *argv])
+    assert exc.value.code == 2 and said in capsys.readouterr().err
+
+
+def test_bench_regularisation_needs_the_exact_replay(monkeypatch, capsys):
+    _fake_bench(monkeypatch)
+    with pytest.raises(SystemExit) as exc:
+        bench.main(["--quick", "--modes", "rti-exact", "--anchor-regularize", "MIRROR"])
+    assert exc.value.code == 2 and "add --anchor acados" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exc:
+        bench.main(["--quick", "--modes", "rti-gn", "--anchor", "acados",
+                    "--anchor-regularize", "MIRROR"])
+    assert exc.value.code == 2 and "add rti-exact to --modes" in capsys.readouterr().err
