@@ -229,6 +229,13 @@ def run_anchor(recording: Path, hessian: str, controller: str, init: str = "shif
     return json.loads(_last_json_line(out.stdout))
 
 
+def _controller_file(name_or_path: str) -> str:
+    """How the header names a controller: params/controller/NAME.yaml for a built-in, the
+    path as given for a user's file."""
+    return (f"params/controller/{name_or_path}.yaml" if trq_params.is_name(name_or_path)
+            else name_or_path)
+
+
 def _last_json_line(stdout: str) -> str:
     """The child's JSON line: the last line that opens an object (acados' C library prints its
     QP failures to the same stdout, and flushes what it holds at the process's exit, after the
@@ -499,8 +506,8 @@ def main(argv=None) -> int:
             ap.error("--anchor-regularize regularises the exact Hessian's replay: add "
                      "rti-exact to --modes")
     print(machine_line(), flush=True)
-    print(f"controller: params/controller/{args.controller}.yaml"
-          + (f", against params/controller/{args.against}.yaml over the daemons"
+    print(f"controller: {_controller_file(args.controller)}"
+          + (f", against {_controller_file(args.against)} over the daemons"
              if args.against else ""), flush=True)
     if anchored:
         reg = "" if regularize == ("NO_REGULARIZE", None) else (

@@ -69,3 +69,13 @@ def test_against_is_refused_where_it_cannot_compare(argv, message, capsys):
     with pytest.raises(SystemExit):
         nmpc.main(argv)
     assert message in capsys.readouterr().err
+
+
+def test_the_header_names_a_controller_file_as_it_was_given():
+    """A built-in by its file under params/controller, a user's file by its path (not wrapped
+    into params/controller/<path>.yaml)."""
+    from trq_lab.bench.nmpc import _controller_file
+
+    assert _controller_file("trq_nmpc_eso") == "params/controller/trq_nmpc_eso.yaml"
+    assert _controller_file("/tmp/ctl.yaml") == "/tmp/ctl.yaml"
+    assert _controller_file("studies/fa_0.4.yaml") == "studies/fa_0.4.yaml"
