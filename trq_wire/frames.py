@@ -33,6 +33,7 @@ frame bytes, as for every other message).
 from __future__ import annotations
 
 import struct
+from collections import namedtuple
 from operator import itemgetter
 
 from pymavlink.dialects.v20 import common as mavlink
@@ -108,8 +109,9 @@ class _Unpacker:
 
 
 _UNPACKERS = {cls.id: _Unpacker(cls) for cls in HOT}
-# every message of the dialect: (CRC_EXTRA, largest payload, name), for the frames of `Unread`
-_CHECKS = {i: (cls.crc_extra, cls.unpacker.size, cls.msgname)
+# every message of the dialect: what checking its frame needs, for the frames of `Unread`
+_Check = namedtuple("_Check", "crc_extra size name")
+_CHECKS = {i: _Check(cls.crc_extra, cls.unpacker.size, cls.msgname)
            for i, cls in mavlink.mavlink_map.items()}
 _new_header = mavlink.MAVLink_header
 _unpack_header = HEADER.unpack_from
@@ -161,20 +163,15 @@ def _decode_at(data, i: int, n: int, wanted=None):
         return None, i
     _, mlen, flags, compat, seq, system, component, id_low, id_high = _unpack_header(data, i)
     msg_id = id_low | id_high << 16
-    if wanted is not None and msg_id not in wanted:      # checked as the others, not unpacked
-        check = _CHECKS.get(msg_id)
-        if check is None or flags & ~SIGNED or mlen > check[1]:
-            return None, i
-        msgbuf = _frame_at(data, i, n, mlen, flags, check[0])
-        if msgbuf is None:
-            return None, i
-        return Unread(msgbuf, msg_id, system, component, check[2]), i + len(msgbuf)
-    u = _UNPACKERS.get(msg_id)
+    unread = wanted is not None and msg_id not in wanted  # checked as the others, not unpacked
+    u = _CHECKS.get(msg_id) if unread else _UNPACKERS.get(msg_id)
     if u is None or flags & ~SIGNED or mlen > u.size:
         return None, i
     msgbuf = _frame_at(data, i, n, mlen, flags, u.crc_extra)
     if msgbuf is None:
         return None, i
+    if unread:
+        return Unread(msgbuf, msg_id, system, component, u.name), i + len(msgbuf)
     body = HEADER_LEN + mlen
     if mlen == u.size:
         values = u.struct.unpack_from(msgbuf, HEADER_LEN)

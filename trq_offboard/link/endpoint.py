@@ -14,7 +14,6 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from trq_wire.mocap import MOCAP_SYSTEM_ID
 from trq_wire.connection import Connection
-from trq_wire.frames import Unread
 from trq_wire.signing import SignatureCheck, sign_outgoing
 
 log = logging.getLogger("trq_offboard.link")
@@ -63,9 +62,8 @@ class MavlinkEndpoint:
         self.stats.messages += 1
         if self.on_frame:
             self.on_frame(bytes(msg.get_msgbuf()))
-        if type(msg) is Unread or (self.wanted is not None
-                                   and msg.get_msgId() not in self.wanted):
-            return                         # pymavlink's path builds every message it parses
+        if self.wanted is not None and msg.get_msgId() not in self.wanted:
+            return                         # an Unread, or a message pymavlink's path built
         try:
             self.on_message(msg)
         except Exception:
