@@ -69,6 +69,9 @@ import trq_params
 
 from trq_lab.bench.acados_anchor import REGULARIZE_METHODS, check_regularize
 
+# acados' exact Hessian as our solver has it (the anchor's default: --anchor-regularize unset)
+UNREGULARISED = ("NO_REGULARIZE", None)
+
 MODES = {     # name: solver overrides of params/controller/trq_nmpc_eso.yaml (and in "controller"
               # overrides of the controller's own keys)
     "rti-gn": dict(kind="rti", hessian="gauss_newton", max_iterations=1),
@@ -215,7 +218,7 @@ def run_anchor(recording: Path, hessian: str, controller: str, init: str = "shif
     `reg_epsilon`: acados' Hessian regularisation (acados_anchor.build_ocp)."""
     from trq_lab.bench import acados_anchor
 
-    regularize, reg_epsilon = acados_anchor.check_regularize(regularize, reg_epsilon)
+    regularize, reg_epsilon = check_regularize(regularize, reg_epsilon)
     with tempfile.TemporaryDirectory(prefix="trq-bench-acados-") as work:
         cmd = [sys.executable, "-m", "trq_lab.bench.acados_anchor", "--replay", str(recording),
                "--hessian", hessian, "--controller", controller, "--init", init,
@@ -475,7 +478,7 @@ def main(argv=None) -> int:
     if args.against == args.controller:
         ap.error(f"--against {args.against}: the same file as --controller")
     regularize = (args.anchor_regularize, args.anchor_reg_epsilon)
-    if regularize != ("NO_REGULARIZE", None):
+    if regularize != UNREGULARISED:
         try:
             regularize = check_regularize(*regularize)
         except ValueError as exc:
@@ -502,7 +505,7 @@ def main(argv=None) -> int:
         if not anchored:
             ap.error("--anchor acados replays the flights of "
                      f"{' and '.join(acados_anchor.ANCHORED_MODES)}: add one to --modes")
-        if regularize != ("NO_REGULARIZE", None) and "exact" not in anchored.values():
+        if regularize != UNREGULARISED and "exact" not in anchored.values():
             ap.error("--anchor-regularize regularises the exact Hessian's replay: add "
                      "rti-exact to --modes")
     print(machine_line(), flush=True)
@@ -510,7 +513,7 @@ def main(argv=None) -> int:
           + (f", against {_controller_file(args.against)} over the daemons"
              if args.against else ""), flush=True)
     if anchored:
-        reg = "" if regularize == ("NO_REGULARIZE", None) else (
+        reg = "" if regularize == UNREGULARISED else (
             f"; exact Hessian regularised by {regularize[0]}"
             + (f", reg_epsilon {regularize[1]:g}" if regularize[1] is not None else ""))
         print(f"anchor: {why}; warm start {args.anchor_init}{reg}", flush=True)
@@ -538,7 +541,7 @@ def main(argv=None) -> int:
                                  sensing=args.sensing)
                     a = run_anchor(rec, anchored[m], args.controller, args.anchor_init,
                                    *(regularize if anchored[m] == "exact"
-                                     else ("NO_REGULARIZE", None)))
+                                     else UNREGULARISED))
                 anchor_runs[m].append(a)
                 print(f"  {a['name']} on {m}'s flight{f' (run {k + 1})' if args.repeat > 1 else ''}"
                       f": {a['steps']} steps, failures {a['failures']}, prep/feedback p50 "
