@@ -12,6 +12,8 @@ cache) comes from trq_wire.
                     output (rates_lowpass_hz)
     fused           the fused filter (estimator: fused): position and velocity from the pose,
                     the raw IMU and the model with the observer's d
+    fused_core, fused_core.c  the fused filter's step in C around the same kernels (what
+                    flies where a C compiler is found; fused stays the reference)
     predictor       the delay predictor: the commands sent, the actuators' walk, the state when
                     the command acts, the observer's b0 under the commands in effect
     effectiveness   the motor effectiveness observer and its composition with the model

@@ -58,7 +58,7 @@ from trq_offboard.allocation import Allocator
 from trq_offboard.config import ControllerConfig, load_controller
 from trq_offboard.effectiveness import MotorEffectiveness, MotorEffectivenessObserver
 from trq_offboard.eso import ExtendedStateObserver
-from trq_offboard.fused import FusedFilter
+from trq_offboard.fused_core import fused_filter
 from trq_offboard.link.wire import HOME_GROUND_DOWN_M
 from trq_offboard.lost_motor import (LostMotorDetector, PairLossDetector, failed_config,
                                       motor_contributions, pair_code)
@@ -232,8 +232,8 @@ class Controller:
         # the fused filter (estimator kind fused): position and velocity from the position
         # source, the IMU and the model with the motors' share of the observer's d; started at
         # the first position sample (`_fuse`)
-        self.fused = (FusedFilter(cfg.fused, vm.gravity_m_s2,
-                                  codegen=cfg.solver.codegen == "auto")
+        self.fused = (fused_filter(cfg.fused, vm.gravity_m_s2,
+                                   codegen=cfg.solver.codegen == "auto")
                       if cfg.fused is not None else None)
         self._fused_on = False
         self._eso_d = np.zeros(6)                # the observer's d of the last step

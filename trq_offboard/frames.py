@@ -19,7 +19,7 @@ import math
 import casadi as ca
 import numpy as np
 
-__all__ = ["rotation_ned_frd", "quat_to_euler"]
+__all__ = ["rotation_ned_frd", "rotation_rows", "quat_to_euler"]
 
 _SYMBOLIC = (ca.SX, ca.MX, ca.DM)
 
@@ -30,16 +30,24 @@ def rotation_ned_frd(roll, pitch, yaw):
     symbolic = not (type(roll) is type(pitch) is type(yaw) is float
                     or type(roll) is type(pitch) is type(yaw) is np.float64) \
         and any(isinstance(a, _SYMBOLIC) for a in (roll, pitch, yaw))
-    cos, sin = (ca.cos, ca.sin) if symbolic else (math.cos, math.sin)
+    if symbolic:
+        return ca.vertcat(*(ca.horzcat(*r) for r in _rows(roll, pitch, yaw, ca.cos, ca.sin)))
+    return np.array(_rows(roll, pitch, yaw, math.cos, math.sin))
+
+
+def rotation_rows(roll: float, pitch: float, yaw: float) -> tuple:
+    """rotation_ned_frd's matrix of float angles as its three rows, tuples of floats (for
+    products written out in a fixed order: the fused filter's, which its C core repeats)."""
+    return _rows(roll, pitch, yaw, math.cos, math.sin)
+
+
+def _rows(roll, pitch, yaw, cos, sin) -> tuple:
     cr, sr = cos(roll), sin(roll)
     cp, sp = cos(pitch), sin(pitch)
     cy, sy = cos(yaw), sin(yaw)
-    rows = ((cp * cy, sr * sp * cy - cr * sy, cr * sp * cy + sr * sy),
+    return ((cp * cy, sr * sp * cy - cr * sy, cr * sp * cy + sr * sy),
             (cp * sy, sr * sp * sy + cr * cy, cr * sp * sy - sr * cy),
             (-sp, sr * cp, cr * cp))
-    if symbolic:
-        return ca.vertcat(*(ca.horzcat(*r) for r in rows))
-    return np.array(rows)
 
 
 def quat_to_euler(w: float, x: float, y: float, z: float) -> tuple[float, float, float]:

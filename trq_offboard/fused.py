@@ -88,7 +88,7 @@ import casadi as ca
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
-from trq_offboard.frames import rotation_ned_frd
+from trq_offboard.frames import rotation_rows
 from trq_offboard.records import EstimatorHealth as Health
 
 __all__ = ["FusedConfig", "FusedFilter", "Health", "HealthReport"]
@@ -139,6 +139,14 @@ class _CASADI:
         return ca.sparsify(ca.DM(a))
 
 
+# the filter's sizes (the C core's arrays, trq_offboard/fused_core.c, and this path's lists
+# alike): periods kept, candidates after a dropout (regain_poses), poses a period holds, IMU
+# messages and poses received between two steps (more than a period or a step holds are
+# counted dropped: `dropped`, `imu_dropped`). Choices: far above what a flight sends (one or
+# two of each a period).
+HISTORY_MAX, CANDIDATES_MAX, POSES_MAX, IMU_PENDING_MAX, POSES_PENDING_MAX = 256, 16, 16, 64, 64
+
+
 @dataclass(frozen=True, kw_only=True)
 class FusedConfig:
     """The fused filter's parameters (controller key `estimator`, kind fused), by name."""
@@ -168,11 +176,15 @@ class FusedConfig:
     regain_poses: int = 3                 # after a dropout: mutually consistent poses to reset
 
     def __post_init__(self) -> None:
-        for name, low in (("imu_rate_hz", 1), ("mocap_rate_hz", 1), ("history", 2),
-                          ("regain_poses", 3), ("accel_reject_max", 1)):
-            if int(getattr(self, name)) < low:
+        for name, low, high in (("imu_rate_hz", 1, None), ("mocap_rate_hz", 1, None),
+                                ("history", 2, HISTORY_MAX),
+                                ("regain_poses", 3, CANDIDATES_MAX),
+                                ("accel_reject_max", 1, None)):
+            value = int(getattr(self, name))
+            if value < low or (high is not None and value > high):
                 raise ValueError(f"FusedConfig.{name} = {getattr(self, name)}: expected an "
-                                 f"integer >= {low}")
+                                 f"integer >= {low}" + ("" if high is None else
+                                                        f" and <= {high}"))
         for name in ("accel_gate", "pose_gate"):
             if not getattr(self, name) > 0.0:
                 raise ValueError(f"FusedConfig.{name} = {getattr(self, name)}: expected > 0")
@@ -388,7 +400,7 @@ class _Period:
     and the posterior at its end."""
     t_us: int
     a_known: np.ndarray
-    rot: np.ndarray                      # R (NED from FRD) at t_us
+    rot: tuple                           # R (NED from FRD) at t_us, its rows (rotation_rows)
     x: np.ndarray
     P: np.ndarray
     w0: np.ndarray = None                # sum of dt (1 - s) f over its samples' pieces
@@ -461,7 +473,7 @@ class FusedFilter:
         std = cfg.mocap_std_m if pos_std_m is None else pos_std_m
         P = np.diag([std ** 2] * 3 + [0.1 ** 2] * 3 + [1.0] * 3
                     + [cfg.accel_bias_std ** 2] * 3)
-        self._periods = [_Period(int(t_us), np.zeros(3), rotation_ned_frd(*euler_rad), x, P)]
+        self._periods = [_Period(int(t_us), np.zeros(3), rotation_rows(*euler_rad), x, P)]
         self._imu.clear()
         self._poses.clear()
         self._candidates.clear()
@@ -492,6 +504,9 @@ class FusedFilter:
         placed at the next `step` in the periods that interval covers."""
         f = np.array(specific_force_frd_m_s2, float)
         if math.isfinite(f[0] + f[1] + f[2]):
+            if len(self._imu) >= IMU_PENDING_MAX:
+                self.imu_dropped += 1
+                return
             self._imu.append((int(t_us), f))
 
     def add_pose(self, t_us: int, pos_ned_m, std_ned_m=None) -> None:
@@ -500,7 +515,7 @@ class FusedFilter:
         if std_ned_m is None:          # the default noise: its variances formed once
             r = self._mocap_r
             if r is not None and math.isfinite(pos_ned_m[0] + pos_ned_m[1] + pos_ned_m[2]):
-                self._poses.append(_Pose(int(t_us), np.array(pos_ned_m, float), r))
+                self._keep_pose(_Pose(int(t_us), np.array(pos_ned_m, float), r))
             return
         p = np.array(pos_ned_m, float)
         std = np.array(std_ned_m, float)
@@ -508,7 +523,13 @@ class FusedFilter:
             r = std * std
             if self.cfg.autopilot_vel_std_m_s > 0.0:
                 r = 2.0 * r           # covariance intersection with the autopilot's velocity
-            self._poses.append(_Pose(int(t_us), p, r))
+            self._keep_pose(_Pose(int(t_us), p, r))
+
+    def _keep_pose(self, pose: _Pose) -> None:
+        if len(self._poses) >= POSES_PENDING_MAX:
+            self.dropped += 1
+        else:
+            self._poses.append(pose)
 
     def step(self, t_us: int, a_known_ned: np.ndarray, euler_rad=None,
              vel_ned_m_s=None) -> Health:
@@ -525,7 +546,7 @@ class FusedFilter:
             return self.health(t_us)
         # (the angles as Python floats: the same products as NumPy scalars', cheaper)
         rot = last.rot if euler_rad is None else \
-            rotation_ned_frd(*np.asarray(euler_rad, float).tolist())
+            rotation_rows(*np.asarray(euler_rad, float).tolist())
         period = _Period(t_us, np.asarray(a_known_ned, float).copy(), rot, last.x, last.P)
         std = self.cfg.autopilot_vel_std_m_s
         if std > 0.0 and vel_ned_m_s is not None:
@@ -594,7 +615,7 @@ class FusedFilter:
             k = len(periods) - 1
             while k > 0 and periods[k - 1].t_us > pose.t_us:
                 k -= 1
-            if k == 0 or periods[k - 1].t_us > pose.t_us:
+            if k == 0 or periods[k - 1].t_us > pose.t_us or len(periods[k].poses) >= POSES_MAX:
                 self.dropped += 1
                 continue
             kept = periods[k].poses
@@ -614,9 +635,13 @@ class FusedFilter:
         if p.covered_s <= 0.0:
             return None
         if p.acc is None:               # formed once, until a sample is added to the period
-            # (ndarray.dot: the figures of @, cheaper: 2026-12-05-fused-filter-period-cut.md)
-            z = (self._periods[k - 1].rot.dot(p.w0) + p.rot.dot(p.w1)) / p.covered_s \
-                + self._g_ned
+            # the products written out in a fixed order (NumPy's go through BLAS, whose order
+            # and fused multiply-adds depend on the CPU), as the C core repeats them
+            a, b = self._periods[k - 1].rot, p.rot
+            u, v = p.w0.tolist(), p.w1.tolist()
+            z = np.array([(r[0] * u[0] + r[1] * u[1] + r[2] * u[2])
+                          + (q[0] * v[0] + q[1] * v[1] + q[2] * v[2]) for r, q in zip(a, b)]) \
+                / p.covered_s + self._g_ned
             p.acc = z, self.cfg.accel_std_m_s2 ** 2 / (p.covered_s * self.cfg.imu_rate_hz)
         return p.acc
 

@@ -13,7 +13,8 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from trq_offboard.config import ConfigError, load_controller
 from trq_offboard.frames import rotation_ned_frd
-from trq_offboard.fused import FusedConfig, FusedFilter, HealthReport
+from trq_offboard.fused import FusedConfig, HealthReport
+from trq_offboard.fused_core import fused_filter
 from trq_params.loader import read_yaml
 
 from conftest import ROOT, feed_imu
@@ -47,7 +48,7 @@ def _fly(n_steps, *, seed=0, model_error=(0.3, -0.2, 0.1), bias_frd=(0.15, -0.1,
     with white noise of vel_noise_m_s). Returns (filter, rows of (t_us,
     error (12), P diagonal (12), health))."""
     rng = np.random.default_rng(seed)
-    f = FusedFilter(cfg, G)
+    f = fused_filter(cfg, G)
     p0, v0, _ = _truth(0.0)
     euler = (0.0, 0.0, 0.4)
     f.reset(0, p0, v0, euler_rad=euler)
@@ -89,8 +90,8 @@ def test_errors_stay_within_the_filters_own_variance():
 def test_the_pose_fused_at_its_time_of_validity_matches_one_on_time():
     """A pose one period old, fused through the history, gives the estimate a filter gets
     when the same pose arrives at its own time (re-propagation is exact)."""
-    a = FusedFilter(CFG, G)
-    b = FusedFilter(CFG, G)
+    a = fused_filter(CFG, G)
+    b = fused_filter(CFG, G)
     for f in (a, b):
         f.reset(0, [0.0, 0.0, -1.0], [0.5, 0.0, 0.0])
     acc = np.array([0.2, -0.1, 0.05])
@@ -139,7 +140,7 @@ def test_dead_reckoning_through_a_dropout_says_so_and_recovers():
 
 
 def test_a_pose_far_off_is_rejected_by_the_gate():
-    f = FusedFilter(CFG, G)
+    f = fused_filter(CFG, G)
     f.reset(0, [0.0, 0.0, -1.0], [0.0, 0.0, 0.0])
     for k in range(1, 20):
         f.add_pose(k * H_US - H_US, [0.0, 0.0, -1.0])

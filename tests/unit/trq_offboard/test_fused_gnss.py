@@ -14,7 +14,8 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from trq_offboard.config import ConfigError, load_controller
 from trq_offboard.controller import Controller
-from trq_offboard.fused import FusedConfig, FusedFilter, HealthReport
+from trq_offboard.fused import FusedConfig, HealthReport
+from trq_offboard.fused_core import fused_filter
 from trq_params.loader import read_yaml
 
 from conftest import ROOT, feed_imu
@@ -48,7 +49,7 @@ def _fly(n_steps, *, seed=0, delay=DELAY, outage=(), cfg=CFG, model_error=(0.05,
     truth's plus that error, handed to each step. Returns (filter, rows of (t_us, position
     error (3), health))."""
     rng = np.random.default_rng(seed)
-    f = FusedFilter(cfg, G)
+    f = fused_filter(cfg, G)
     p0, v0, _ = _truth(0.0)
     euler = (0.0, 0.0, 0.3)
     f.reset(0, p0, v0, 0.1, euler)
@@ -103,7 +104,7 @@ def test_delayed_fixes_taken_as_new_lag_the_estimate():
     def rms(rows):
         return np.sqrt(np.mean(np.array([r[1] for r in rows[200:]]) ** 2))
     _, good = _fly(800)
-    f = FusedFilter(CFG, G)          # the same fixes stamped with their arrival
+    f = fused_filter(CFG, G)          # the same fixes stamped with their arrival
     rng = np.random.default_rng(0)
     p0, v0, _ = _truth(0.0)
     f.reset(0, p0, v0, 0.1)

@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 
 from trq_offboard.frames import rotation_ned_frd
-from trq_offboard.fused import FusedConfig, FusedFilter
+from trq_offboard.fused import FusedConfig
+from trq_offboard.fused_core import fused_filter
 
 G = 9.81
 CFG = FusedConfig(mocap_std_m=0.0005, accel_std_m_s2=0.3, model_acc_density=0.05,
@@ -86,7 +87,7 @@ def _dead_reckon(cfg, periods, msgs, *, late_periods=0, codegen=False):
     """The filter started on the truth at 0 (its attitude the truth's), fed each message in
     the period after its stamp (or `late_periods` later), the truth's attitude at each
     period's end, no known input, no pose: its velocity error at each period's end."""
-    f = FusedFilter(cfg, G, codegen=codegen)
+    f = fused_filter(cfg, G, codegen=codegen)
     f.reset(0, _pos(0.0), _vel(0.0), euler_rad=_euler(0.0))
     errs, i = [], 0
     for k, t in enumerate(periods):
@@ -130,7 +131,7 @@ def test_no_message_is_lost_or_counted_twice():
     the time the messages cover adds up to the time elapsed to the last one."""
     periods, msgs = _schedule(3, 40)
     cfg = FusedConfig(**{**CFG.__dict__, "history": 100})      # every period kept, to sum
-    f = FusedFilter(cfg, G, codegen=False)
+    f = fused_filter(cfg, G, codegen=False)
     f.reset(0, _pos(0.0), _vel(0.0), euler_rad=_euler(0.0))
     i, repeats, several = 0, 0, 0
     for t in periods:
@@ -151,7 +152,7 @@ def test_a_late_fix_keeps_the_autopilots_velocity_of_every_period():
     late runs those periods again with their velocities: the estimate a filter gets with the
     same position on time."""
     cfg = FusedConfig(**{**CFG.__dict__, "autopilot_vel_std_m_s": 0.005})
-    a, b = FusedFilter(cfg, G, codegen=False), FusedFilter(cfg, G, codegen=False)
+    a, b = fused_filter(cfg, G, codegen=False), fused_filter(cfg, G, codegen=False)
     for f in (a, b):
         f.reset(0, [0.0, 0.0, -1.0], [0.5, 0.0, 0.0])
     rng = np.random.default_rng(4)
@@ -166,7 +167,7 @@ def test_a_late_fix_keeps_the_autopilots_velocity_of_every_period():
             f.step(k * 10_000, np.zeros(3), None, vels[k - 1])
     assert np.allclose(a.x, b.x, rtol=0, atol=1e-12) and np.allclose(a.P, b.P, atol=1e-15)
     # and the velocities did count: without them the estimate differs
-    c = FusedFilter(cfg, G, codegen=False)
+    c = fused_filter(cfg, G, codegen=False)
     c.reset(0, [0.0, 0.0, -1.0], [0.5, 0.0, 0.0])
     c.add_pose(10_000, pose)
     for k in range(1, 7):
@@ -181,7 +182,7 @@ def _level(f, t_us, force=(0.0, 0.0, -G)):
 
 @pytest.mark.parametrize("codegen", [False, True])
 def test_the_accelerometer_gate_rejects_an_impulse_but_learns_a_step(codegen):
-    f = FusedFilter(CFG, G, codegen=codegen)
+    f = fused_filter(CFG, G, codegen=codegen)
     f.reset(0, [0.0, 0.0, -1.0], [0.0, 0.0, 0.0])
     t = 0
     for _ in range(50):                           # at rest, level
@@ -211,7 +212,7 @@ def test_after_a_dropout_a_glitch_is_not_taken_and_consistent_poses_reset_the_po
     """Half a second without a pose while the filter's velocity is off: the first pose back
     is a glitch (10 cm off the others) and is held, never fused; the next three lie on one
     line: the position is reset to the last of them (counted) and the poses are fused again."""
-    f = FusedFilter(CFG, G, codegen=codegen)
+    f = fused_filter(CFG, G, codegen=codegen)
     f.reset(0, [0.0, 0.0, -1.0], [0.0, 0.0, 0.0])
     t = 0
     for _ in range(20):
