@@ -9,5 +9,6 @@
     cpu_budget     trq-bench-cpu-budget: real time with the controller held to a share of a core
     sim            trq-bench-sim: the plant and the vehicle daemon, both physics cores
     wire           trq-bench-wire: the wire's part of a period, pymavlink's path against trq_wire's
+    fused          trq-bench-fused: the fused filter's step, its C core against its Python path
     hover_check    trq-hover-check: an open-loop hover over UDP (the plant and the links end to end)
 """
