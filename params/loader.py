@@ -49,7 +49,7 @@ from trq_params import ConfigError
 
 __all__ = ["ConfigError", "Invalid", "load", "validate", "read", "read_yaml", "chain",
            "path_keys", "name_keys", "leaf_types", "PathStr", "NameOrPath", "Num", "Int", "Flag",
-           "Text", "Choice", "Vec",
+           "Text", "Choice", "Vec", "NumOrVec",
            "Items", "Range", "range_of", "expect", "merge", "dump", "BUILTIN"]
 
 BUILTIN = "builtin:"
@@ -456,6 +456,21 @@ def Vec(n: int, lo: float = -math.inf, hi: float = math.inf) -> Any:
             raise expect(want)
         return tuple(float(v) for v in value)
     return Annotated[tuple[float, ...], _checked(check), Range(lo, hi)]
+
+
+def NumOrVec(n: int, lo: float = -math.inf, hi: float = math.inf) -> Any:
+    """One finite number in [lo, hi] for every axis (a float), or a list of n of them (a tuple
+    of floats), as a per-axis figure that most files give once."""
+    want = f"a number, or a list of {n} numbers, in [{lo:g}, {hi:g}]"
+
+    def check(value: Any) -> float | tuple[float, ...]:
+        if _is_number(value) and lo <= value <= hi:
+            return float(value)
+        if isinstance(value, (list, tuple)) and len(value) == n and all(
+                _is_number(v) and lo <= v <= hi for v in value):
+            return tuple(float(v) for v in value)
+        raise expect(want)
+    return Annotated[float | tuple[float, ...], _checked(check), Range(lo, hi)]
 
 
 def Items(n: int) -> BeforeValidator:

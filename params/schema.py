@@ -27,8 +27,8 @@ from typing import Annotated, Any, Optional
 from pydantic import (BaseModel, BeforeValidator, ConfigDict, Field, ValidationInfo,
                       field_validator, model_validator)
 from trq_params import exists, is_name
-from trq_params.loader import (Choice, Flag, Int, Invalid, Items, NameOrPath, Num, PathStr, Range,
-                               Text, Vec, expect)
+from trq_params.loader import (Choice, Flag, Int, Invalid, Items, NameOrPath, Num, NumOrVec,
+                               PathStr, Range, Text, Vec, expect)
 
 __all__ = ["Strict", "VehicleFile", "SimFile", "ControllerFile", "EsoFile", "MotorEvent",
            "ServoEvent", "WindEvent", "SensorEvent", "ClearEvent", "ScenarioFile",
@@ -354,7 +354,8 @@ class SimFile(Strict):
 # --------------------------------------------------------------------------------------------
 
 class EsoGroup(Strict):
-    omega_o_rad_s: Num(0.1, 500.0)
+    # the group's bandwidth, or one per axis (x, y, z; roll, pitch, yaw)
+    omega_o_rad_s: NumOrVec(3, 0.1, 500.0)
     delta: Num(1e-6, 10.0)
 
 

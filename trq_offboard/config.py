@@ -136,7 +136,8 @@ def load_vehicle_model(path: Path | str) -> VehicleModel:
 @dataclass(frozen=True)
 class EsoChannelGains:
     """Gains of one group of channels (translational or rotational)."""
-    omega_o_rad_s: float                  # observer bandwidth
+    # observer bandwidth: the group's, or one per axis (x, y, z; roll, pitch, yaw)
+    omega_o_rad_s: float | tuple[float, float, float]
     delta: float                          # fal linear band (m or rad; m/s or rad/s on rates)
     # what the channels measure: the paper's third-order observer on the output (position,
     # angles), or one order lower on its measured rate (velocity, body rates)
@@ -310,7 +311,8 @@ def controller_config(c: schema.ControllerFile, file: str) -> ControllerConfig:
         rate = c.control_rate_hz
         w_max = eso.substeps * rate
         for group, gains in (("translational", eso.translational), ("rotational", eso.rotational)):
-            if gains.omega_o_rad_s > w_max:
+            w = gains.omega_o_rad_s
+            if (max(w) if isinstance(w, tuple) else w) > w_max:
                 raise ConfigError(
                     f"{eso.file}: key '{group}.omega_o_rad_s': got {gains.omega_o_rad_s!r}, "
                     f"expected at most substeps x control_rate_hz = {eso.substeps} x {rate} = "
@@ -378,6 +380,12 @@ def check_rates_lowpass(cutoff_hz: float, eso: EsoConfig | None, control_rate_hz
     (w h <= 1, as the observer's own). ConfigError naming `where`, the key and the bound."""
     if eso is None or cutoff_hz <= 0.0:
         return
+    if eso.rotational.output == "rates" and not isinstance(eso.rotational.omega_o_rad_s, float):
+        raise ConfigError(
+            f"{eso.file}: key 'rotational.omega_o_rad_s': got "
+            f"{list(eso.rotational.omega_o_rad_s)!r}, expected one number: the body-rate "
+            f"observer of rates_lowpass_hz ({cutoff_hz:g} Hz, {where}) takes one bandwidth for "
+            "the three rates")
     hz_max = eso.substeps * control_rate_hz / (2.0 * math.pi)
     if cutoff_hz > hz_max:
         raise ConfigError(

@@ -79,7 +79,8 @@ class ExtendedStateObserver:
         self.dt = control_dt_s
         self.h = control_dt_s / cfg.substeps
         groups = (cfg.translational, cfg.rotational)
-        w = np.repeat([g.omega_o_rad_s for g in groups], 3)
+        w = np.concatenate([np.broadcast_to(np.asarray(g.omega_o_rad_s, float), 3)
+                            for g in groups])
         self.delta = np.repeat([g.delta for g in groups], 3)
         # channels one order lower, on the measured rate (velocity, body rates)
         velocity, rates = cfg.translational.output == "velocity", cfg.rotational.output == "rates"

@@ -121,3 +121,32 @@ def test_solver_qp_keys(tmp_path):
     bad = dict(src, tilt_rate_limit="horizon")          # removed (2026-12-05): unknown
     with pytest.raises(ConfigError, match=r"tilt_rate_limit"):
         load_controller(_write(tmp_path, "c6.yaml", bad))
+
+
+def test_an_observer_bandwidth_per_axis_is_read_and_checked(tmp_path):
+    """omega_o_rad_s is one number or three (x, y, z; roll, pitch, yaw): three are kept as
+    such, checked against the substeps' bound by their largest, refused in another length by
+    name, and refused with the body-rate observer of rates_lowpass_hz (one bandwidth)."""
+    src = read_yaml(PARAMS / "controller/nmpc.yaml")
+    src["vehicle"] = str(PARAMS / "vehicle/trq.yaml")
+    eso = read_yaml(PARAMS / "controller/eso_paper.yaml")
+    eso["rotational"]["omega_o_rad_s"] = [70.0, 70.0, 85.0]
+    src["observer"] = {"kind": "nonlinear", "file": str(_write(tmp_path, "e.yaml", eso))}
+    assert load_controller(_write(tmp_path, "c.yaml", src)).eso.rotational.omega_o_rad_s \
+        == (70.0, 70.0, 85.0)
+    eso["rotational"]["omega_o_rad_s"] = [70.0, 85.0]
+    src["observer"]["file"] = str(_write(tmp_path, "e2.yaml", eso))
+    with pytest.raises(ConfigError, match=r"e2\.yaml: key 'rotational\.omega_o_rad_s'.*a number, "
+                                          r"or a list of 3 numbers"):
+        load_controller(_write(tmp_path, "c2.yaml", src))
+    eso["rotational"]["omega_o_rad_s"] = [70.0, 70.0, 150.0]   # past substeps x rate, 100
+    src["observer"]["file"] = str(_write(tmp_path, "e3.yaml", dict(eso, substeps=1)))
+    with pytest.raises(ConfigError, match=r"e3\.yaml: key 'rotational\.omega_o_rad_s'.*at most"):
+        load_controller(_write(tmp_path, "c3.yaml", src))
+    rates = read_yaml(PARAMS / "controller/eso.yaml")
+    rates["rotational"]["omega_o_rad_s"] = [100.0, 100.0, 120.0]
+    src["observer"]["file"] = str(_write(tmp_path, "e4.yaml", rates))
+    src["rates_lowpass_hz"] = 40.0
+    with pytest.raises(ConfigError, match=r"e4\.yaml: key 'rotational\.omega_o_rad_s'.*one "
+                                          r"number: the body-rate observer"):
+        load_controller(_write(tmp_path, "c4.yaml", src))
