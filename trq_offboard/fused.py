@@ -352,6 +352,18 @@ def _kernel_two(cfg: FusedConfig) -> ca.Function:
                        [x1, P1, nis1, take1, x2, P2, ratio2, nis2, take2, xp2, Pp2])
 
 
+def start_state(cfg: FusedConfig, pos_ned_m, vel_ned_m_s, pos_std_m: float | None = None
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """`FusedFilter.reset`'s x and P: the position and velocity given, a_r = 0 and b = 0; the
+    pose's variance on position (or pos_std_m's), generous ones on velocity and a_r,
+    accel_bias_std on b."""
+    x = np.concatenate([np.asarray(pos_ned_m, float), np.asarray(vel_ned_m_s, float),
+                        np.zeros(6)])
+    std = cfg.mocap_std_m if pos_std_m is None else pos_std_m
+    P = np.diag([std ** 2] * 3 + [0.1 ** 2] * 3 + [1.0] * 3 + [cfg.accel_bias_std ** 2] * 3)
+    return x, P
+
+
 class _Kernel:
     """A compiled kernel evaluated in place (casadi.Function.buffer, as
     model.dynamics.NumpyFunction, which this module cannot import: config imports it): the
@@ -467,12 +479,7 @@ class FusedFilter:
         """Start from a position and velocity (the autopilot's) and the attitude at t_us,
         a_r = 0 and b = 0, with the pose's variance on position (or pos_std_m's), generous
         ones on velocity and a_r, accel_bias_std on b."""
-        cfg = self.cfg
-        x = np.concatenate([np.asarray(pos_ned_m, float), np.asarray(vel_ned_m_s, float),
-                            np.zeros(6)])
-        std = cfg.mocap_std_m if pos_std_m is None else pos_std_m
-        P = np.diag([std ** 2] * 3 + [0.1 ** 2] * 3 + [1.0] * 3
-                    + [cfg.accel_bias_std ** 2] * 3)
+        x, P = start_state(self.cfg, pos_ned_m, vel_ned_m_s, pos_std_m)
         self._periods = [_Period(int(t_us), np.zeros(3), rotation_rows(*euler_rad), x, P)]
         self._imu.clear()
         self._poses.clear()

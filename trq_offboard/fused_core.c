@@ -621,6 +621,16 @@ static void run_period(core_t *c, int k, int newest)
     memcpy(p->P, P, sizeof(P));
 }
 
+/* a whole period p from t_prev as one stretch (_run_two's): to its pose q if any, on to its
+   end, there its accelerometer (if has_acc) and its velocity */
+static void period_stretch(core_t *c, stretch_t *s, int64_t t_prev, const period_t *p,
+                           const pose_t *q, int has_acc, double gate)
+{
+    int64_t t = q == NULL ? p->t_us : q->t_us;
+    set_stretch(c, s, t - t_prev, p->a_known, q, p->t_us - t, has_acc ? p : NULL, gate,
+                p->has_vel ? p : NULL);
+}
+
 /* FusedFilter._run_two: 1 done, 0 nothing done (the periods hold more) */
 static int run_two(core_t *c, int k)
 {
@@ -652,18 +662,8 @@ static int run_two(core_t *c, int k)
     gate2_not = (k - lo == m && !any) ? INFINITY : c->accel_gate;
     c->k2.arg[0] = p0->x;
     c->k2.arg[1] = p0->P;
-    if (q1 == NULL)
-        set_stretch(c, &c->s1, p1->t_us - p0->t_us, p1->a_known, NULL, 0,
-                    acc1 ? p1 : NULL, gate1, p1->has_vel ? p1 : NULL);
-    else
-        set_stretch(c, &c->s1, q1->t_us - p0->t_us, p1->a_known, q1, p1->t_us - q1->t_us,
-                    acc1 ? p1 : NULL, gate1, p1->has_vel ? p1 : NULL);
-    if (q2 == NULL)
-        set_stretch(c, &c->s2, p2->t_us - p1->t_us, p2->a_known, NULL, 0,
-                    acc2 ? p2 : NULL, gate2_not, p2->has_vel ? p2 : NULL);
-    else
-        set_stretch(c, &c->s2, q2->t_us - p1->t_us, p2->a_known, q2, p2->t_us - q2->t_us,
-                    acc2 ? p2 : NULL, gate2_not, p2->has_vel ? p2 : NULL);
+    period_stretch(c, &c->s1, p0->t_us, p1, q1, acc1, gate1);
+    period_stretch(c, &c->s2, p1->t_us, p2, q2, acc2, gate2_not);
     c->gate_taken = c->accel_gate;
     TRQ_K2(c->k2.arg, c->k2.res, c->k2.iw, c->k2.w, 0);
     memcpy(p1->x, c->r2_x1, sizeof(p1->x));

@@ -39,7 +39,7 @@ import numpy as np
 
 from trq_offboard import fused
 from trq_offboard.fused import (CANDIDATES_MAX, HISTORY_MAX, IMU_MAX_SPAN_INTERVALS, N_STATES,
-                                FusedConfig, FusedFilter, Health)
+                                FusedConfig, FusedFilter, Health, start_state)
 
 __all__ = ["FusedCore", "fused_filter"]
 
@@ -138,12 +138,7 @@ class FusedCore:
     def reset(self, t_us: int, pos_ned_m, vel_ned_m_s, pos_std_m: float | None = None,
               euler_rad=(0.0, 0.0, 0.0)) -> None:
         """FusedFilter.reset."""
-        cfg = self.cfg
-        x = np.concatenate([np.asarray(pos_ned_m, float), np.asarray(vel_ned_m_s, float),
-                            np.zeros(6)])
-        std = cfg.mocap_std_m if pos_std_m is None else pos_std_m
-        P = np.diag([std ** 2] * 3 + [0.1 ** 2] * 3 + [1.0] * 3
-                    + [cfg.accel_bias_std ** 2] * 3)
+        x, P = start_state(self.cfg, pos_ned_m, vel_ned_m_s, pos_std_m)
         e = np.array([float(v) for v in euler_rad])
         P = np.asfortranarray(P)          # (held: the call reads its memory)
         self._lib.trq_fused_reset(self._core, int(t_us), x.ctypes.data, P.ctypes.data,
