@@ -215,25 +215,12 @@ class FusedCore:
     def test_ratio(self) -> float:
         return self._stat(12)
 
-    @property
-    def rejected(self) -> int:
-        return int(self._stat(15))
-
-    @property
-    def resets(self) -> int:
-        return int(self._stat(16))
-
-    @property
-    def accel_rejected(self) -> int:
-        return int(self._stat(17))
-
-    @property
-    def dropped(self) -> int:
-        return int(self._stat(18))
-
-    @property
-    def imu_dropped(self) -> int:
-        return int(self._stat(19))
+    # FusedFilter's counters, read from trq_fused_health's figures by index
+    rejected = property(lambda self: int(self._stat(15)))
+    resets = property(lambda self: int(self._stat(16)))
+    accel_rejected = property(lambda self: int(self._stat(17)))
+    dropped = property(lambda self: int(self._stat(18)))
+    imu_dropped = property(lambda self: int(self._stat(19)))
 
     @property
     def last_pose_us(self) -> int | None:
