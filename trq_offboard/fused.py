@@ -352,6 +352,18 @@ def _kernel_two(cfg: FusedConfig) -> ca.Function:
                        [x1, P1, nis1, take1, x2, P2, ratio2, nis2, take2, xp2, Pp2])
 
 
+def pose_variances(cfg: FusedConfig, std_ned_m=None) -> tuple[float, float, float] | None:
+    """The variances per axis the filter gives a pose of 1-sigma errors std_ned_m (None:
+    mocap_std_m on each), doubled with the autopilot's velocity as a measurement (covariance
+    intersection: the two are not independent); None when the errors are not finite and > 0
+    (the pose is dropped)."""
+    s = (cfg.mocap_std_m,) * 3 if std_ned_m is None else tuple(float(v) for v in std_ned_m)
+    if not (math.isfinite(s[0] + s[1] + s[2]) and min(s) > 0.0):
+        return None
+    k = 2.0 if cfg.autopilot_vel_std_m_s > 0.0 else 1.0
+    return k * (s[0] * s[0]), k * (s[1] * s[1]), k * (s[2] * s[2])
+
+
 def start_state(cfg: FusedConfig, pos_ned_m, vel_ned_m_s, pos_std_m: float | None = None
                 ) -> tuple[np.ndarray, np.ndarray]:
     """`FusedFilter.reset`'s x and P: the position and velocity given, a_r = 0 and b = 0; the
@@ -446,12 +458,10 @@ class FusedFilter:
         self._poses: list[_Pose] = []
         self._imu_last_us: int | None = None
         self._imu_nominal_us = round(1e6 / cfg.imu_rate_hz)
-        self._mocap_std = np.full(3, cfg.mocap_std_m)
         # the variances a pose of the default noise carries, formed once (None: the noise not
         # finite and > 0, every such pose dropped, as `add_pose` drops one)
-        r = self._mocap_std * self._mocap_std
-        self._mocap_r = ((2.0 * r if cfg.autopilot_vel_std_m_s > 0.0 else r)
-                         if math.isfinite(cfg.mocap_std_m) and cfg.mocap_std_m > 0.0 else None)
+        r = pose_variances(cfg)
+        self._mocap_r = None if r is None else np.array(r)
         self._dropout_us = round(cfg.dropout_s * 1e6)
         self._candidates: list[tuple[int, np.ndarray, np.ndarray, np.ndarray]] = []
         self.last_pose_us: int | None = None
@@ -525,12 +535,9 @@ class FusedFilter:
                 self._keep_pose(_Pose(int(t_us), np.array(pos_ned_m, float), r))
             return
         p = np.array(pos_ned_m, float)
-        std = np.array(std_ned_m, float)
-        if math.isfinite(p[0] + p[1] + p[2] + std[0] + std[1] + std[2]) and std.min() > 0.0:
-            r = std * std
-            if self.cfg.autopilot_vel_std_m_s > 0.0:
-                r = 2.0 * r           # covariance intersection with the autopilot's velocity
-            self._keep_pose(_Pose(int(t_us), p, r))
+        r = pose_variances(self.cfg, std_ned_m)
+        if r is not None and math.isfinite(p[0] + p[1] + p[2]):
+            self._keep_pose(_Pose(int(t_us), p, np.array(r)))
 
     def _keep_pose(self, pose: _Pose) -> None:
         if len(self._poses) >= POSES_PENDING_MAX:

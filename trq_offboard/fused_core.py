@@ -39,7 +39,8 @@ import numpy as np
 
 from trq_offboard import fused
 from trq_offboard.fused import (CANDIDATES_MAX, HISTORY_MAX, IMU_MAX_SPAN_INTERVALS, N_STATES,
-                                FusedConfig, FusedFilter, Health, start_state)
+                                FusedConfig, FusedFilter, Health, pose_variances,
+                                start_state)
 
 __all__ = ["FusedCore", "fused_filter"]
 
@@ -129,10 +130,7 @@ class FusedCore:
         self._o = self._out.ctypes.data
         self._stats = np.zeros(_OUT)
         self._period = np.zeros(3 + _NX + _NP)
-        r = cfg.mocap_std_m * cfg.mocap_std_m
-        # the variances a pose of the default noise carries (FusedFilter's _mocap_r)
-        self._mocap_r = ((2.0 * r if cfg.autopilot_vel_std_m_s > 0.0 else r)
-                         if math.isfinite(cfg.mocap_std_m) and cfg.mocap_std_m > 0.0 else None)
+        self._mocap_r = pose_variances(cfg)      # a pose of the default noise's, formed once
         self._started = False
 
     def reset(self, t_us: int, pos_ned_m, vel_ned_m_s, pos_std_m: float | None = None,
@@ -155,17 +153,9 @@ class FusedCore:
     def add_pose(self, t_us: int, pos_ned_m, std_ned_m=None) -> None:
         """FusedFilter.add_pose."""
         p0, p1, p2 = (float(v) for v in pos_ned_m)
-        if std_ned_m is None:
-            r = self._mocap_r
-            if r is not None and math.isfinite(p0 + p1 + p2):
-                self._lib.trq_fused_add_pose(self._core, int(t_us), p0, p1, p2, r, r, r)
-            return
-        s0, s1, s2 = (float(v) for v in std_ned_m)
-        if math.isfinite(p0 + p1 + p2 + s0 + s1 + s2) and min(s0, s1, s2) > 0.0:
-            r0, r1, r2 = s0 * s0, s1 * s1, s2 * s2
-            if self.cfg.autopilot_vel_std_m_s > 0.0:
-                r0, r1, r2 = 2.0 * r0, 2.0 * r1, 2.0 * r2
-            self._lib.trq_fused_add_pose(self._core, int(t_us), p0, p1, p2, r0, r1, r2)
+        r = self._mocap_r if std_ned_m is None else pose_variances(self.cfg, std_ned_m)
+        if r is not None and math.isfinite(p0 + p1 + p2):
+            self._lib.trq_fused_add_pose(self._core, int(t_us), p0, p1, p2, *r)
 
     def step(self, t_us: int, a_known_ned: np.ndarray, euler_rad=None,
              vel_ned_m_s=None) -> Health:
