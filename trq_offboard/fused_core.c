@@ -186,7 +186,6 @@ core_t *trq_fused_new(const double *cfg)
         trq_fused_free(c);
         return NULL;
     }
-    c->k1.arg[0] = NULL;
     stretch_args(c->k1.arg, 2, &c->s1);
     r = c->k1.res;
     r[0] = c->r1_x, r[1] = c->r1_P, r[2] = &c->r1_ratio, r[3] = &c->r1_nis;
