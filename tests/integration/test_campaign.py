@@ -31,6 +31,7 @@ from conftest import PARAMS, ROOT, cli
 
 from trq_lab.campaign.flight import run_flight
 from trq_lab.campaign.spec import load_campaign
+from trq_offboard.nmpc import hpipm
 from trq_lab.campaign.store import flight_inputs
 from trq_lab.reporting.campaign import summarise, wind_label
 
@@ -109,6 +110,9 @@ def test_smoke_campaign_report_and_heat_maps(smoke):
     text = (out / "report.md").read_text()
     assert "# Campaign `smoke`" in text
     assert "8 of 8 flights flown" in text and "flights/hour" in text
+    # which QP library flew them (another flies other last bits): this environment's
+    assert f"the NMPC's QPs solved by {hpipm.library_label()}" in text
+    assert json.loads((out / "last_run.json").read_text())["qp_library"] == hpipm.library_label()
     assert "## `trq_nmpc_eso`" in text and "## `quad_nmpc`" in text
     assert "Where each controller stops coping" in text
     for name in ("success.png", "rmse.png"):

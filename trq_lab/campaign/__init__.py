@@ -24,6 +24,9 @@ Outputs in DIR:
                         trq-results turns into the README's campaigns row
     logs/<id>/          with --keep-logs, each flight's flight.csv and controller.csv: what
                         --rescore measures again when a metric is added after the flights flew
+    last_run.json       the last run's counts, wall and CPU time, and the QP library the NMPCs
+                        solved with (CasADi's libhpipm, or $TRQ_HPIPM_LIBRARY's: another library
+                        flies the same flights with other last bits)
 With a plant axis, report.md also sets every flight against its plant's faulted trim
 (trq_lab.reporting.plant_campaign: envelope classes, rank correlations, paired comparison,
 targets), with

@@ -31,6 +31,7 @@ from trq_lab.campaign.flight import rescore, run_flight
 from trq_lab.campaign.spec import SENSING_DEFAULT, Campaign, load_campaign
 from trq_lab.campaign.store import flight_inputs, load_results, rows_of, write_csv, write_json
 from trq_lab.reporting.campaign import wind_label, write_report
+from trq_offboard.nmpc import hpipm
 
 PROGRESS_EVERY_S = 2.0       # a terminal's bar is redrawn at most this often
 PROGRESS_LOG_EVERY_S = 30.0  # a log's (not a terminal) progress line is written at most this often
@@ -88,7 +89,9 @@ def run_campaign(campaign: Campaign, out: Path, *, workers: int | None = None,
         todo = todo[:max_flights]
     info = {"planned": len(campaign.flights), "skipped": skipped, "flown": 0, "failed": 0,
             "wall_s": 0.0, "workers": 0, "flights_per_hour": 0.0, "cluster_start_s": 0.0,
-            "cpu_s": 0.0, "sim_s": 0.0}
+            "cpu_s": 0.0, "sim_s": 0.0,
+            # the workers inherit this environment: the QP library their NMPCs load
+            "qp_library": hpipm.library_label()}
     print(f"campaign: {campaign.name}: {len(campaign.flights)} flights, {skipped} already done, "
           f"{len(todo)} to fly", file=stream, flush=True)
     if not todo:
@@ -222,6 +225,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"campaign: the flights used {info['cpu_s']:.0f} CPU s for {info['sim_s']:.0f} "
                   f"simulated s ({info['cpu_s'] / max(info['flown'], 1):.1f} CPU s a flight); the "
                   f"workers got {info['cpu_share']:.0%} of their cores")
+            print(f"campaign: the NMPC's QPs solved by {info['qp_library']}")
         if info["flown"] or not last.is_file():
             write_json(last, info)
         else:                   # nothing flown: the run that flew the flights stays the report's

@@ -495,7 +495,10 @@ def write_report(campaign: Campaign, rows: list[dict], out: Path, run_info: dict
     if run_info:
         lines += [f"Last run: {run_info['flown']} flights in {run_info['wall_s']:.0f} s on "
                   f"{run_info['workers']} worker(s): **{run_info['flights_per_hour']:.0f} "
-                  f"flights/hour**.", ""]
+                  f"flights/hour**"
+                  + (f"; the NMPC's QPs solved by {run_info['qp_library']} (another library "
+                     "flies the same flights with other last bits)" if "qp_library" in run_info
+                     else "") + ".", ""]
     summary: dict = {"campaign": campaign.name, "description": campaign.description.strip(),
                      "planned": n_plan, "flights": len(rows),
                      "failed": len(failed), "success_rmse_m": campaign.success_rmse_m}

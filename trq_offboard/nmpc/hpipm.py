@@ -117,6 +117,17 @@ def library_path() -> Path | None:
     return bundled_path()
 
 
+def library_label() -> str:
+    """Which libhpipm a process started now would solve its QPs with, for a run's record:
+    "CasADi's <path>" or "$TRQ_HPIPM_LIBRARY <path>" (or "none found"). Two libraries fly the
+    same flight with other last bits (BLASFEO's kernels differ), so a run says which."""
+    other = os.environ.get(LIBRARY_ENV)
+    if other:
+        return f"${LIBRARY_ENV} {other}"
+    path = bundled_path()
+    return f"CasADi's {path}" if path is not None else "none found"
+
+
 def bundled_path() -> Path | None:
     """libhpipm of the installed CasADi (next to its own libraries), or None."""
     try:

@@ -174,3 +174,13 @@ def test_conic_is_refused_while_another_build_is_in_use(monkeypatch, tmp_path):
     monkeypatch.setattr(hpipm, "_LIB_PATH", tmp_path / "libhpipm.so")
     with pytest.raises(RuntimeError, match=r"cannot run in a process that loaded .*TRQ_HPIPM"):
         hpipm.check_conic()
+
+
+def test_the_library_label_names_the_one_a_process_loads(monkeypatch, tmp_path):
+    """A run's record of its QP library: $TRQ_HPIPM_LIBRARY's when set, else CasADi's."""
+    other = tmp_path / "libhpipm.so"
+    monkeypatch.setenv(hpipm.LIBRARY_ENV, str(other))
+    assert hpipm.library_label() == f"$TRQ_HPIPM_LIBRARY {other}"
+    monkeypatch.delenv(hpipm.LIBRARY_ENV)
+    bundled = hpipm.bundled_path()
+    assert hpipm.library_label() == (f"CasADi's {bundled}" if bundled else "none found")
