@@ -699,7 +699,14 @@ static void run(core_t *c, int first)
    newest period's t_us */
 void trq_fused_health(const core_t *c, int64_t t_us, double *out)
 {
-    const period_t *p = &c->per[(c->head + c->n - 1) % HISTORY_MAX];
+    const period_t *p;
+    int i;
+    if (c->n == 0) {                            /* before the first reset: nothing known */
+        for (i = 0; i < 22; ++i)
+            out[i] = NAN;
+        return;
+    }
+    p = &c->per[(c->head + c->n - 1) % HISTORY_MAX];
     memcpy(out, p->x, NX * sizeof(double));
     out[12] = c->test_ratio;
     out[13] = (p->P[0] + p->P[NX + 1] + p->P[2 * NX + 2]) / 3.0;
@@ -718,8 +725,13 @@ void trq_fused_health(const core_t *c, int64_t t_us, double *out)
 void trq_fused_step(core_t *c, int64_t t_us, const double *a_known, const double *euler,
                     const double *vel, double *out)
 {
-    period_t *last = per(c, c->n - 1), *p;
+    period_t *last, *p;
     int first;
+    if (c->n == 0) {                            /* before the first reset: no history */
+        trq_fused_health(c, t_us, out);
+        return;
+    }
+    last = per(c, c->n - 1);
     if (t_us <= last->t_us) {
         trq_fused_health(c, t_us, out);
         return;

@@ -160,6 +160,7 @@ class FusedCore:
     def step(self, t_us: int, a_known_ned: np.ndarray, euler_rad=None,
              vel_ned_m_s=None) -> Health:
         """FusedFilter.step."""
+        self._check_started("step")
         buf = self._in
         buf[0:3] = a_known_ned
         e = None
@@ -174,6 +175,10 @@ class FusedCore:
         self._lib.trq_fused_step(self._core, int(t_us), self._a, e, v, self._o)
         return self._health(self._out.tolist())
 
+    def _check_started(self, what: str) -> None:
+        if not self._started:
+            raise RuntimeError(f"FusedCore.{what} before reset: the filter has no state yet")
+
     @staticmethod
     def _health(o: list) -> Health:
         return Health((o[0], o[1], o[2]), (o[3], o[4], o[5]), o[12], o[13], o[14] != 0.0,
@@ -181,6 +186,7 @@ class FusedCore:
 
     def health(self, t_us: int) -> Health:
         """FusedFilter.health."""
+        self._check_started("health")
         self._lib.trq_fused_health(self._core, int(t_us), self._o)
         return self._health(self._out.tolist())
 

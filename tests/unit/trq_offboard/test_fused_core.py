@@ -162,3 +162,12 @@ def test_a_history_past_the_cores_limit_is_refused_by_name():
 def test_without_codegen_the_factory_gives_the_numpy_path():
     f = fused_filter(sequences.CFG, sequences.G, codegen=False)
     assert isinstance(f, FusedFilter) and not f.compiled
+
+
+def test_a_step_or_health_before_the_first_reset_is_refused_by_name():
+    f = fused_filter(sequences.CFG, sequences.G)
+    assert f.last_pose_us is None
+    with pytest.raises(RuntimeError, match=r"FusedCore\.step before reset"):
+        f.step(10_000, np.zeros(3))
+    with pytest.raises(RuntimeError, match=r"FusedCore\.health before reset"):
+        f.health(0)
