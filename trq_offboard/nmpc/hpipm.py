@@ -121,11 +121,10 @@ def library_label() -> str:
     """Which libhpipm a process started now would solve its QPs with, for a run's record:
     "CasADi's <path>" or "$TRQ_HPIPM_LIBRARY <path>" (or "none found"). Two libraries fly the
     same flight with other last bits (BLASFEO's kernels differ), so a run says which."""
-    other = os.environ.get(LIBRARY_ENV)
-    if other:
-        return f"${LIBRARY_ENV} {other}"
-    path = bundled_path()
-    return f"CasADi's {path}" if path is not None else "none found"
+    path = library_path()
+    if path is None:
+        return "none found"
+    return f"${LIBRARY_ENV} {path}" if os.environ.get(LIBRARY_ENV) else f"CasADi's {path}"
 
 
 def bundled_path() -> Path | None:
