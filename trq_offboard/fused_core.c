@@ -27,6 +27,7 @@
 #define IMU_PENDING_MAX 64
 #define POSES_PENDING_MAX 64
 #define CANDIDATES_MAX 16
+#define HEALTH_N 22                     /* trq_fused_health's figures (fused_core.py's _OUT) */
 
 enum { K_NEW, K_FUSED, K_REJECTED, K_HELD, K_RESET };
 
@@ -569,7 +570,9 @@ static void run_period(core_t *c, int k, int newest)
     int has_acc = acc_of(c, k);
     double gate = prev->acc_taken ? c->accel_gate : gate_of(c, k);
     const period_t *acc = has_acc ? p : NULL, *vel = p->has_vel ? p : NULL;
-    double x[NX], P[NP], prior_x[NX], prior_P[NP];
+    double x[NX], P[NP];
+    /* the prior at a pose (FusedFilter._prior): the kernel's, until its next call */
+    const double *prior_x = c->r1_xp, *prior_P = c->r1_Pp;
     int64_t t = prev->t_us;
     int active[POSES_MAX], n_active = 0, i, done = 0;
     memcpy(x, prev->x, sizeof(x));
@@ -581,20 +584,11 @@ static void run_period(core_t *c, int k, int newest)
     }
     for (i = 0; i < n_active; ++i) {
         pose_t *q = &p->poses[active[i]];
-        int last = i == n_active - 1, have_prior = 0;
+        int last = i == n_active - 1;
         stretch(c, x, P, q->t_us - t, p->a_known, q, last ? p->t_us - q->t_us : 0,
                 last ? acc : NULL, gate, last ? vel : NULL);
-        if (q->kind == K_NEW) {
-            /* the prior kept before anything else runs the kernel again */
-            memcpy(prior_x, c->r1_xp, sizeof(prior_x));
-            memcpy(prior_P, c->r1_Pp, sizeof(prior_P));
-            have_prior = 1;
+        if (q->kind == K_NEW)
             decide(c, q, c->r1_ratio, prior_x, prior_P);
-        }
-        if ((q->kind == K_RESET || q->kind == K_REJECTED || q->kind == K_HELD) && !have_prior) {
-            memcpy(prior_x, c->r1_xp, sizeof(prior_x));
-            memcpy(prior_P, c->r1_Pp, sizeof(prior_P));
-        }
         if (q->kind == K_FUSED) {
             memcpy(x, c->r1_x, sizeof(x));
             memcpy(P, c->r1_P, sizeof(P));
@@ -702,7 +696,7 @@ void trq_fused_health(const core_t *c, int64_t t_us, double *out)
     const period_t *p;
     int i;
     if (c->n == 0) {                            /* before the first reset: nothing known */
-        for (i = 0; i < 22; ++i)
+        for (i = 0; i < HEALTH_N; ++i)
             out[i] = NAN;
         return;
     }
