@@ -25,6 +25,8 @@ cache) comes from trq_wire.
                     about the body-frame orbit under a position loop), its descent and touchdown
     spin_nmpc       its optional inner loop (`spin.inner: nmpc`): an NMPC on the orbit's model
     reference       the flight's plan (Reference, ConstantReference)
+    reference_core, reference_core.c  the plan's grid in C (what Reference.grid runs where a
+                    C compiler is found; Reference._pv stays the specification)
     landing         the end of a landing on the ground's contact (GroundContact)
     records         typed records across module boundaries
     loop            the offboard flight over MAVLink (OffboardFlight)

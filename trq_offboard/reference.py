@@ -32,6 +32,7 @@ from typing import Protocol
 
 import numpy as np
 
+from trq_offboard import reference_core
 from trq_offboard.config import ReferenceConfig
 from trq_offboard.records import ReferenceSample
 
@@ -75,10 +76,11 @@ class Reference:
 
     def __init__(self, cfg: ReferenceConfig, start_ned_m, start_yaw_rad: float = 0.0,
                  t0_s: float = 0.0, *, airborne: bool = False,
-                 ground_down_m: float | None = None) -> None:
+                 ground_down_m: float | None = None, compiled: bool = True) -> None:
         """`airborne`: the controller takes over a flying vehicle: no take-off, the plan starts
         by holding where the vehicle is; it lands on `ground_down_m` (NED down of the ground,
-        default the start point's)."""
+        default the start point's). `compiled`: `grid` in C (reference_core.py) where a C
+        compiler is found, else `_pv` point by point: the same figures."""
         self.cfg = cfg
         self.start = np.asarray(start_ned_m, float).reshape(3)
         self.yaw = float(start_yaw_rad)
@@ -103,6 +105,14 @@ class Reference:
         drop = (self.ground + LAND_BELOW_M) - self.end_point[2]
         self.t_land = float(abs(drop) * 1.875 / cfg.climb_speed_m_s) if cfg.land else 0.0
         self.t5 = self.t4 + self.t_land
+        self._kernel = None if compiled else False      # reference_core's, on the first grid
+        self._params = np.array(
+            [self.t0, self.t1, self.t2, self.t3, self.t4, self.t5, self.t_takeoff, self.t_land,
+             *self._start, *self._hover, *self._end, self.ground, self._w, self._T, self._r,
+             self._full_ramp, self._phi_end, cfg.radius_m, cfg.helix_climb_m,
+             *(float(v) for v in cfg.step_ned_m), cfg.duration_s,
+             reference_core.KINDS.index(cfg.kind) if cfg.kind in reference_core.KINDS else -1,
+             1.0 if cfg.land else 0.0], float)
 
     # --- phase of the periodic manoeuvres -------------------------------------------------
     def _phase(self, tau: float) -> tuple[float, float]:
@@ -181,7 +191,15 @@ class Reference:
     def grid(self, t_s: float, step_s: float, n: int) -> tuple[np.ndarray, np.ndarray]:
         """The plan at t_s + k step_s, k = 0..n-1: (pos_vel (n, 6) NED [m, m/s], yaw (n,) rad);
         the same values as `sample`, without a record per point."""
-        t0, pv = float(t_s), self._pv
+        t0 = float(t_s)
+        kernel = self._kernel
+        if kernel is None:
+            kernel = self._kernel = reference_core.grid_kernel() or False
+        if kernel:
+            out = np.empty((n, 6))
+            kernel(self._params.ctypes.data, t0, float(step_s), n, out.ctypes.data)
+            return out, np.full(n, self.yaw)
+        pv = self._pv
         return np.array([pv(t0 + k * step_s)[0] for k in range(n)]), np.full(n, self.yaw)
 
     def done(self, t_s: float) -> bool:

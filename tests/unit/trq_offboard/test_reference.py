@@ -101,3 +101,28 @@ def test_grid_is_the_samples_to_the_bit(kind, shape):
             want = [ref.sample(t0 + k * step) for k in range(21)]
             assert pv.tobytes() == np.array([w.pos_ned_m + w.vel_ned_m_s for w in want]).tobytes()
             assert yaw.tobytes() == np.array([w.yaw_rad for w in want]).tobytes()
+
+
+@pytest.mark.parametrize("kind", ["hover", "circle", "helix", "figure8", "step"])
+def test_compiled_grid_is_the_python_grid(kind):
+    """reference_core.c's grid (where a C compiler is found: the one a controller flies) against
+    `_pv` point by point (compiled=False), byte for byte, on a dense sweep through every phase
+    and the crawl after the landing, with steps that land on the phases' edges and steps that
+    do not; a grid's points at arbitrary offsets (a lost period: t not on the control grid)."""
+    from trq_offboard import reference_core
+    from trq_offboard.nmpc.cache import find_compiler
+
+    if find_compiler() is None:
+        pytest.skip("no C compiler: the grid is the Python one")
+    assert reference_core.grid_kernel() is not None
+    rc = replace(CFG.reference, kind=kind, helix_climb_m=-0.4, step_ned_m=(0.3, -0.2, -0.1))
+    for airborne in (False, True):
+        args = (rc, [0.25, -1.5, -0.02], 0.7)
+        kw = dict(t0_s=1.5, airborne=airborne, ground_down_m=0.1)
+        fast, slow = Reference(*args, **kw), Reference(*args, compiled=False, **kw)
+        for t0 in np.arange(0.0, fast.end_time_s + 3.0, 0.0137):
+            for step in (0.05, 0.01):
+                a, ya = fast.grid(t0, step, 21)
+                b, yb = slow.grid(t0, step, 21)
+                assert a.tobytes() == b.tobytes() and ya.tobytes() == yb.tobytes(), (t0, step)
+        assert fast._kernel and slow._kernel is False
