@@ -176,7 +176,7 @@ class Process:
     def wait(self, timeout_s: float, what: str = "") -> int:
         """The exit code, or an AssertionError with the output's tail after timeout_s."""
         try:
-            return self.popen.wait(timeout=max(timeout_s, 0.1))
+            return self._exited(self.popen.wait(timeout=max(timeout_s, 0.1)))
         except subprocess.TimeoutExpired:
             raise AssertionError(f"{self.name} did not exit within {timeout_s:.0f} s"
                                  f"{' ' + what if what else ''}\n{self.why()}") from None
@@ -190,7 +190,14 @@ class Process:
             except subprocess.TimeoutExpired:
                 self.popen.kill()
                 self.popen.wait(timeout=STOP_TIMEOUT_S)
-        return self.popen.returncode
+        return self._exited(self.popen.returncode)
+
+    def _exited(self, code: int) -> int:
+        """A controller daemon's log on the ground once it has exited: its controller.ulg
+        written as controller.csv (trq_lab.procs.controller_csv), as the lab's runners do."""
+        if self.log_dir is not None:
+            procs.controller_csv(self.log_dir)
+        return code
 
     def wait_bound(self, port: int | None = None, timeout_s: float = 60.0) -> None:
         """Until this process is bound to UDP 127.0.0.1:port (its own port by default)."""

@@ -4,6 +4,9 @@ stress tool and the tests): waiting until one listens, and stopping one for cert
     wait_bound(port, proc, timeout_s) -> bool    True once someone holds UDP 127.0.0.1:port
     stop(proc, grace_s)                           SIGINT (a daemon's clean shutdown: it closes
                                                   its logs), then SIGKILL after grace_s
+    controller_csv(log_dir)                       the controller daemon's controller.ulg as
+                                                  controller.csv, once it has exited (the
+                                                  ground's conversion: trq_wire.ulog)
 """
 
 from __future__ import annotations
@@ -13,7 +16,9 @@ import socket
 import subprocess
 import time
 
-__all__ = ["wait_bound", "stop"]
+from pathlib import Path
+
+__all__ = ["wait_bound", "stop", "controller_csv"]
 
 
 def wait_bound(port: int, proc: subprocess.Popen, timeout_s: float) -> bool:
@@ -40,3 +45,16 @@ def stop(proc: subprocess.Popen | None, grace_s: float = 10.0) -> None:
     except subprocess.TimeoutExpired:
         proc.kill()
         proc.wait()
+
+
+def controller_csv(log_dir: Path) -> Path | None:
+    """controller.csv of a controller daemon's log folder: written from its controller.ulg
+    (trq_wire.ulog.to_csv) unless a CSV at least as new is there; None when the folder has
+    neither (a daemon run with --no-log, or one that never started its flight log)."""
+    from trq_wire.ulog import to_csv
+
+    log_dir = Path(log_dir)
+    ulg, csv = log_dir / "controller.ulg", log_dir / "controller.csv"
+    if ulg.exists() and not (csv.exists() and csv.stat().st_mtime_ns >= ulg.stat().st_mtime_ns):
+        return to_csv(ulg, csv)
+    return csv if csv.exists() else None

@@ -46,6 +46,7 @@ from trq_lab import metrics as metrics_mod
 from trq_lab import procs
 from trq_lab.overlays import run_dir, write_controller_overlay
 from trq_lab.reporting import scenario as report
+from trq_wire.ulog import LogTail
 
 # what a command waits in real time, about one NMPC step (docs/decisions/
 # 2026-12-02-shorter-applied-delay.md: what else was tried)
@@ -284,10 +285,12 @@ def _fly(scenario: Scenario, run: Run, realtime: bool, ctrl_yaml: Path, sim_yaml
         vehicle = subprocess.Popen(vcmd, stdout=vout, stderr=subprocess.STDOUT, env=env)
         controller = subprocess.Popen(ccmd, stdout=cout, stderr=subprocess.STDOUT, env=env)
         run.status = "flying"
+        tail = LogTail(run.out / "controller.ulg")
         try:
             while controller.poll() is None:
                 run.wall_s = time.monotonic() - wall0
-                run.t_s = _last_time(run.out / "controller.csv")
+                row = tail.last()            # the controller's ULog, as it flies
+                run.t_s = row["t_s"] if row else 0.0
                 if run.wall_s > scenario.timeout_s:
                     run.status = "timeout"
                     controller.send_signal(signal.SIGINT)
@@ -307,6 +310,7 @@ def _fly(scenario: Scenario, run: Run, realtime: bool, ctrl_yaml: Path, sim_yaml
                 procs.stop(proc)
     run.returncode = controller.returncode
     run.wall_s = time.monotonic() - wall0
+    procs.controller_csv(run.out)            # the controller's ULog on the ground
     run.t_s = _last_time(run.out / "controller.csv")
     lines = (run.out / "controller.out").read_text(errors="replace").strip().splitlines()
     run.summary = next((ln for ln in reversed(lines) if ln.startswith("trq-offboard:")), "")

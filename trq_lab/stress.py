@@ -574,6 +574,7 @@ def run(args: argparse.Namespace) -> int:
         if controller is not None:
             try:
                 controller.wait(timeout=args.seconds + 60.0)
+                procs.controller_csv(out / "controller")      # its ULog, on the ground
             except subprocess.TimeoutExpired:
                 problems.append("the controller did not finish its flight")
             text = (out / "controller.out").read_text(errors="replace")

@@ -59,8 +59,13 @@ def build_parser() -> argparse.ArgumentParser:
                    choices=("hover", "step", "circle", "helix", "figure8"),
                    help="override the reference kind of the controller file")
     p.add_argument("--log-dir", type=Path, default=None,
-                   help="directory for controller.csv and offboard.tlog "
+                   help="directory for the controller's log and offboard.tlog "
                         "(default: logs/offboard-<time>)")
+    p.add_argument("--log-format", choices=("ulog", "csv"), default="ulog",
+                   help="the controller's log: controller.ulg, its rows packed as PX4 logs on "
+                        "board (trq-log-csv writes controller.csv from it on the ground), or "
+                        "controller.csv formatted during the flight (the formatting costs the "
+                        "control period); default ulog")
     p.add_argument("--no-log", action="store_true", help="write no logs")
     p.add_argument("--applied-delay-s", type=float, default=None,
                    help="how long a command takes to act after the state it answers was "
@@ -121,7 +126,8 @@ def main(argv: list[str] | None = None,
         args.log_dir or Path("logs") / time.strftime(f"offboard-{cfg.name}-%Y%m%d-%H%M%S"))
     clog = tlog = None
     if log_dir is not None:
-        clog = ControllerLog(log_dir / "controller.csv",
+        name = "controller.ulg" if args.log_format == "ulog" else "controller.csv"
+        clog = ControllerLog(log_dir / name,
                              {"controller": cfg.name, "controller_file": cfg.file,
                               "vehicle_file": cfg.vehicle.file, "connect": args.connect,
                               "frames": "world NED, body FRD",

@@ -1,8 +1,10 @@
-"""The controller's flight log: one CSV row per control step (estimated state, reference,
+"""The controller's flight log: one row per control step (estimated state, reference,
 observer estimate, command, applied outputs, solve time and status, the period's CPU time by
-part), flushed about once a second. The file format (header, row formatting, flushing) and the
-.tlog of the offboard link's MAVLink traffic are trq_wire.logfile's, shared with the vehicle's
-flight.csv.
+part), flushed about once a second. Two forms of the same rows: controller.csv, formatted in
+flight (trq_wire.logfile's format, shared with the vehicle's flight.csv), or controller.ulg,
+the rows packed as PX4's ULog (trq_wire.ulog: what the daemon writes by default, as PX4 logs
+on board; `trq_wire.ulog.to_csv` writes the same CSV bytes from it on the ground). The .tlog
+of the offboard link's MAVLink traffic is trq_wire.logfile's.
 
 Rows are kept as the loop's records and formatted in batches of `batch` (off the control step:
 a call only appends, one call in `batch` writes the batch), every record but the newest, whose
@@ -31,6 +33,7 @@ from pathlib import Path
 
 from trq_offboard.loop import FlightController, StepRecord
 from trq_wire.logfile import CsvLog
+from trq_wire.ulog import UlogLog
 
 CPU_PARTS = ("observer", "effectiveness", "predictor", "feedback", "prepare", "wire", "log",
              "period")
@@ -49,6 +52,11 @@ COLUMNS = (
     + ["est_test_ratio", "est_pos_var_m2", "est_dead_reckoning", "est_rejected", "est_resets",
        "est_accel_rejected"]
     + ["lost_motor"])
+# each column's type in the ULog form (trq_wire.ulog: f float, i integer or nan, s string)
+_INTEGERS = {"stamp_us", "iterations", "est_dead_reckoning", "est_rejected", "est_resets",
+             "est_accel_rejected", "lost_motor"}
+_STRINGS = {"phase", "status", "source"}
+KINDS = "".join("i" if c in _INTEGERS else "s" if c in _STRINGS else "f" for c in COLUMNS)
 
 
 def _ms(ns: int) -> float:
@@ -63,7 +71,14 @@ def solver_header(controller: FlightController) -> dict:
 class ControllerLog:
     def __init__(self, path: Path, meta: dict[str, object], flush_every: int = 50,
                  batch: int = 50) -> None:
-        self._log = CsvLog(path, COLUMNS, meta, flush_every=flush_every)
+        """`path`: controller.csv, or a .ulg path for the ULog form (trq_wire.ulog: the rows
+        packed, not formatted; `trq_wire.ulog.to_csv` writes the same CSV from it)."""
+        if Path(path).suffix == ".ulg":
+            self._log = UlogLog(path, COLUMNS, KINDS, meta, timestamp="stamp_us",
+                                name="trq_controller", sys_name="trq-offboard",
+                                flush_every=flush_every)
+        else:
+            self._log = CsvLog(path, COLUMNS, meta, flush_every=flush_every)
         self.path = self._log.path
         self._batch = max(1, batch)
         self._rows: list[StepRecord] = []

@@ -15,6 +15,8 @@ Whatever both ends must compute identically lives here, once:
                 microseconds of SERVO_OUTPUT_RAW, both directions
     logfile     the CSV log format of flight.csv and controller.csv ('# key: value' header
                 lines, a column-name line, one row per tick), its reader, the .tlog writer
+    ulog        a CSV log's rows as PX4's ULog (controller.ulg: packed on board, not
+                formatted) and its conversion to the same CSV on the ground (pyulog)
     frames      the MAVLink 2 frames of a control period's hot messages (the telemetry in,
                 SET_ACTUATOR_CONTROL_TARGET out), unpacked and packed with one struct each,
                 byte for byte as pymavlink packs them; the frame checksum (X.25, CRC_EXTRA)

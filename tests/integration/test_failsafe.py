@@ -22,6 +22,7 @@ from conftest import ROOT, Daemons, Process, wait_until
 
 from trq_lab import metrics
 from trq_lab.gcs.client import MavClient, NoAnswer
+from trq_wire.ulog import LogTail
 
 pytestmark = pytest.mark.slow      # starts daemons or flies: the full run only
 
@@ -61,7 +62,15 @@ class Rig:
         return self.v.gcs_port
 
 
+_TAILS: dict[Path, LogTail] = {}
+
+
 def controller_time(path: Path) -> float:
+    """The flight time of the controller's newest row: its log is being written (the ULog's
+    tail; the CSV's last line with --log-format csv)."""
+    if path.suffix == ".ulg":
+        row = _TAILS.setdefault(path, LogTail(path)).last()     # reads on from the last call
+        return row["t_s"] if row else 0.0
     try:
         last = path.read_text().strip().splitlines()[-1]
         return float(last.split(",")[0])
@@ -73,7 +82,7 @@ def start_flight(rig: Rig) -> Process:
     ctl = rig.controller("ctl_a")
     time.sleep(1.0)                     # the controller listens first (its NMPC takes a moment)
     rig.vehicle()
-    wait_until(lambda: controller_time(rig.out / "ctl_a" / "controller.csv") >= 5.0, 90,
+    wait_until(lambda: controller_time(rig.out / "ctl_a" / "controller.ulg") >= 5.0, 90,
                "the first controller to fly past the fault", lambda: ctl.why() + rig.v.why())
     return ctl
 

@@ -126,7 +126,7 @@ def test_garbage_on_the_serial_line_costs_time_not_the_flight(udp_flight, daemon
 
     stop = threading.Event()
     sprayed = [0]
-    csv = tmp_path / "noisy" / "ctl" / "controller.csv"
+    csv = tmp_path / "noisy" / "ctl" / "controller.ulg"
 
     def spray(pair: PtyPair) -> None:
         # bursts that look like MAVLink (magics, plausible headers) into both ends
@@ -171,7 +171,7 @@ def test_over_tcp_a_killed_controller_leaves_the_failsafe_and_a_new_one_takes_ov
                           log_dir=tmp_path / "veh")
     controller = ("--controller", str(overlay), "--connect", f"tcpout://127.0.0.1:{port}")
     ctl_a = daemons.controller(*controller, log_dir=tmp_path / "a", name="ctl_a")
-    wait_until(lambda: controller_time(tmp_path / "a" / "controller.csv") >= 3.0, 90,
+    wait_until(lambda: controller_time(tmp_path / "a" / "controller.ulg") >= 3.0, 90,
                "the first controller to fly", lambda: ctl_a.why() + veh.why())
     ctl_a.kill()                                        # SIGKILL: its connection just ends
     with MavClient(f"udpout:127.0.0.1:{veh.gcs_port}") as gcs:

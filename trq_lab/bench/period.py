@@ -34,6 +34,8 @@ from pathlib import Path
 
 import numpy as np
 
+from trq_lab import procs
+
 __all__ = ["daemons_period", "PARTS", "parts_table"]
 
 PARTS = ("observer", "effectiveness", "predictor", "feedback", "prepare", "wire", "log",
@@ -108,6 +110,7 @@ def fly_daemons(seconds: float, controller: str, log_dir: Path,
         if ctl_cpu is None:
             ctl.kill()
             ctl_cpu = _reap(ctl)
+    procs.controller_csv(log_dir)          # on the ground: after the controller's CPU is read
     return {"seconds": seconds, "controller_cpu_s": ctl_cpu, "vehicle_cpu_s": veh_cpu,
             "wall_s": wall, "vehicle_rc": veh.returncode, "controller_rc": ctl.returncode}
 

@@ -15,4 +15,5 @@ beside it and the summaries (metrics.json). It flies nothing.
                     standard library only)
     lost_motor      figures of flights with a motor lost: height, thrust axis tilt, yaw rate,
                     drift from the failure
+    logcsv          the controller daemon's ULog as its CSV log, on the ground (trq-log-csv)
 """

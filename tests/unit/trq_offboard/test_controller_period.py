@@ -133,25 +133,38 @@ def test_lag_chain_is_the_step_by_step_lag():
             assert np.array_equal(ys[k], y)
 
 
-def test_controller_log_writes_every_row_in_order_after_its_period(tmp_path):
+@pytest.mark.parametrize("form", ["csv", "ulg"])
+def test_controller_log_writes_every_row_in_order_after_its_period(tmp_path, form):
+    """In either form (controller.csv formatted in flight, controller.ulg packed and written
+    as the same CSV on the ground: its bytes equal the CSV form's)."""
     from trq_lab import metrics
     from trq_offboard.log import ControllerLog
     from trq_offboard.loop import StepRecord
     from trq_offboard.records import ActuatorCommand, ReferenceSample
+    from trq_wire.ulog import to_csv
 
-    log = ControllerLog(tmp_path / "controller.csv", {"controller": "x"}, batch=3)
+    logs = [ControllerLog(tmp_path / f"controller.{f}", {"controller": "x", "frames": "a b"},
+                          batch=3) for f in ("csv", "ulg")]
     cmd = ActuatorCommand((50.0,) * 4, (0.0,) * 4)
-    ref = ReferenceSample((0.0, 0.0, -1.0), (0.0, 0.0, 0.0), 0.0)
     records = []
     for k in range(8):
         if records:        # as the loop does: the last period closes at the next step's start
             records[-1].cpu.period_ns = 2_000_000 + k
+        ref = ReferenceSample((0.0, 0.0, -1.0), (0.0, 0.0, 0.0), 0.0,
+                              "hold" if k < 5 else "land")
         r = StepRecord(0.01 * k, 10_000 * k, _hover_state(), ref, cmd, None, None)
-        log(r)
+        for log in logs:
+            log(r)
         r.cpu.prepare_ns, r.cpu.wire_ns, r.cpu.log_ns = 300_000, 100_000, 1_000
         records.append(r)
-    log.close()
-    _, cols = metrics.read_csv(tmp_path / "controller.csv")
+    for log in logs:
+        log.close()
+    path = tmp_path / "controller.csv"
+    if form == "ulg":
+        csv_bytes = path.read_bytes()
+        path = to_csv(tmp_path / "controller.ulg", tmp_path / "ground.csv")
+        assert path.read_bytes() == csv_bytes
+    _, cols = metrics.read_csv(path)
     assert cols["stamp_us"].tolist() == [10_000 * k for k in range(8)]
     assert cols["cpu_period_ms"][:7].tolist() == [(2_000_000 + k) * 1e-6 for k in range(1, 8)]
     assert math.isnan(cols["cpu_period_ms"][7])        # the last period never closed
