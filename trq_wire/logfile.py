@@ -15,7 +15,8 @@ import time
 from pathlib import Path
 from typing import Callable, Iterable, TextIO
 
-__all__ = ["CsvLog", "Tlog", "VehicleTimeline", "format_row", "read_header", "read_csv_log"]
+__all__ = ["CsvLog", "Tlog", "VehicleTimeline", "FlushedFile", "format_row", "read_header",
+           "read_csv_log"]
 
 
 def format_row(row: Iterable[object]) -> str:
@@ -27,23 +28,19 @@ def format_row(row: Iterable[object]) -> str:
                      else v if isinstance(v, str) else str(v) for v in row])
 
 
-class CsvLog:
-    """A CSV log being written: the header at once, then a row per call."""
+class FlushedFile:
+    """A log file being written (its folder made), flushed every `flush_every` records
+    (`_put`) so that a killed process leaves it readable up to the last flush, and at close."""
 
-    def __init__(self, path: Path, columns: Iterable[str], meta: dict[str, object],
-                 flush_every: int = 100) -> None:
+    def __init__(self, path: Path, mode: str, flush_every: int, **open_args) -> None:
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._f = open(self.path, "w", encoding="ascii", newline="\n")
-        for key, value in meta.items():
-            self._f.write(f"# {key}: {value}\n")
-        self._f.write(",".join(columns) + "\n")
-        self._f.flush()
+        self._f = open(self.path, mode, **open_args)
         self._n = 0
         self._every = max(1, flush_every)
 
-    def __call__(self, row: Iterable[object]) -> None:
-        self._f.write(format_row(row) + "\n")
+    def _put(self, data) -> None:
+        self._f.write(data)
         self._n += 1
         if self._n % self._every == 0:
             self._f.flush()
@@ -51,6 +48,21 @@ class CsvLog:
     def close(self) -> None:
         if not self._f.closed:
             self._f.close()
+
+
+class CsvLog(FlushedFile):
+    """A CSV log being written: the header at once, then a row per call."""
+
+    def __init__(self, path: Path, columns: Iterable[str], meta: dict[str, object],
+                 flush_every: int = 100) -> None:
+        super().__init__(path, "w", flush_every, encoding="ascii", newline="\n")
+        for key, value in meta.items():
+            self._f.write(f"# {key}: {value}\n")
+        self._f.write(",".join(columns) + "\n")
+        self._f.flush()
+
+    def __call__(self, row: Iterable[object]) -> None:
+        self._put(format_row(row) + "\n")
 
 
 def read_header(f: TextIO) -> tuple[dict[str, str], list[str]]:
@@ -75,33 +87,22 @@ def read_csv_log(path: Path) -> tuple[dict[str, str], list[str], "object"]:
     return meta, columns, data
 
 
-class Tlog:
+class Tlog(FlushedFile):
     """pymavlink's telemetry log: each message as an 8-byte big-endian UNIX time in
     microseconds followed by the raw MAVLink frame (readable by mavlogdump.py)."""
 
     def __init__(self, path: Path, flush_every: int = 500,
                  clock: Callable[[], int] = lambda: time.time_ns() // 1000) -> None:
-        self.path = Path(path)
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._f = open(self.path, "wb")
-        self._n = 0
-        self._every = max(1, flush_every)
+        super().__init__(path, "wb", flush_every)
         self._clock = clock
 
     def write(self, unix_us: int, frame: bytes) -> None:
         """A frame with the UNIX time (us) it was sent or received."""
-        self._f.write(struct.pack(">Q", unix_us) + frame)
-        self._n += 1
-        if self._n % self._every == 0:
-            self._f.flush()
+        self._put(struct.pack(">Q", unix_us) + frame)
 
     def __call__(self, frame: bytes) -> None:
         """A frame stamped with the log's clock now (the wall clock unless given another)."""
         self.write(self._clock(), frame)
-
-    def close(self) -> None:
-        if not self._f.closed:
-            self._f.close()
 
 
 MAGIC_V2 = 0xFD

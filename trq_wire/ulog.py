@@ -35,6 +35,8 @@ import struct
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 
+from trq_wire.logfile import CsvLog, FlushedFile
+
 __all__ = ["UlogLog", "LogTail", "to_csv", "KINDS", "MAGIC"]
 
 MAGIC = b"ULog\x01\x12\x35"
@@ -65,7 +67,7 @@ def _field_name(column: str) -> str:
     return column
 
 
-class UlogLog:
+class UlogLog(FlushedFile):
     """A CSV log's rows as one ULog topic (the module docstring): the definitions at once, a
     data message per call, flushed every `flush_every` rows and at close."""
 
@@ -78,15 +80,12 @@ class UlogLog:
                              f"{len(columns)} columns")
         if timestamp not in columns or kinds[columns.index(timestamp)] == "s":
             raise ValueError(f"timestamp column {timestamp!r}: a numeric column of the log")
-        self.path = Path(path)
-        self.path.parent.mkdir(parents=True, exist_ok=True)
         self._time = columns.index(timestamp)
         self._strings = [i for i, k in enumerate(kinds) if k == "s"]
         self._columns = columns
         self._enums: list[dict[str, int]] = [{} for _ in columns]
         self._row = struct.Struct(f"<HBHQ{len(columns)}d")
         self._size = self._row.size - _HEADER.size
-        self._f = open(self.path, "wb")
         out = [MAGIC, bytes((VERSION,)), struct.pack("<Q", 0),
                _message("B", _FLAGS.pack(*([0] * 16), 0, 0, 0)),
                _message("F", (f"{name}:uint64_t timestamp;"
@@ -95,10 +94,9 @@ class UlogLog:
         for key, value in meta.items():
             out.append(_info(f"trq_meta:{_field_name(str(key))}", str(value)))
         out.append(_message("A", struct.pack("<BH", 0, MSG_ID) + name.encode("ascii")))
+        super().__init__(path, "wb", flush_every)       # every definition checked first
         self._f.write(b"".join(out))
         self._f.flush()
-        self._n = 0
-        self._every = max(1, flush_every)
 
     def _index(self, i: int, value: str) -> int:
         enum = self._enums[i]
@@ -113,14 +111,7 @@ class UlogLog:
         their indices)."""
         for i in self._strings:
             row[i] = self._index(i, row[i])
-        self._f.write(self._row.pack(self._size, 0x44, MSG_ID, int(row[self._time]), *row))
-        self._n += 1
-        if self._n % self._every == 0:
-            self._f.flush()
-
-    def close(self) -> None:
-        if not self._f.closed:
-            self._f.close()
+        self._put(self._row.pack(self._size, 0x44, MSG_ID, int(row[self._time]), *row))
 
 
 def _int_or_nan(v: float):
@@ -132,8 +123,6 @@ def to_csv(path: Path, csv_path: Path | None = None) -> Path:
     `csv_path`); returns its path. A file that is not one, or has no rows' topic, raises
     ValueError naming it."""
     from pyulog import ULog
-
-    from trq_wire.logfile import CsvLog
 
     path = Path(path)
     with open(path, "rb") as f:
