@@ -27,6 +27,7 @@ Keep within what the vehicle can do: the defaults fly at 0.63 m/s with 0.4 m/s^2
 
 from __future__ import annotations
 
+import ctypes
 import math
 from typing import Protocol
 
@@ -113,6 +114,7 @@ class Reference:
              *(float(v) for v in cfg.step_ned_m), cfg.duration_s,
              reference_core.KINDS.index(cfg.kind) if cfg.kind in reference_core.KINDS else -1,
              1.0 if cfg.land else 0.0], float)
+        self._params_at = self._params.ctypes.data       # (the array is kept: its address)
 
     # --- phase of the periodic manoeuvres -------------------------------------------------
     def _phase(self, tau: float) -> tuple[float, float]:
@@ -196,9 +198,11 @@ class Reference:
         if kernel is None:
             kernel = self._kernel = reference_core.grid_kernel() or False
         if kernel:
-            out = np.empty((n, 6))
-            kernel(self._params.ctypes.data, t0, float(step_s), n, out.ctypes.data)
-            return out, np.full(n, self.yaw)
+            # a ctypes buffer the array is made over: its address without NumPy's ctypes
+            # helper, a few microseconds a call on the controller's period
+            out = (ctypes.c_double * (6 * n))()
+            kernel(self._params_at, t0, float(step_s), n, ctypes.addressof(out))
+            return np.frombuffer(out).reshape(n, 6), np.full(n, self.yaw)
         pv = self._pv
         return np.array([pv(t0 + k * step_s)[0] for k in range(n)]), np.full(n, self.yaw)
 
