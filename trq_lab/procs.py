@@ -15,7 +15,6 @@ import signal
 import socket
 import subprocess
 import time
-
 from pathlib import Path
 
 __all__ = ["wait_bound", "stop", "controller_csv"]

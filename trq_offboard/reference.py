@@ -113,7 +113,7 @@ class Reference:
              self._full_ramp, self._phi_end, cfg.radius_m, cfg.helix_climb_m,
              *(float(v) for v in cfg.step_ned_m), cfg.duration_s,
              reference_core.KINDS.index(cfg.kind) if cfg.kind in reference_core.KINDS else -1,
-             1.0 if cfg.land else 0.0], float)
+             1.0 if cfg.land else 0.0, LAND_BELOW_M, LAND_CRAWL_M_S, CRAWL_RAMP_S], float)
         self._params_at = self._params.ctypes.data       # (the array is kept: its address)
 
     # --- phase of the periodic manoeuvres -------------------------------------------------

@@ -5,17 +5,18 @@
    built without contraction into fused multiply-adds and without the compiler's builtins (GCC
    would otherwise turn pow(x, 2.0) into x * x, which libm's pow need not round alike).
 
-   The plan's figures come as one array (reference_core.py's PARAMS names their order). */
+   The plan's figures come as one array (reference_core.py's PARAMS names their order), the
+   landing's constants of reference.py among them. */
 #include <math.h>
 
 enum { P_T0, P_T1, P_T2, P_T3, P_T4, P_T5, P_TAKEOFF, P_TLAND,
        P_SN, P_SE, P_SD, P_HN, P_HE, P_HD, P_EN, P_EE, P_ED, P_GROUND,
        P_W, P_T, P_R, P_FULL_RAMP, P_PHI_END, P_RADIUS, P_HELIX_CLIMB,
-       P_STEP_N, P_STEP_E, P_STEP_D, P_DURATION, P_KIND, P_LAND, P_COUNT };
+       P_STEP_N, P_STEP_E, P_STEP_D, P_DURATION, P_KIND, P_LAND,
+       P_LAND_BELOW, P_CRAWL, P_CRAWL_RAMP, P_COUNT };
 enum { K_HOVER, K_STEP, K_CIRCLE, K_HELIX, K_FIGURE8 };
 
 static const double PI = 3.141592653589793;
-static const double LAND_BELOW_M = 0.2, LAND_CRAWL_M_S = 0.3, CRAWL_RAMP_S = 1.0;
 
 /* _smoothstep5: (value, derivative) of 10 s^3 - 15 s^4 + 6 s^5, clamped outside [0, 1] */
 static void smoothstep5(double s, double *v, double *dv)
@@ -106,14 +107,14 @@ static void pv(const double *p, double t, double *o)
     o[0] = en; o[1] = ee; o[2] = ed;
     if (t < p[P_T4] || !(p[P_LAND] != 0.0))
         return;
-    const double dz = (p[P_GROUND] + LAND_BELOW_M) - ed;
+    const double dz = (p[P_GROUND] + p[P_LAND_BELOW]) - ed;
     if (t >= p[P_T5]) {
-        const double x = (t - p[P_T5]) / CRAWL_RAMP_S;
+        const double x = (t - p[P_T5]) / p[P_CRAWL_RAMP];
         double s, ds;
         smoothstep5(x, &s, &ds);
         const double rise = x < 1.0 ? pow(x, 4.0) * ((2.5 - 3.0 * x) + x * x) : x - 0.5;
-        o[2] = (ed + dz) + (LAND_CRAWL_M_S * CRAWL_RAMP_S) * rise;
-        o[5] = LAND_CRAWL_M_S * s;
+        o[2] = (ed + dz) + (p[P_CRAWL] * p[P_CRAWL_RAMP]) * rise;
+        o[5] = p[P_CRAWL] * s;
         return;
     }
     const double tl = p[P_TLAND];

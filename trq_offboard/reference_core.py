@@ -27,7 +27,8 @@ FLAGS = ("-ffp-contract=off", "-fno-fast-math", "-fno-builtin", "-lm")
 PARAMS = ("t0", "t1", "t2", "t3", "t4", "t5", "t_takeoff", "t_land",
           "start_n", "start_e", "start_d", "hover_n", "hover_e", "hover_d",
           "end_n", "end_e", "end_d", "ground", "w", "T", "r", "full_ramp", "phi_end",
-          "radius", "helix_climb", "step_n", "step_e", "step_d", "duration", "kind", "land")
+          "radius", "helix_climb", "step_n", "step_e", "step_d", "duration", "kind", "land",
+          "land_below", "crawl", "crawl_ramp")
 KINDS = ("hover", "step", "circle", "helix", "figure8")
 
 
