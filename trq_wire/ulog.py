@@ -45,6 +45,7 @@ KINDS = "fis"                  # float, integer (or nan), string
 _HEADER = struct.Struct("<HB")                 # a message's size (after this header) and type
 _FLAGS = struct.Struct("<8B8B3Q")             # compat, incompat flags, appended offsets
 MSG_ID = 0
+_DATA, _FORMAT = ord("D"), ord("F")            # a data and a format message's type
 
 
 def _message(kind: str, payload: bytes) -> bytes:
@@ -60,11 +61,11 @@ def _info(key: str, value: str) -> bytes:
     return _message("I", bytes((len(type_key),)) + type_key + data)
 
 
-def _field_name(column: str) -> str:
-    if not column or not all(c.isalnum() or c == "_" for c in column) or column == "timestamp":
-        raise ValueError(f"column {column!r}: a ULog field is letters, digits and '_' "
+def _field_name(name: str, what: str = "column") -> str:
+    if not name or not all(c.isalnum() or c == "_" for c in name) or name == "timestamp":
+        raise ValueError(f"{what} {name!r}: a ULog name is letters, digits and '_' "
                          "(and not 'timestamp', the topic's own)")
-    return column
+    return name
 
 
 class UlogLog(FlushedFile):
@@ -92,7 +93,7 @@ class UlogLog(FlushedFile):
                               + "".join(f"double {c};" for c in columns)).encode("ascii")),
                _info("sys_name", sys_name), _info("trq_kinds", kinds)]
         for key, value in meta.items():
-            out.append(_info(f"trq_meta:{_field_name(str(key))}", str(value)))
+            out.append(_info(f"trq_meta:{_field_name(str(key), 'meta key')}", str(value)))
         out.append(_message("A", struct.pack("<BH", 0, MSG_ID) + name.encode("ascii")))
         super().__init__(path, "wb", flush_every)       # every definition checked first
         self._f.write(b"".join(out))
@@ -111,7 +112,7 @@ class UlogLog(FlushedFile):
         their indices)."""
         for i in self._strings:
             row[i] = self._index(i, row[i])
-        self._put(self._row.pack(self._size, 0x44, MSG_ID, int(row[self._time]), *row))
+        self._put(self._row.pack(self._size, _DATA, MSG_ID, int(row[self._time]), *row))
 
 
 def _int_or_nan(v: float):
@@ -197,11 +198,11 @@ class LogTail:
             if end > n:
                 break                                  # a message still being written
             body = data[i + _HEADER.size:end]
-            if kind == ord("F") and self._columns is None:
+            if kind == _FORMAT and self._columns is None:
                 fields = body.decode("ascii").split(":", 1)[1].strip(";").split(";")
                 self._columns = [f.split(" ", 1)[1] for f in fields[1:]]
                 self._row = struct.Struct(f"<HQ{len(self._columns)}d")
-            elif kind == ord("D") and self._row is not None and size == self._row.size:
+            elif kind == _DATA and self._row is not None and size == self._row.size:
                 values = self._row.unpack(body)[2:]
                 self._last = dict(zip(self._columns, values))
             i = end

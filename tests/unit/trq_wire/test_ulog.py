@@ -93,7 +93,7 @@ def test_bad_definitions_are_refused_by_name(tmp_path):
         UlogLog(tmp_path / "b.ulg", COLUMNS, KINDS, META, timestamp="phase")
     with pytest.raises(ValueError, match="'timestamp'"):
         UlogLog(tmp_path / "b.ulg", ["timestamp"], "i", META, timestamp="timestamp")
-    with pytest.raises(ValueError, match="'solver name'"):
+    with pytest.raises(ValueError, match="meta key 'solver name'"):
         UlogLog(tmp_path / "b.ulg", COLUMNS, KINDS, {"solver name": 1}, timestamp="stamp_us")
     assert not (tmp_path / "b.ulg").exists()             # refused before anything is written
 
