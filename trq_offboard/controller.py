@@ -369,7 +369,7 @@ class Controller:
             self.reset(t_s, state, applied)
         # 1. the state estimate in
         x = state.as_vector()
-        if not np.all(np.isfinite(x)):
+        if not np.isfinite(x).all():            # (the methods: no NumPy wrapper a period)
             return self._emergency(t_s, "non-finite state", c0)
         # the input that acted since the last step: the previous command, or what the vehicle
         # reports it produced (applied_input in the controller file)
@@ -423,8 +423,8 @@ class Controller:
         u_plan, x_plan, info = self.solver.solve(x0, x_ref, d, u_applied, guess,
                                                  y0=y_act if self._act_states else None)
         # 7. the command
-        if info.status is SolveStatus.OK and np.all(np.isfinite(u_plan)) \
-                and np.all(np.isfinite(x_plan)):
+        if info.status is SolveStatus.OK and np.isfinite(u_plan).all() \
+                and np.isfinite(x_plan).all():
             self._plan, self._plan_t = (u_plan, x_plan), t_act
             u, source = self._command_of_plan(u_plan[0]), CommandSource.NMPC
         else:

@@ -269,7 +269,7 @@ class RtiSolver(Solver):
         a_prev = np.asarray(u_prev, float)[0:4] if o.tilting else None
         if o.n_lag and y0 is None:
             y0 = u_prev
-        w = np.clip(o.pack(guess[1], guess[0], a_prev, y0), o.lbw, o.ubw)
+        w = o.pack(guess[1], guess[0], a_prev, y0).clip(o.lbw, o.ubw)     # np.clip's ufunc
         x_ref = np.asarray(x_ref, float).reshape(self._N + 1, self._nx)
         d = np.asarray(d, float).reshape(6)
         if self.qp_interface == "direct":
@@ -307,8 +307,8 @@ class RtiSolver(Solver):
         try:
             it = 0
             P = self._prepared
-            if P is not None and np.max(np.abs(np.asarray(x0, float).reshape(12)
-                                               - P.w[self._x_pos[0]])) > 2.0:
+            if P is not None and np.abs(np.asarray(x0, float).reshape(12)
+                                        - P.w[self._x_pos[0]]).max() > 2.0:
                 self._prepared = None      # stale: the state is far from the linearisation
             for it in range(1, self.max_iterations + 1):
                 if self._prepared is None or it > 1:
