@@ -48,6 +48,11 @@ MSG_ID = 0
 _DATA, _FORMAT = ord("D"), ord("F")            # a data and a format message's type
 
 
+def _data_layout(n_columns: int) -> str:
+    """A data message's payload: the topic's id, its timestamp, a double per column."""
+    return f"HQ{n_columns}d"
+
+
 def _message(kind: str, payload: bytes) -> bytes:
     if len(payload) > 0xFFFF:
         raise ValueError(f"a ULog message holds at most 65535 bytes, not {len(payload)}")
@@ -85,7 +90,7 @@ class UlogLog(FlushedFile):
         self._strings = [i for i, k in enumerate(kinds) if k == "s"]
         self._columns = columns
         self._enums: list[dict[str, int]] = [{} for _ in columns]
-        self._row = struct.Struct(f"<HBHQ{len(columns)}d")
+        self._row = struct.Struct("<HB" + _data_layout(len(columns)))    # with its header
         self._size = self._row.size - _HEADER.size
         out = [MAGIC, bytes((VERSION,)), struct.pack("<Q", 0),
                _message("B", _FLAGS.pack(*([0] * 16), 0, 0, 0)),
@@ -192,6 +197,7 @@ class LogTail:
         except OSError:
             return self._last
         i, n = 0, len(data)
+        newest = None                                  # only the newest row is unpacked
         while i + _HEADER.size <= n:
             size, kind = _HEADER.unpack_from(data, i)
             end = i + _HEADER.size + size
@@ -201,10 +207,11 @@ class LogTail:
             if kind == _FORMAT and self._columns is None:
                 fields = body.decode("ascii").split(":", 1)[1].strip(";").split(";")
                 self._columns = [f.split(" ", 1)[1] for f in fields[1:]]
-                self._row = struct.Struct(f"<HQ{len(self._columns)}d")
+                self._row = struct.Struct("<" + _data_layout(len(self._columns)))
             elif kind == _DATA and self._row is not None and size == self._row.size:
-                values = self._row.unpack(body)[2:]
-                self._last = dict(zip(self._columns, values))
+                newest = body
             i = end
         self._offset += i
+        if newest is not None:
+            self._last = dict(zip(self._columns, self._row.unpack(newest)[2:]))
         return self._last
