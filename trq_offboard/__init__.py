@@ -17,6 +17,8 @@ cache) comes from trq_wire.
     predictor       the delay predictor: the commands sent, the actuators' walk, the state when
                     the command acts, the observer's b0 under the commands in effect
     effectiveness   the motor effectiveness observer and its composition with the model
+    observer_period  the observers' regular period (ESO, rate observer, effectiveness) as one
+                    compiled call (their own methods stay the reference)
     lost_motor      a whole motor lost: its detector and the failed configuration
     nmpc/           the OCP and its solvers (ocp, base, rti, nlp, factory; hpipm, hpipm_fetch,
                     feedback, cache)

@@ -67,6 +67,7 @@ from trq_offboard.model.dynamics import NumpyFunction
 from trq_offboard.nmpc.base import Solver
 from trq_offboard.nmpc.cache import compiled_many
 from trq_offboard.nmpc.factory import make_solver
+from trq_offboard.observer_period import ObserverPeriod
 from trq_offboard.predictor import DelayPredictor
 from trq_offboard.rate_observer import RateObserver
 from trq_offboard.records import (
@@ -200,11 +201,16 @@ class Controller:
                                         lagged, self._last_u)
         self.motors = (MotorEffectiveness(effectiveness, self.model, self.predictor)
                        if effectiveness is not None else None)
+        # the observers' regular period as one compiled call (observer_period.py), with codegen
+        self._period = (ObserverPeriod.of(self.eso, self.rate_observer, self.motors)
+                        if cfg.solver.codegen == "auto" else None)
         # their functions, compiled (nmpc/cache.py; in parallel, one per core), once per process
         # for a configuration (they are functions of the file and `lagged` alone)
         def build() -> dict:
             fns = {**self.predictor.functions(),
-                   **(self.motors.functions() if self.motors is not None else {})}
+                   **(self.motors.functions() if self.motors is not None else {}),
+                   **({"observer_period": self._period.function()}
+                      if self._period is not None else {})}
             return {name: fn for name, (fn, _) in
                     zip(fns, compiled_many(list(fns.values()), cfg.solver.codegen == "auto"))}
 
@@ -213,6 +219,8 @@ class Controller:
         self.predictor.bind(built)
         if self.motors is not None:
             self.motors.bind(built)
+        if self._period is not None:
+            self._period.bind(built["observer_period"])
         # the NMPC's stage carries the actuators' lag states (actuator_states): its plan starts
         # from the actuators' outputs predicted for t + delay (self._y_act)
         self._act_states = bool(self.solver.ocp.n_lag)
@@ -385,13 +393,18 @@ class Controller:
         b0 = self._b0(x, t_s, applied, u_applied, path) if t_s > self._last_t else None
         if self.fused is not None and sensors is not None:
             self._health = self._fuse(x, t_s, sensors, b0)
-        d, d_obs, out_err = self._observe(x, t_s, b0)
+        d, d_obs, out_err, motored = self._observe(x, t_s, b0, y_now)
         self._eso_d = d_obs
         c1 = clock()
-        # 4. the motors' effectiveness
+        # 4. the motors' effectiveness (its observer already advanced where `_observe` took the
+        # composed period)
         if self.motors is not None:
-            d, path, y_act, self._scale = self.motors.step(x, d, y_now, t_prev, t_s, t_act,
-                                                           self.solver.ocp)
+            if motored:
+                d, path, y_act, self._scale = self.motors.after_period(y_now, d, t_s, t_act,
+                                                                       self.solver.ocp)
+            else:
+                d, path, y_act, self._scale = self.motors.step(x, d, y_now, t_prev, t_s, t_act,
+                                                               self.solver.ocp)
             # the fused filter's: the motors' share of the observer's d, bounded as the observer
             # bounds d: at a spool-up on the ground (d is the ground's reaction) the deficit it
             # explains is not a motor's, and unbounded it would throw the filter off
@@ -578,18 +591,29 @@ class Controller:
         if self.rate_observer is not None:
             self.rate_observer.reset(x[9:12])
 
-    def _observe(self, x: np.ndarray, t_s: float, b0: np.ndarray | None
-                 ) -> tuple[np.ndarray, np.ndarray, float]:
+    def _observe(self, x: np.ndarray, t_s: float, b0: np.ndarray | None,
+                 y_nom: np.ndarray | None = None
+                 ) -> tuple[np.ndarray, np.ndarray, float, bool]:
         """The observer advanced from the last step to t_s with b0, the model's accelerations
         under the input that acted (`_b0`; None: no time has passed): (d, the observer's own
-        estimate (logged), its output error); zeros without an observer."""
+        estimate (logged), its output error, whether the motors' observer was advanced too);
+        zeros without an observer. A regular period is one compiled call of the observers
+        composed (observer_period.py), the motors' observer included (y_nom: the actuators'
+        healthy outputs at t_s, the walk's), and d then less the motors' share."""
         if self.eso is None:
             d = np.zeros(6)
-            return d, d, 0.0
+            return d, d, 0.0, False
         if self.landed:              # held at the measured state, no disturbance (`landed`)
             self._reset_observers(x)
             d = np.zeros(6)
-            return d, d, 0.0
+            return d, d, 0.0, False
+        if self._period is not None and t_s > self._last_t and b0 is not None:
+            segs = (self.predictor.in_effect(self._last_t, t_s) if self.motors is not None
+                    else None)
+            got = self._period.run(x, b0, t_s - self._last_t, y_nom, segs)
+            if got is not None:
+                d_obs, d, out_err = got
+                return d, d_obs, out_err, self.motors is not None
         y = self.eso.measurement(x)
         ro = self.rate_observer
         if t_s > self._last_t and b0 is not None:
@@ -601,7 +625,7 @@ class Controller:
         d = self.eso.disturbance(x[6:9])
         if ro is not None:
             d[3:6] = ro.disturbance
-        return d, d, self.eso.output_error(y)
+        return d, d, self.eso.output_error(y), False
 
     def _b0(self, x: np.ndarray, t_s: float, applied: ActuatorCommand | None,
             u_applied: np.ndarray, path) -> np.ndarray:

@@ -277,6 +277,11 @@ class MotorEffectiveness:
         share = self.predictor.b0(x, y_true) - self.predictor.b0(x, y_nom)
         return self._end(e, y_nom, d - share[[0, 1, 2, 6, 7, 8]], t1, t_act, ocp)
 
+    def after_period(self, y_nom, d, t1, t_act, ocp):
+        """`step`'s result where its observer was advanced outside (the controller's composed
+        period, trq_offboard/observer_period.py) and d is already less the motors' share."""
+        return self._end(self.observer.e, y_nom, d, t1, t_act, ocp)
+
     def _end(self, e, y_nom, d, t1, t_act, ocp):
         """`step`'s result once the observer has its e and outputs: the plan's throttle scale
         (set as `ocp`'s bounds), and the predictor's walk from the estimated outputs."""

@@ -73,8 +73,13 @@ class StepTimes:
     """CPU time (ns, of the calling thread: an injected clock, Controller's cpu_ns) of the parts
     of one Controller.step, in the order they run; their sum is the step's. A measurement: it
     never changes what is flown."""
-    observer_ns: int = 0               # the actuators' walk, the ESO's b0 and update, its d
+    observer_ns: int = 0               # the actuators' walk, the ESO's b0 and update, its d;
+                                       # in a regular period also the motor effectiveness
+                                       # observer and d less its share (one compiled call:
+                                       # trq_offboard/observer_period.py)
     effectiveness_ns: int = 0          # the motor effectiveness observer and d less its share
+                                       # (in a regular period: the plan's throttle scale and
+                                       # the walk from the estimated outputs)
     predictor_ns: int = 0              # the delay predictor (0 when it does not run)
     feedback_ns: int = 0               # reference, warm start, the solver's feedback, the command
 

@@ -411,25 +411,37 @@ class _ScaledHoverSolver(_HoverSolver):
         self.ocp = self._Ocp()
 
 
-def test_compiled_effective_step_is_the_step_by_step_one():
-    """The effectiveness observer's period as one compiled call (deficit, observer piece, the
-    motors' share of d) against the same period call by call: the same estimates, outputs, d
-    and throttle bounds after every step of a flight with disturbances, regular periods, late
-    and lost samples (those take the call-by-call path in both)."""
+@pytest.mark.parametrize("path", ["composed", "effective", "composed without motors"])
+def test_compiled_observer_periods_are_the_call_by_call_ones(path):
+    """The observers' period in one compiled call against the same period call by call: the
+    ESO, the rate observer and the motors' effectiveness observer (deficit, observer piece, the
+    motors' share of d) composed (observer_period.py), or the effectiveness observer's period
+    alone as one call (`effective`); the same estimates, outputs, d, output error and throttle
+    bounds after every step of a flight with disturbances, regular periods, late and lost
+    samples (those take the call-by-call path in both)."""
     cfg = load_controller(CTRL)
     probe = Controller(dataclasses.replace(cfg, effectiveness=None),
                        solver=_HoverSolver(np.zeros(8), cfg.horizon_steps))
+    if path == "composed without motors":
+        cfg = dataclasses.replace(cfg, effectiveness=None)
     ctls = [Controller(cfg, solver=_ScaledHoverSolver(probe.u_trim, cfg.horizon_steps))
             for _ in range(2)]
-    ctls[1].motors._effective_fn = None                 # call by call
+    a, b = ctls
+    assert a.rate_observer is not None and a._period is not None
+    b._period = None                                    # call by call
+    if b.motors is not None:
+        b.motors._effective_fn = None
+    if path == "effective":
+        a._period = None
     calls = [0]
-    fused = ctls[0].motors._effective_fn
-    real = fused.outputs
+    fn = a._period._fn if a._period is not None else a.motors._effective_fn
+    name = "evaluate" if a._period is not None else "outputs"
+    real = getattr(fn, name)
 
     def counted(*args):
         calls[0] += 1
         return real(*args)
-    fused.outputs = counted
+    setattr(fn, name, counted)
     rng = np.random.default_rng(23)
     x = np.zeros(12)
     x[2] = -2.0
@@ -443,13 +455,21 @@ def test_compiled_effective_step_is_the_step_by_step_one():
         x[9:12] = rng.normal(size=3) * 0.05
         s = StateEstimate.from_vector(x)
         out = [c.step(t, s, None, _const_reference()) for c in ctls]
-        a, b = ctls
         assert out[0][0] == out[1][0], k
+        ia, ib = (dataclasses.replace(o[1], cpu=None) for o in out)
+        assert ia == ib, k                   # d, the output error, the effectiveness
         assert np.array_equal(a._last_d, b._last_d), k
+        assert np.array_equal(a._eso_d, b._eso_d), k
+        assert np.array_equal(a.eso.z, b.eso.z) and np.array_equal(a.eso._y_prev, b.eso._y_prev)
+        assert np.array_equal(a.rate_observer.s, b.rate_observer.s), k
+        assert np.array_equal(a.rate_observer._y_prev, b.rate_observer._y_prev), k
+        if a.motors is None:
+            continue
         for name in ("e", "y", "_y_meas_prev"):
             assert np.array_equal(getattr(a.motors.observer, name),
                                   getattr(b.motors.observer, name)), (k, name)
         assert np.array_equal(a._scale, b._scale)
         assert np.array_equal(a.solver.ocp.scales[-1], b.solver.ocp.scales[-1])
     assert calls[0] > 150                        # the compiled call served most periods
-    assert np.min(ctls[0].motors.observer.e) < 1.0  # and the deficit was read
+    if a.motors is not None:
+        assert np.min(a.motors.observer.e) < 1.0  # and the deficit was read

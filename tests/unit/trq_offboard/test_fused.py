@@ -311,6 +311,7 @@ def test_the_motors_share_handed_to_the_filter_is_bounded_as_the_observers_d():
     cfg = load_controller(ROOT / "params" / "controller" / "trq_nmpc_eso_fused.yaml")
     ctl = Controller(cfg, solver=Hold(cfg.horizon_steps))
     ctl.solver.u = ctl.u_trim
+    ctl._period = None               # the call-by-call period, whose motors.step is patched
     real = ctl.motors.step
     huge = np.array([-300.0, 400.0, -28000.0, 0.0, 0.0, 0.0])
 
