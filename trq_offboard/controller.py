@@ -565,6 +565,8 @@ class Controller:
         """The command of a plan's row: the effective throttles divided by the motors' scale;
         a rotor flown as lost (scale 0) is commanded idle."""
         scale = self._scale
+        if scale.min() > 0.0:             # no rotor flown as lost: the same quotient
+            return np.asarray(u_row, float) / scale
         dead = scale <= 0.0
         u = np.asarray(u_row, float) / np.where(dead, 1.0, scale)
         u[dead] = self._u_lo[dead]

@@ -326,12 +326,14 @@ class DelayPredictor:
         sent = self.sent
         if not len(sent):
             return [(t0, t1, self.last_u)] if t1 > t0 else []
+        if t1 <= t0:                    # an empty interval (the walk after t1 with no delay):
+            # the oldest command's piece before it acts, of no length, if it acts after t0
+            s0 = float(sent.times[0]) + self.applied_delay_s
+            return [(t0, min(s0, t1), sent.commands[0])] if s0 > t0 else []
         starts, cmds = sent.times + self.applied_delay_s, sent.commands
         segs = []
         if starts[0] > t0:
             segs.append((t0, min(float(starts[0]), t1), cmds[0]))
-        if t1 <= t0:                    # an empty interval: no command's piece is in it
-            return segs
         if float(starts.max()) <= t0:   # every command acts from t0 or before: the newest,
             return [(t0, t1, cmds[-1])]  # from max(start, t0) = t0 to min(inf, t1) = t1
         # each command from its start to the next one's (the last one on), within [t0, t1]

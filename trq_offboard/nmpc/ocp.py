@@ -147,6 +147,7 @@ class Ocp:
     n_lag: int = 0                     # actuator lag states, the last n_lag rows of s_k
     lag_gain: np.ndarray | None = None  # (n_lag,) 1 - exp(-h/T) (scaled units, as v)
     _c_bounds: tuple | None = None     # set_throttle_scale: (indices, healthy lbw, healthy ubw)
+    _c_views: tuple | None = None      # and the (lbw, ubw) views of those indices
 
     @staticmethod
     def build(cfg: ControllerConfig, model: PredictionModel) -> "Ocp":
@@ -216,9 +217,18 @@ class Ocp:
             cols = slice(4, 8) if self.tilting else slice(0, 4)
             idx = self.v_index[:, cols]
             self._c_bounds = (idx, self.lbw[idx].copy(), self.ubw[idx].copy())
+            if self.stage_major():
+                # the same bounds as (N, 4) views of lbw and ubw (w stage by stage): a
+                # strided copy each period instead of a fancy-indexed assignment
+                c = slice(self.ns + cols.start, self.ns + cols.stop)
+                self._c_views = (self.stages(self.lbw)[0][:, c], self.stages(self.ubw)[0][:, c])
         idx, lo, hi = self._c_bounds
-        self.lbw[idx] = lo * e
-        self.ubw[idx] = hi * e
+        if self._c_views is not None:
+            np.multiply(lo, e, out=self._c_views[0])
+            np.multiply(hi, e, out=self._c_views[1])
+        else:
+            self.lbw[idx] = lo * e
+            self.ubw[idx] = hi * e
 
     # --- packing (all NumPy) ------------------------------------------------------------------
     def params(self, x_ref, u_trim, d) -> np.ndarray:

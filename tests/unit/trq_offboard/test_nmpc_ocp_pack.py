@@ -73,3 +73,20 @@ def test_pack_and_unpack_are_their_index_specification(name, actuator_states):
         w_any = rng.normal(size=w.size)                # any w, not only a packed one
         for got, spec in zip(o.unpack(w_any), _unpack_spec(o, w_any)):
             assert got.shape == spec.shape and got.tobytes() == spec.tobytes()
+
+
+@pytest.mark.parametrize("name,actuator_states", [
+    ("trq_nmpc_eso", "off"), ("trq_nmpc_eso", "on"), ("quad_nmpc", "off")])
+def test_throttle_scale_sets_the_throttles_bounds_by_index(name, actuator_states):
+    """set_throttle_scale through the stage views: every stage's throttle bounds scaled by e
+    and nothing else moved, as the index arrays say, after one scale and after another."""
+    o, _ = _ocp(name, actuator_states)
+    lo0, hi0 = o.lbw.copy(), o.ubw.copy()
+    idx = o.v_index[:, 4:8] if o.tilting else o.v_index[:, 0:4]
+    for e in (np.array([0.5, 1.0, 0.75, 0.25]), np.array([1.0, 0.9, 1.0, 0.3])):
+        o.set_throttle_scale(e)
+        want_lo, want_hi = lo0.copy(), hi0.copy()
+        want_lo[idx] = lo0[idx] * e
+        want_hi[idx] = hi0[idx] * e
+        assert np.array_equal(o.lbw, want_lo) and np.array_equal(o.ubw, want_hi)
+    assert o._c_views is not None                  # the views served (w stage by stage)
