@@ -308,7 +308,23 @@ def anchor_table(results: list[dict], anchors: dict[str, dict],
             lines.append(f"\nthe controller daemon's CPU per period from outside ({name}) / "
                          f"{a['name']}'s step p50 (target <= 1.5): "
                          f"{fig['controller_cpu_ms'] / a['total_median_ms']:.2f}")
+            ratios = paired_to_anchor(fig, a)
+            if len(ratios) > 1:
+                lines.append(f"  paired run by run (the flight and the replay of one run): "
+                             f"median {float(np.median(ratios)):.2f}; runs "
+                             f"{', '.join(f'{r:.2f}' for r in ratios)}")
     return "\n".join(lines)
+
+
+def paired_to_anchor(daemons: dict, anchor: dict) -> list[float]:
+    """The controller's CPU per period over acados' step p50, run k's flight against run k's
+    replay (the two a few minutes apart, where the medians of all runs can be a machine's
+    slow spell apart); [] when either lacks its runs' figures or their counts differ."""
+    ours = daemons.get("controller_cpu_runs_ms", [])
+    theirs = anchor.get("total_median_runs_ms", [])
+    if not ours or len(ours) != len(theirs):
+        return []
+    return [c / t for c, t in zip(ours, theirs)]
 
 
 def combine(runs: list[dict]) -> dict:
@@ -378,6 +394,7 @@ def _daemons_summary(runs: list[dict]) -> dict:
     ratio = [r["controller_cpu_ms"] / (r["parts"]["solve (wall)"]["mean_ms"]
                                         + r["parts"]["prepare"]["mean_ms"]) for r in runs]
     return {"runs": len(runs), "parts": parts, "ratio_to_solver": med(ratio),
+            "controller_cpu_runs_ms": [r["controller_cpu_ms"] for r in runs],
             **{k: med([r[k] for r in runs])
                for k in ("controller_cpu_ms", "vehicle_cpu_ms", "realtime_factor")}}
 
@@ -593,7 +610,9 @@ def main(argv=None) -> int:
               f"{', '.join(f'{r:.2f}' for r in ratios)}); {args.controller} "
               f"{daemons['controller_cpu_ms']:.3f} ms, {args.against} "
               f"{against['controller_cpu_ms']:.3f} ms")
-    anchors = {m: combine(anchor_runs[m]) for m in anchored}
+    anchors = {m: {**combine(anchor_runs[m]),
+                   "total_median_runs_ms": [a["total_median_ms"] for a in anchor_runs[m]]}
+               for m in anchored}
     if anchors:
         print(f"\nacados' real-time iteration on the same OCP, replaying our flights (median of "
               f"{args.repeat} run(s); times around acados' calls, wall unless said):")

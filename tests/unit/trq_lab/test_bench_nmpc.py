@@ -58,6 +58,27 @@ def test_the_anchor_table_sets_both_daemon_controllers_against_acados():
                              controller="trq_nmpc_eso_fused")
     assert "(trq_nmpc_eso_fused) / acados exact's step p50 (target <= 1.5): 1.60" in text
     assert "(trq_nmpc_eso) / acados exact's step p50 (target <= 1.5): 1.20" in text
+    assert "paired" not in text                  # without the runs' figures
+
+
+def test_the_target_is_also_paired_run_by_run_against_the_replay():
+    """Each run's flight over the same run's replay, beside the ratio of the medians (which
+    may set one run's fast spell against another's slow one)."""
+    mode = {"name": "rti-exact", "prep_median_ms": 1.0, "median_ms": 1.0, "total_median_ms": 2.0,
+            "total_p99_ms": 3.0, "period_cpu_median_ms": 2.5}
+    anchor = {"name": "acados exact", "hessian": "exact", "prep_median_ms": 0.5,
+              "feedback_median_ms": 0.5, "feedback_p99_ms": 0.8, "total_median_ms": 1.0,
+              "total_p99_ms": 1.5, "total_cpu_median_ms": 1.0, "internal_total_median_ms": 0.9,
+              "qp_iterations_median": 5, "qp_iterations_max": 9, "failures": 0, "build_s": 1.0,
+              "total_median_runs_ms": [1.0, 2.0, 0.5]}
+    daemons = {"controller_cpu_ms": 1.6, "controller_cpu_runs_ms": [1.5, 2.0, 1.0]}
+    assert nmpc.paired_to_anchor(daemons, anchor) == [1.5, 1.0, 2.0]
+    text = nmpc.anchor_table([mode], {"rti-exact": anchor}, daemons,
+                             controller="trq_nmpc_eso_fused")
+    assert "(trq_nmpc_eso_fused) / acados exact's step p50 (target <= 1.5): 1.60" in text
+    assert "paired run by run (the flight and the replay of one run): median 1.50; " \
+           "runs 1.50, 1.00, 2.00" in text
+    assert nmpc.paired_to_anchor(daemons, {**anchor, "total_median_runs_ms": [1.0]}) == []
 
 
 @pytest.mark.parametrize("argv, message", [
