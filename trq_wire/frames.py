@@ -113,7 +113,7 @@ _UNPACKERS = {cls.id: _Unpacker(cls) for cls in HOT}
 _Check = namedtuple("_Check", "crc_extra size name")
 _CHECKS = {i: _Check(cls.crc_extra, cls.unpacker.size, cls.msgname)
            for i, cls in mavlink.mavlink_map.items()}
-_new_header = mavlink.MAVLink_header
+_Header = mavlink.MAVLink_header
 _unpack_header = HEADER.unpack_from
 
 
@@ -181,7 +181,13 @@ def _decode_at(data, i: int, n: int, wanted=None):
     fields.update(zip(u.scalar_names, u.scalars(values)))
     for name, a, b in u.arrays:
         fields[name] = list(values[a:b])
-    fields["_header"] = _new_header(u.cls.id, flags, compat, mlen, seq, system, component)
+    # pymavlink's MAVLink_header with its attributes in its __init__'s order, without the
+    # Python call
+    header = object.__new__(_Header)
+    header.__dict__ = {"mlen": mlen, "seq": seq, "srcSystem": system,
+                       "srcComponent": component, "msgId": u.cls.id,
+                       "incompat_flags": flags, "compat_flags": compat}
+    fields["_header"] = header
     fields["_msgbuf"] = msgbuf
     fields["_payload"] = msgbuf[6:body]     # as pymavlink's decode sets it
     fields["_crc"] = msgbuf[body] | msgbuf[body + 1] << 8

@@ -87,6 +87,9 @@ def read_csv_log(path: Path) -> tuple[dict[str, str], list[str], "object"]:
     return meta, columns, data
 
 
+_pack_stamp = struct.Struct(">Q").pack
+
+
 class Tlog(FlushedFile):
     """pymavlink's telemetry log: each message as an 8-byte big-endian UNIX time in
     microseconds followed by the raw MAVLink frame (readable by mavlogdump.py)."""
@@ -98,7 +101,7 @@ class Tlog(FlushedFile):
 
     def write(self, unix_us: int, frame: bytes) -> None:
         """A frame with the UNIX time (us) it was sent or received."""
-        self._put(struct.pack(">Q", unix_us) + frame)
+        self._put(_pack_stamp(unix_us) + frame)
 
     def __call__(self, frame: bytes) -> None:
         """A frame stamped with the log's clock now (the wall clock unless given another)."""
@@ -128,8 +131,9 @@ class VehicleTimeline:
         self._latest = 0
 
     def heard(self, frame: bytes) -> None:
-        if len(frame) < 12 or frame[0] != MAGIC_V2 or (frame[5], frame[6]) != VEHICLE \
-                or frame[7] | frame[8] << 8 | frame[9] << 16 != ODOMETRY_ID:
+        # the message id first: most frames are not ODOMETRY
+        if len(frame) < 12 or frame[7] | frame[8] << 8 | frame[9] << 16 != ODOMETRY_ID \
+                or frame[0] != MAGIC_V2 or (frame[5], frame[6]) != VEHICLE:
             return
         # time_usec leads ODOMETRY's payload; MAVLink 2 drops trailing zero bytes
         stamp = struct.unpack_from("<Q", frame[10:10 + min(frame[1], 8)].ljust(8, b"\0"))[0]

@@ -36,17 +36,16 @@ def parse_odometry(msg) -> Odometry | None:
     if msg.frame_id != mavlink.MAV_FRAME_LOCAL_NED \
             or msg.child_frame_id != mavlink.MAV_FRAME_LOCAL_NED:
         return None
-    values = (msg.x, msg.y, msg.z, msg.vx, msg.vy, msg.vz, *msg.q, msg.rollspeed,
-              msg.pitchspeed, msg.yawspeed)
-    if not all(math.isfinite(v) for v in values):
+    pos, vel = (msg.x, msg.y, msg.z), (msg.vx, msg.vy, msg.vz)
+    rates = (msg.rollspeed, msg.pitchspeed, msg.yawspeed)
+    q0, q1, q2, q3 = msg.q
+    if not all(map(math.isfinite, (*pos, *vel, q0, q1, q2, q3, *rates))):
         return None
-    n = math.sqrt(sum(v * v for v in msg.q))
+    n = math.sqrt(0 + q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)     # sum()'s order, from 0
     if not 0.9 < n < 1.1:
         return None
-    q = [v / n for v in msg.q]
     return Odometry(int(msg.time_usec), StateEstimate(
-        (msg.x, msg.y, msg.z), (msg.vx, msg.vy, msg.vz), quat_to_euler(*q),
-        (msg.rollspeed, msg.pitchspeed, msg.yawspeed)))
+        pos, vel, quat_to_euler(q0 / n, q1 / n, q2 / n, q3 / n), rates))
 
 
 def parse_actuator_outputs(msg, tilt_limit_rad: float) -> ActuatorCommand | None:
@@ -121,13 +120,13 @@ def parse_highres_accel(msg) -> tuple[int, tuple[float, float, float]] | None:
     if (msg.fields_updated & ACCEL_UPDATED) != ACCEL_UPDATED:
         return None
     acc = (msg.xacc, msg.yacc, msg.zacc)
-    return (int(msg.time_usec), acc) if all(math.isfinite(v) for v in acc) else None
+    return (int(msg.time_usec), acc) if all(map(math.isfinite, acc)) else None
 
 
 def parse_mocap(msg) -> tuple[int, tuple[float, float, float]] | None:
     """ATT_POS_MOCAP's (time of validity us, position m NED), None if not finite."""
     pos = (msg.x, msg.y, msg.z)
-    return (int(msg.time_usec), pos) if all(math.isfinite(v) for v in pos) else None
+    return (int(msg.time_usec), pos) if all(map(math.isfinite, pos)) else None
 
 
 def vision_odometry(mocap_msg):
