@@ -193,6 +193,15 @@ class ExtendedStateObserver:
             return np.broadcast_to(e, (3, 6))
         return fal(e, self._acol, self.delta)
 
+    def substeps_for(self, dt_s: float) -> int:
+        """The Euler substeps `update` takes over a gap of dt_s: each at most a control period
+        over `substeps`."""
+        return max(1, int(math.ceil(self.cfg.substeps * dt_s / self.dt - 1e-9)))
+
+    def takes_period(self, dt_s: float) -> bool:
+        """Whether `update` over dt_s is one call of the compiled period."""
+        return self._period_fn is not None and self.substeps_for(dt_s) == self.cfg.substeps
+
     def update(self, y: np.ndarray, b0: np.ndarray, dt_s: float | None = None) -> None:
         """Advance by dt_s (default one control period) to the measured output y (6,
         `measurement`), with b0 (6, `b0_of`) held. A longer gap (a lost or skipped sample) is
@@ -202,7 +211,7 @@ class ExtendedStateObserver:
         y = np.asarray(y, float)
         b0 = np.asarray(b0, float)
         dt = self.dt if dt_s is None else float(dt_s)
-        n = max(1, int(math.ceil(self.cfg.substeps * dt / self.dt - 1e-9)))
+        n = self.substeps_for(dt)
         if n == self.cfg.substeps and self._period_fn is not None:   # one control period
             self.z = self._period_fn(self.z, self._y_prev, y, b0, dt).reshape(3, 6)
             self._y_prev = y.copy()

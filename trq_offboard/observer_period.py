@@ -34,8 +34,6 @@ observers' own methods, which remain the reference. Pure: no clock, no I/O.
 
 from __future__ import annotations
 
-import math
-
 import casadi as ca
 import numpy as np
 
@@ -44,12 +42,6 @@ from trq_offboard.eso import ExtendedStateObserver
 from trq_offboard.rate_observer import RateObserver
 
 __all__ = ["ObserverPeriod"]
-
-
-def _regular(substeps: int, dt: float, period_s: float) -> bool:
-    """Whether a gap of dt takes an observer's compiled period: the substeps its `update`
-    would take (the same expression) are its `substeps`."""
-    return max(1, int(math.ceil(substeps * dt / period_s - 1e-9))) == substeps
 
 
 class ObserverPeriod:
@@ -63,8 +55,7 @@ class ObserverPeriod:
         self.eso, self.ro, self.motors = eso, ro, motors
         self._n_eso = 24
         self._n_ro = 15 if ro is not None else 0
-        self._n_mot = 12 if motors is not None else 0
-        self.n_mem = self._n_eso + self._n_ro + self._n_mot
+        self.n_mem = self._n_eso + self._n_ro + (12 if motors is not None else 0)
         self._nt = motors._nt if motors is not None else 0
         self._nu = motors.model.nu if motors is not None else 0
         self._fn = None
@@ -133,10 +124,8 @@ class ObserverPeriod:
         eso, ro, motors = self.eso, self.ro, self.motors
         # each observer as its own `update` would take the gap (its compiled period: a test
         # may take one's away to fly the NumPy path)
-        if self._fn is None or eso._period_fn is None \
-                or not _regular(eso.cfg.substeps, dt, eso.dt):
-            return None
-        if ro is not None and (ro._period_fn is None or not _regular(ro.substeps, dt, ro.dt)):
+        if self._fn is None or not eso.takes_period(dt) \
+                or (ro is not None and not ro.takes_period(dt)):
             return None
         p = self._p
         p[0] = dt

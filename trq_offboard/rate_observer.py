@@ -141,13 +141,22 @@ class RateObserver:
                             np.zeros(3) if disturbance is None else np.asarray(disturbance)])
         self._y_prev = y.copy()
 
+    def substeps_for(self, dt_s: float) -> int:
+        """The Euler substeps `update` takes over a gap of dt_s: each at most a control period
+        over `substeps`."""
+        return max(1, int(math.ceil(self.substeps * dt_s / self.dt - 1e-9)))
+
+    def takes_period(self, dt_s: float) -> bool:
+        """Whether `update` over dt_s is one call of the compiled period."""
+        return self._period_fn is not None and self.substeps_for(dt_s) == self.substeps
+
     def update(self, rates: np.ndarray, b0: np.ndarray, dt_s: float | None = None) -> None:
         """Advance by dt_s (default one control period) to the measured (filtered) rates,
         with the angular acceleration b0 (3) held."""
         y = np.asarray(rates, float)
         b0 = np.asarray(b0, float)
         dt = self.dt if dt_s is None else float(dt_s)
-        n = max(1, int(math.ceil(self.substeps * dt / self.dt - 1e-9)))
+        n = self.substeps_for(dt)
         if n == self.substeps and self._period_fn is not None:     # one control period
             self.s = self._period_fn(self.s, self._y_prev, y, b0, dt).reshape(4, 3)
             self._y_prev = y.copy()
