@@ -44,6 +44,11 @@ reference and d before its preparation; ours prepared with the previous ones and
 in its feedback (exactly for the reference, to first order for d). acados' multipliers stay its
 own (exact Hessian). Times: wall (time.perf_counter) and CPU (time.thread_time) around each
 acados call, and acados' own time_preparation / time_feedback.
+
+A `Replayer` builds acados once for a recording and makes as many passes through it as asked,
+each from acados' memory reset (the same sequence solved each time). `--serve` keeps one in a
+process and makes a pass on each request on stdin, its figures on stdout (`serve`): the bench's
+bracket of the daemons' flights (trq_lab/bench/nmpc.py).
 """
 
 from __future__ import annotations
@@ -60,8 +65,8 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["available", "build_ocp", "AcadosRti", "replay", "Recorder", "ANCHORED_MODES",
-           "REGULARIZE_METHODS", "check_regularize"]
+__all__ = ["available", "build_ocp", "AcadosRti", "replay", "Replayer", "serve", "Recorder",
+           "ANCHORED_MODES", "REGULARIZE_METHODS", "check_regularize"]
 
 # our benchmark modes with an acados counterpart: mode -> acados' hessian_approx
 ANCHORED_MODES = {"rti-gn": "gauss_newton", "rti-exact": "exact"}
@@ -431,36 +436,57 @@ class Recorder:
 
 # --- the replay ------------------------------------------------------------------------------------
 
-def replay(recording: Path, hessian: str, controller: str = "trq_nmpc_eso",
-           init: str = "shift", workdir: Path | None = None,
-           split_s: float | None = None, regularize: str = "NO_REGULARIZE",
-           reg_epsilon: float | None = None) -> dict:
-    """acados' RTI through a recorded flight of ours: per-step times and first commands against
-    ours (see the module's docstring). `split_s`: the first commands also compared apart before
-    and after this time of the flight (step k at k control periods; the bench's fault).
-    `regularize`, `reg_epsilon`: acados' Hessian regularisation (`build_ocp`)."""
-    import trq_params
+class Replayer:
+    """acados built once for a recorded flight, stepped through it pass after pass (`run`):
+    the one-shot replay (`replay`) makes one pass; the bench's bracketing server
+    (`serve`) one on each request, between the daemons' flights. Every pass after the
+    first starts from acados' memory reset (its iterates and the QP's to zero, as built), so
+    that each pass solves the same sequence."""
 
-    from trq_offboard.config import load_controller
-    from trq_offboard.model import PredictionModel
+    def __init__(self, recording: Path, hessian: str, controller: str = "trq_nmpc_eso",
+                 init: str = "shift", workdir: Path | None = None,
+                 regularize: str = "NO_REGULARIZE", reg_epsilon: float | None = None):
+        import trq_params
 
-    ok, why = available()
-    if not ok:
-        raise RuntimeError(why)
-    with np.load(recording) as f:       # read once (an npz reads an array at each access)
-        rec = {k: f[k] for k in f.files}
-    cfg = load_controller(trq_params.resolve("controller", controller))
-    model = PredictionModel(cfg.vehicle)
-    with tempfile.TemporaryDirectory(prefix="trq-acados-") as tmp:
-        rti = AcadosRti(cfg, model, rec["u_trim"], hessian, Path(workdir or tmp),
-                        regularize=regularize, reg_epsilon=reg_epsilon)
-        pb, dt = rti.pb, cfg.control_dt_s
+        from trq_offboard.config import load_controller
+        from trq_offboard.model import PredictionModel
+
+        ok, why = available()
+        if not ok:
+            raise RuntimeError(why)
+        with np.load(recording) as f:       # read once (an npz reads an array at each access)
+            self.rec = {k: f[k] for k in f.files}
+        self.cfg = load_controller(trq_params.resolve("controller", controller))
+        self.hessian, self.init, self.regularize = hessian, init, regularize
+        self._tmp = None
+        if workdir is None:
+            self._tmp = tempfile.TemporaryDirectory(prefix="trq-acados-")
+            workdir = Path(self._tmp.name)
+        self.rti = AcadosRti(self.cfg, PredictionModel(self.cfg.vehicle), self.rec["u_trim"],
+                             hessian, Path(workdir), regularize=regularize,
+                             reg_epsilon=reg_epsilon)
+        self.passes = 0
+
+    def close(self) -> None:
+        if self._tmp is not None:
+            self._tmp.cleanup()
+            self._tmp = None
+
+    def run(self) -> tuple[np.ndarray, np.ndarray]:
+        """One pass through the recording: per step (prep wall, prep CPU, feedback wall,
+        feedback CPU, acados' prep, acados' feedback, QP iterations, feedback status, 1 when
+        the solution is finite) and the first commands (K, 8)."""
+        rti, rec = self.rti, self.rec
+        if self.passes:
+            rti.solver.reset()
+        self.passes += 1
+        pb, dt = rti.pb, self.cfg.control_dt_s
         K = rec["x0"].shape[0]
-        rows = np.zeros((K, 8))    # prep wall, prep CPU, fb wall, fb CPU, acados prep, fb, qp it
+        rows = np.zeros((K, 9))
         u0 = np.zeros((K, 8))
-        failures, prev, statuses = 0, None, {}
+        prev = None
         for k in range(K):
-            if init == "ours" or prev is None:
+            if self.init == "ours" or prev is None:
                 rti.set_init(rec["guess_s"][k], rec["guess_v"][k])
             else:
                 rti.set_init(*_shift(prev[0], prev[1], pb.step_s, dt, rec["alpha_prev"][k]))
@@ -471,63 +497,108 @@ def replay(recording: Path, hessian: str, controller: str = "trq_nmpc_eso",
             st_f, wf, cf = rti.feedback(s0)
             tf = rti.solver.get_stats("time_feedback")
             qp_it = np.atleast_1d(rti.solver.get_stats("qp_iter"))
+            s, v = rti.solution()
+            finite = bool(np.all(np.isfinite(s)) and np.all(np.isfinite(v)))
+            prev = (s, v) if finite else None
+            u0[k] = rti.command(s, v)
             # a step fails in its feedback (the QP); the preparation returns the status acados
             # holds, the previous feedback's, so that a failure's next step would count again
-            failed = st_f != 0
-            failures += int(failed)
-            if failed:
-                key = f"feedback {st_f}"
-                statuses[key] = statuses.get(key, 0) + 1
-            s, v = rti.solution()
-            if not (np.all(np.isfinite(s)) and np.all(np.isfinite(v))):
-                failures += 1
-                prev = None
-            else:
-                prev = (s, v)
-            u0[k] = rti.command(s, v)
-            rows[k] = (wp, cp, wf, cf, tp, tf, float(qp_it[-1]) if qp_it.size else -1, st_f)
-        build_s = rti.build_s
-    ms = 1e3
-    total = rows[:, 0] + rows[:, 2]
-    total_cpu = rows[:, 1] + rows[:, 3]
-    du_all = np.abs(u0 - rec["u0"])
-    ok_ours = rec["ok"].astype(bool)
-    med = lambda a: float(np.median(a) * ms)                   # noqa: E731
-    p99 = lambda a: float(np.percentile(a, 99) * ms)           # noqa: E731
-    t_s = np.arange(K) * cfg.control_dt_s
-    parts = {"": np.ones(K, bool)}
-    if split_s is not None:
-        parts.update({"_before": t_s < split_s, "_after": t_s >= split_s})
-    close = {}
-    for tag, sel in parts.items():
-        du = du_all[sel & ok_ours]
-        if du.size:
-            close.update({
-                f"du_tilt_deg_median{tag}": float(np.degrees(np.median(du[:, 0:4]))),
-                f"du_tilt_deg_max{tag}": float(np.degrees(du[:, 0:4].max())),
-                f"du_throttle_pct_median{tag}": float(np.median(du[:, 4:8])),
-                f"du_throttle_pct_max{tag}": float(du[:, 4:8].max())})
-    first_fail = next((k for k in range(K) if rows[k, 7] != 0), None)
-    return dict(
-        name=anchor_name(hessian, regularize), hessian=hessian, regularize=regularize,
-        reg_epsilon=float(rti.ocp.solver_options.reg_epsilon),
-        init=init, steps=int(K), failures=int(failures), build_s=build_s,
-        prep_median_ms=med(rows[:, 0]), prep_p99_ms=p99(rows[:, 0]),
-        feedback_median_ms=med(rows[:, 2]), feedback_p99_ms=p99(rows[:, 2]),
-        feedback_max_ms=float(rows[:, 2].max() * ms),
-        total_median_ms=med(total), total_p99_ms=p99(total),
-        # the same over the steps whose QP solved: the anchor's cost without its failures'
-        total_median_solved_ms=(med(total[rows[:, 7] == 0]) if np.any(rows[:, 7] == 0)
-                                else math.nan),
-        total_cpu_median_ms=med(total_cpu), total_cpu_p99_ms=p99(total_cpu),
-        internal_prep_median_ms=med(rows[:, 4]), internal_feedback_median_ms=med(rows[:, 5]),
-        internal_total_median_ms=med(rows[:, 4] + rows[:, 5]),
-        qp_iterations_median=float(np.median(rows[:, 6])),
-        qp_iterations_max=int(rows[:, 6].max()),
-        **close, failure_statuses=statuses,
-        first_failure_s=(math.nan if first_fail is None else float(t_s[first_fail])),
-        **_ours_solver_step(rec, med, p99),
-        acados=_describe(Path(os.environ["ACADOS_SOURCE_DIR"])))
+            rows[k] = (wp, cp, wf, cf, tp, tf, float(qp_it[-1]) if qp_it.size else -1, st_f,
+                       finite)
+        return rows, u0
+
+    def summary(self, rows: np.ndarray, u0: np.ndarray, split_s: float | None = None) -> dict:
+        """A pass's figures (see the module's docstring). `split_s`: the first commands also
+        compared apart before and after this time of the flight (step k at k control periods;
+        the bench's fault)."""
+        rec, cfg, rti = self.rec, self.cfg, self.rti
+        K = rows.shape[0]
+        fb_status, nonfinite = rows[:, 7], rows[:, 8] == 0
+        statuses: dict[str, int] = {}
+        for st in fb_status[fb_status != 0]:
+            key = f"feedback {int(st)}"
+            statuses[key] = statuses.get(key, 0) + 1
+        # a failed feedback counts once, a non-finite solution once more
+        failures = int(np.count_nonzero(fb_status) + np.count_nonzero(nonfinite))
+        ms = 1e3
+        total = rows[:, 0] + rows[:, 2]
+        total_cpu = rows[:, 1] + rows[:, 3]
+        du_all = np.abs(u0 - rec["u0"])
+        ok_ours = rec["ok"].astype(bool)
+        med = lambda a: float(np.median(a) * ms)                   # noqa: E731
+        p99 = lambda a: float(np.percentile(a, 99) * ms)           # noqa: E731
+        t_s = np.arange(K) * cfg.control_dt_s
+        parts = {"": np.ones(K, bool)}
+        if split_s is not None:
+            parts.update({"_before": t_s < split_s, "_after": t_s >= split_s})
+        close = {}
+        for tag, sel in parts.items():
+            du = du_all[sel & ok_ours]
+            if du.size:
+                close.update({
+                    f"du_tilt_deg_median{tag}": float(np.degrees(np.median(du[:, 0:4]))),
+                    f"du_tilt_deg_max{tag}": float(np.degrees(du[:, 0:4].max())),
+                    f"du_throttle_pct_median{tag}": float(np.median(du[:, 4:8])),
+                    f"du_throttle_pct_max{tag}": float(du[:, 4:8].max())})
+        first_fail = next((k for k in range(K) if fb_status[k] != 0), None)
+        return dict(
+            name=anchor_name(self.hessian, self.regularize), hessian=self.hessian,
+            regularize=self.regularize,
+            reg_epsilon=float(rti.ocp.solver_options.reg_epsilon),
+            init=self.init, steps=int(K), failures=failures, build_s=rti.build_s,
+            prep_median_ms=med(rows[:, 0]), prep_p99_ms=p99(rows[:, 0]),
+            feedback_median_ms=med(rows[:, 2]), feedback_p99_ms=p99(rows[:, 2]),
+            feedback_max_ms=float(rows[:, 2].max() * ms),
+            total_median_ms=med(total), total_p99_ms=p99(total),
+            # the same over the steps whose QP solved: the anchor's cost without its failures'
+            total_median_solved_ms=(med(total[fb_status == 0]) if np.any(fb_status == 0)
+                                    else math.nan),
+            total_cpu_median_ms=med(total_cpu), total_cpu_p99_ms=p99(total_cpu),
+            internal_prep_median_ms=med(rows[:, 4]),
+            internal_feedback_median_ms=med(rows[:, 5]),
+            internal_total_median_ms=med(rows[:, 4] + rows[:, 5]),
+            qp_iterations_median=float(np.median(rows[:, 6])),
+            qp_iterations_max=int(rows[:, 6].max()),
+            **close, failure_statuses=statuses,
+            first_failure_s=(math.nan if first_fail is None else float(t_s[first_fail])),
+            **_ours_solver_step(rec, med, p99),
+            acados=_describe(Path(os.environ["ACADOS_SOURCE_DIR"])))
+
+
+def replay(recording: Path, hessian: str, controller: str = "trq_nmpc_eso",
+           init: str = "shift", workdir: Path | None = None,
+           split_s: float | None = None, regularize: str = "NO_REGULARIZE",
+           reg_epsilon: float | None = None) -> dict:
+    """acados' RTI through a recorded flight of ours: per-step times and first commands against
+    ours (see the module's docstring), one pass of a `Replayer`."""
+    r = Replayer(recording, hessian, controller, init, workdir, regularize, reg_epsilon)
+    try:
+        return r.summary(*r.run(), split_s=split_s)
+    finally:
+        r.close()
+
+
+def serve(replayer: Replayer, requests, answer, split_s: float | None = None) -> int:
+    """The bench's bracketing server: one JSON line to `answer` when built ({"ready": true,
+    "build_s"}), then for each line of `requests`, "pass": one pass through the recording and
+    its figures (`Replayer.summary` with `split_s`, and the pass's number); "quit" or the end
+    of `requests`: return the passes made. Another line is answered {"error": ...} and the
+    server goes on."""
+    def say(obj: dict) -> None:
+        answer.write(json.dumps(obj) + "\n")
+        answer.flush()
+
+    say({"ready": True, "build_s": replayer.rti.build_s, "name": anchor_name(
+        replayer.hessian, replayer.regularize)})
+    for line in requests:
+        word = line.strip()
+        if word == "quit":
+            break
+        if word != "pass":
+            say({"error": f"unknown request {word[:40]!r}: expected pass or quit"})
+            continue
+        say({**replayer.summary(*replayer.run(), split_s=split_s), "pass": replayer.passes})
+    return replayer.passes
 
 
 def anchor_name(hessian: str, regularize: str = "NO_REGULARIZE") -> str:
@@ -551,7 +622,8 @@ def _ours_solver_step(rec, med, p99) -> dict:
 
 
 def main(argv=None) -> int:
-    """Child process of trq-bench-nmpc --anchor acados: replay one recording, print JSON."""
+    """Child process of trq-bench-nmpc --anchor acados: replay one recording, print JSON; with
+    --serve, build once and answer the bench's requests on stdin (`serve`)."""
     ap = argparse.ArgumentParser(prog="python -m trq_lab.bench.acados_anchor",
                                  description=__doc__.splitlines()[0])
     ap.add_argument("--replay", type=Path, required=True, help="a recording (.npz) of a flight")
@@ -564,6 +636,9 @@ def main(argv=None) -> int:
                     help="acados' regularize_method (default NO_REGULARIZE, acados' own)")
     ap.add_argument("--reg-epsilon", type=float, default=None,
                     help="acados' reg_epsilon for the methods that read one (default: acados')")
+    ap.add_argument("--serve", action="store_true",
+                    help="build once, then one pass through the recording for each line "
+                         "'pass' on stdin, its figures a JSON line on stdout ('quit' ends)")
     args = ap.parse_args(argv)
     try:
         check_regularize(args.regularize, args.reg_epsilon)
@@ -573,6 +648,18 @@ def main(argv=None) -> int:
     if not ok:
         print(why, file=sys.stderr)
         return 2
+    if args.serve:
+        # acados' C library prints its QP failures to file descriptor 1, buffered: the answers
+        # keep the process's stdout to themselves and the library writes to stderr instead
+        answer = os.fdopen(os.dup(1), "w")
+        os.dup2(2, 1)
+        replayer = Replayer(args.replay, args.hessian, args.controller, args.init,
+                            regularize=args.regularize, reg_epsilon=args.reg_epsilon)
+        try:
+            serve(replayer, sys.stdin, answer, split_s=args.split_s)
+        finally:
+            replayer.close()
+        return 0
     print(json.dumps(replay(args.replay, args.hessian, args.controller, args.init,
                             split_s=args.split_s, regularize=args.regularize,
                             reg_epsilon=args.reg_epsilon)), flush=True)

@@ -47,11 +47,21 @@ and to the step: docs/decisions/2026-12-06-acados-exact-regularisation.md). With
 controller daemon's CPU per period from outside (trq_lab/bench/period.py) is set against acados'
 step too, and --against CONTROLLER flies a second controller file over the daemons in the same
 run, interleaved, for the ratio of the two (paired run by run).
+
+The bracket (--anchor acados with --daemons): a replay a few minutes away from the daemons'
+flights can meet the shared machine in another state. So each anchored mode is flown once more,
+recorded, and acados is built on that recording once, in a server process (AnchorServer; the
+child `python -m trq_lab.bench.acados_anchor --serve`). It steps acados through the whole
+recording right before each run's short daemon flight, between the short and the long one, and
+right after the long one, while neither daemon runs (period.daemons_period's `bracket`). The
+target is printed a third way: each run's CPU per period over the median of its three passes'
+step p50, with the range of every pass (a machine that moved during the run shows there).
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import json
 import math
@@ -220,16 +230,96 @@ def run_anchor(recording: Path, hessian: str, controller: str, init: str = "shif
 
     regularize, reg_epsilon = check_regularize(regularize, reg_epsilon)
     with tempfile.TemporaryDirectory(prefix="trq-bench-acados-") as work:
-        cmd = [sys.executable, "-m", "trq_lab.bench.acados_anchor", "--replay", str(recording),
-               "--hessian", hessian, "--controller", controller, "--init", init,
-               "--split-s", str(FAULT_T_S), "--regularize", regularize]
-        if reg_epsilon is not None:
-            cmd += ["--reg-epsilon", repr(reg_epsilon)]
+        cmd = _anchor_cmd(recording, hessian, controller, init, regularize, reg_epsilon)
         out = subprocess.run(cmd, env=acados_anchor.library_env(), cwd=work,
                              capture_output=True, text=True)
     if out.returncode != 0:
         raise RuntimeError(f"acados anchor ({hessian}) failed:\n{out.stderr[-2000:]}")
     return json.loads(_last_json_line(out.stdout))
+
+
+def _anchor_cmd(recording: Path, hessian: str, controller: str, init: str,
+                regularize: str, reg_epsilon: float | None) -> list[str]:
+    cmd = [sys.executable, "-m", "trq_lab.bench.acados_anchor", "--replay", str(recording),
+           "--hessian", hessian, "--controller", controller, "--init", init,
+           "--split-s", str(FAULT_T_S), "--regularize", regularize]
+    return cmd + (["--reg-epsilon", repr(reg_epsilon)] if reg_epsilon is not None else [])
+
+
+# what a bracketing pass keeps of acados' figures (the rest is the per-run replay's to print)
+BRACKET_KEYS = ("total_median_ms", "total_cpu_median_ms", "failures", "steps", "pass")
+
+
+class AnchorServer:
+    """acados' RTI built once for a recorded flight, in its own process
+    (`python -m trq_lab.bench.acados_anchor --serve`), stepped through the whole flight on each
+    `one_pass()`: the bench's bracket of the daemons' flights, so that acados' step is taken
+    seconds before, between and after them, at the same moment of the machine. A context
+    manager: the process is ended (and its work directory removed) on exit."""
+
+    def __init__(self, recording: Path, hessian: str, controller: str, init: str = "shift",
+                 regularize: str = "NO_REGULARIZE", reg_epsilon: float | None = None):
+        from trq_lab.bench import acados_anchor
+
+        regularize, reg_epsilon = check_regularize(regularize, reg_epsilon)
+        self._work = tempfile.TemporaryDirectory(prefix="trq-bench-acados-")
+        self._stderr_path = Path(self._work.name) / "stderr.txt"
+        self._stderr = open(self._stderr_path, "w")
+        self._proc = subprocess.Popen(
+            _anchor_cmd(recording, hessian, controller, init, regularize, reg_epsilon)
+            + ["--serve"], env=acados_anchor.library_env(), cwd=self._work.name,
+            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self._stderr, text=True)
+        try:
+            ready = self._answer()
+        except Exception:
+            self.close()
+            raise
+        self.name, self.build_s = ready["name"], ready["build_s"]
+
+    def _answer(self) -> dict:
+        line = self._proc.stdout.readline()
+        if not line:
+            rc = self._proc.wait()
+            self._stderr.flush()
+            tail = self._stderr_path.read_text(errors="replace")[-2000:]
+            raise RuntimeError(f"acados' replay server ended (exit {rc}):\n{tail}")
+        obj = json.loads(line)
+        if "error" in obj:
+            raise RuntimeError(f"acados' replay server: {obj['error']}")
+        return obj
+
+    def one_pass(self) -> dict:
+        """One pass through the recording: its figures (acados_anchor.Replayer.summary)."""
+        self._proc.stdin.write("pass\n")
+        self._proc.stdin.flush()
+        return self._answer()
+
+    def close(self) -> None:
+        if self._proc.poll() is None:
+            try:
+                self._proc.stdin.write("quit\n")
+                self._proc.stdin.close()
+                self._proc.wait(timeout=30)
+            except (OSError, subprocess.TimeoutExpired):
+                self._proc.kill()
+                self._proc.wait()
+        self._stderr.close()
+        self._work.cleanup()
+
+    def __enter__(self) -> "AnchorServer":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def bracket_passes(servers: dict[str, "AnchorServer"]) -> dict[str, dict]:
+    """One pass of every server (mode -> BRACKET_KEYS of its figures): one bracket point."""
+    out = {}
+    for mode, server in servers.items():
+        fig = server.one_pass()
+        out[mode] = {k: fig[k] for k in BRACKET_KEYS}
+    return out
 
 
 def _controller_file(name_or_path: str) -> str:
@@ -313,6 +403,14 @@ def anchor_table(results: list[dict], anchors: dict[str, dict],
                 lines.append(f"  paired run by run (the flight and the replay of one run): "
                              f"median {float(np.median(ratios)):.2f}; runs "
                              f"{', '.join(f'{r:.2f}' for r in ratios)}")
+            ratios = bracketed_to_anchor(fig, mode)
+            if ratios:
+                passes = [ms for run in fig["bracket_passes_ms"][mode] for ms in run]
+                lines.append(f"  bracketed (acados stepped through {mode}'s flight right before, "
+                             f"between and right after each run's two flights; its step p50 "
+                             f"{min(passes):.3f}-{max(passes):.3f} ms over "
+                             f"{len(passes)} passes): median {float(np.median(ratios)):.2f}; "
+                             f"runs {', '.join(f'{r:.2f}' for r in ratios)}")
     return "\n".join(lines)
 
 
@@ -325,6 +423,17 @@ def paired_to_anchor(daemons: dict, anchor: dict) -> list[float]:
     if not ours or len(ours) != len(theirs):
         return []
     return [c / t for c, t in zip(ours, theirs)]
+
+
+def bracketed_to_anchor(daemons: dict, mode: str) -> list[float]:
+    """The controller's CPU per period over acados' step p50 taken around the same run's
+    flights (the median of the bracket's passes through `mode`'s flight: before, between and
+    after the two flights, seconds apart); [] without brackets."""
+    ours = daemons.get("controller_cpu_runs_ms", [])
+    passes = daemons.get("bracket_passes_ms", {}).get(mode, [])
+    if not ours or len(ours) != len(passes):
+        return []
+    return [c / float(np.median(p)) for c, p in zip(ours, passes)]
 
 
 def combine(runs: list[dict]) -> dict:
@@ -393,8 +502,12 @@ def _daemons_summary(runs: list[dict]) -> dict:
              for name in runs[0]["parts"]}
     ratio = [r["controller_cpu_ms"] / (r["parts"]["solve (wall)"]["mean_ms"]
                                         + r["parts"]["prepare"]["mean_ms"]) for r in runs]
+    bracketed = all(r.get("brackets") for r in runs)
+    passes = ({mode: [[b[mode]["total_median_ms"] for b in r["brackets"]] for r in runs]
+               for mode in runs[0]["brackets"][0]} if bracketed else {})
     return {"runs": len(runs), "parts": parts, "ratio_to_solver": med(ratio),
             "controller_cpu_runs_ms": [r["controller_cpu_ms"] for r in runs],
+            **({"bracket_passes_ms": passes} if bracketed else {}),
             **{k: med([r[k] for r in runs])
                for k in ("controller_cpu_ms", "vehicle_cpu_ms", "realtime_factor")}}
 
@@ -472,7 +585,10 @@ def main(argv=None) -> int:
                          "model, weights and bounds) through the flights of rti-gn (Gauss-Newton) "
                          "and rti-exact (exact Hessian) that this run flies, each replay right "
                          "after its flight, and print its preparation and feedback times beside "
-                         "ours with the ratios (needs acados: trq_lab/bench/acados_anchor.py)")
+                         "ours with the ratios (needs acados: trq_lab/bench/acados_anchor.py); "
+                         "with --daemons, also stepped through a flight of its own right "
+                         "before, between and after each run's two daemon flights, and the "
+                         "target printed against those passes (the bracket)")
     ap.add_argument("--anchor-init", choices=("shift", "ours"), default="shift",
                     help="acados' warm start: its own previous solution shifted by one control "
                          "period (shift, default) or the guess our solver was handed (ours)")
@@ -536,6 +652,34 @@ def main(argv=None) -> int:
         print(f"anchor: {why}; warm start {args.anchor_init}{reg}", flush=True)
     if args.repeat < 1:
         ap.error(f"--repeat {args.repeat}: expected at least 1")
+    with contextlib.ExitStack() as stack:
+        servers = {}
+        if args.daemons and anchored:
+            servers = _bracket_servers(stack, anchored, seconds, args, regularize)
+        return _runs(args, modes, anchored, seconds, regularize, servers)
+
+
+def _bracket_servers(stack: contextlib.ExitStack, anchored: dict[str, str], seconds, args,
+                     regularize) -> dict[str, AnchorServer]:
+    """For the daemons' bracket: each anchored mode flown once more, recorded, and acados built
+    on its recording in a server process (AnchorServer), kept until `stack` closes."""
+    rec_dir = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="trq-bench-bracket-")))
+    servers = {}
+    for m, hessian in anchored.items():
+        rec = rec_dir / f"{m}.npz"
+        run_mode(m, seconds, args.controller, record=rec, sensing=args.sensing)
+        servers[m] = stack.enter_context(AnchorServer(
+            rec, hessian, args.controller, args.anchor_init,
+            *(regularize if hessian == "exact" else UNREGULARISED)))
+        print(f"  bracket of the daemons' flights: {servers[m].name} built on a flight of {m} "
+              f"({servers[m].build_s:.1f} s)", flush=True)
+    return servers
+
+
+def _runs(args, modes: list[str], anchored: dict[str, str], seconds, regularize,
+          servers: dict[str, AnchorServer]) -> int:
+    """The repeats, the tables and the JSON (main's, after its checks)."""
+    bracket = (lambda point: bracket_passes(servers)) if servers else None
     runs: dict[str, list[dict]] = {m: [] for m in modes}
     anchor_runs: dict[str, list[dict]] = {m: [] for m in anchored}
     daemon_runs: list[dict] = []
@@ -544,12 +688,16 @@ def main(argv=None) -> int:
         if args.daemons:      # interleaved with the modes, as they are with each other
             from trq_lab.bench.period import daemons_period
             for name in daemon_order(args.controller, args.against, k):
-                d = daemons_period(controller=name, sensing=args.sensing)
+                d = daemons_period(controller=name, sensing=args.sensing, bracket=bracket)
                 (daemon_runs if name == args.controller else against_runs).append(d)
                 print(f"  daemons, {name}{f' (run {k + 1})' if args.repeat > 1 else ''}: "
                       f"controller {d['controller_cpu_ms']:.2f} ms CPU a period from outside, "
                       f"vehicle {d['vehicle_cpu_ms']:.2f} ms, lockstep "
-                      f"{d['realtime_factor']:.2f}x real time", flush=True)
+                      f"{d['realtime_factor']:.2f}x real time"
+                      + "".join(f"; {servers[m].name} p50 "
+                                + "/".join(f"{b[m]['total_median_ms']:.3f}"
+                                           for b in d["brackets"]) + " ms around it"
+                                for m in servers), flush=True)
         for m in modes:       # one after the other: the modes do not share the cores
             if m in anchored:     # the flight recorded, acados replays it right after
                 with tempfile.TemporaryDirectory(prefix="trq-bench-rec-") as rec_dir:

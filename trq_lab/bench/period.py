@@ -18,6 +18,11 @@ same periods (the controller's own measurement, records.StepTimes and PeriodTime
 over the rows stamped in (short_s, long_s]; their whole period (every thread, from one step's
 start to the next) is the inside view of the outside figure. Both flights write their logs, as a
 scenario's do (the log's cost is one of the parts).
+
+`bracket`: a callable run right before the short flight, between the two and right after the
+long one, while neither daemon runs (trq-bench-nmpc's anchor: acados stepped through a
+recorded flight at the same moments of the machine); what it returns is kept, in that order,
+as the figures' "brackets".
 """
 
 from __future__ import annotations
@@ -31,6 +36,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
@@ -140,18 +146,29 @@ def cpu_parts(csv_path: Path, lo_s: float, hi_s: float) -> dict:
 def daemons_period(short_s: float = 5.0, long_s: float = 35.0,
                    controller: str = "trq_nmpc_eso", control_rate_hz: int = 100,
                    controller_cmd: list[str] | None = None,
-                   log_root: Path | None = None, sensing: str | None = None) -> dict:
+                   log_root: Path | None = None, sensing: str | None = None,
+                   bracket: Callable[[str], object] | None = None) -> dict:
     """The two flights and what follows from them (see the module docstring).
     `controller_cmd`: fly_daemons'. `log_root`: the flights' logs go to its `short/` and
     `long/` and stay (default: a temporary directory, removed). `sensing`: the vehicle's
-    sensing profile (fly_daemons')."""
+    sensing profile (fly_daemons'). `bracket`: called with "before", "between" and "after"
+    around the flights (the module docstring)."""
+    brackets = []
+
+    def at(point: str) -> None:
+        if bracket is not None:
+            brackets.append(bracket(point))
+
     with contextlib.ExitStack() as stack:
         root = Path(log_root) if log_root is not None else Path(
             stack.enter_context(tempfile.TemporaryDirectory(prefix="trq-bench-period-")))
+        at("before")
         short = fly_daemons(short_s, controller, root / "short", controller_cmd=controller_cmd,
                             sensing=sensing)
+        at("between")
         long_ = fly_daemons(long_s, controller, root / "long", controller_cmd=controller_cmd,
                             sensing=sensing)
+        at("after")
         parts = cpu_parts(root / "long" / "controller.csv", short_s, long_s)
     periods = (long_s - short_s) * control_rate_hz
     dwall = long_["wall_s"] - short["wall_s"]
@@ -162,6 +179,7 @@ def daemons_period(short_s: float = 5.0, long_s: float = 35.0,
         "vehicle_cpu_ms": (long_["vehicle_cpu_s"] - short["vehicle_cpu_s"]) / periods * 1e3,
         "realtime_factor": (long_s - short_s) / dwall if dwall > 0 else float("nan"),
         "parts": parts,
+        **({"brackets": brackets} if bracket is not None else {}),
     }
 
 

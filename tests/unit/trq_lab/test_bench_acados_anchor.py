@@ -297,3 +297,103 @@ def test_bench_regularisation_needs_the_exact_replay(monkeypatch, capsys):
         bench.main(["--quick", "--modes", "rti-gn", "--anchor", "acados",
                     "--anchor-regularize", "MIRROR"])
     assert exc.value.code == 2 and "add rti-exact to --modes" in capsys.readouterr().err
+
+
+class _FakeReplayer:
+    """What `serve` reads of a Replayer: its build, names, passes, run and summary."""
+
+    def __init__(self):
+        self.rti = types.SimpleNamespace(build_s=3.5)
+        self.hessian, self.regularize, self.passes = "exact", "NO_REGULARIZE", 0
+        self.split = []
+
+    def run(self):
+        self.passes += 1
+        return np.full((2, 9), float(self.passes)), np.zeros((2, 8))
+
+    def summary(self, rows, u0, split_s=None):
+        self.split.append(split_s)
+        return {"total_median_ms": float(rows[0, 0])}
+
+
+def test_the_server_answers_each_pass_and_stops_at_quit():
+    """The bench's bracketing server: built, then one pass a request, a wrong request answered
+    with an error that names it (the server goes on), and nothing after quit."""
+    import io
+    import json
+
+    fake, out = _FakeReplayer(), io.StringIO()
+    n = aa.serve(fake, ["pass\n", "passs\n", "pass\n", "quit\n", "pass\n"], out, split_s=12.0)
+    said = [json.loads(line) for line in out.getvalue().splitlines()]
+    assert n == 2 and fake.split == [12.0, 12.0]
+    assert said[0] == {"ready": True, "build_s": 3.5, "name": "acados-rti-exact"}
+    assert said[1] == {"total_median_ms": 1.0, "pass": 1}
+    assert "unknown request 'passs'" in said[2]["error"]
+    assert said[3] == {"total_median_ms": 2.0, "pass": 2} and len(said) == 4
+    out = io.StringIO()
+    assert aa.serve(_FakeReplayer(), iter(["pass\n"]), out) == 1     # the requests' end ends it
+
+
+class _FakeServer:
+    """bench.AnchorServer without acados: its passes counted, each a step p50 of 0.5 ms."""
+    made = []
+
+    def __init__(self, recording, hessian, controller, init="shift",
+                 regularize="NO_REGULARIZE", reg_epsilon=None):
+        self.name, self.build_s, self.passes = aa.anchor_name(hessian, regularize), 1.0, 0
+        self.args = (hessian, regularize, reg_epsilon)
+        self.closed = False
+        _FakeServer.made.append(self)
+
+    def one_pass(self):
+        self.passes += 1
+        return {"total_median_ms": 0.5, "total_cpu_median_ms": 0.5, "failures": 0,
+                "steps": 10, "pass": self.passes, "du_tilt_deg_max": 1.0}
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.closed = True
+
+
+def test_the_bench_brackets_each_daemon_run_with_acados_passes(monkeypatch, capsys, tmp_path):
+    """With --daemons and --anchor acados, acados is built once per anchored mode on a flight
+    of its own, stepped through it before, between and after each run's two daemon flights,
+    and the target is printed against those passes; the servers end with the bench."""
+    import json
+
+    from trq_lab.bench import period
+
+    _fake_bench(monkeypatch)
+    tables = []
+    monkeypatch.setattr(bench, "anchor_table", lambda *a, **k: tables.append(a) or "")
+    _FakeServer.made.clear()
+    monkeypatch.setattr(bench, "AnchorServer", _FakeServer)
+    points = []
+
+    def daemons_period(controller, sensing, bracket):
+        got = [bracket(p) for p in ("before", "between", "after")]
+        points.append(controller)
+        part = {"mean_ms": 0.4, "p50_ms": 0.4, "p99_ms": 0.4}
+        return {"controller_cpu_ms": 0.75, "vehicle_cpu_ms": 1.0, "realtime_factor": 2.0,
+                "parts": {"solve (wall)": part, "prepare": part}, "brackets": got}
+
+    monkeypatch.setattr(period, "daemons_period", daemons_period)
+    monkeypatch.setattr(period, "parts_table", lambda fig: "")
+    out = tmp_path / "b.json"
+    assert bench.main(["--quick", "--modes", "rti-gn,rti-exact", "--anchor", "acados",
+                       "--daemons", "--repeat", "2", "--json", str(out)]) == 0
+    text = capsys.readouterr().out
+    servers = {s.name: s for s in _FakeServer.made}
+    assert set(servers) == {"acados-rti-gn", "acados-rti-exact"}
+    assert all(s.passes == 6 and s.closed for s in servers.values())     # 2 runs x 3 points
+    assert "acados-rti-exact p50 0.500/0.500/0.500 ms around it" in text
+    daemons = tables[0][2]                       # what the target's lines are printed from
+    assert daemons["bracket_passes_ms"] == {"rti-gn": [[0.5] * 3] * 2,
+                                            "rti-exact": [[0.5] * 3] * 2}
+    assert bench.bracketed_to_anchor(daemons, "rti-exact") == [1.5, 1.5]
+    runs = json.loads(out.read_text())["daemon_runs"]
+    assert [sorted(b) for b in runs[0]["brackets"]] == [["rti-exact", "rti-gn"]] * 3
+    assert "du_tilt_deg_max" not in runs[0]["brackets"][0]["rti-exact"]   # the pass's figures
+

@@ -100,3 +100,53 @@ def test_the_header_names_a_controller_file_as_it_was_given():
     assert _controller_file("trq_nmpc_eso") == "params/controller/trq_nmpc_eso.yaml"
     assert _controller_file("/tmp/ctl.yaml") == "/tmp/ctl.yaml"
     assert _controller_file("studies/fa_0.4.yaml") == "studies/fa_0.4.yaml"
+
+
+def test_the_target_is_bracketed_by_acados_passes_around_each_run():
+    """Each run's flight over the median of acados' passes taken right before, between and
+    after its two flights; the passes' range printed, so that a machine that moved shows."""
+    mode = {"name": "rti-exact", "prep_median_ms": 1.0, "median_ms": 1.0, "total_median_ms": 2.0,
+            "total_p99_ms": 3.0, "period_cpu_median_ms": 2.5}
+    anchor = {"name": "acados exact", "hessian": "exact", "prep_median_ms": 0.5,
+              "feedback_median_ms": 0.5, "feedback_p99_ms": 0.8, "total_median_ms": 1.0,
+              "total_p99_ms": 1.5, "total_cpu_median_ms": 1.0, "internal_total_median_ms": 0.9,
+              "qp_iterations_median": 5, "qp_iterations_max": 9, "failures": 0, "build_s": 1.0}
+    runs = [{"controller_cpu_ms": c, "vehicle_cpu_ms": 1.0, "realtime_factor": 2.0,
+             "parts": {"solve (wall)": {"mean_ms": 0.5}, "prepare": {"mean_ms": 0.5}},
+             "brackets": [{"rti-exact": {"total_median_ms": t}} for t in ts]}
+            for c, ts in ((1.5, (1.0, 3.0, 1.2)), (2.0, (0.8, 0.9, 1.0)))]
+    daemons = nmpc._daemons_summary(runs)
+    assert daemons["bracket_passes_ms"] == {"rti-exact": [[1.0, 3.0, 1.2], [0.8, 0.9, 1.0]]}
+    assert nmpc.bracketed_to_anchor(daemons, "rti-exact") == [1.25, 2.0 / 0.9]
+    assert nmpc.bracketed_to_anchor(daemons, "rti-gn") == []
+    text = nmpc.anchor_table([mode], {"rti-exact": anchor}, daemons,
+                             controller="trq_nmpc_eso_fused")
+    assert "bracketed (acados stepped through rti-exact's flight right before, between and " \
+           "right after each run's two flights; its step p50 0.800-3.000 ms over 6 passes): " \
+           "median 1.74; runs 1.25, 2.22" in text
+    unbracketed = nmpc._daemons_summary([{k: v for k, v in r.items() if k != "brackets"}
+                                         for r in runs])
+    assert "bracket_passes_ms" not in unbracketed
+    assert "bracketed" not in nmpc.anchor_table([mode], {"rti-exact": anchor}, unbracketed)
+
+
+def test_the_daemons_period_calls_its_bracket_around_the_flights(monkeypatch, tmp_path):
+    """before the short flight, between the two, after the long one, with neither daemon
+    flying; what the bracket returns kept in that order."""
+    from trq_lab.bench import period
+
+    events = []
+
+    def fly(seconds, controller, log_dir, controller_cmd=None, sensing=None):
+        events.append(f"fly {seconds:g}")
+        return {"controller_cpu_s": seconds * 1e-3, "vehicle_cpu_s": seconds * 2e-3,
+                "wall_s": seconds / 2}
+
+    monkeypatch.setattr(period, "fly_daemons", fly)
+    monkeypatch.setattr(period, "cpu_parts", lambda *a: {})
+    fig = period.daemons_period(5.0, 35.0, log_root=tmp_path,
+                                bracket=lambda point: events.append(point) or point.upper())
+    assert events == ["before", "fly 5", "between", "fly 35", "after"]
+    assert fig["brackets"] == ["BEFORE", "BETWEEN", "AFTER"]
+    assert fig["controller_cpu_ms"] == pytest.approx(30e-3 / 3000 * 1e3)
+    assert "brackets" not in period.daemons_period(5.0, 35.0, log_root=tmp_path)
