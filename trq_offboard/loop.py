@@ -346,18 +346,35 @@ class OffboardFlight:
                 silent_s += wait_s
                 log.warning("no telemetry for %.1f s: not commanding", silent_s)
 
+    async def _unanswered_state(self, timeout_s: float) -> wire.Odometry | None:
+        """The newest state not answered yet, waited for up to `timeout_s` of wall time (None:
+        none came, the vehicle silent)."""
+        try:
+            async with asyncio.timeout(timeout_s):
+                return await self._next_odometry()
+        except TimeoutError:
+            return None
+
     async def _command(self, msg, command_id: int, retries: int = COMMAND_TRIES,
                        hold: ActuatorCommand | None = None) -> int:
         """Send a command and wait for its COMMAND_ACK (retries on silence). With `hold` (only
         when the control loop is not running), every new state that arrives meanwhile is
         answered with that command: in lockstep the vehicle's time, and with it a delayed
         link's delivery of the command and of its ACK, moves only on answers (PX4, too, wants
-        the setpoint stream flowing around arming and mode changes)."""
+        the setpoint stream flowing around arming and mode changes). With `hold` each try goes
+        with a state not answered yet (waited for, up to the ACK's timeout, if every state so
+        far is) and leaves before that state's answer: in lockstep the vehicle takes it at that
+        state's time, whatever the wall clock does. Sent after the answer, it would race the
+        vehicle's next period (taken at one state's time or the next's by which datagram the
+        vehicle reads first)."""
         loop = asyncio.get_running_loop()
         for _ in range(retries):
             fut = loop.create_future()
             self._acks[command_id] = fut
+            sent = await self._unanswered_state(self.ack_timeout_s) if hold is not None else None
             self.link.send(msg)
+            if sent is not None:
+                self._answer(sent.stamp_us, hold)
             deadline = loop.time() + self.ack_timeout_s
             sent_us = self.odometry.stamp_us if self.odometry is not None else None
             while not fut.done() and loop.time() < deadline:
@@ -376,12 +393,6 @@ class OffboardFlight:
                                    return_when=asyncio.FIRST_COMPLETED)
                 waiter.cancel()
             if fut.done():
-                answered = self._answered_stamp
-                if hold is not None and sent_us is not None \
-                        and (answered is None or answered < sent_us):
-                    # the ACK beat our answer to the state the command went with: answer it
-                    # now, so that the next state is the same whichever came first
-                    self._answer(sent_us, hold)
                 return fut.result()
         raise FlightError(f"no COMMAND_ACK for command {command_id} after {retries} tries")
 

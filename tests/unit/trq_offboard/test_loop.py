@@ -215,8 +215,12 @@ def test_arms_then_answers_each_stamp_once_and_lands():
         stamp = await answer_until_disarm(flight, link, stamp)
         assert len(ctl.steps) == 2, "a command was computed after touchdown"
         idle = [m for m in link.targets() if m.time_usec >= 30_000]
-        assert len(idle) == IDLE_STEPS_BEFORE_DISARM
+        # the idle steps, then the state the disarm goes with, answered right after it
+        assert len(idle) == IDLE_STEPS_BEFORE_DISARM + 1
         assert all(list(m.controls) == [0.0] * 8 for m in idle)
+        disarm = link.commands(0.0)[0]
+        after = link.sent[link.sent.index(disarm) + 1]
+        assert after is idle[-1] and after.time_usec == stamp - 10_000
         flight.on_message(ack(mavlink.MAV_RESULT_ACCEPTED))
         flight.on_message(odometry(stamp, down_m=0.0))
         summary = await asyncio.wait_for(task, WAIT_S)
