@@ -30,7 +30,9 @@ flight's controller.csv, short and long, the same way. It checks that the replay
 (a)'s flight (flight.csv's rows) and prints, medians over the runs: each process's CPU per
 control period measured from outside (rusage of the exited child), the replay's share of the real
 controller's, the loop's parts from both logs, and against acados' exact-Hessian RTI step (issue
-18's anchor; --anchor acados measures it in the same run, trq_lab/bench/acados_anchor.py;
+18's anchor; --anchor acados measures it in the same run, trq_lab/bench/acados_anchor.py:
+built once on a recorded rti-exact flight and stepped through it right before, between and
+after each pair of daemon flights, each run's step the median of its six passes;
 --acados-ms takes it from a dated record) the floor's ratio and the best case it implies, the
 floor plus a solver as fast as acados (and plus ours), against the target of 1.5x. Without an
 anchor it prints the floor in ms beside the machine's calibration (trq_lab/bench/nmpc.py's
@@ -40,6 +42,7 @@ anchor it prints the floor in ms beside the machine's calibration (trq_lab/bench
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import sys
@@ -61,7 +64,7 @@ from trq_offboard.records import (
 )
 
 __all__ = ["ReplayController", "RecordingError", "ReplayDiverged", "replay_command", "main",
-           "TARGET_RATIO"]
+           "TARGET_RATIO", "bracket_step"]
 
 TARGET_RATIO = 1.5         # issue 18: the controller's whole CPU per period / acados' RTI step
 COMMAND_COLUMNS = ([f"cmd_throttle{i}_pct" for i in range(1, 5)]
@@ -333,14 +336,17 @@ def _nan(v: np.ndarray) -> np.ndarray:
     return np.array([isinstance(x, float) and math.isnan(x) for x in v.tolist()], dtype=bool)
 
 
-def floor_run(short_s: float, long_s: float, controller: str, work: Path) -> dict:
-    """One run: the real controller's flights, then the replay of its long flight's log."""
+def floor_run(short_s: float, long_s: float, controller: str, work: Path,
+              bracket=None) -> dict:
+    """One run: the real controller's flights, then the replay of its long flight's log.
+    `bracket`: period.daemons_period's, around both pairs of flights."""
     from trq_lab.bench.period import daemons_period
 
-    real = daemons_period(short_s, long_s, controller, log_root=work / "real")
+    real = daemons_period(short_s, long_s, controller, log_root=work / "real", bracket=bracket)
     csv = work / "real" / "long" / "controller.csv"
     floor = daemons_period(short_s, long_s, controller,
-                           controller_cmd=replay_command(csv), log_root=work / "floor")
+                           controller_cmd=replay_command(csv), log_root=work / "floor",
+                           bracket=bracket)
     checks = {}
     for flight in ("short", "long"):
         rc = floor[flight]["controller_rc"]
@@ -436,15 +442,23 @@ def table(s: dict, acados_label: str) -> str:
     return "\n".join(lines)
 
 
-def acados_step(controller: str, seconds: float = 16.0) -> dict:
-    """acados' exact-Hessian RTI step on our rti-exact flight of `seconds` (the way
-    `trq-bench-nmpc --modes rti-exact --anchor acados --quick` measures it)."""
+def acados_server(stack, controller: str, seconds: float = 16.0):
+    """acados' exact-Hessian RTI built on our rti-exact flight of `seconds` (the flight
+    `trq-bench-nmpc --modes rti-exact --anchor acados --quick` replays), in a server process
+    (trq_lab/bench/nmpc.py's AnchorServer) kept until `stack` closes."""
     from trq_lab.bench import nmpc
 
-    with tempfile.TemporaryDirectory(prefix="trq-bench-floor-rec-") as rec_dir:
-        rec = Path(rec_dir) / "flight.npz"
-        nmpc.run_mode("rti-exact", seconds, controller, record=rec)
-        return nmpc.run_anchor(rec, "exact", controller)
+    rec_dir = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="trq-bench-floor-rec-")))
+    rec = rec_dir / "flight.npz"
+    nmpc.run_mode("rti-exact", seconds, controller, record=rec)
+    return stack.enter_context(nmpc.AnchorServer(rec, "exact", controller))
+
+
+def bracket_step(run: dict) -> dict:
+    """acados' step in one run: the median of its passes' step p50 around the run's four
+    flights (the real controller's two, the replay's two), and the passes."""
+    passes = [b["total_median_ms"] for who in ("real", "floor") for b in run[who]["brackets"]]
+    return {"total_median_ms": float(np.median(passes)), "passes_ms": passes}
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -464,7 +478,9 @@ def build_parser() -> argparse.ArgumentParser:
                     help="the controller file of the real flights (default trq_nmpc_eso)")
     ap.add_argument("--anchor", choices=("acados",), default=None,
                     help="measure acados' exact-Hessian RTI step in each run, on our rti-exact "
-                         "flight of 16 s (needs acados: trq_lab/bench/acados_anchor.py)")
+                         "flight of 16 s, built once and stepped through that flight right "
+                         "before, between and after each pair of daemon flights (needs acados: "
+                         "trq_lab/bench/acados_anchor.py)")
     ap.add_argument("--acados-ms", type=float, default=None,
                     help="acados' exact-Hessian RTI step (ms) from a dated record, where the "
                          "anchor cannot run here: the ratios are then across runs")
@@ -498,16 +514,31 @@ def main(argv: list[str] | None = None) -> int:
         ok, why = acados_anchor.available()
         if not ok:
             ap.error(f"--anchor acados: {why}")
-    from trq_lab.bench.nmpc import calibration_ms, machine_line
+    from trq_lab.bench.nmpc import machine_line
 
     print(machine_line(), flush=True)
     print(f"controller: {args.controller}; flights {args.short_s:g} s and {args.long_s:g} s of "
           f"vehicle time in lockstep; "
           f"{args.repeat} run(s)", flush=True)
+    with contextlib.ExitStack() as stack:
+        server = acados_server(stack, args.controller) if args.anchor else None
+        return _runs(args, server)
+
+
+def _runs(args, server) -> int:
+    """The runs, the table and the JSON (main's, after its checks); `server`: acados' bracket
+    (acados_server) or None."""
+    from trq_lab.bench.nmpc import BRACKET_KEYS, calibration_ms, machine_line
+
+    def one_pass(point: str) -> dict:
+        fig = server.one_pass()
+        return {k: fig[k] for k in BRACKET_KEYS}
+
+    bracket = one_pass if server is not None else None
     runs, anchors = [], []
     for k in range(args.repeat):
         with tempfile.TemporaryDirectory(prefix="trq-bench-floor-") as work:
-            r = floor_run(args.short_s, args.long_s, args.controller, Path(work))
+            r = floor_run(args.short_s, args.long_s, args.controller, Path(work), bracket)
         runs.append(r)
         c = r["checks"]
         print(f"  run {k + 1}: controller {r['real']['controller_cpu_ms']:.3f} ms CPU a period "
@@ -519,15 +550,17 @@ def main(argv: list[str] | None = None) -> int:
             print(f"trq-bench-floor: the replay did not fly the recorded flight: {c}",
                   file=sys.stderr)
             return 1
-        if args.anchor:
-            a = acados_step(args.controller)
+        if server is not None:
+            a = bracket_step(r)
             anchors.append(a)
-            print(f"  run {k + 1}: acados exact prep+feedback p50 {a['total_median_ms']:.3f} ms",
-                  flush=True)
+            print(f"  run {k + 1}: acados exact prep+feedback p50 {a['total_median_ms']:.3f} ms "
+                  f"(the median of its passes around the run's flights: "
+                  f"{' '.join(f'{v:.3f}' for v in a['passes_ms'])})", flush=True)
     acados_ms, label = args.acados_ms, "given with --acados-ms, not measured in this run"
     if anchors:
         acados_ms = _median([a["total_median_ms"] for a in anchors])
-        label = f"measured in this run, median of {len(anchors)}"
+        label = (f"measured in this run around each run's flights, median of "
+                 f"{len(anchors)} runs")
     s = summary(runs, acados_ms, [a["total_median_ms"] for a in anchors] or None)
     s["calibration_ms"] = cal = calibration_ms()
     print("per run, CPU per period from outside, ms: the real controller "

@@ -310,3 +310,13 @@ def test_a_recording_with_its_own_filter_is_checked_without_what_it_logs_of_it(
     _with_column(tmp_path / "rec.csv", tmp_path / "cmd.csv", "cmd_tilt2_rad", ["0.25"] * 3)
     ok, why = pf.replayed_steps(tmp_path / "rec.csv", tmp_path / "cmd.csv")
     assert not ok and "cmd_tilt2_rad differs at row 1" in why
+
+
+def test_a_runs_acados_step_is_the_median_of_its_passes_around_its_flights():
+    """The bracket: acados' passes before, between and after the real controller's flights
+    and the replay's; the run's step is their median."""
+    run = {"real": {"brackets": [{"total_median_ms": v} for v in (0.7, 0.9, 0.8)]},
+           "floor": {"brackets": [{"total_median_ms": v} for v in (1.4, 0.75, 0.85)]}}
+    a = pf.bracket_step(run)
+    assert a["passes_ms"] == [0.7, 0.9, 0.8, 1.4, 0.75, 0.85]
+    assert a["total_median_ms"] == pytest.approx(0.825)
