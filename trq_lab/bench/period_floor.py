@@ -528,11 +528,10 @@ def main(argv: list[str] | None = None) -> int:
 def _runs(args, server) -> int:
     """The runs, the table and the JSON (main's, after its checks); `server`: acados' bracket
     (acados_server) or None."""
-    from trq_lab.bench.nmpc import BRACKET_KEYS, calibration_ms, machine_line
+    from trq_lab.bench.nmpc import bracket_passes, calibration_ms, machine_line
 
     def one_pass(point: str) -> dict:
-        fig = server.one_pass()
-        return {k: fig[k] for k in BRACKET_KEYS}
+        return bracket_passes({"rti-exact": server})["rti-exact"]
 
     bracket = one_pass if server is not None else None
     runs, anchors = [], []

@@ -397,3 +397,34 @@ def test_the_bench_brackets_each_daemon_run_with_acados_passes(monkeypatch, caps
     assert [sorted(b) for b in runs[0]["brackets"]] == [["rti-exact", "rti-gn"]] * 3
     assert "du_tilt_deg_max" not in runs[0]["brackets"][0]["rti-exact"]   # the pass's figures
 
+
+
+_FAKE_SERVER = r"""
+import json, sys
+print(json.dumps({"ready": True, "build_s": 2.5, "name": "acados-rti-exact"}), flush=True)
+n = 0
+for line in sys.stdin:
+    if line.strip() == "quit":
+        break
+    n += 1
+    print("QP solver returned error", file=sys.stderr, flush=True)    # acados' C output
+    print(json.dumps({"total_median_ms": 0.5 * n, "pass": n}), flush=True)
+"""
+
+
+def test_the_anchor_server_process_is_driven_and_ended(monkeypatch):
+    """AnchorServer without acados: a child speaking serve's protocol; its passes read in
+    order, acados' C output (stderr) kept out of the answers, the child ended by close."""
+    monkeypatch.setattr(bench, "_anchor_cmd", lambda *a: [sys.executable, "-c", _FAKE_SERVER])
+    with bench.AnchorServer("r.npz", "exact", "trq_nmpc_eso") as server:
+        assert (server.name, server.build_s) == ("acados-rti-exact", 2.5)
+        assert [server.one_pass()["total_median_ms"] for _ in range(3)] == [0.5, 1.0, 1.5]
+        proc = server._proc
+    assert proc.poll() == 0
+
+
+def test_an_anchor_server_that_dies_is_named_with_its_last_words(monkeypatch):
+    script = "import sys; print('libacados.so: cannot open', file=sys.stderr); sys.exit(3)"
+    monkeypatch.setattr(bench, "_anchor_cmd", lambda *a: [sys.executable, "-c", script])
+    with pytest.raises(RuntimeError, match=r"(?s)ended \(exit 3\).*libacados.so: cannot open"):
+        bench.AnchorServer("r.npz", "exact", "trq_nmpc_eso")

@@ -320,3 +320,40 @@ def test_a_runs_acados_step_is_the_median_of_its_passes_around_its_flights():
     a = pf.bracket_step(run)
     assert a["passes_ms"] == [0.7, 0.9, 0.8, 1.4, 0.75, 0.85]
     assert a["total_median_ms"] == pytest.approx(0.825)
+
+
+def test_the_anchor_brackets_every_pair_of_flights_with_one_server(monkeypatch, capsys):
+    """--anchor acados: one server for the whole bench, three passes around the real
+    controller's flights and three around the replay's in each run, the run's step their
+    median; the ratios in the table are within each run."""
+    from trq_lab.bench import acados_anchor, nmpc
+
+    passes = iter([0.8, 0.8, 0.8, 1.2, 1.2, 1.2,      # run 1: the machine moved in between
+                   0.5, 0.5, 0.5, 0.5, 0.5, 0.5])
+    served = []
+
+    class Server:
+        def one_pass(self):
+            served.append(1)
+            return {"total_median_ms": next(passes), "total_cpu_median_ms": 0.0,
+                    "failures": 0, "steps": 1, "pass": len(served)}
+
+    def floor_run(short_s, long_s, controller, work, bracket=None):
+        run = _run(2.0, 0.5)
+        for who in ("real", "floor"):
+            run[who]["brackets"] = [bracket(p) for p in ("before", "between", "after")]
+        run["checks"] = {f: {"controller_rc": 0, "same_flight": True, "flight": "ok",
+                             "same_steps": True, "steps": "ok"} for f in ("short", "long")}
+        return run
+
+    monkeypatch.setattr(acados_anchor, "available", lambda: (True, "fake"))
+    monkeypatch.setattr(pf, "acados_server", lambda stack, controller: Server())
+    monkeypatch.setattr(pf, "floor_run", floor_run)
+    monkeypatch.setattr(nmpc, "machine_line", lambda: "machine")
+    monkeypatch.setattr(nmpc, "calibration_ms", lambda repeats=5: 1.0)
+    assert pf.main(["--anchor", "acados", "--repeat", "2"]) == 0
+    out = capsys.readouterr().out
+    assert len(served) == 12
+    assert "run 1: acados exact prep+feedback p50 1.000 ms (the median of its passes around " \
+           "the run's flights: 0.800 0.800 0.800 1.200 1.200 1.200)" in out
+    assert "the floor / acados' step: 0.67 (within each run: 0.50 1.00, median 0.75)" in out
