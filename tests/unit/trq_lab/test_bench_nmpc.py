@@ -46,13 +46,17 @@ def test_the_ratio_is_paired_run_by_run():
         nmpc.paired_ratios(runs, against[:2])
 
 
+# a mode's row and acados' replay of it, as anchor_table reads them
+MODE = {"name": "rti-exact", "prep_median_ms": 1.0, "median_ms": 1.0, "total_median_ms": 2.0,
+        "total_p99_ms": 3.0, "period_cpu_median_ms": 2.5}
+ANCHOR = {"name": "acados exact", "hessian": "exact", "prep_median_ms": 0.5,
+          "feedback_median_ms": 0.5, "feedback_p99_ms": 0.8, "total_median_ms": 1.0,
+          "total_p99_ms": 1.5, "total_cpu_median_ms": 1.0, "internal_total_median_ms": 0.9,
+          "qp_iterations_median": 5, "qp_iterations_max": 9, "failures": 0, "build_s": 1.0}
+
+
 def test_the_anchor_table_sets_both_daemon_controllers_against_acados():
-    mode = {"name": "rti-exact", "prep_median_ms": 1.0, "median_ms": 1.0, "total_median_ms": 2.0,
-            "total_p99_ms": 3.0, "period_cpu_median_ms": 2.5}
-    anchor = {"name": "acados exact", "hessian": "exact", "prep_median_ms": 0.5,
-              "feedback_median_ms": 0.5, "feedback_p99_ms": 0.8, "total_median_ms": 1.0,
-              "total_p99_ms": 1.5, "total_cpu_median_ms": 1.0, "internal_total_median_ms": 0.9,
-              "qp_iterations_median": 5, "qp_iterations_max": 9, "failures": 0, "build_s": 1.0}
+    mode, anchor = MODE, ANCHOR
     text = nmpc.anchor_table([mode], {"rti-exact": anchor}, {"controller_cpu_ms": 1.6},
                              {"controller_cpu_ms": 1.2, "controller": "trq_nmpc_eso"},
                              controller="trq_nmpc_eso_fused")
@@ -64,13 +68,7 @@ def test_the_anchor_table_sets_both_daemon_controllers_against_acados():
 def test_the_target_is_also_paired_run_by_run_against_the_replay():
     """Each run's flight over the same run's replay, beside the ratio of the medians (which
     may set one run's fast spell against another's slow one)."""
-    mode = {"name": "rti-exact", "prep_median_ms": 1.0, "median_ms": 1.0, "total_median_ms": 2.0,
-            "total_p99_ms": 3.0, "period_cpu_median_ms": 2.5}
-    anchor = {"name": "acados exact", "hessian": "exact", "prep_median_ms": 0.5,
-              "feedback_median_ms": 0.5, "feedback_p99_ms": 0.8, "total_median_ms": 1.0,
-              "total_p99_ms": 1.5, "total_cpu_median_ms": 1.0, "internal_total_median_ms": 0.9,
-              "qp_iterations_median": 5, "qp_iterations_max": 9, "failures": 0, "build_s": 1.0,
-              "total_median_runs_ms": [1.0, 2.0, 0.5]}
+    mode, anchor = MODE, {**ANCHOR, "total_median_runs_ms": [1.0, 2.0, 0.5]}
     daemons = {"controller_cpu_ms": 1.6, "controller_cpu_runs_ms": [1.5, 2.0, 1.0]}
     assert nmpc.paired_to_anchor(daemons, anchor) == [1.5, 1.0, 2.0]
     text = nmpc.anchor_table([mode], {"rti-exact": anchor}, daemons,
@@ -105,12 +103,7 @@ def test_the_header_names_a_controller_file_as_it_was_given():
 def test_the_target_is_bracketed_by_acados_passes_around_each_run():
     """Each run's flight over the median of acados' passes taken right before, between and
     after its two flights; the passes' range printed, so that a machine that moved shows."""
-    mode = {"name": "rti-exact", "prep_median_ms": 1.0, "median_ms": 1.0, "total_median_ms": 2.0,
-            "total_p99_ms": 3.0, "period_cpu_median_ms": 2.5}
-    anchor = {"name": "acados exact", "hessian": "exact", "prep_median_ms": 0.5,
-              "feedback_median_ms": 0.5, "feedback_p99_ms": 0.8, "total_median_ms": 1.0,
-              "total_p99_ms": 1.5, "total_cpu_median_ms": 1.0, "internal_total_median_ms": 0.9,
-              "qp_iterations_median": 5, "qp_iterations_max": 9, "failures": 0, "build_s": 1.0}
+    mode, anchor = MODE, ANCHOR
     runs = [{"controller_cpu_ms": c, "vehicle_cpu_ms": 1.0, "realtime_factor": 2.0,
              "parts": {"solve (wall)": {"mean_ms": 0.5}, "prepare": {"mean_ms": 0.5}},
              "brackets": [{"rti-exact": {"total_median_ms": t}} for t in ts]}
