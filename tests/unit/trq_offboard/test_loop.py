@@ -695,3 +695,91 @@ def test_the_link_builds_every_message_the_loop_reads_and_no_other():
     assert flight.applied is not None
     assert mavlink.MAVLINK_MSG_ID_SERVO_OUTPUT_RAW not in link.wanted
     assert mavlink.MAVLINK_MSG_ID_ODOMETRY in link.wanted
+
+
+class LockstepVehicle(FakeLink):
+    """A vehicle in lockstep behind the fake link: it takes each command at its current stamp
+    and acknowledges it at once, and steps one period on the answer to its stamp. What it sends
+    reaches the controller in order, all in the loop's next turn (`apart` False) or one message
+    every 5 ms (`apart` True), so that an ACK and the next state come together or apart. It notes
+    each command that left while the newest state the controller had was already answered: in
+    lockstep such a command races the vehicle's step (PROTOCOL.md)."""
+
+    def __init__(self, apart: bool) -> None:
+        super().__init__()
+        self.t_us, self.apart = 0, apart
+        self.taken: list[tuple[int, float, int]] = []     # (command, param1, stamp)
+        self.late: list[int] = []          # commands sent after their state's answer
+        self.newest = None                 # the newest state delivered to the controller
+        self.answered: set[int] = set()
+        self._outbox: list = []
+
+    def deliver(self, msg) -> None:
+        if msg.get_type() == "ODOMETRY":
+            self.newest = msg.time_usec
+        self.on_message(msg)
+
+    def _out(self, msg) -> None:
+        self._outbox.append(msg)
+        if len(self._outbox) == 1:
+            asyncio.get_running_loop().call_soon(self._pump)
+
+    def _pump(self) -> None:
+        while self._outbox:
+            self.deliver(self._outbox.pop(0))
+            if self.apart and self._outbox:      # the controller's loop turns in between
+                asyncio.get_running_loop().call_later(0.005, self._pump)
+                return
+
+    def send(self, msg) -> bool:
+        super().send(msg)
+        if msg.get_type() == "COMMAND_LONG":
+            if self.newest in self.answered:
+                self.late.append(msg.command)
+            self.taken.append((msg.command, msg.param1, self.t_us))
+            self._out(from_vehicle(mavlink.MAVLink_command_ack_message(
+                msg.command, mavlink.MAV_RESULT_ACCEPTED)))
+        elif msg.get_type() == "SET_ACTUATOR_CONTROL_TARGET":
+            self.answered.add(msg.time_usec)
+            if msg.time_usec == self.t_us:
+                self.t_us += 10_000
+                self._out(odometry(self.t_us))
+        return True
+
+
+class SensorsController(FakeController):
+    """A FakeController handed the sensor samples of its streams (and dropping them)."""
+
+    def step(self, t_s, state, applied, reference, sensors=None):
+        return super().step(t_s, state, applied, reference)
+
+
+@pytest.mark.parametrize("apart", [False, True])
+def test_commands_on_hold_leave_before_their_states_answer(apart):
+    """Two stream requests and the arming: every command leaves while the newest state is not
+    answered yet, before its answer, so that in lockstep the vehicle takes it at that state's
+    stamp whatever the wall clock does; the same stamps whether each ACK and the next state
+    reach the controller together or apart."""
+    async def scenario():
+        link = LockstepVehicle(apart)
+        ref = FakeReference(done_at_s=1e9)
+        flight = OffboardFlight(link, SensorsController(), lambda state, airborne=False: ref,
+                                name="fake", tilt_limit_rad=LIMIT, connect_timeout_s=1.0,
+                                ack_timeout_s=0.5)
+        flight.streams = {"HIGHRES_IMU": 125, "ATT_POS_MOCAP": 100}
+        task = asyncio.create_task(flight.run())
+        link.deliver(heartbeat())
+        link.deliver(odometry(0))
+        await until(lambda: link.commands(1.0) and link.t_us >= 30_000, "the arming")
+        await cancelled(task)
+        return link
+
+    link = asyncio.run(scenario())
+    interval = mavlink.MAV_CMD_SET_MESSAGE_INTERVAL
+    on_hold = (interval, ARM)             # the flight's own request for OFFBOARD is not held
+    assert [c for c in link.late if c in on_hold] == [], \
+        "a command on hold left after the answer to its state"
+    assert [t for t in link.taken if t[0] in on_hold] == [
+        (interval, float(mavlink.MAVLINK_MSG_ID_HIGHRES_IMU), 0),
+        (interval, float(mavlink.MAVLINK_MSG_ID_ATT_POS_MOCAP), 10_000),
+        (ARM, 1.0, 20_000)]
