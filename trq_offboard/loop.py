@@ -425,10 +425,9 @@ class OffboardFlight:
         start = self.odometry.stamp_us if self.odometry is not None else 0
         waited = False
         while True:
-            # the state this try goes with, not answered yet (waited for if every state so far
-            # is: after the stream requests): the command leaves before its answer, so in
-            # lockstep the vehicle takes it at that state's time, and the times below are the
-            # vehicle's, whatever the wall clock does (a flight replays bit for bit)
+            # the state this try goes with (the one `_command` sends it with: the newest not
+            # answered yet), so that the times below are the vehicle's, whatever the wall clock
+            # does (a flight replays bit for bit)
             issued = (await self._next_odometry()).stamp_us
             result = await self._command(wire.arm_command(True),
                                          mavlink.MAV_CMD_COMPONENT_ARM_DISARM, hold=IDLE)

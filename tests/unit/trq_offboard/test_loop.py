@@ -122,8 +122,9 @@ def ack(result: int):
     return from_vehicle(mavlink.MAVLink_command_ack_message(ARM, result))
 
 
-def make_flight(reference: FakeReference | None = None, **kw):
-    link, ctl = FakeLink(), FakeController()
+def make_flight(reference: FakeReference | None = None, link: FakeLink | None = None,
+                ctl: FakeController | None = None, **kw):
+    link, ctl = link or FakeLink(), ctl or FakeController()
     ref = reference or FakeReference(done_at_s=1e9)
     kw.setdefault("connect_timeout_s", 1.0)
     kw.setdefault("ack_timeout_s", 0.5)
@@ -761,11 +762,7 @@ def test_commands_on_hold_leave_before_their_states_answer(apart):
     stamp whatever the wall clock does; the same stamps whether each ACK and the next state
     reach the controller together or apart."""
     async def scenario():
-        link = LockstepVehicle(apart)
-        ref = FakeReference(done_at_s=1e9)
-        flight = OffboardFlight(link, SensorsController(), lambda state, airborne=False: ref,
-                                name="fake", tilt_limit_rad=LIMIT, connect_timeout_s=1.0,
-                                ack_timeout_s=0.5)
+        flight, link, _ = make_flight(link=LockstepVehicle(apart), ctl=SensorsController())
         flight.streams = {"HIGHRES_IMU": 125, "ATT_POS_MOCAP": 100}
         task = asyncio.create_task(flight.run())
         link.deliver(heartbeat())
