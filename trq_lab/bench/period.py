@@ -19,6 +19,11 @@ over the rows stamped in (short_s, long_s]; their whole period (every thread, fr
 start to the next) is the inside view of the outside figure. Both flights write their logs, as a
 scenario's do (the log's cost is one of the parts).
 
+A controller flown for the first time in the process first flies a warm-up flight of `warm_s`
+(its figures dropped): the compiled parts of both daemons are built and cached on disk by the
+first flight on a machine, and a build in the short flight alone would be subtracted from the
+long one's CPU (a negative period on a fresh machine).
+
 `bracket`: a callable run right before the short flight, between the two and right after the
 long one, while neither daemon runs (trq-bench-nmpc's anchor: acados stepped through a
 recorded flight at the same moments of the machine); what it returns is kept, in that order,
@@ -43,6 +48,9 @@ import numpy as np
 from trq_lab import procs
 
 __all__ = ["daemons_period", "PARTS", "parts_table"]
+
+# what has flown in this process (controller, its command, sensing): warm, caches built
+_WARM: set = set()
 
 PARTS = ("observer", "effectiveness", "predictor", "feedback", "prepare", "wire", "log",
          "period")
@@ -147,12 +155,14 @@ def daemons_period(short_s: float = 5.0, long_s: float = 35.0,
                    controller: str = "trq_nmpc_eso", control_rate_hz: int = 100,
                    controller_cmd: list[str] | None = None,
                    log_root: Path | None = None, sensing: str | None = None,
-                   bracket: Callable[[str], object] | None = None) -> dict:
+                   bracket: Callable[[str], object] | None = None,
+                   warm_s: float = 1.0) -> dict:
     """The two flights and what follows from them (see the module docstring).
     `controller_cmd`: fly_daemons'. `log_root`: the flights' logs go to its `short/` and
     `long/` and stay (default: a temporary directory, removed). `sensing`: the vehicle's
     sensing profile (fly_daemons'). `bracket`: called with "before", "between" and "after"
-    around the flights (the module docstring)."""
+    around the flights (the module docstring). `warm_s`: the warm-up flight's seconds (the
+module docstring; 0: none)."""
     brackets = []
 
     def at(point: str) -> None:
@@ -162,6 +172,11 @@ def daemons_period(short_s: float = 5.0, long_s: float = 35.0,
     with contextlib.ExitStack() as stack:
         root = Path(log_root) if log_root is not None else Path(
             stack.enter_context(tempfile.TemporaryDirectory(prefix="trq-bench-period-")))
+        key = (controller, tuple(controller_cmd or ()), sensing)
+        if warm_s > 0 and key not in _WARM:
+            fly_daemons(warm_s, controller, root / "warm", controller_cmd=controller_cmd,
+                        sensing=sensing)
+            _WARM.add(key)
         at("before")
         short = fly_daemons(short_s, controller, root / "short", controller_cmd=controller_cmd,
                             sensing=sensing)

@@ -137,9 +137,41 @@ def test_the_daemons_period_calls_its_bracket_around_the_flights(monkeypatch, tm
 
     monkeypatch.setattr(period, "fly_daemons", fly)
     monkeypatch.setattr(period, "cpu_parts", lambda *a: {})
+    monkeypatch.setattr(period, "_WARM", {("trq_nmpc_eso", (), None)})    # flown already
     fig = period.daemons_period(5.0, 35.0, log_root=tmp_path,
                                 bracket=lambda point: events.append(point) or point.upper())
     assert events == ["before", "fly 5", "between", "fly 35", "after"]
     assert fig["brackets"] == ["BEFORE", "BETWEEN", "AFTER"]
     assert fig["controller_cpu_ms"] == pytest.approx(30e-3 / 3000 * 1e3)
     assert "brackets" not in period.daemons_period(5.0, 35.0, log_root=tmp_path)
+
+
+def test_a_controller_flies_a_warm_up_first_once_a_process(monkeypatch, tmp_path):
+    """the first flight on a fresh machine builds and caches the compiled parts: a warm-up
+    flight takes it, before the bracket, once per controller, command and sensing; its CPU is
+    not in the figures."""
+    from trq_lab.bench import period
+
+    events = []
+
+    def fly(seconds, controller, log_dir, controller_cmd=None, sensing=None):
+        events.append((seconds, controller, sensing))
+        cost = 100.0 if not any(e[1:] == (controller, sensing) for e in events[:-1]) else 0.0
+        return {"controller_cpu_s": seconds * 1e-3 + cost, "vehicle_cpu_s": 0.0,
+                "wall_s": seconds / 2}
+
+    monkeypatch.setattr(period, "fly_daemons", fly)
+    monkeypatch.setattr(period, "cpu_parts", lambda *a: {})
+    monkeypatch.setattr(period, "_WARM", set())
+    fig = period.daemons_period(5.0, 35.0, log_root=tmp_path, sensing="mocap",
+                                bracket=lambda point: events.append(point))
+    assert events == [(1.0, "trq_nmpc_eso", "mocap"), "before", (5.0, "trq_nmpc_eso", "mocap"),
+                      "between", (35.0, "trq_nmpc_eso", "mocap"), "after"]
+    assert fig["controller_cpu_ms"] == pytest.approx(30e-3 / 3000 * 1e3)
+    events.clear()
+    period.daemons_period(5.0, 35.0, log_root=tmp_path, sensing="mocap")
+    period.daemons_period(5.0, 35.0, log_root=tmp_path, sensing="mocap", warm_s=0.0,
+                          controller="trq_nmpc_eso_fused")
+    assert [e[0] for e in events] == [5.0, 35.0, 5.0, 35.0]
+    period.daemons_period(5.0, 35.0, log_root=tmp_path, controller="trq_nmpc_eso_fused")
+    assert [e[0] for e in events[4:]] == [1.0, 5.0, 35.0]
