@@ -92,13 +92,16 @@ def _listening(port: int, proc: subprocess.Popen, timeout_s: float) -> None:
 
 def fly_daemons(seconds: float, controller: str, log_dir: Path,
                 python: str = sys.executable,
-                controller_cmd: list[str] | None = None, sensing: str | None = None) -> dict:
+                controller_cmd: list[str] | None = None, sensing: str | None = None,
+                listen_timeout_s: float = 60.0, controller_env: dict | None = None) -> dict:
     """One lockstep flight of both daemons for `seconds` of vehicle time: CPU s of each
     process, the vehicle's wall time (start to exit) and both exit codes. `controller_cmd`: the
     command that starts the controller daemon, before its options (default
     `python -m trq_offboard`; another program taking trq-offboard's options, e.g.
-    trq_lab/bench/period_floor.py's replay). `sensing`: the vehicle's sensing profile (its
-    --sensing; None: the sim file's)."""
+    trq_lab/bench/period_floor.py's replay, or either under a profiler). `sensing`: the
+    vehicle's sensing profile (its --sensing; None: the sim file's). `listen_timeout_s`: how
+    long the controller may take to start listening. `controller_env`: variables set for the
+    controller's process only."""
     pv, pc, pg, pt = _free_ports(4)
     vcmd = [python, "-m", "sil_vehicle", "--duration", f"{seconds:g}", "--mode", "lockstep",
             "--offboard-bind", f"127.0.0.1:{pv}", "--offboard-target", f"127.0.0.1:{pc}",
@@ -108,8 +111,8 @@ def fly_daemons(seconds: float, controller: str, log_dir: Path,
     ccmd += ["--controller", controller, "--connect", f"udpin:127.0.0.1:{pc}",
              "--log-dir", str(log_dir)]
     out = dict(stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    ctl = subprocess.Popen(ccmd, **out)
-    _listening(pc, ctl, 60.0)              # built and listening: the vehicle's clock starts now
+    ctl = subprocess.Popen(ccmd, **out, env={**os.environ, **(controller_env or {})})
+    _listening(pc, ctl, listen_timeout_s)  # built and listening: the vehicle's clock starts now
     t0 = time.monotonic()
     veh = subprocess.Popen(vcmd, **out)
     veh_cpu = _reap(veh)
