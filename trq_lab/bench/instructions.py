@@ -18,7 +18,8 @@ after, on any machine), and time (trq-bench-nmpc --daemons, trq-bench-floor) to 
 How: the two lockstep flights of both daemons of trq_lab/bench/period.py (`fly_daemons`,
 `short_s` and `long_s` of vehicle time, the default sim), with the controller daemon run under
 valgrind's callgrind (`--tool=callgrind`, its default event: instructions executed, Ir; child
-processes not followed; PYTHONHASHSEED=0 so that sets and dicts iterate alike in both flights).
+processes not followed; PYTHONHASHSEED=0 so that sets and dicts iterate alike in both flights,
+and NumPy's OpenBLAS on one thread, `period_count` says why).
 Each flight's count is split by the ELF object whose code ran (callgrind's self cost, `ob=`),
 and the period's count of an object is (long - short) / periods, start-up and shut-down
 cancelled as period.py cancels them for CPU time. The objects are grouped (`GROUPS`): the
@@ -183,7 +184,11 @@ def period_count(controller: str, short_s: float, long_s: float, work: Path,
     command = list(controller_cmd or [sys.executable, "-m", "trq_offboard"])
     counts, fns = {}, {}
     flights = {}
-    env = {"PYTHONHASHSEED": "0"}
+    # sets and dicts iterating alike in both flights; NumPy's OpenBLAS on one thread: its idle
+    # workers' spinning, serialised by valgrind, otherwise adds a count that varies from flight
+    # to flight (the period's BLAS calls are small products, which OpenBLAS runs on the
+    # calling thread either way)
+    env = {"PYTHONHASHSEED": "0", "OPENBLAS_NUM_THREADS": "1"}
     for name, seconds in (("short", short_s), ("long", long_s)):
         out = work / name / "callgrind"
         out.mkdir(parents=True)

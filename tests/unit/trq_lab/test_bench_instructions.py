@@ -134,7 +134,7 @@ def test_the_period_is_the_difference_of_the_two_flights_over_their_periods(monk
     fig = ins.period_count("trq_nmpc_eso", 2.0, 6.0, tmp_path, sensing="mocap")
     assert [s[0] for s in seen] == [2.0, 6.0]
     assert all(s[2] == "mocap" and s[3] == ins.LISTEN_TIMEOUT_S
-               and s[4] == {"PYTHONHASHSEED": "0"} for s in seen)
+               and s[4] == {"PYTHONHASHSEED": "0", "OPENBLAS_NUM_THREADS": "1"} for s in seen)
     assert seen[0][1][-3:] == [ins.sys.executable, "-m", "trq_offboard"]
     assert fig["periods"] == 400
     assert fig["total"] == pytest.approx(63.0)
