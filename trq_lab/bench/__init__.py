@@ -6,6 +6,8 @@
     period         the controller's whole period from outside its process, over both daemons
                    (trq-bench-nmpc --daemons), and a controller.csv's parts
     period_floor   trq-bench-floor: the daemon's machinery alone, a recorded flight replayed
+    instructions   trq-bench-instructions: the period counted in instructions (valgrind's
+                   callgrind) by the library that runs them; the floor's and acados' step's too
     cpu_budget     trq-bench-cpu-budget: real time with the controller held to a share of a core
     sim            trq-bench-sim: the plant and the vehicle daemon, both physics cores
     wire           trq-bench-wire: the wire's part of a period, pymavlink's path against trq_wire's
