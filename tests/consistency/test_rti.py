@@ -163,15 +163,17 @@ def test_cache_is_reused_and_invalidated(cache_env, monkeypatch):
     monkeypatch.setattr(trq_wire.cache.subprocess, "run", spy)
     cfg = _cfg(hessian="gauss_newton")
     model, u_trim, *_ = ocp_problem(cfg)
-    libs_before = set(cache_env.glob("rti_lin_*.so"))
+    libs_before = set(cache_env.glob("rti_prep_*.so"))
     first = RtiSolver(cfg, model, u_trim)
     n_first = len(calls)       # 0 if an earlier test of this module already compiled it
     second = RtiSolver(cfg, model, u_trim)
     assert second.build_mode == "cached" and len(calls) == n_first      # no compiler call
     if n_first:
         assert first.build_mode == "compiled"
-    # the per-stage code does not depend on the horizon length: reused for another N
+    # the preparation is compiled whole for its horizon (no CasADi virtual machine around the
+    # stage functions a period): another N is another library
     cfg_n = dataclasses.replace(cfg, horizon_steps=10)
+    assert RtiSolver(cfg_n, model, u_trim).build_mode == "compiled"
     assert RtiSolver(cfg_n, model, u_trim).build_mode == "cached"
     # a parameter of the formulation changes: a new library is compiled
     heavy = dataclasses.replace(cfg, vehicle=dataclasses.replace(
@@ -182,8 +184,8 @@ def test_cache_is_reused_and_invalidated(cache_env, monkeypatch):
     # and the prediction step h too
     cfg_h = dataclasses.replace(cfg, step_s=0.04)
     assert RtiSolver(cfg_h, model, u_trim).build_mode == "compiled"
-    new = set(cache_env.glob("rti_lin_*.so")) - libs_before
-    assert len(new) == (1 if n_first else 0) + 2, new
+    new = set(cache_env.glob("rti_prep_*.so")) - libs_before
+    assert len(new) == (1 if n_first else 0) + 3, new
 
 
 def test_pure_python_fallback_without_compiler(cache_env, monkeypatch):

@@ -47,7 +47,7 @@ from trq_offboard.model import PredictionModel
 from trq_offboard.model.dynamics import NumpyFunction
 from trq_offboard.nmpc import feedback, hpipm
 from trq_offboard.nmpc.base import Solver, conic_line, conic_qp, plan_of
-from trq_offboard.nmpc.cache import compiled_many
+from trq_offboard.nmpc.cache import compiled, compiled_many
 from trq_offboard.nmpc.ocp import Ocp, Stage
 from trq_offboard.records import SolveInfo, SolveStatus
 
@@ -112,11 +112,26 @@ class RtiSolver(Solver):
         w_sym, p_sym = ca.SX.sym("w", nw), ca.SX.sym("p", o.n_params)
         fns.append(ca.Function(f"rti_cost_{tag}_{N}", [w_sym, p_sym], [o.cost_fn(w_sym, p_sym)]))
         enabled = sc.codegen == "auto"
-        built = compiled_many(fns, enabled)
+        # HPIPM called directly (nmpc/hpipm.py) or through casadi.conic
+        self.qp_interface = "conic"
+        if sc.qp_solver == "hpipm" and sc.hpipm_interface == "direct":
+            ok, why = hpipm.available()
+            if ok:
+                self.qp_interface = "direct"
+            else:
+                warnings.warn(f"HPIPM could not be called directly ({why}): the RTI uses "
+                              "casadi.conic('hpipm') instead (slower)", RuntimeWarning,
+                              stacklevel=2)
+        direct = self.qp_interface == "direct"
+        # the direct preparation is compiled whole below, its stage functions inlined: no
+        # CasADi virtual machine around them a period (its indexing, its map, the outputs'
+        # densification); the conic path calls them compiled apart
+        whole = direct and enabled
+        built = compiled_many(fns[-1:] if whole else fns, enabled)
         self._cost_fn = NumpyFunction(built[-1][0])
         self._cost_fn.args[1][(N + 1) * nx:(N + 1) * nx + nu] = self.u_trim / o.u_scale
         self.build_mode = built[0][1]                  # compiled | cached | interpreted
-        lin = built[0][0].map(N)
+        lin = (fns[0] if whole else built[0][0]).map(N)
         # constant cost Hessians (stage and terminal)
         zero = [np.zeros(ns), np.zeros(nv), np.zeros(nx), np.zeros(nu)]
         hc = np.asarray(ca.Function("hc", [s, v, xr, ut], [ca.hessian(l_k, z)[0]])(*zero))
@@ -141,22 +156,11 @@ class RtiSolver(Solver):
         grad_src = ca.vertcat(ca.vec(GZ), gN(W[s_idx[N].tolist()], XR[:, N]))
         pos = np.concatenate([z_idx.ravel(), s_idx[N]])
         grad = grad_src[np.argsort(pos).tolist()]
-        # HPIPM called directly (nmpc/hpipm.py) or through casadi.conic
-        self.qp_interface = "conic"
-        if sc.qp_solver == "hpipm" and sc.hpipm_interface == "direct":
-            ok, why = hpipm.available()
-            if ok:
-                self.qp_interface = "direct"
-            else:
-                warnings.warn(f"HPIPM could not be called directly ({why}): the RTI uses "
-                              "casadi.conic('hpipm') instead (slower)", RuntimeWarning,
-                              stacklevel=2)
-        direct = self.qp_interface == "direct"
         self._hc = hc + reg * np.eye(nz)               # constant stage Hessian (GN part)
         self._hcN = hcN + reg * np.eye(ns)
         HL = None
         if hessian == "exact":
-            hess = built[1][0].map(N)
+            hess = (fns[1] if whole else built[1][0]).map(N)
             HL = ca.densify(hess(S, V, D, ca.reshape(LAM, ns, N)))   # (nz, nz N)
         if direct:
             # the stage Jacobians [A_k B_k] dense (column-major: one block per stage), all
@@ -195,7 +199,9 @@ class RtiSolver(Solver):
                 outs.append(ca.MX(h_sp, hsrc[h_src.tolist()]))
             else:
                 self._h_const = ca.DM(h_sp, ca.DM(base[h_src]))
-        self._prep = ca.Function("rti_prep", [W, XR, UT, D, LAM], outs)
+        self._prep = ca.Function(f"rti_prep_{tag}_{N}", [W, XR, UT, D, LAM], outs)
+        if whole:
+            self._prep, self.build_mode = compiled(self._prep)
         if direct:
             self._prep_np = NumpyFunction(self._prep)
             # state boxes: the finite bounds of s_k (the same for k >= 1); inputs all boxed
