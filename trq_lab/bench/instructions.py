@@ -258,14 +258,13 @@ def top_objects(objects: dict[str, float], n: int = 12) -> str:
 
 
 def main(argv=None) -> int:
+    from trq_lab.bench.period import add_flight_lengths
+
     ap = argparse.ArgumentParser(prog="trq-bench-instructions",
                                  description=__doc__.splitlines()[0])
     ap.add_argument("--controller", default="trq_nmpc_eso")
     ap.add_argument("--sensing", default=None, help="the vehicle's sensing profile")
-    ap.add_argument("--short-s", type=float, default=2.0,
-                    help="the short flight, s of vehicle time (default 2)")
-    ap.add_argument("--long-s", type=float, default=6.0,
-                    help="the long flight, s of vehicle time (default 6)")
+    add_flight_lengths(ap, 2.0, 6.0)
     ap.add_argument("--floor", action="store_true",
                     help="also the replay of the long flight (trq-bench-floor's floor)")
     ap.add_argument("--anchor", choices=("acados",), default=None,

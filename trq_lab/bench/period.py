@@ -132,6 +132,14 @@ def fly_daemons(seconds: float, controller: str, log_dir: Path,
             "wall_s": wall, "vehicle_rc": veh.returncode, "controller_rc": ctl.returncode}
 
 
+def add_flight_lengths(ap, short_s: float, long_s: float) -> None:
+    """The two flights' --short-s and --long-s (s of vehicle time) on a bench's parser."""
+    ap.add_argument("--short-s", type=float, default=short_s,
+                    help=f"the short flight, s of vehicle time (default {short_s:g})")
+    ap.add_argument("--long-s", type=float, default=long_s,
+                    help=f"the long flight, s of vehicle time (default {long_s:g})")
+
+
 def cpu_parts(csv_path: Path, lo_s: float, hi_s: float) -> dict:
     """{part: {mean_ms, p50_ms, p99_ms}} of a controller.csv's cpu_*_ms columns and its solve
     time, over the steps stamped in (lo_s, hi_s] (nan for a column the log lacks)."""

@@ -470,10 +470,8 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--repeat", type=int, default=3,
                     help="runs, each the real controller's flights then their replay "
                          "(interleaved); the figures are medians (default 3)")
-    ap.add_argument("--short-s", type=float, default=5.0,
-                    help="the short flight, s of vehicle time (default 5)")
-    ap.add_argument("--long-s", type=float, default=35.0,
-                    help="the long flight, s of vehicle time (default 35)")
+    from trq_lab.bench.period import add_flight_lengths
+    add_flight_lengths(ap, 5.0, 35.0)
     ap.add_argument("--controller", default="trq_nmpc_eso",
                     help="the controller file of the real flights (default trq_nmpc_eso)")
     ap.add_argument("--anchor", choices=("acados",), default=None,
