@@ -94,23 +94,6 @@ class RtiSolver(Solver):
         self._N, self._ns, self._nv, self._nx = N, ns, nv, nx
         stage = Stage.build(cfg, model)
 
-        # --- per-stage functions (SX, compiled once) -------------------------------------------
-        s, v = ca.SX.sym("s", ns), ca.SX.sym("v", nv)
-        xr, ut, d = ca.SX.sym("x_ref", nx), ca.SX.sym("u_trim", nu), ca.SX.sym("d", 6)
-        lam = ca.SX.sym("lam", ns)
-        z = ca.vertcat(s, v)
-        phi = stage.dynamics(s, v, d)
-        l_k = stage.cost(s, v, xr, ut)
-        tag = "trq" if o.tilting else "quad"
-        fns = [ca.Function(f"rti_lin_{tag}", [s, v, xr, ut, d],
-                           [phi, ca.jacobian(phi, z), ca.gradient(l_k, z), ca.jacobian(phi, d)],
-                           {"cse": True})]
-        if hessian == "exact":
-            fns.append(ca.Function(f"rti_hess_{tag}", [s, v, d, lam],
-                                   [ca.hessian(ca.dot(lam, phi), z)[0]], {"cse": True}))
-        # the NLP's cost (logged with every solve), the Ocp's own expression compiled
-        w_sym, p_sym = ca.SX.sym("w", nw), ca.SX.sym("p", o.n_params)
-        fns.append(ca.Function(f"rti_cost_{tag}_{N}", [w_sym, p_sym], [o.cost_fn(w_sym, p_sym)]))
         enabled = sc.codegen == "auto"
         # HPIPM called directly (nmpc/hpipm.py) or through casadi.conic
         self.qp_interface = "conic"
@@ -127,6 +110,27 @@ class RtiSolver(Solver):
         # CasADi virtual machine around them a period (its indexing, its map, the outputs'
         # densification); the conic path calls them compiled apart
         whole = direct and enabled
+        # inlined, the stage functions write their Jacobians and Hessian dense (their structural
+        # zeros as zeros): the preparation's densification of them is then no copy at all
+        dense = ca.densify if whole else (lambda e: e)
+
+        # --- per-stage functions (SX, compiled once) -------------------------------------------
+        s, v = ca.SX.sym("s", ns), ca.SX.sym("v", nv)
+        xr, ut, d = ca.SX.sym("x_ref", nx), ca.SX.sym("u_trim", nu), ca.SX.sym("d", 6)
+        lam = ca.SX.sym("lam", ns)
+        z = ca.vertcat(s, v)
+        phi = stage.dynamics(s, v, d)
+        l_k = stage.cost(s, v, xr, ut)
+        tag = "trq" if o.tilting else "quad"
+        fns = [ca.Function(f"rti_lin_{tag}", [s, v, xr, ut, d],
+                           [phi, dense(ca.jacobian(phi, z)), dense(ca.gradient(l_k, z)),
+                            dense(ca.jacobian(phi, d))], {"cse": True})]
+        if hessian == "exact":
+            fns.append(ca.Function(f"rti_hess_{tag}", [s, v, d, lam],
+                                   [dense(ca.hessian(ca.dot(lam, phi), z)[0])], {"cse": True}))
+        # the NLP's cost (logged with every solve), the Ocp's own expression compiled
+        w_sym, p_sym = ca.SX.sym("w", nw), ca.SX.sym("p", o.n_params)
+        fns.append(ca.Function(f"rti_cost_{tag}_{N}", [w_sym, p_sym], [o.cost_fn(w_sym, p_sym)]))
         built = compiled_many(fns[-1:] if whole else fns, enabled)
         self._cost_fn = NumpyFunction(built[-1][0])
         self._cost_fn.args[1][(N + 1) * nx:(N + 1) * nx + nu] = self.u_trim / o.u_scale
