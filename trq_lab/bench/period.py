@@ -173,7 +173,7 @@ def daemons_period(short_s: float = 5.0, long_s: float = 35.0,
     `long/` and stay (default: a temporary directory, removed). `sensing`: the vehicle's
     sensing profile (fly_daemons'). `bracket`: called with "before", "between" and "after"
     around the flights (the module docstring). `warm_s`: the warm-up flight's seconds (the
-module docstring; 0: none)."""
+    module docstring; 0: none)."""
     brackets = []
 
     def at(point: str) -> None:

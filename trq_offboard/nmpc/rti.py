@@ -11,11 +11,15 @@ normally the previous plan shifted by one control period) evaluate, for every st
 
     phi_k = F(s_k, v_k, d)   A_k, B_k = dF/d(s, v)   D_k = dF/dd   grad l_k   [H_k]
 
-with ONE call of a per-stage function mapped over the horizon (the stage function is generated as C
-and compiled once, `cache.py`; the same code serves every stage and every horizon length), and
-assemble the structured QP in the increments dw:
+with ONE call of a per-stage function mapped over the horizon, and assemble the structured QP in
+the increments dw:
 
     min 1/2 dw' H dw + grad' dw   s.t.  gaps + J dw = 0,   lbw - w <= dw <= ubw - w
+
+With HPIPM called directly the whole preparation (the stage function, its map, the gaps, the
+gradient's assembly, the outputs written dense) is generated as one C function and compiled once
+for its horizon (`cache.py`); on the conic path the stage function is compiled apart, serving
+every horizon length, and CasADi runs the rest.
 
 H is the constant Hessian of the quadratic cost (Gauss-Newton: exact here, since the cost is
 quadratic in w) or, for hessian="exact", the Hessian of the Lagrangian with the multipliers of the
@@ -114,7 +118,7 @@ class RtiSolver(Solver):
         # zeros as zeros): the preparation's densification of them is then no copy at all
         dense = ca.densify if whole else (lambda e: e)
 
-        # --- per-stage functions (SX, compiled once) -------------------------------------------
+        # --- per-stage functions (SX: inlined in the preparation, or compiled apart) -----------
         s, v = ca.SX.sym("s", ns), ca.SX.sym("v", nv)
         xr, ut, d = ca.SX.sym("x_ref", nx), ca.SX.sym("u_trim", nu), ca.SX.sym("d", 6)
         lam = ca.SX.sym("lam", ns)
