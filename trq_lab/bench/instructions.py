@@ -52,7 +52,8 @@ import sys
 import tempfile
 from pathlib import Path
 
-__all__ = ["GROUPS", "callgrind_objects", "group_of", "period_count", "acados_count", "main"]
+__all__ = ["GROUPS", "callgrind_costs", "by_object", "by_function", "group_of", "period_count",
+           "acados_count", "main"]
 
 LISTEN_TIMEOUT_S = 900.0       # the controller's start-up under callgrind: imports, cached builds
 ACADOS_STEP_FUNCTION = "ocp_nlp_solve"
@@ -83,14 +84,13 @@ def group_of(obj: str) -> str:
     return OTHER
 
 
-def callgrind_objects(path: Path, functions: bool = False
-                      ) -> tuple[collections.Counter, int]:
-    """The self cost of each ELF object in a callgrind output file (its first event: Ir), or
-    with `functions` of each function (keyed "object's file name: function"), and the file's
-    total. Each cost line counts for the function it is in and that function's object (`ob=`
-    before `fn=`); the line after `calls=` is the call's inclusive cost, the callee's, and is
-    not counted again. Names compressed as `(id) name` are expanded. Raises ValueError on a
-    file whose costs do not add up to its own total."""
+def callgrind_costs(path: Path) -> tuple[collections.Counter, int]:
+    """The self cost of each function in a callgrind output file (its first event: Ir), keyed
+    (its ELF object, the function), and the file's total. Each cost line counts for the
+    function it is in, whose object is the `ob=` before its `fn=`; the line after `calls=` is
+    the call's inclusive cost, the callee's, and is not counted again. Names compressed as
+    `(id) name` are expanded. Raises ValueError on a file whose costs do not add up to its own
+    total."""
     names: dict[tuple[str, str], str] = {}
 
     def expand(kind: str, value: str) -> str:
@@ -126,8 +126,7 @@ def callgrind_objects(path: Path, functions: bool = False
             elif key in ("fn", "cfn"):
                 name = expand("fn", value)
                 if key == "fn":
-                    key_now = (f"{(ob or '?').rsplit('/', 1)[-1]}: {name}" if functions
-                               else ob)
+                    key_now = (ob, name)
             elif key == "calls":
                 skip = True
             elif line.startswith("totals:"):
@@ -138,6 +137,20 @@ def callgrind_objects(path: Path, functions: bool = False
     elif total != counted:
         raise ValueError(f"{path}: its costs add up to {counted}, its total says {total}")
     return cost, total
+
+
+def by_object(costs: collections.Counter) -> collections.Counter:
+    """callgrind_costs' figures summed per ELF object."""
+    out: collections.Counter = collections.Counter()
+    for (obj, _fn), n in costs.items():
+        out[obj] += n
+    return out
+
+
+def by_function(costs: collections.Counter) -> collections.Counter:
+    """callgrind_costs' figures keyed "object's file name: function"."""
+    return collections.Counter({f"{(obj or '?').rsplit('/', 1)[-1]}: {fn}": n
+                                for (obj, fn), n in costs.items()})
 
 
 def _only_output(out_dir: Path) -> Path:
@@ -182,7 +195,7 @@ def period_count(controller: str, short_s: float, long_s: float, work: Path,
     from trq_lab.bench.period import fly_daemons
 
     command = list(controller_cmd or [sys.executable, "-m", "trq_offboard"])
-    counts, fns = {}, {}
+    costs = {}
     flights = {}
     # sets and dicts iterating alike in both flights; NumPy's OpenBLAS on one thread: its idle
     # workers' spinning, serialised by valgrind, otherwise adds a count that varies from flight
@@ -196,15 +209,15 @@ def period_count(controller: str, short_s: float, long_s: float, work: Path,
                                     controller_cmd=callgrind_command(out, command),
                                     sensing=sensing, listen_timeout_s=LISTEN_TIMEOUT_S,
                                     controller_env=env)
-        counts[name] = callgrind_objects(_only_output(out))
-        fns[name] = callgrind_objects(_only_output(out), functions=True)[0]
+        costs[name] = callgrind_costs(_only_output(out))
     periods = (long_s - short_s) * control_rate_hz
-    objects = per_period(counts["short"][0], counts["long"][0], periods)
+    (short, short_total), (long_, long_total) = costs["short"], costs["long"]
+    objects = per_period(by_object(short), by_object(long_), periods)
     return {"periods": periods, "flights": flights,
-            "total": (counts["long"][1] - counts["short"][1]) / periods,
+            "total": (long_total - short_total) / periods,
             "groups": grouped(objects),
             "objects": {k or "?": v for k, v in objects.items()},
-            "functions": per_period(fns["short"], fns["long"], periods)}
+            "functions": per_period(by_function(short), by_function(long_), periods)}
 
 
 def acados_count(recording: Path, hessian: str, controller: str, work: Path) -> dict:
@@ -227,8 +240,8 @@ def acados_count(recording: Path, hessian: str, controller: str, work: Path) -> 
         raise RuntimeError(f"acados' replay under callgrind failed:\n{run.stderr[-2000:]}")
     from trq_lab.bench.nmpc import _last_json_line
     summary = json.loads(_last_json_line(run.stdout))
-    objects, total = callgrind_objects(_only_output(out))
-    functions = callgrind_objects(_only_output(out), functions=True)[0]
+    costs, total = callgrind_costs(_only_output(out))
+    objects, functions = by_object(costs), by_function(costs)
     steps = summary["steps"]
     return {"steps": steps, "failures": summary.get("failures"), "total": total / steps,
             "groups": grouped({k: v / steps for k, v in objects.items()}),

@@ -64,7 +64,8 @@ def write(path: Path, py1=100, py2=20, np=300, qp=5000, kern=40, total=None) -> 
 
 
 def test_self_cost_per_object_names_expanded_and_calls_not_counted_twice(tmp_path):
-    cost, total = ins.callgrind_objects(write(tmp_path / "callgrind.out.1"))
+    costs, total = ins.callgrind_costs(write(tmp_path / "callgrind.out.1"))
+    cost = ins.by_object(costs)
     assert total == 5460
     assert cost["/usr/lib/libpython3.11.so.1.0"] == 120          # not the call's 300
     assert cost["/home/u/.venv/lib/python3.11/site-packages/numpy/_core/"
@@ -74,7 +75,8 @@ def test_self_cost_per_object_names_expanded_and_calls_not_counted_twice(tmp_pat
 
 
 def test_self_cost_per_function_keyed_by_its_object(tmp_path):
-    cost, total = ins.callgrind_objects(write(tmp_path / "callgrind.out.1"), functions=True)
+    costs, total = ins.callgrind_costs(write(tmp_path / "callgrind.out.1"))
+    cost = ins.by_function(costs)
     assert cost == {"libpython3.11.so.1.0: _PyEval_EvalFrameDefault": 120,
                     "_multiarray_umath.so: array_dot": 300,
                     "libblasfeo.so: kernel_dgemm_nt_4x4_lib4": 5000,
@@ -85,7 +87,7 @@ def test_self_cost_per_function_keyed_by_its_object(tmp_path):
 def test_a_file_whose_costs_miss_its_total_is_refused_by_name(tmp_path):
     path = write(tmp_path / "callgrind.out.2", total=9999)
     with pytest.raises(ValueError, match=re.escape(str(path)) + ".*9999"):
-        ins.callgrind_objects(path)
+        ins.callgrind_costs(path)
 
 
 @pytest.mark.parametrize("obj, group", [
