@@ -19,10 +19,12 @@ over the rows stamped in (short_s, long_s]; their whole period (every thread, fr
 start to the next) is the inside view of the outside figure. Both flights write their logs, as a
 scenario's do (the log's cost is one of the parts).
 
-A controller flown for the first time in the process first flies a warm-up flight of `warm_s`
-(its figures dropped): the compiled parts of both daemons are built and cached on disk by the
-first flight on a machine, and a build in the short flight alone would be subtracted from the
-long one's CPU (a negative period on a fresh machine).
+A controller flown for the first time in the process (with a sensing profile) first flies a
+warm-up flight of `warm_s` (its figures dropped): the compiled parts of both daemons are built
+and cached on disk by the first flight on a machine, and a build in the short flight alone would
+be subtracted from the long one's CPU (a negative period on a fresh machine). A replay of that
+controller's flight (`controller_cmd`, the floor bench's) builds nothing the controller's own
+flights have not, and flies no warm-up of its own.
 
 `bracket`: a callable run right before the short flight, between the two and right after the
 long one, while neither daemon runs (trq-bench-nmpc's anchor: acados stepped through a
@@ -49,7 +51,7 @@ from trq_lab import procs
 
 __all__ = ["daemons_period", "PARTS", "parts_table"]
 
-# what has flown in this process (controller, its command, sensing): warm, caches built
+# what has flown in this process (controller, sensing): warm, caches built
 _WARM: set = set()
 
 PARTS = ("observer", "effectiveness", "predictor", "feedback", "prepare", "wire", "log",
@@ -183,7 +185,7 @@ def daemons_period(short_s: float = 5.0, long_s: float = 35.0,
     with contextlib.ExitStack() as stack:
         root = Path(log_root) if log_root is not None else Path(
             stack.enter_context(tempfile.TemporaryDirectory(prefix="trq-bench-period-")))
-        key = (controller, tuple(controller_cmd or ()), sensing)
+        key = (controller, sensing)
         if warm_s > 0 and key not in _WARM:
             fly_daemons(warm_s, controller, root / "warm", controller_cmd=controller_cmd,
                         sensing=sensing)

@@ -137,7 +137,7 @@ def test_the_daemons_period_calls_its_bracket_around_the_flights(monkeypatch, tm
 
     monkeypatch.setattr(period, "fly_daemons", fly)
     monkeypatch.setattr(period, "cpu_parts", lambda *a: {})
-    monkeypatch.setattr(period, "_WARM", {("trq_nmpc_eso", (), None)})    # flown already
+    monkeypatch.setattr(period, "_WARM", {("trq_nmpc_eso", None)})    # flown already
     fig = period.daemons_period(5.0, 35.0, log_root=tmp_path,
                                 bracket=lambda point: events.append(point) or point.upper())
     assert events == ["before", "fly 5", "between", "fly 35", "after"]
@@ -148,7 +148,7 @@ def test_the_daemons_period_calls_its_bracket_around_the_flights(monkeypatch, tm
 
 def test_a_controller_flies_a_warm_up_first_once_a_process(monkeypatch, tmp_path):
     """the first flight on a fresh machine builds and caches the compiled parts: a warm-up
-    flight takes it, before the bracket, once per controller, command and sensing; its CPU is
+    flight takes it, before the bracket, once per controller and sensing (a replay's command not again); its CPU is
     not in the figures."""
     from trq_lab.bench import period
 
@@ -175,3 +175,6 @@ def test_a_controller_flies_a_warm_up_first_once_a_process(monkeypatch, tmp_path
     assert [e[0] for e in events] == [5.0, 35.0, 5.0, 35.0]
     period.daemons_period(5.0, 35.0, log_root=tmp_path, controller="trq_nmpc_eso_fused")
     assert [e[0] for e in events[4:]] == [1.0, 5.0, 35.0]
+    period.daemons_period(5.0, 35.0, log_root=tmp_path, controller="trq_nmpc_eso_fused",
+                          controller_cmd=["python", "-m", "replay", "x.csv"])
+    assert [e[0] for e in events[7:]] == [5.0, 35.0]
