@@ -143,10 +143,10 @@ def callgrind_costs(path: Path) -> tuple[collections.Counter, int]:
 
 
 def by_object(costs: collections.Counter) -> collections.Counter:
-    """callgrind_costs' figures summed per ELF object."""
+    """callgrind_costs' figures summed per ELF object ("?" where callgrind names none)."""
     out: collections.Counter = collections.Counter()
     for (obj, _fn), n in costs.items():
-        out[obj] += n
+        out[obj or "?"] += n
     return out
 
 
@@ -179,14 +179,14 @@ def callgrind_command(out_dir: Path, command: list[str],
 
 def per_period(short: collections.Counter, long_: collections.Counter,
                periods: float) -> dict[str, float]:
-    """Each object's instructions per period, (long - short) / periods."""
+    """Each key's instructions per period, (long - short) / periods."""
     return {k: (long_.get(k, 0) - short.get(k, 0)) / periods for k in set(short) | set(long_)}
 
 
 def grouped(objects: dict[str, float]) -> dict[str, float]:
     out: dict[str, float] = collections.defaultdict(float)
     for obj, n in objects.items():
-        out[group_of(obj or "")] += n
+        out[group_of(obj)] += n
     return dict(out)
 
 
@@ -219,7 +219,7 @@ def period_count(controller: str, short_s: float, long_s: float, work: Path,
     return {"periods": periods, "flights": flights,
             "total": (long_total - short_total) / periods,
             "groups": grouped(objects),
-            "objects": {k or "?": v for k, v in objects.items()},
+            "objects": objects,
             "functions": per_period(by_function(short), by_function(long_), periods)}
 
 
@@ -244,12 +244,12 @@ def acados_count(recording: Path, hessian: str, controller: str, work: Path) -> 
     from trq_lab.bench.nmpc import _last_json_line
     summary = json.loads(_last_json_line(run.stdout))
     costs, total = callgrind_costs(_only_output(out))
-    objects, functions = by_object(costs), by_function(costs)
     steps = summary["steps"]
+    none = collections.Counter()                  # the whole count is the steps'
+    objects = per_period(none, by_object(costs), steps)
     return {"steps": steps, "failures": summary.get("failures"), "total": total / steps,
-            "groups": grouped({k: v / steps for k, v in objects.items()}),
-            "objects": {(k or "?"): v / steps for k, v in objects.items()},
-            "functions": {k: v / steps for k, v in functions.items()}}
+            "groups": grouped(objects), "objects": objects,
+            "functions": per_period(none, by_function(costs), steps)}
 
 
 def table(rows: dict[str, dict]) -> str:
