@@ -49,6 +49,13 @@ A `Replayer` builds acados once for a recording and makes as many passes through
 each from acados' memory reset (the same sequence solved each time). `--serve` keeps one in a
 process and makes a pass on each request on stdin, its figures on stdout (`serve`): the bench's
 bracket of the daemons' flights (trq_lab/bench/nmpc.py).
+
+Pacing (`pace_s`, "pass PACE_MS", --pace-ms): by default the steps follow each other at once, a
+tight loop. Paced, each step's feedback starts `pace_s` after the previous step's feedback
+started (the wait, untimed, between the preparation and the feedback, where a control loop waits
+for its next state): acados stepped as a control loop at 1/pace_s Hz steps it, whose caches the
+machine has had that long to take back between two steps
+(docs/decisions/2026-12-07-period-paced.md).
 """
 
 from __future__ import annotations
@@ -472,11 +479,17 @@ class Replayer:
             self._tmp.cleanup()
             self._tmp = None
 
-    def run(self) -> tuple[np.ndarray, np.ndarray]:
+    def run(self, pace_s: float = 0.0, clock=time.perf_counter, sleep=time.sleep
+            ) -> tuple[np.ndarray, np.ndarray]:
         """One pass through the recording: per step (prep wall, prep CPU, feedback wall,
         feedback CPU, acados' prep, acados' feedback, QP iterations, feedback status, 1 when
-        the solution is finite) and the first commands (K, 8)."""
+        the solution is finite) and the first commands (K, 8). `pace_s` > 0: each feedback
+        starts pace_s after the previous one started (the module's docstring; `clock` and
+        `sleep` the wall clock's)."""
+        if not (pace_s >= 0.0 and math.isfinite(pace_s)):
+            raise ValueError(f"pace {pace_s:g} s: expected a finite time >= 0")
         rti, rec = self.rti, self.rec
+        due = None                            # when the next feedback may start (paced)
         if self.passes:
             rti.solver.reset()
         self.passes += 1
@@ -494,6 +507,10 @@ class Replayer:
             st_p, wp, cp = rti.prepare()
             tp = rti.solver.get_stats("time_preparation")
             s0 = np.concatenate([rec["x0"][k], rec["alpha_prev"][k]])
+            if pace_s > 0.0:
+                if due is not None and due > clock():
+                    sleep(due - clock())
+                due = clock() + pace_s
             st_f, wf, cf = rti.feedback(s0)
             tf = rti.solver.get_stats("time_feedback")
             qp_it = np.atleast_1d(rti.solver.get_stats("qp_iter"))
@@ -507,7 +524,8 @@ class Replayer:
                        finite)
         return rows, u0
 
-    def summary(self, rows: np.ndarray, u0: np.ndarray, split_s: float | None = None) -> dict:
+    def summary(self, rows: np.ndarray, u0: np.ndarray, split_s: float | None = None,
+                pace_s: float = 0.0) -> dict:
         """A pass's figures (see the module's docstring). `split_s`: the first commands also
         compared apart before and after this time of the flight (step k at k control periods;
         the bench's fault)."""
@@ -545,7 +563,8 @@ class Replayer:
             name=anchor_name(self.hessian, self.regularize), hessian=self.hessian,
             regularize=self.regularize,
             reg_epsilon=float(rti.ocp.solver_options.reg_epsilon),
-            init=self.init, steps=int(K), failures=failures, build_s=rti.build_s,
+            init=self.init, pace_ms=pace_s * 1e3, steps=int(K), failures=failures,
+            build_s=rti.build_s,
             prep_median_ms=med(rows[:, 0]), prep_p99_ms=p99(rows[:, 0]),
             feedback_median_ms=med(rows[:, 2]), feedback_p99_ms=p99(rows[:, 2]),
             feedback_max_ms=float(rows[:, 2].max() * ms),
@@ -568,21 +587,22 @@ class Replayer:
 def replay(recording: Path, hessian: str, controller: str = "trq_nmpc_eso",
            init: str = "shift", workdir: Path | None = None,
            split_s: float | None = None, regularize: str = "NO_REGULARIZE",
-           reg_epsilon: float | None = None) -> dict:
+           reg_epsilon: float | None = None, pace_s: float = 0.0) -> dict:
     """acados' RTI through a recorded flight of ours: per-step times and first commands against
-    ours (see the module's docstring), one pass of a `Replayer`."""
+    ours (see the module's docstring), one pass of a `Replayer` (paced: `pace_s`)."""
     r = Replayer(recording, hessian, controller, init, workdir, regularize, reg_epsilon)
     try:
-        return r.summary(*r.run(), split_s=split_s)
+        return r.summary(*r.run(pace_s), split_s=split_s, pace_s=pace_s)
     finally:
         r.close()
 
 
 def serve(replayer: Replayer, requests, answer, split_s: float | None = None) -> int:
     """The bench's bracketing server: one JSON line to `answer` when built ({"ready": true,
-    "build_s"}), then for each line of `requests`, "pass": one pass through the recording and
-    its figures (`Replayer.summary` with `split_s`, and the pass's number); "quit" or the end
-    of `requests`: return the passes made. Another line is answered {"error": ...} and the
+    "build_s"}), then for each line of `requests`, "pass" (or "pass PACE_MS": paced, the
+    module's docstring): one pass through the recording and its figures (`Replayer.summary`
+    with `split_s`, and the pass's number); "quit" or the end of `requests`: return the passes
+    made. Another line, or a pace that is not a time >= 0, is answered {"error": ...} and the
     server goes on."""
     def say(obj: dict) -> None:
         answer.write(json.dumps(obj) + "\n")
@@ -591,14 +611,26 @@ def serve(replayer: Replayer, requests, answer, split_s: float | None = None) ->
     say({"ready": True, "build_s": replayer.rti.build_s, "name": anchor_name(
         replayer.hessian, replayer.regularize)})
     for line in requests:
-        word = line.strip()
+        word, *rest = line.split() or [""]
         if word == "quit":
             break
-        if word != "pass":
-            say({"error": f"unknown request {word[:40]!r}: expected pass or quit"})
+        pace_s = _pace_of(rest[0]) if word == "pass" and len(rest) == 1 else 0.0
+        if word != "pass" or len(rest) > 1 or pace_s is None:
+            say({"error": f"unknown request {line.strip()[:40]!r}: expected pass, "
+                          "pass PACE_MS (a time >= 0) or quit"})
             continue
-        say({**replayer.summary(*replayer.run(), split_s=split_s), "pass": replayer.passes})
+        say({**replayer.summary(*replayer.run(pace_s), split_s=split_s, pace_s=pace_s),
+             "pass": replayer.passes})
     return replayer.passes
+
+
+def _pace_of(text: str) -> float | None:
+    """A request's pace in ms as seconds, None if it is not a finite time >= 0."""
+    try:
+        ms = float(text)
+    except ValueError:
+        return None
+    return ms * 1e-3 if math.isfinite(ms) and ms >= 0.0 else None
 
 
 def anchor_name(hessian: str, regularize: str = "NO_REGULARIZE") -> str:
@@ -636,10 +668,15 @@ def main(argv=None) -> int:
                     help="acados' regularize_method (default NO_REGULARIZE, acados' own)")
     ap.add_argument("--reg-epsilon", type=float, default=None,
                     help="acados' reg_epsilon for the methods that read one (default: acados')")
+    ap.add_argument("--pace-ms", type=float, default=0.0, metavar="MS",
+                    help="each feedback MS after the previous one started, as a control loop "
+                         "paces it (default 0: a tight loop)")
     ap.add_argument("--serve", action="store_true",
                     help="build once, then one pass through the recording for each line "
                          "'pass' on stdin, its figures a JSON line on stdout ('quit' ends)")
     args = ap.parse_args(argv)
+    if not (math.isfinite(args.pace_ms) and args.pace_ms >= 0.0):
+        ap.error(f"--pace-ms {args.pace_ms:g}: expected a time >= 0")
     try:
         check_regularize(args.regularize, args.reg_epsilon)
     except ValueError as exc:
@@ -662,7 +699,8 @@ def main(argv=None) -> int:
         return 0
     print(json.dumps(replay(args.replay, args.hessian, args.controller, args.init,
                             split_s=args.split_s, regularize=args.regularize,
-                            reg_epsilon=args.reg_epsilon)), flush=True)
+                            reg_epsilon=args.reg_epsilon, pace_s=args.pace_ms * 1e-3)),
+          flush=True)
     return 0
 
 

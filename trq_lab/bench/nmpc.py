@@ -56,6 +56,14 @@ recording right before each run's short daemon flight, between the short and the
 right after the long one, while neither daemon runs (period.daemons_period's `bracket`). The
 target is printed a third way: each run's CPU per period over the median of its three passes'
 step p50, with the range of every pass (a machine that moved during the run shows there).
+
+--pacing realtime (with --daemons): the vehicle runs on the wall clock, so that the control loop
+runs at its rate and waits a whole control period less its own work between two steps, and
+acados' bracket passes are paced at the same period (each feedback one control period after the
+previous one started). Both sides then find the machine as long after their last step. The
+default, lockstep, sets the lockstep daemons against acados' tight loop: on a shared VM a step's
+cost grows with the time since the last one, and the two pacings differ by a factor
+(docs/decisions/2026-12-07-period-paced.md).
 """
 
 from __future__ import annotations
@@ -248,6 +256,8 @@ def _anchor_cmd(recording: Path, hessian: str, controller: str, init: str,
 
 # what a bracketing pass keeps of acados' figures (the rest is the per-run replay's to print)
 BRACKET_KEYS = ("total_median_ms", "total_cpu_median_ms", "failures", "steps", "pass")
+# --pacing: how the daemons' flights and acados' bracket passes are paced
+PACINGS = ("lockstep", "realtime")
 
 
 class AnchorServer:
@@ -288,9 +298,10 @@ class AnchorServer:
             raise RuntimeError(f"acados' replay server: {obj['error']}")
         return obj
 
-    def one_pass(self) -> dict:
-        """One pass through the recording: its figures (acados_anchor.Replayer.summary)."""
-        self._proc.stdin.write("pass\n")
+    def one_pass(self, pace_ms: float = 0.0) -> dict:
+        """One pass through the recording: its figures (acados_anchor.Replayer.summary);
+        `pace_ms` > 0: paced as a control loop at that period (acados_anchor's docstring)."""
+        self._proc.stdin.write(f"pass {pace_ms:g}\n" if pace_ms > 0.0 else "pass\n")
         self._proc.stdin.flush()
         return self._answer()
 
@@ -313,11 +324,13 @@ class AnchorServer:
         self.close()
 
 
-def bracket_passes(servers: dict[str, "AnchorServer"]) -> dict[str, dict]:
-    """One pass of every server (mode -> BRACKET_KEYS of its figures): one bracket point."""
+def bracket_passes(servers: dict[str, "AnchorServer"], pace_ms: float = 0.0
+                   ) -> dict[str, dict]:
+    """One pass of every server (mode -> BRACKET_KEYS of its figures), paced at `pace_ms`
+    (0: a tight loop): one bracket point."""
     out = {}
     for mode, server in servers.items():
-        fig = server.one_pass()
+        fig = server.one_pass(pace_ms) if pace_ms > 0.0 else server.one_pass()
         out[mode] = {k: fig[k] for k in BRACKET_KEYS}
     return out
 
@@ -569,6 +582,12 @@ def main(argv=None) -> int:
                          "control period measured from outside, its parts from its log, the "
                          "vehicle's CPU per period and the closed loop's real-time factor "
                          "(trq_lab/bench/period.py)")
+    ap.add_argument("--pacing", choices=PACINGS, default="lockstep",
+                    help="with --daemons: lockstep (default: the vehicle waits for each answer, "
+                         "acados' bracket passes a tight loop) or realtime (the vehicle on the "
+                         "wall clock, the control loop at its rate, and acados' bracket passes "
+                         "paced at the same control period: both sides given the same time "
+                         "between two steps, docs/decisions/2026-12-07-period-paced.md)")
     ap.add_argument("--sensing", default="mocap", metavar="NAME|PATH",
                     help="the vehicle's sensing profile in --daemons (default: mocap, as the "
                          "scenarios fly; truth: the near-truth stream, no estimator), and in the "
@@ -606,6 +625,8 @@ def main(argv=None) -> int:
     for flag, name in (("--controller", args.controller), ("--against", args.against)):
         if name is not None and not trq_params.exists("controller", name):
             ap.error(f"{flag} {name}: no params/controller/{name}.yaml")
+    if args.pacing != "lockstep" and not args.daemons:
+        ap.error(f"--pacing {args.pacing} paces the daemons' flights: add --daemons")
     if args.against is not None and not args.daemons:
         ap.error("--against compares the controllers over both daemons: add --daemons")
     if args.against == args.controller:
@@ -679,7 +700,13 @@ def _bracket_servers(stack: contextlib.ExitStack, anchored: dict[str, str], seco
 def _runs(args, modes: list[str], anchored: dict[str, str], seconds, regularize,
           servers: dict[str, AnchorServer]) -> int:
     """The repeats, the tables and the JSON (main's, after its checks)."""
-    bracket = (lambda point: bracket_passes(servers)) if servers else None
+    from trq_offboard.config import load_controller
+
+    realtime = args.pacing == "realtime"
+    pace_ms = load_controller(trq_params.resolve("controller", args.controller)
+                              ).control_dt_s * 1e3 if realtime else 0.0
+    bracket = (lambda point: bracket_passes(servers, pace_ms)) if servers else None
+    paced = {"vehicle_mode": "realtime"} if realtime else {}
     runs: dict[str, list[dict]] = {m: [] for m in modes}
     anchor_runs: dict[str, list[dict]] = {m: [] for m in anchored}
     daemon_runs: list[dict] = []
@@ -688,11 +715,12 @@ def _runs(args, modes: list[str], anchored: dict[str, str], seconds, regularize,
         if args.daemons:      # interleaved with the modes, as they are with each other
             from trq_lab.bench.period import daemons_period
             for name in daemon_order(args.controller, args.against, k):
-                d = daemons_period(controller=name, sensing=args.sensing, bracket=bracket)
+                d = daemons_period(controller=name, sensing=args.sensing, bracket=bracket,
+                                   **paced)
                 (daemon_runs if name == args.controller else against_runs).append(d)
                 print(f"  daemons, {name}{f' (run {k + 1})' if args.repeat > 1 else ''}: "
                       f"controller {d['controller_cpu_ms']:.2f} ms CPU a period from outside, "
-                      f"vehicle {d['vehicle_cpu_ms']:.2f} ms, lockstep "
+                      f"vehicle {d['vehicle_cpu_ms']:.2f} ms, {args.pacing} "
                       f"{d['realtime_factor']:.2f}x real time"
                       + "".join(f"; {servers[m].name} p50 "
                                 + "/".join(f"{b[m]['total_median_ms']:.3f}"

@@ -95,17 +95,21 @@ def _listening(port: int, proc: subprocess.Popen, timeout_s: float) -> None:
 def fly_daemons(seconds: float, controller: str, log_dir: Path,
                 python: str = sys.executable,
                 controller_cmd: list[str] | None = None, sensing: str | None = None,
-                listen_timeout_s: float = 60.0, controller_env: dict | None = None) -> dict:
-    """One lockstep flight of both daemons for `seconds` of vehicle time: CPU s of each
+                listen_timeout_s: float = 60.0, controller_env: dict | None = None,
+                vehicle_mode: str = "lockstep") -> dict:
+    """One flight of both daemons for `seconds` of vehicle time: CPU s of each
     process, the vehicle's wall time (start to exit) and both exit codes. `controller_cmd`: the
     command that starts the controller daemon, before its options (default
     `python -m trq_offboard`; another program taking trq-offboard's options, e.g.
     trq_lab/bench/period_floor.py's replay, or either under a profiler). `sensing`: the
     vehicle's sensing profile (its --sensing; None: the sim file's). `listen_timeout_s`: how
     long the controller may take to start listening. `controller_env`: variables set for the
-    controller's process only."""
+    controller's process only. `vehicle_mode`: lockstep (default) or realtime (the vehicle on
+    the wall clock: the control loop at its rate, waiting between two steps as on a vehicle)."""
     pv, pc, pg, pt = _free_ports(4)
-    vcmd = [python, "-m", "sil_vehicle", "--duration", f"{seconds:g}", "--mode", "lockstep",
+    if vehicle_mode not in ("lockstep", "realtime"):
+        raise ValueError(f"vehicle mode {vehicle_mode!r}: expected lockstep or realtime")
+    vcmd = [python, "-m", "sil_vehicle", "--duration", f"{seconds:g}", "--mode", vehicle_mode,
             "--offboard-bind", f"127.0.0.1:{pv}", "--offboard-target", f"127.0.0.1:{pc}",
             "--gcs-bind", f"127.0.0.1:{pg}", "--gcs-target", f"127.0.0.1:{pt}",
             "--log-dir", str(log_dir)] + (["--sensing", sensing] if sensing else [])
@@ -169,13 +173,13 @@ def daemons_period(short_s: float = 5.0, long_s: float = 35.0,
                    controller_cmd: list[str] | None = None,
                    log_root: Path | None = None, sensing: str | None = None,
                    bracket: Callable[[str], object] | None = None,
-                   warm_s: float = 1.0) -> dict:
+                   warm_s: float = 1.0, vehicle_mode: str = "lockstep") -> dict:
     """The two flights and what follows from them (see the module docstring).
     `controller_cmd`: fly_daemons'. `log_root`: the flights' logs go to its `short/` and
     `long/` and stay (default: a temporary directory, removed). `sensing`: the vehicle's
     sensing profile (fly_daemons'). `bracket`: called with "before", "between" and "after"
     around the flights (the module docstring). `warm_s`: the warm-up flight's seconds (the
-    module docstring; 0: none)."""
+    module docstring; 0: none). `vehicle_mode`: fly_daemons'."""
     brackets = []
 
     def at(point: str) -> None:
@@ -188,14 +192,14 @@ def daemons_period(short_s: float = 5.0, long_s: float = 35.0,
         key = (controller, sensing)
         if warm_s > 0 and key not in _WARM:
             fly_daemons(warm_s, controller, root / "warm", controller_cmd=controller_cmd,
-                        sensing=sensing)
+                        sensing=sensing, vehicle_mode=vehicle_mode)
             _WARM.add(key)
         at("before")
         short = fly_daemons(short_s, controller, root / "short", controller_cmd=controller_cmd,
-                            sensing=sensing)
+                            sensing=sensing, vehicle_mode=vehicle_mode)
         at("between")
         long_ = fly_daemons(long_s, controller, root / "long", controller_cmd=controller_cmd,
-                            sensing=sensing)
+                            sensing=sensing, vehicle_mode=vehicle_mode)
         at("after")
         parts = cpu_parts(root / "long" / "controller.csv", short_s, long_s)
     periods = (long_s - short_s) * control_rate_hz

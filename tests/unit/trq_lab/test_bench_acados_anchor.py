@@ -305,15 +305,16 @@ class _FakeReplayer:
     def __init__(self):
         self.rti = types.SimpleNamespace(build_s=3.5)
         self.hessian, self.regularize, self.passes = "exact", "NO_REGULARIZE", 0
-        self.split = []
+        self.split, self.paces = [], []
 
-    def run(self):
+    def run(self, pace_s=0.0):
         self.passes += 1
+        self.paces.append(pace_s)
         return np.full((2, 9), float(self.passes)), np.zeros((2, 8))
 
-    def summary(self, rows, u0, split_s=None):
+    def summary(self, rows, u0, split_s=None, pace_s=0.0):
         self.split.append(split_s)
-        return {"total_median_ms": float(rows[0, 0])}
+        return {"total_median_ms": float(rows[0, 0]), "pace_ms": pace_s * 1e3}
 
 
 def test_the_server_answers_each_pass_and_stops_at_quit():
@@ -327,11 +328,91 @@ def test_the_server_answers_each_pass_and_stops_at_quit():
     said = [json.loads(line) for line in out.getvalue().splitlines()]
     assert n == 2 and fake.split == [12.0, 12.0]
     assert said[0] == {"ready": True, "build_s": 3.5, "name": "acados-rti-exact"}
-    assert said[1] == {"total_median_ms": 1.0, "pass": 1}
+    assert said[1] == {"total_median_ms": 1.0, "pace_ms": 0.0, "pass": 1}
     assert "unknown request 'passs'" in said[2]["error"]
-    assert said[3] == {"total_median_ms": 2.0, "pass": 2} and len(said) == 4
+    assert said[3] == {"total_median_ms": 2.0, "pace_ms": 0.0, "pass": 2} and len(said) == 4
     out = io.StringIO()
     assert aa.serve(_FakeReplayer(), iter(["pass\n"]), out) == 1     # the requests' end ends it
+
+
+def test_the_server_paces_a_pass_on_request_and_refuses_a_bad_pace():
+    """"pass 10": one pass paced at 10 ms (the module's docstring); a pace that is not a
+    time >= 0, or a word too many, is answered with an error and no pass."""
+    import io
+    import json
+
+    fake, out = _FakeReplayer(), io.StringIO()
+    n = aa.serve(fake, ["pass 10\n", "pass -1\n", "pass ten\n", "pass nan\n", "pass 1 2\n",
+                        "pass\n"], out)
+    said = [json.loads(line) for line in out.getvalue().splitlines()][1:]
+    assert n == 2 and fake.paces == [0.01, 0.0]
+    assert said[0] == {"total_median_ms": 1.0, "pace_ms": 10.0, "pass": 1}
+    assert [("error" in a) for a in said] == [False, True, True, True, True, False]
+    assert "'pass -1'" in said[1]["error"] and "a time >= 0" in said[1]["error"]
+
+
+class _PacedRti:
+    """What Replayer.run calls of AcadosRti, on a fake clock: each call takes 1 ms, and the
+    feedbacks' start times are kept."""
+
+    def __init__(self, clock):
+        self.clock, self.feedbacks = clock, []
+        self.pb = types.SimpleNamespace(step_s=0.05)
+        self.solver = types.SimpleNamespace(reset=lambda: None,
+                                            get_stats=lambda key: 0.0 if key != "qp_iter" else 3)
+
+    def set_init(self, s, v):
+        pass
+
+    def set_stage_data(self, *a):
+        pass
+
+    def prepare(self):
+        self.clock.t += 1e-3
+        return 0, 1e-3, 1e-3
+
+    def feedback(self, s0):
+        self.feedbacks.append(self.clock.t)
+        self.clock.t += 1e-3
+        return 0, 1e-3, 1e-3
+
+    def solution(self):
+        return np.zeros((21, 16)), np.zeros((20, 8))
+
+    def command(self, s, v):
+        return np.zeros(8)
+
+
+def test_a_paced_pass_starts_each_feedback_one_period_after_the_last():
+    """Replayer.run(pace_s): the wait falls between the preparation and the feedback (where a
+    control loop waits for its state), each feedback pace_s after the previous one started;
+    the timed parts never include it. Unpaced, the steps follow each other at once."""
+    clock = types.SimpleNamespace(t=100.0)
+    slept = []
+
+    def sleep(s):
+        slept.append(s)
+        clock.t += s
+
+    r = object.__new__(aa.Replayer)
+    r.rti, r.init, r.passes = _PacedRti(clock), "ours", 0
+    r.cfg = types.SimpleNamespace(control_dt_s=0.01)
+    K = 4
+    r.rec = {"x0": np.zeros((K, 12)), "alpha_prev": np.zeros((K, 4)),
+             "guess_s": np.zeros((K, 21, 16)), "guess_v": np.zeros((K, 20, 8)),
+             "x_ref": np.zeros((K, 21, 12)), "d": np.zeros((K, 6)),
+             "v_lo": np.zeros((K, 20, 8)), "v_hi": np.zeros((K, 20, 8))}
+    rows, _ = r.run(0.01, clock=lambda: clock.t, sleep=sleep)
+    starts = np.array(r.rti.feedbacks)
+    np.testing.assert_allclose(np.diff(starts), 0.01)
+    np.testing.assert_allclose(slept, [0.008] * (K - 1))     # 10 ms less the 2 ms of work
+    np.testing.assert_allclose(rows[:, 0] + rows[:, 2], 2e-3)   # the waits are not timed
+    r.rti.feedbacks.clear()
+    slept.clear()
+    r.run(0.0, clock=lambda: clock.t, sleep=sleep)
+    assert slept == [] and np.allclose(np.diff(r.rti.feedbacks), 2e-3)
+    with pytest.raises(ValueError, match="pace -1 s"):
+        r.run(-1.0)
 
 
 class _FakeServer:
@@ -343,10 +424,12 @@ class _FakeServer:
         self.name, self.build_s, self.passes = aa.anchor_name(hessian, regularize), 1.0, 0
         self.args = (hessian, regularize, reg_epsilon)
         self.closed = False
+        self.paces = []
         _FakeServer.made.append(self)
 
-    def one_pass(self):
+    def one_pass(self, pace_ms=0.0):
         self.passes += 1
+        self.paces.append(pace_ms)
         return {"total_median_ms": 0.5, "total_cpu_median_ms": 0.5, "failures": 0,
                 "steps": 10, "pass": self.passes, "du_tilt_deg_max": 1.0}
 
@@ -399,6 +482,40 @@ def test_the_bench_brackets_each_daemon_run_with_acados_passes(monkeypatch, caps
 
 
 
+def test_realtime_pacing_paces_both_the_daemons_and_the_bracket(monkeypatch, capsys):
+    """--pacing realtime: the daemons fly with the vehicle on the wall clock and acados'
+    bracket passes are paced at the controller's control period; without --daemons it is
+    refused."""
+    from trq_lab.bench import period
+
+    _fake_bench(monkeypatch)
+    _FakeServer.made.clear()
+    monkeypatch.setattr(bench, "AnchorServer", _FakeServer)
+    modes = []
+
+    def daemons_period(controller, sensing, bracket, vehicle_mode="lockstep"):
+        modes.append(vehicle_mode)
+        part = {"mean_ms": 0.4, "p50_ms": 0.4, "p99_ms": 0.4}
+        return {"controller_cpu_ms": 0.75, "vehicle_cpu_ms": 1.0, "realtime_factor": 1.0,
+                "parts": {"solve (wall)": part, "prepare": part},
+                "brackets": [bracket(p) for p in "abc"]}
+
+    monkeypatch.setattr(period, "daemons_period", daemons_period)
+    monkeypatch.setattr(period, "parts_table", lambda fig: "")
+    assert bench.main(["--quick", "--modes", "rti-exact", "--anchor", "acados", "--daemons",
+                       "--pacing", "realtime"]) == 0
+    assert modes == ["realtime"] and _FakeServer.made[0].paces == [10.0] * 3
+    assert ", realtime 1.00x real time" in capsys.readouterr().out
+    modes.clear()
+    _FakeServer.made.clear()
+    assert bench.main(["--quick", "--modes", "rti-exact", "--anchor", "acados",
+                       "--daemons"]) == 0                # the default: lockstep, tight passes
+    assert modes == ["lockstep"] and _FakeServer.made[0].paces == [0.0] * 3
+    with pytest.raises(SystemExit) as exc:
+        bench.main(["--quick", "--modes", "rti-exact", "--pacing", "realtime"])
+    assert exc.value.code == 2 and "add --daemons" in capsys.readouterr().err
+
+
 _FAKE_SERVER = r"""
 import json, sys
 print(json.dumps({"ready": True, "build_s": 2.5, "name": "acados-rti-exact"}), flush=True)
@@ -408,7 +525,8 @@ for line in sys.stdin:
         break
     n += 1
     print("QP solver returned error", file=sys.stderr, flush=True)    # acados' C output
-    print(json.dumps({"total_median_ms": 0.5 * n, "pass": n}), flush=True)
+    print(json.dumps({"total_median_ms": 0.5 * n, "pass": n, "request": line.strip()}),
+          flush=True)
 """
 
 
@@ -419,6 +537,7 @@ def test_the_anchor_server_process_is_driven_and_ended(monkeypatch):
     with bench.AnchorServer("r.npz", "exact", "trq_nmpc_eso") as server:
         assert (server.name, server.build_s) == ("acados-rti-exact", 2.5)
         assert [server.one_pass()["total_median_ms"] for _ in range(3)] == [0.5, 1.0, 1.5]
+        assert server.one_pass(10.0)["request"] == "pass 10"       # paced at 10 ms
         proc = server._proc
     assert proc.poll() == 0
 

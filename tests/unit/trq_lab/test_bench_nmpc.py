@@ -130,8 +130,9 @@ def test_the_daemons_period_calls_its_bracket_around_the_flights(monkeypatch, tm
 
     events = []
 
-    def fly(seconds, controller, log_dir, controller_cmd=None, sensing=None):
-        events.append(f"fly {seconds:g}")
+    def fly(seconds, controller, log_dir, controller_cmd=None, sensing=None,
+            vehicle_mode="lockstep"):
+        events.append(f"fly {seconds:g} {vehicle_mode}")
         return {"controller_cpu_s": seconds * 1e-3, "vehicle_cpu_s": seconds * 2e-3,
                 "wall_s": seconds / 2}
 
@@ -140,10 +141,21 @@ def test_the_daemons_period_calls_its_bracket_around_the_flights(monkeypatch, tm
     monkeypatch.setattr(period, "_WARM", {("trq_nmpc_eso", None)})    # flown already
     fig = period.daemons_period(5.0, 35.0, log_root=tmp_path,
                                 bracket=lambda point: events.append(point) or point.upper())
-    assert events == ["before", "fly 5", "between", "fly 35", "after"]
+    assert events == ["before", "fly 5 lockstep", "between", "fly 35 lockstep", "after"]
     assert fig["brackets"] == ["BEFORE", "BETWEEN", "AFTER"]
     assert fig["controller_cpu_ms"] == pytest.approx(30e-3 / 3000 * 1e3)
-    assert "brackets" not in period.daemons_period(5.0, 35.0, log_root=tmp_path)
+    events.clear()
+    assert "brackets" not in period.daemons_period(5.0, 35.0, log_root=tmp_path,
+                                                   vehicle_mode="realtime")
+    assert events == ["fly 5 realtime", "fly 35 realtime"]      # both flights so paced
+
+
+def test_a_flight_in_an_unknown_vehicle_mode_is_refused_before_it_starts(tmp_path):
+    from trq_lab.bench import period
+
+    with pytest.raises(ValueError, match="vehicle mode 'fast': expected lockstep or realtime"):
+        period.fly_daemons(1.0, "trq_nmpc_eso", tmp_path, vehicle_mode="fast")
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_a_controller_flies_a_warm_up_first_once_a_process(monkeypatch, tmp_path):
@@ -154,7 +166,8 @@ def test_a_controller_flies_a_warm_up_first_once_a_process(monkeypatch, tmp_path
 
     events = []
 
-    def fly(seconds, controller, log_dir, controller_cmd=None, sensing=None):
+    def fly(seconds, controller, log_dir, controller_cmd=None, sensing=None,
+            vehicle_mode="lockstep"):
         events.append((seconds, controller, sensing))
         cost = 100.0 if not any(e[1:] == (controller, sensing) for e in events[:-1]) else 0.0
         return {"controller_cpu_s": seconds * 1e-3 + cost, "vehicle_cpu_s": 0.0,
