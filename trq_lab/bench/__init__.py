@@ -12,5 +12,6 @@
     sim            trq-bench-sim: the plant and the vehicle daemon, both physics cores
     wire           trq-bench-wire: the wire's part of a period, pymavlink's path against trq_wire's
     fused          trq-bench-fused: the fused filter's step, its C core against its Python path
+    decay          trq-bench-decay: a compiled step's cost after a wait, asleep or spinning
     hover_check    trq-hover-check: an open-loop hover over UDP (the plant and the links end to end)
 """
