@@ -1,12 +1,14 @@
 /* The fused filter's step in C (trq_offboard/fused_core.py): FusedFilter's bookkeeping around
-   its two compiled kernels (trq_offboard/fused.py), the same decisions and the same arithmetic
+   its compiled kernel (trq_offboard/fused.py), the same decisions and the same arithmetic
    operation for operation, with the filter's history owned here.
 
    fused.py stays the reference and the readable statement of the filter; this file repeats its
-   methods under their names (place_imu is FusedFilter._place_imu, and so on). The kernels are
-   the CasADi functions fused.py generates (`_kernel`, `_kernel_two`), whose generated C the
-   Python side puts before this file and names through TRQ_K1 and TRQ_K2 (and their _work
-   functions). Built without fused multiply-add and without fast-math (fused_core.py's flags),
+   methods under their names (place_imu is FusedFilter._place_imu, and so on). The kernel is
+   the CasADi function fused.py generates (`_kernel`), whose generated C the Python side puts
+   before this file and names through TRQ_K1 (and its _work function). FusedFilter's
+   `_kernel_two` (two stretches chained, one call from Python) is here two calls of TRQ_K1,
+   its arithmetic call by call: its straight-line code is twice the one's, read once a period
+   from beyond the caches (docs/decisions/2026-12-07-period-paced.md). Built without fused multiply-add and without fast-math (fused_core.py's flags),
    so that every product and sum rounds as Python's does: tests/unit/trq_offboard/
    test_fused_core.py holds the two to the bit.
 
@@ -93,18 +95,13 @@ typedef struct {
     double test_ratio;
     int64_t rejected, dropped, imu_dropped, accel_rejected, resets;
     /* the kernels and their outputs */
-    kernel_t k1, k2;
-    stretch_t s1, s2;
-    double gate_taken;
+    kernel_t k1;
+    stretch_t s1;
     double r1_x[NX], r1_P[NP], r1_ratio, r1_nis, r1_taken, r1_xp[NX], r1_Pp[NP];
-    double r2_x1[NX], r2_P1[NP], r2_nis1, r2_take1, r2_x2[NX], r2_P2[NP], r2_ratio2, r2_nis2,
-        r2_take2, r2_xp2[NX], r2_Pp2[NP];
 } core_t;
 
 int TRQ_K1(const double **arg, double **res, long long *iw, double *w, int mem);
 int TRQ_K1_WORK(long long *sz_arg, long long *sz_res, long long *sz_iw, long long *sz_w);
-int TRQ_K2(const double **arg, double **res, long long *iw, double *w, int mem);
-int TRQ_K2_WORK(long long *sz_arg, long long *sz_res, long long *sz_iw, long long *sz_w);
 
 static period_t *per(core_t *c, int k)
 {
@@ -153,7 +150,6 @@ void trq_fused_free(core_t *c)
     if (c == NULL)
         return;
     kernel_free(&c->k1);
-    kernel_free(&c->k2);
     free(c->per);
     free(c);
 }
@@ -182,8 +178,7 @@ core_t *trq_fused_new(const double *cfg)
     c->per = calloc(HISTORY_MAX, sizeof(period_t));
     if (c->per == NULL || c->history < 2 || c->history > HISTORY_MAX || c->regain < 3
         || c->regain > CANDIDATES_MAX || c->reject_max < 1
-        || !kernel_init(&c->k1, TRQ_K1_WORK) || !kernel_init(&c->k2, TRQ_K2_WORK)
-        || c->k1.sz_arg < 15 || c->k1.sz_res < 7 || c->k2.sz_arg < 29 || c->k2.sz_res < 11) {
+        || !kernel_init(&c->k1, TRQ_K1_WORK) || c->k1.sz_arg < 15 || c->k1.sz_res < 7) {
         trq_fused_free(c);
         return NULL;
     }
@@ -191,13 +186,6 @@ core_t *trq_fused_new(const double *cfg)
     r = c->k1.res;
     r[0] = c->r1_x, r[1] = c->r1_P, r[2] = &c->r1_ratio, r[3] = &c->r1_nis;
     r[4] = &c->r1_taken, r[5] = c->r1_xp, r[6] = c->r1_Pp;
-    stretch_args(c->k2.arg, 2, &c->s1);
-    stretch_args(c->k2.arg, 15, &c->s2);
-    c->k2.arg[28] = &c->gate_taken;
-    r = c->k2.res;
-    r[0] = c->r2_x1, r[1] = c->r2_P1, r[2] = &c->r2_nis1, r[3] = &c->r2_take1;
-    r[4] = c->r2_x2, r[5] = c->r2_P2, r[6] = &c->r2_ratio2, r[7] = &c->r2_nis2;
-    r[8] = &c->r2_take2, r[9] = c->r2_xp2, r[10] = c->r2_Pp2;
     c->test_ratio = NAN;
     return c;
 }
@@ -630,7 +618,7 @@ static int run_two(core_t *c, int k)
     period_t *p0 = per(c, k - 2), *p1 = per(c, k - 1), *p2 = per(c, k);
     pose_t *q1 = NULL, *q2 = NULL;
     int i, n_active = 0, acc1, acc2, m = c->reject_max, lo, any;
-    double gate1, gate2_not;
+    double gate1, gate2_not, take1;
     for (i = 0; i < p1->n_poses; ++i) {
         int kind = p1->poses[i].kind;
         if (kind == K_NEW || kind == K_FUSED || kind == K_RESET) {
@@ -653,26 +641,33 @@ static int run_two(core_t *c, int k)
     for (i = lo; i < k - 1; ++i)
         any |= per(c, i)->acc_taken;
     gate2_not = (k - lo == m && !any) ? INFINITY : c->accel_gate;
-    c->k2.arg[0] = p0->x;
-    c->k2.arg[1] = p0->P;
+    /* the period before, from p0 */
+    c->k1.arg[0] = p0->x;
+    c->k1.arg[1] = p0->P;
     period_stretch(c, &c->s1, p0->t_us, p1, q1, acc1, gate1);
-    period_stretch(c, &c->s2, p1->t_us, p2, q2, acc2, gate2_not);
-    c->gate_taken = c->accel_gate;
-    TRQ_K2(c->k2.arg, c->k2.res, c->k2.iw, c->k2.w, 0);
-    memcpy(p1->x, c->r2_x1, sizeof(p1->x));
-    memcpy(p1->P, c->r2_P1, sizeof(p1->P));
-    acc_result(c, k - 1, acc1, c->r2_take1 > 0.0, k);
+    TRQ_K1(c->k1.arg, c->k1.res, c->k1.iw, c->k1.w, 0);
+    take1 = c->r1_taken;
+    memcpy(p1->x, c->r1_x, sizeof(p1->x));
+    memcpy(p1->P, c->r1_P, sizeof(p1->P));
+    acc_result(c, k - 1, acc1, take1 > 0.0, k);
+    /* the new one from its end; its gate as `_kernel_two`'s if_else(!has_acc1 || take1,
+       accel_gate, gate2_not), C's truth of a double as the generated code's */
+    c->k1.arg[0] = p1->x;
+    c->k1.arg[1] = p1->P;
+    period_stretch(c, &c->s1, p1->t_us, p2, q2, acc2,
+                   (!acc1 || take1 != 0.0) ? c->accel_gate : gate2_not);
+    TRQ_K1(c->k1.arg, c->k1.res, c->k1.iw, c->k1.w, 0);
     if (q2 != NULL) {
-        double ratio = c->r2_ratio2;
+        double ratio = c->r1_ratio;
         if (!(ratio <= 1.0)) {                  /* past the gate (or not a number) */
             run_period(c, k, k);
             return 1;
         }
         decide(c, q2, ratio, NULL, NULL);
     }
-    memcpy(p2->x, c->r2_x2, sizeof(p2->x));
-    memcpy(p2->P, c->r2_P2, sizeof(p2->P));
-    acc_result(c, k, acc2, c->r2_take2 > 0.0, k);
+    memcpy(p2->x, c->r1_x, sizeof(p2->x));
+    memcpy(p2->P, c->r1_P, sizeof(p2->P));
+    acc_result(c, k, acc2, c->r1_taken > 0.0, k);
     return 1;
 }
 

@@ -61,12 +61,10 @@ def _library(cfg: FusedConfig) -> ctypes.CDLL | None:
     def build() -> ctypes.CDLL | None:
         if find_compiler() is None:
             return None
-        k1, k2 = fused._kernel(cfg), fused._kernel_two(cfg)
+        k1 = fused._kernel(cfg)
         cg = ca.CodeGenerator("trq_fused_core.c", {"with_header": False})
         cg.add(k1)
-        cg.add(k2)
-        names = (f"#define TRQ_K1 {k1.name()}\n#define TRQ_K1_WORK {k1.name()}_work\n"
-                 f"#define TRQ_K2 {k2.name()}\n#define TRQ_K2_WORK {k2.name()}_work\n")
+        names = f"#define TRQ_K1 {k1.name()}\n#define TRQ_K1_WORK {k1.name()}_work\n"
         path = compiled_c("trq_fused_core", cg.dump() + names + SOURCE.read_text(), FLAGS)
         if path is None:
             return None
