@@ -407,10 +407,13 @@ def anchor_table(results: list[dict], anchors: dict[str, dict],
     flown = ([(controller, daemons)] if daemons is not None else []) + \
         ([(against["controller"], against)] if against is not None else [])
     for name, fig in flown:
+        # the flights paced in real time against the replays' tight loop: not alike
+        unlike = (" (the daemons paced in real time, acados' replay a tight loop: only the "
+                  "bracket paces both alike)" if fig.get("pacing") == "realtime" else "")
         for mode, a in anchors.items():
             lines.append(f"\nthe controller daemon's CPU per period from outside ({name}) / "
                          f"{a['name']}'s step p50 (target <= 1.5): "
-                         f"{fig['controller_cpu_ms'] / a['total_median_ms']:.2f}")
+                         f"{fig['controller_cpu_ms'] / a['total_median_ms']:.2f}{unlike}")
             ratios = paired_to_anchor(fig, a)
             if len(ratios) > 1:
                 lines.append(f"  paired run by run (the flight and the replay of one run): "
@@ -765,8 +768,9 @@ def _runs(args, modes: list[str], anchored: dict[str, str], seconds, regularize,
     daemons = _daemons_summary(daemon_runs) if daemon_runs else None
     if daemons is not None:
         from trq_lab.bench.period import parts_table
-        print(f"\nthe whole period over both daemons in lockstep, sensing {args.sensing} (median "
-              f"of {len(daemon_runs)} run(s)):")
+        daemons["pacing"] = args.pacing
+        print(f"\nthe whole period over both daemons in {args.pacing}, sensing {args.sensing} "
+              f"(median of {len(daemon_runs)} run(s)):")
         print(parts_table(daemons))
         print(f"controller CPU per period / the solver's own step (feedback wall + preparation "
               f"CPU, same flights): {daemons['ratio_to_solver']:.2f}; closed loop "
@@ -775,6 +779,7 @@ def _runs(args, modes: list[str], anchored: dict[str, str], seconds, regularize,
     if against_runs:
         against = _daemons_summary(against_runs)
         against["controller"] = args.against
+        against["pacing"] = args.pacing
         ratios = paired_ratios(daemon_runs, against_runs)
         against["ratio"] = float(np.median(ratios))
         against["ratios"] = ratios

@@ -121,6 +121,10 @@ def test_the_target_is_bracketed_by_acados_passes_around_each_run():
                                          for r in runs])
     assert "bracket_passes_ms" not in unbracketed
     assert "bracketed" not in nmpc.anchor_table([mode], {"rti-exact": anchor}, unbracketed)
+    assert "only the bracket paces both alike" not in text          # lockstep: as before
+    paced = nmpc.anchor_table([mode], {"rti-exact": anchor}, {**daemons, "pacing": "realtime"})
+    assert "(the daemons paced in real time, acados' replay a tight loop: only the bracket " \
+           "paces both alike)" in paced
 
 
 def test_the_daemons_period_calls_its_bracket_around_the_flights(monkeypatch, tmp_path):
