@@ -4,6 +4,7 @@
     trq-bench-instructions --controller trq_nmpc_eso_fused --sensing mocap
     trq-bench-instructions --floor                          # the replay (the floor) as well
     trq-bench-instructions --anchor acados                  # acados' exact RTI step as well
+    trq-bench-instructions --cache                          # and the caches' misses, simulated
     trq-bench-instructions --json out/bench_instructions.json
 
 Why: on a shared VM the same code's period moves by 20 % and more between two flights, and
@@ -36,6 +37,14 @@ acados (trq_lab/bench/acados_anchor.py) under callgrind collecting only inside a
 step = that count / the recording's steps. The Python around acados' calls is not counted, as
 the time bench does not time it.
 
+--cache adds callgrind's cache simulation (`CACHE_SIM`: first-level instruction and data
+caches of 32 KB, a last level of 512 KB standing for one x86 core's L2; a choice, callgrind
+simulates two levels) and prints each process's misses per period beside its instructions: how
+much code and data a period reads from beyond each level, a figure that, like the count, does
+not move with the machine's moment. It simulates one process on caches of its own: what another
+process, or the machine, takes from them between two periods is not in it
+(docs/decisions/2026-12-07-period-paced.md; `trq-bench-decay` measures that).
+
 A controller under callgrind runs some fifty times slower: the flights take minutes, the
 controller's start-up most of it (its listening wait is `LISTEN_TIMEOUT_S`).
 """
@@ -53,13 +62,19 @@ import sys
 import tempfile
 from pathlib import Path
 
-__all__ = ["GROUPS", "callgrind_costs", "by_object", "by_function", "group_of", "period_count",
-           "acados_count", "main"]
+__all__ = ["GROUPS", "CACHE_SIM", "callgrind_costs", "callgrind_totals", "by_object",
+           "by_function", "group_of", "period_count", "acados_count", "main"]
 
 LISTEN_TIMEOUT_S = 900.0       # the controller's start-up under callgrind: imports, cached builds
 ACADOS_STEP_FUNCTION = "ocp_nlp_solve"
 JSON_FUNCTIONS = 300           # the functions a JSON keeps, those that run most
 QUICK_S = 16.0                 # the anchor's recorded flight: trq-bench-nmpc --quick's
+# --cache: callgrind's two simulated levels, size,associativity,line (the module's docstring)
+CACHE_SIM = ("--cache-sim=yes", "--I1=32768,8,64", "--D1=32768,8,64", "--LL=524288,8,64")
+# the simulation's events, as callgrind names them, and how the table names them
+CACHE_EVENTS = (("Ir", "instructions"), ("I1mr", "L1 instruction misses"),
+                ("ILmr", "L2 instruction misses"), ("DLmr", "L2 data read misses"),
+                ("DLmw", "L2 data write misses"))
 
 # (group, a pattern of the object's path); the first that matches names the group
 GROUPS = (
@@ -142,6 +157,21 @@ def callgrind_costs(path: Path) -> tuple[collections.Counter, int]:
     return cost, total
 
 
+def callgrind_totals(path: Path) -> dict[str, int]:
+    """A callgrind output file's totals per event (its `events:` line and its `totals:` or
+    `summary:` line). ValueError naming the file when either is missing."""
+    events = totals = None
+    with open(path, errors="replace") as f:
+        for line in f:
+            if line.startswith("events:"):
+                events = line.split()[1:]
+            elif line.startswith(("totals:", "summary:")):
+                totals = [int(v) for v in line.split()[1:]]
+    if events is None or totals is None:
+        raise ValueError(f"{path}: no events or totals line (not a callgrind output?)")
+    return dict(zip(events, totals))
+
+
 def by_object(costs: collections.Counter) -> collections.Counter:
     """callgrind_costs' figures summed per ELF object ("?" where callgrind names none)."""
     out: collections.Counter = collections.Counter()
@@ -192,13 +222,15 @@ def grouped(objects: dict[str, float]) -> dict[str, float]:
 
 def period_count(controller: str, short_s: float, long_s: float, work: Path,
                  sensing: str | None = None, controller_cmd: list[str] | None = None,
-                 control_rate_hz: int = 100) -> dict:
+                 control_rate_hz: int = 100, cache: bool = False) -> dict:
     """The controller daemon's instructions per period over the two flights (the module's
-    docstring); `controller_cmd`: fly_daemons' (default: the real controller)."""
+    docstring); `controller_cmd`: fly_daemons' (default: the real controller); `cache`: with
+    the cache simulation, its events per period under "cache"."""
     from trq_lab.bench.period import fly_daemons
 
     command = list(controller_cmd or [sys.executable, "-m", "trq_offboard"])
     costs = {}
+    totals = {}
     flights = {}
     # sets and dicts iterating alike in both flights; NumPy's OpenBLAS on one thread: its idle
     # workers' spinning, serialised by valgrind, otherwise adds a count that varies from flight
@@ -209,10 +241,12 @@ def period_count(controller: str, short_s: float, long_s: float, work: Path,
         out = work / name / "callgrind"
         out.mkdir(parents=True)
         flights[name] = fly_daemons(seconds, controller, work / name,
-                                    controller_cmd=callgrind_command(out, command),
+                                    controller_cmd=callgrind_command(
+                                        out, command, CACHE_SIM if cache else ()),
                                     sensing=sensing, listen_timeout_s=LISTEN_TIMEOUT_S,
                                     controller_env=env)
         costs[name] = callgrind_costs(_only_output(out))
+        totals[name] = callgrind_totals(_only_output(out))
     periods = (long_s - short_s) * control_rate_hz
     (short, short_total), (long_, long_total) = costs["short"], costs["long"]
     objects = per_period(by_object(short), by_object(long_), periods)
@@ -220,10 +254,13 @@ def period_count(controller: str, short_s: float, long_s: float, work: Path,
             "total": (long_total - short_total) / periods,
             "groups": grouped(objects),
             "objects": objects,
-            "functions": per_period(by_function(short), by_function(long_), periods)}
+            "functions": per_period(by_function(short), by_function(long_), periods),
+            **({"cache": per_period(totals["short"], totals["long"], periods)}
+               if cache else {})}
 
 
-def acados_count(recording: Path, hessian: str, controller: str, work: Path) -> dict:
+def acados_count(recording: Path, hessian: str, controller: str, work: Path,
+                 cache: bool = False) -> dict:
     """acados' instructions per RTI step (preparation and feedback) replaying `recording`
     (the module's docstring)."""
     from trq_lab.bench import acados_anchor
@@ -236,7 +273,8 @@ def acados_count(recording: Path, hessian: str, controller: str, work: Path) -> 
     cmd = callgrind_command(out, [sys.executable, "-m", "trq_lab.bench.acados_anchor",
                                   "--replay", str(recording), "--hessian", hessian,
                                   "--controller", controller],
-                            extra=(f"--toggle-collect={ACADOS_STEP_FUNCTION}",))
+                            extra=(f"--toggle-collect={ACADOS_STEP_FUNCTION}",
+                                   *(CACHE_SIM if cache else ())))
     run = subprocess.run(cmd, env=acados_anchor.library_env(), cwd=out, capture_output=True,
                          text=True)
     if run.returncode != 0:
@@ -249,7 +287,9 @@ def acados_count(recording: Path, hessian: str, controller: str, work: Path) -> 
     objects = per_period(none, by_object(costs), steps)
     return {"steps": steps, "failures": summary.get("failures"), "total": total / steps,
             "groups": grouped(objects), "objects": objects,
-            "functions": per_period(none, by_function(costs), steps)}
+            "functions": per_period(none, by_function(costs), steps),
+            **({"cache": per_period(none, callgrind_totals(_only_output(out)), steps)}
+               if cache else {})}
 
 
 def table(rows: dict[str, dict]) -> str:
@@ -264,6 +304,18 @@ def table(rows: dict[str, dict]) -> str:
                                              for n in names) + " |")
     lines.append("| **all** | " + " | ".join(f"**{rows[n]['total'] / 1e3:.0f}**"
                                              for n in names) + " |")
+    return "\n".join(lines)
+
+
+def cache_table(rows: dict[str, dict]) -> str:
+    """The simulated caches' events per period (thousands), one row per measured process."""
+    lines = ["| thousands a period (a step for acados) | "
+             + " | ".join(label for _, label in CACHE_EVENTS) + " |",
+             "|---" * (len(CACHE_EVENTS) + 1) + "|"]
+    for name, r in rows.items():
+        c = r["cache"]
+        lines.append(f"| {name} | " + " | ".join(f"{c.get(e, 0.0) / 1e3:.1f}"
+                                                 for e, _ in CACHE_EVENTS) + " |")
     return "\n".join(lines)
 
 
@@ -285,6 +337,8 @@ def main(argv=None) -> int:
                     help="also the replay of the long flight (trq-bench-floor's floor)")
     ap.add_argument("--anchor", choices=("acados",), default=None,
                     help="also acados' RTI step on the bench's recorded rti-exact flight")
+    ap.add_argument("--cache", action="store_true",
+                    help="also simulate the caches (L1 32 KB, L2 512 KB): misses per period")
     ap.add_argument("--functions", type=int, default=0, metavar="N",
                     help="also list the N functions that run most in each process")
     ap.add_argument("--json", type=Path, default=None, help="write the figures to this file")
@@ -305,7 +359,7 @@ def main(argv=None) -> int:
     with tempfile.TemporaryDirectory(prefix="trq-bench-instructions-") as tmp:
         work = Path(tmp)
         rows[args.controller] = period_count(args.controller, args.short_s, args.long_s,
-                                             work / "real", args.sensing)
+                                             work / "real", args.sensing, cache=args.cache)
         print(f"  {args.controller}: {rows[args.controller]['total'] / 1e3:.0f} k "
               f"instructions a period", flush=True)
         if args.floor:
@@ -313,19 +367,22 @@ def main(argv=None) -> int:
             csv = work / "real" / "long" / "controller.csv"
             rows["the floor (replay)"] = period_count(
                 args.controller, args.short_s, args.long_s, work / "floor", args.sensing,
-                controller_cmd=replay_command(csv))
+                controller_cmd=replay_command(csv), cache=args.cache)
             print(f"  the floor: {rows['the floor (replay)']['total'] / 1e3:.0f} k "
                   f"instructions a period", flush=True)
         if args.anchor:
             from trq_lab.bench.nmpc import run_mode
             rec = work / "rec_exact.npz"
             run_mode("rti-exact", QUICK_S, "trq_nmpc_eso", record=rec)
-            rows["acados exact RTI step"] = acados_count(rec, "exact", "trq_nmpc_eso", work)
+            rows["acados exact RTI step"] = acados_count(rec, "exact", "trq_nmpc_eso", work,
+                                                         cache=args.cache)
             print(f"  acados' exact RTI step: "
                   f"{rows['acados exact RTI step']['total'] / 1e3:.0f} k instructions a step "
                   f"({rows['acados exact RTI step']['steps']} steps)", flush=True)
     print()
     print(table(rows))
+    if args.cache:
+        print(f"\nthe caches, simulated ({' '.join(CACHE_SIM[1:])}):\n{cache_table(rows)}")
     for name, r in rows.items():
         print(f"\n{name}, the objects that run most:\n{top_objects(r['objects'])}")
         if args.functions:

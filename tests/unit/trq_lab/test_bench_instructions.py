@@ -171,3 +171,48 @@ def test_flights_of_the_wrong_lengths_are_refused(capsys):
     with pytest.raises(SystemExit):
         ins.main(["--short-s", "6", "--long-s", "2"])
     assert "--short-s 6 and --long-s 2" in capsys.readouterr().err
+
+
+SIMULATED = """events: Ir I1mr ILmr DLmr DLmw
+ob=(1) /usr/lib/libpython3.11.so.1.0
+fl=(1) ???
+fn=(1) _PyEval_EvalFrameDefault
+0 {ir} {i1} {il} {dr} {dw}
+totals: {ir} {i1} {il} {dr} {dw}
+"""
+
+
+def test_the_totals_per_event_are_read_and_a_file_without_them_refused(tmp_path):
+    assert ins.callgrind_totals(write(tmp_path / "a.out", total=5460)) == {"Ir": 5460}
+    path = tmp_path / "b.out"
+    path.write_text(SIMULATED.format(ir=100, i1=7, il=3, dr=2, dw=1))
+    assert ins.callgrind_totals(path) == {"Ir": 100, "I1mr": 7, "ILmr": 3, "DLmr": 2, "DLmw": 1}
+    assert ins.callgrind_costs(path)[1] == 100          # the count reads the first event, Ir
+    path.write_text("fn=(1) f\n0 3\n")
+    with pytest.raises(ValueError, match=r"c\.out: no events or totals line"):
+        ins.callgrind_totals(path.rename(tmp_path / "c.out"))
+
+
+def test_with_the_cache_simulated_the_misses_are_per_period_too(monkeypatch, tmp_path):
+    """--cache: callgrind runs with CACHE_SIM's options and each event's total is taken per
+    period as the instructions are; the table prints them in thousands."""
+    from trq_lab.bench import period
+
+    def fly(seconds, controller, log_dir, controller_cmd=None, sensing=None,
+            listen_timeout_s=60.0, controller_env=None):
+        assert all(opt in controller_cmd for opt in ins.CACHE_SIM)
+        out = next(a for a in controller_cmd if a.startswith("--callgrind-out-file="))
+        path = Path(out.split("=", 1)[1].replace("%p", "77"))
+        n = int(seconds * 100)                    # periods flown, each 2 M Ir, 30 k I1 misses
+        path.write_text(SIMULATED.format(ir=500 + 2_000_000 * n, i1=50 + 30_000 * n,
+                                         il=4000 * n, dr=1000 * n, dw=2000 * n))
+        return {"controller_rc": 0}
+
+    monkeypatch.setattr(ins, "valgrind", lambda: "/usr/bin/valgrind")
+    monkeypatch.setattr(period, "fly_daemons", fly)
+    fig = ins.period_count("trq_nmpc_eso", 2.0, 6.0, tmp_path, cache=True)
+    assert fig["cache"] == {"Ir": 2e6, "I1mr": 3e4, "ILmr": 4e3, "DLmr": 1e3, "DLmw": 2e3}
+    text = ins.cache_table({"ours": fig})
+    assert text.splitlines()[0].startswith("| thousands a period (a step for acados) | "
+                                           "instructions | L1 instruction misses |")
+    assert text.splitlines()[2] == "| ours | 2000.0 | 30.0 | 4.0 | 1.0 | 2.0 |"
