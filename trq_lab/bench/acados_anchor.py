@@ -528,7 +528,7 @@ class Replayer:
                 pace_s: float = 0.0) -> dict:
         """A pass's figures (see the module's docstring). `split_s`: the first commands also
         compared apart before and after this time of the flight (step k at k control periods;
-        the bench's fault)."""
+        the bench's fault). `pace_s`: the pass's pacing (`run`'s), reported as pace_ms."""
         rec, cfg, rti = self.rec, self.cfg, self.rti
         K = rows.shape[0]
         fb_status, nonfinite = rows[:, 7], rows[:, 8] == 0

@@ -60,7 +60,8 @@ step p50, with the range of every pass (a machine that moved during the run show
 --pacing realtime (with --daemons): the vehicle runs on the wall clock, so that the control loop
 runs at its rate and waits a whole control period less its own work between two steps, and
 acados' bracket passes are paced at the same period (each feedback one control period after the
-previous one started). Both sides then find the machine as long after their last step. The
+previous one started; a pass then takes the recording's steps times the period, 16 s with
+--quick). Both sides then find the machine as long after their last step. The
 default, lockstep, sets the lockstep daemons against acados' tight loop: on a shared VM a step's
 cost grows with the time since the last one, and the two pacings differ by a factor
 (docs/decisions/2026-12-07-period-paced.md).
