@@ -62,7 +62,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-__all__ = ["GROUPS", "CACHE_SIM", "callgrind_costs", "callgrind_totals", "by_object",
+__all__ = ["GROUPS", "CACHE_SIM", "callgrind_costs", "callgrind_file", "by_object",
            "by_function", "group_of", "period_count", "acados_count", "main"]
 
 LISTEN_TIMEOUT_S = 900.0       # the controller's start-up under callgrind: imports, cached builds
@@ -102,13 +102,13 @@ def group_of(obj: str) -> str:
     return OTHER
 
 
-def callgrind_costs(path: Path) -> tuple[collections.Counter, int]:
-    """The self cost of each function in a callgrind output file (its first event: Ir), keyed
-    (its ELF object, the function), and the file's total. Each cost line counts for the
-    function it is in, whose object is the `ob=` before its `fn=`; the line after `calls=` is
-    the call's inclusive cost, the callee's, and is not counted again. Names compressed as
-    `(id) name` are expanded. Raises ValueError on a file whose costs do not add up to its own
-    total."""
+def callgrind_file(path: Path) -> tuple[collections.Counter, dict[str, int]]:
+    """One pass over a callgrind output file: the self cost of each function (its first event:
+    Ir), keyed (its ELF object, the function), and the file's totals per event (its `events:`
+    line and its `totals:` line). Each cost line counts for the function it is in, whose object
+    is the `ob=` before its `fn=`; the line after `calls=` is the call's inclusive cost, the
+    callee's, and is not counted again. Names compressed as `(id) name` are expanded. Raises
+    ValueError on a file whose costs do not add up to its own total."""
     names: dict[tuple[str, str], str] = {}
 
     def expand(kind: str, value: str) -> str:
@@ -122,7 +122,7 @@ def callgrind_costs(path: Path) -> tuple[collections.Counter, int]:
     cost: collections.Counter = collections.Counter()
     ob = key_now = None
     skip = False
-    total = None
+    events, totals = ["Ir"], None
     with open(path, errors="replace") as f:
         for line in f:
             if skip:
@@ -147,29 +147,22 @@ def callgrind_costs(path: Path) -> tuple[collections.Counter, int]:
                     key_now = (ob, name)
             elif key == "calls":
                 skip = True
-            elif line.startswith("totals:"):
-                total = int(line.split()[1])
-    counted = sum(cost.values())
-    if total is None:
-        total = counted
-    elif total != counted:
-        raise ValueError(f"{path}: its costs add up to {counted}, its total says {total}")
-    return cost, total
-
-
-def callgrind_totals(path: Path) -> dict[str, int]:
-    """A callgrind output file's totals per event (its `events:` line and its `totals:` or
-    `summary:` line). ValueError naming the file when either is missing."""
-    events = totals = None
-    with open(path, errors="replace") as f:
-        for line in f:
-            if line.startswith("events:"):
+            elif line.startswith("events:"):
                 events = line.split()[1:]
-            elif line.startswith(("totals:", "summary:")):
+            elif line.startswith("totals:"):
                 totals = [int(v) for v in line.split()[1:]]
-    if events is None or totals is None:
-        raise ValueError(f"{path}: no events or totals line (not a callgrind output?)")
-    return dict(zip(events, totals))
+    counted = sum(cost.values())
+    if totals is None:
+        totals = [counted]
+    elif totals[0] != counted:
+        raise ValueError(f"{path}: its costs add up to {counted}, its total says {totals[0]}")
+    return cost, dict(zip(events, totals))
+
+
+def callgrind_costs(path: Path) -> tuple[collections.Counter, int]:
+    """callgrind_file's costs and the file's total of its first event (Ir)."""
+    cost, totals = callgrind_file(path)
+    return cost, next(iter(totals.values()))
 
 
 def by_object(costs: collections.Counter) -> collections.Counter:
@@ -245,10 +238,10 @@ def period_count(controller: str, short_s: float, long_s: float, work: Path,
                                         out, command, CACHE_SIM if cache else ()),
                                     sensing=sensing, listen_timeout_s=LISTEN_TIMEOUT_S,
                                     controller_env=env)
-        costs[name] = callgrind_costs(_only_output(out))
-        totals[name] = callgrind_totals(_only_output(out))
+        costs[name], totals[name] = callgrind_file(_only_output(out))
     periods = (long_s - short_s) * control_rate_hz
-    (short, short_total), (long_, long_total) = costs["short"], costs["long"]
+    short, long_ = costs["short"], costs["long"]
+    short_total, long_total = (next(iter(totals[k].values())) for k in ("short", "long"))
     objects = per_period(by_object(short), by_object(long_), periods)
     return {"periods": periods, "flights": flights,
             "total": (long_total - short_total) / periods,
@@ -281,15 +274,15 @@ def acados_count(recording: Path, hessian: str, controller: str, work: Path,
         raise RuntimeError(f"acados' replay under callgrind failed:\n{run.stderr[-2000:]}")
     from trq_lab.bench.nmpc import _last_json_line
     summary = json.loads(_last_json_line(run.stdout))
-    costs, total = callgrind_costs(_only_output(out))
+    costs, totals = callgrind_file(_only_output(out))
+    total = next(iter(totals.values()))
     steps = summary["steps"]
     none = collections.Counter()                  # the whole count is the steps'
     objects = per_period(none, by_object(costs), steps)
     return {"steps": steps, "failures": summary.get("failures"), "total": total / steps,
             "groups": grouped(objects), "objects": objects,
             "functions": per_period(none, by_function(costs), steps),
-            **({"cache": per_period(none, callgrind_totals(_only_output(out)), steps)}
-               if cache else {})}
+            **({"cache": per_period(none, totals, steps)} if cache else {})}
 
 
 def table(rows: dict[str, dict]) -> str:

@@ -331,7 +331,7 @@ def bracket_passes(servers: dict[str, "AnchorServer"], pace_ms: float = 0.0
     (0: a tight loop): one bracket point."""
     out = {}
     for mode, server in servers.items():
-        fig = server.one_pass(pace_ms) if pace_ms > 0.0 else server.one_pass()
+        fig = server.one_pass(pace_ms)
         out[mode] = {k: fig[k] for k in BRACKET_KEYS}
     return out
 

@@ -182,15 +182,16 @@ totals: {ir} {i1} {il} {dr} {dw}
 """
 
 
-def test_the_totals_per_event_are_read_and_a_file_without_them_refused(tmp_path):
-    assert ins.callgrind_totals(write(tmp_path / "a.out", total=5460)) == {"Ir": 5460}
+def test_the_totals_per_event_come_with_the_costs(tmp_path):
+    assert ins.callgrind_file(write(tmp_path / "a.out", total=5460))[1] == {"Ir": 5460}
     path = tmp_path / "b.out"
     path.write_text(SIMULATED.format(ir=100, i1=7, il=3, dr=2, dw=1))
-    assert ins.callgrind_totals(path) == {"Ir": 100, "I1mr": 7, "ILmr": 3, "DLmr": 2, "DLmw": 1}
-    assert ins.callgrind_costs(path)[1] == 100          # the count reads the first event, Ir
-    path.write_text("fn=(1) f\n0 3\n")
-    with pytest.raises(ValueError, match=r"c\.out: no events or totals line"):
-        ins.callgrind_totals(path.rename(tmp_path / "c.out"))
+    costs, totals = ins.callgrind_file(path)
+    assert totals == {"Ir": 100, "I1mr": 7, "ILmr": 3, "DLmr": 2, "DLmw": 1}
+    assert sum(costs.values()) == 100                   # the costs are the first event's, Ir
+    assert ins.callgrind_costs(path)[1] == 100
+    path.write_text("fn=(1) f\n0 3\n")                 # no totals line: the costs' sum
+    assert ins.callgrind_file(path)[1] == {"Ir": 3}
 
 
 def test_with_the_cache_simulated_the_misses_are_per_period_too(monkeypatch, tmp_path):

@@ -333,7 +333,8 @@ def test_the_anchor_brackets_every_pair_of_flights_with_one_server(monkeypatch, 
     served = []
 
     class Server:
-        def one_pass(self):
+        def one_pass(self, pace_ms=0.0):
+            assert pace_ms == 0.0             # the floor bench's bracket: a tight loop
             served.append(1)
             return {"total_median_ms": next(passes), "total_cpu_median_ms": 0.0,
                     "failures": 0, "steps": 1, "pass": len(served)}
