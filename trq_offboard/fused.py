@@ -338,7 +338,9 @@ def _kernel_two(cfg: FusedConfig) -> ca.Function:
              that holds when the first period's accelerometer was rejected>, gate_taken)
             -> (x1, P1, nis1, taken1, x2, P2, ratio2, nis2, taken2, x2_prior, P2_prior)
     The second's gate is gate_taken when the first period's accelerometer was taken (or it
-    had none), as `FusedFilter._gate` has it."""
+    had none), as `FusedFilter._gate` has it. One call from Python where two would cost two
+    calls' Python; fused_core.c calls `_kernel` twice instead (the same figures, half the
+    straight-line code to read a period: docs/decisions/2026-12-07-period-paced.md)."""
     n = N_STATES
     x, P = ca.SX.sym("x", n), ca.SX.sym("P", n, n)
     ins1, stretch1 = _stretch_symbols(cfg, x, P)

@@ -1,7 +1,7 @@
 """The fused filter's step in C: `FusedCore`, FusedFilter's API (trq_offboard/fused.py) over
 fused_core.c, which owns the filter's history and runs its bookkeeping (the samples placed in
-the periods they cover, the gates' decisions, the periods run again) around the same two
-compiled kernels, in one call a period.
+the periods they cover, the gates' decisions, the periods run again) around the same compiled
+kernel (FusedFilter's two-stretch kernel as two calls of it), in one call a period.
 
     f = fused_filter(cfg, gravity_m_s2)    # a FusedCore, or FusedFilter where no C compiler is
     f.reset(t_us, pos, vel, euler_rad=e)   # found or codegen is off
