@@ -87,6 +87,7 @@ import numpy as np
 import trq_params
 
 from trq_lab.bench.acados_anchor import REGULARIZE_METHODS, check_regularize
+from trq_lab.bench.period import VEHICLE_MODES
 
 # acados' exact Hessian as our solver has it (the anchor's default: --anchor-regularize unset)
 UNREGULARISED = ("NO_REGULARIZE", None)
@@ -257,8 +258,6 @@ def _anchor_cmd(recording: Path, hessian: str, controller: str, init: str,
 
 # what a bracketing pass keeps of acados' figures (the rest is the per-run replay's to print)
 BRACKET_KEYS = ("total_median_ms", "total_cpu_median_ms", "failures", "steps", "pass")
-# --pacing: how the daemons' flights and acados' bracket passes are paced
-PACINGS = ("lockstep", "realtime")
 
 
 class AnchorServer:
@@ -586,7 +585,7 @@ def main(argv=None) -> int:
                          "control period measured from outside, its parts from its log, the "
                          "vehicle's CPU per period and the closed loop's real-time factor "
                          "(trq_lab/bench/period.py)")
-    ap.add_argument("--pacing", choices=PACINGS, default="lockstep",
+    ap.add_argument("--pacing", choices=VEHICLE_MODES, default="lockstep",
                     help="with --daemons: lockstep (default: the vehicle waits for each answer, "
                          "acados' bracket passes a tight loop) or realtime (the vehicle on the "
                          "wall clock, the control loop at its rate, and acados' bracket passes "
@@ -710,7 +709,6 @@ def _runs(args, modes: list[str], anchored: dict[str, str], seconds, regularize,
     pace_ms = load_controller(trq_params.resolve("controller", args.controller)
                               ).control_dt_s * 1e3 if realtime else 0.0
     bracket = (lambda point: bracket_passes(servers, pace_ms)) if servers else None
-    paced = {"vehicle_mode": "realtime"} if realtime else {}
     runs: dict[str, list[dict]] = {m: [] for m in modes}
     anchor_runs: dict[str, list[dict]] = {m: [] for m in anchored}
     daemon_runs: list[dict] = []
@@ -720,7 +718,7 @@ def _runs(args, modes: list[str], anchored: dict[str, str], seconds, regularize,
             from trq_lab.bench.period import daemons_period
             for name in daemon_order(args.controller, args.against, k):
                 d = daemons_period(controller=name, sensing=args.sensing, bracket=bracket,
-                                   **paced)
+                                   vehicle_mode=args.pacing)
                 (daemon_runs if name == args.controller else against_runs).append(d)
                 print(f"  daemons, {name}{f' (run {k + 1})' if args.repeat > 1 else ''}: "
                       f"controller {d['controller_cpu_ms']:.2f} ms CPU a period from outside, "

@@ -53,6 +53,8 @@ __all__ = ["daemons_period", "PARTS", "parts_table"]
 
 # what has flown in this process (controller, sensing): warm, caches built
 _WARM: set = set()
+# the vehicle's clock modes a bench flies (sil_vehicle --mode): lockstep, or the wall clock
+VEHICLE_MODES = ("lockstep", "realtime")
 
 PARTS = ("observer", "effectiveness", "predictor", "feedback", "prepare", "wire", "log",
          "period")
@@ -107,7 +109,7 @@ def fly_daemons(seconds: float, controller: str, log_dir: Path,
     controller's process only. `vehicle_mode`: lockstep (default) or realtime (the vehicle on
     the wall clock: the control loop at its rate, waiting between two steps as on a vehicle)."""
     pv, pc, pg, pt = _free_ports(4)
-    if vehicle_mode not in ("lockstep", "realtime"):
+    if vehicle_mode not in VEHICLE_MODES:
         raise ValueError(f"vehicle mode {vehicle_mode!r}: expected lockstep or realtime")
     vcmd = [python, "-m", "sil_vehicle", "--duration", f"{seconds:g}", "--mode", vehicle_mode,
             "--offboard-bind", f"127.0.0.1:{pv}", "--offboard-target", f"127.0.0.1:{pc}",

@@ -455,7 +455,8 @@ def test_the_bench_brackets_each_daemon_run_with_acados_passes(monkeypatch, caps
     monkeypatch.setattr(bench, "AnchorServer", _FakeServer)
     points = []
 
-    def daemons_period(controller, sensing, bracket):
+    def daemons_period(controller, sensing, bracket, vehicle_mode):
+        assert vehicle_mode == "lockstep"
         got = [bracket(p) for p in ("before", "between", "after")]
         points.append(controller)
         part = {"mean_ms": 0.4, "p50_ms": 0.4, "p99_ms": 0.4}
@@ -493,7 +494,7 @@ def test_realtime_pacing_paces_both_the_daemons_and_the_bracket(monkeypatch, cap
     monkeypatch.setattr(bench, "AnchorServer", _FakeServer)
     modes = []
 
-    def daemons_period(controller, sensing, bracket, vehicle_mode="lockstep"):
+    def daemons_period(controller, sensing, bracket, vehicle_mode):
         modes.append(vehicle_mode)
         part = {"mean_ms": 0.4, "p50_ms": 0.4, "p99_ms": 0.4}
         return {"controller_cpu_ms": 0.75, "vehicle_cpu_ms": 1.0, "realtime_factor": 1.0,
