@@ -8,9 +8,10 @@
    before this file and names through TRQ_K1 (and its _work function). FusedFilter's
    `_kernel_two` (two stretches chained, one call from Python) is here two calls of TRQ_K1,
    its arithmetic call by call: its straight-line code is twice the one's, read once a period
-   from beyond the caches (docs/decisions/2026-12-07-period-paced.md). Built without fused multiply-add and without fast-math (fused_core.py's flags),
-   so that every product and sum rounds as Python's does: tests/unit/trq_offboard/
-   test_fused_core.py holds the two to the bit.
+   from beyond the caches (docs/decisions/2026-12-07-period-paced.md). Built without fused
+   multiply-add and without fast-math (fused_core.py's flags), so that every product and sum
+   rounds as Python's does: tests/unit/trq_offboard/test_fused_core.py holds the two to the
+   bit.
 
    Limits the Python filter does not have (its lists grow): HISTORY_MAX periods, POSES_MAX
    poses in a period, IMU_PENDING_MAX IMU messages and POSES_PENDING_MAX poses between two
@@ -603,13 +604,14 @@ static void run_period(core_t *c, int k, int newest)
 }
 
 /* a whole period p from t_prev as one stretch (_run_two's): to its pose q if any, on to its
-   end, there its accelerometer (if has_acc) and its velocity */
-static void period_stretch(core_t *c, stretch_t *s, int64_t t_prev, const period_t *p,
-                           const pose_t *q, int has_acc, double gate)
+   end, there its accelerometer (if has_acc) and its velocity, from x and P at t_prev: the
+   kernel's outputs in r1_* (`stretch`) */
+static void period_stretch(core_t *c, const double *x, const double *P, int64_t t_prev,
+                           const period_t *p, const pose_t *q, int has_acc, double gate)
 {
     int64_t t = q == NULL ? p->t_us : q->t_us;
-    set_stretch(c, s, t - t_prev, p->a_known, q, p->t_us - t, has_acc ? p : NULL, gate,
-                p->has_vel ? p : NULL);
+    stretch(c, x, P, t - t_prev, p->a_known, q, p->t_us - t, has_acc ? p : NULL, gate,
+            p->has_vel ? p : NULL);
 }
 
 /* FusedFilter._run_two: 1 done, 0 nothing done (the periods hold more) */
@@ -642,21 +644,15 @@ static int run_two(core_t *c, int k)
         any |= per(c, i)->acc_taken;
     gate2_not = (k - lo == m && !any) ? INFINITY : c->accel_gate;
     /* the period before, from p0 */
-    c->k1.arg[0] = p0->x;
-    c->k1.arg[1] = p0->P;
-    period_stretch(c, &c->s1, p0->t_us, p1, q1, acc1, gate1);
-    TRQ_K1(c->k1.arg, c->k1.res, c->k1.iw, c->k1.w, 0);
+    period_stretch(c, p0->x, p0->P, p0->t_us, p1, q1, acc1, gate1);
     take1 = c->r1_taken;
     memcpy(p1->x, c->r1_x, sizeof(p1->x));
     memcpy(p1->P, c->r1_P, sizeof(p1->P));
     acc_result(c, k - 1, acc1, take1 > 0.0, k);
     /* the new one from its end; its gate as `_kernel_two`'s if_else(!has_acc1 || take1,
        accel_gate, gate2_not), C's truth of a double as the generated code's */
-    c->k1.arg[0] = p1->x;
-    c->k1.arg[1] = p1->P;
-    period_stretch(c, &c->s1, p1->t_us, p2, q2, acc2,
+    period_stretch(c, p1->x, p1->P, p1->t_us, p2, q2, acc2,
                    (!acc1 || take1 != 0.0) ? c->accel_gate : gate2_not);
-    TRQ_K1(c->k1.arg, c->k1.res, c->k1.iw, c->k1.w, 0);
     if (q2 != NULL) {
         double ratio = c->r1_ratio;
         if (!(ratio <= 1.0)) {                  /* past the gate (or not a number) */
