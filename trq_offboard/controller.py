@@ -152,6 +152,9 @@ class Controller:
                  cpu_ns: Callable[[], int] = time.thread_time_ns) -> None:
         self.cfg = cfg
         self.cpu_ns = cpu_ns                 # the parts' CPU clock (a measurement only)
+        # the preparation through the solver's compiled guess where it has one
+        # (Solver.prepares_plans); False: the NumPy path, its specification (the twin tests)
+        self.compiled_guess = True
         self.last_prepare_cpu_ns = 0
         vm = cfg.vehicle
         self.model = PredictionModel(vm)
@@ -700,6 +703,17 @@ class Controller:
         elapsed = t_next - self._plan_t
         if elapsed >= self.N * self.h:
             return
+        if self.solver.prepares_plans and self._descent is None and self.compiled_guess:
+            # the same preparation in one compiled call (nmpc/guess_core.py): the plan shifted,
+            # packed and clipped, the reference states beside it, from the grid kept below
+            pv, yaw_ref = self._grid(t_next, reference)
+            y0 = None
+            if self._act_states and self._y_act is not None:
+                y0 = self.predictor.lag(self._y_act, self._last_u * self._scale,
+                                        self.cfg.control_dt_s)
+            self.solver.prepare_plan(self._plan, elapsed, self.h, pv, yaw_ref, self._last_d,
+                                     self._last_u, y0)
+            return
         # the plan's states from t_next on: the guess's, its first row the predicted state
         xs = _interp_with(self._plan[1], self._shift(elapsed)[1])
         x_pred = xs[0].copy()
@@ -733,17 +747,21 @@ class Controller:
             # the spin's target (spin_weight), in the direction the vehicle spins
             xr[:, 11] = math.copysign(self.cfg.lost_motor.spin_rate_rad_s, x[11])
             return xr
-        # the preparation samples the time the next step then asks for (when the two floats
-        # agree): the last grid kept
-        key = self._grid_key
-        if key is not None and key[0] is reference and key[1] == t_s:
-            pv, yaw_ref = self._grid_val
-        else:
-            pv, yaw_ref = reference.grid(t_s, self.h, self.N + 1)
-            self._grid_key, self._grid_val = (reference, t_s), (pv, yaw_ref)
+        pv, yaw_ref = self._grid(t_s, reference)
         xr[:, 0:6] = pv
         xr[:, 8] = yaw + _wrap(yaw_ref - yaw)
         return xr
+
+    def _grid(self, t_s: float, reference: FlightReference) -> tuple[np.ndarray, np.ndarray]:
+        """The flight plan's grid of the horizon from t_s (reference.grid). The preparation
+        samples the time the next step then asks for (when the two floats agree): the last
+        grid kept."""
+        key = self._grid_key
+        if key is not None and key[0] is reference and key[1] == t_s:
+            return self._grid_val
+        got = reference.grid(t_s, self.h, self.N + 1)
+        self._grid_key, self._grid_val = (reference, t_s), got
+        return got
 
     def _guess(self, t_s: float, x: np.ndarray, d: np.ndarray, xs: np.ndarray | None = None):
         """The plan (u, x) shifted to t_s, x its first state (the yaw kept next to x's), or

@@ -6,6 +6,8 @@
     rti          RtiSolver, the real-time default: one SQP step a period, a preparation and a
                  feedback phase on per-stage C compiled once
     feedback     the RTI's feedback phase as one compiled call (the NumPy one kept beside it)
+    guess_core, guess_core.c  the RTI's next linearisation point as one compiled call: the
+                 plan shifted, packed and clipped, and the reference states (the NumPy path kept)
     hpipm        HPIPM's OCP QP called directly through ctypes (the "direct" binding), and which
                  libhpipm is loaded
     hpipm_fetch  trq-hpipm-fetch: BLASFEO's tuned kernels from a well-kept wheel (opt-in)

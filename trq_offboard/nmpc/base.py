@@ -43,6 +43,7 @@ class Solver(ABC):
 
     ocp: Ocp
     prepares: bool = False           # has a preparation phase (`prepare` does something)
+    prepares_plans: bool = False     # `prepare_plan` prepares at a plan shifted in one call
     qp_iterations: int = 0           # the last solve's QP iterations (0: not counted)
     build_mode: str = "interpreted"  # its functions: compiled | cached | interpreted
 
@@ -60,6 +61,15 @@ class Solver(ABC):
     def prepare(self, x_ref: np.ndarray, d: np.ndarray, u_prev: np.ndarray, guess: Plan,
                 y0: np.ndarray | None = None) -> None:
         """The preparation for the next solve (solvers that `prepares`); here nothing."""
+
+    def prepare_plan(self, plan: Plan, elapsed_s: float, h_s: float, pv: np.ndarray,
+                     yaw_ref: np.ndarray, d: np.ndarray, u_prev: np.ndarray,
+                     y0: np.ndarray | None = None) -> None:
+        """`prepare` at `plan` (u (N, nu), x (N+1, 12), rows h_s apart) shifted by elapsed_s,
+        the reference states those of the flight plan's grid from then (pv (N+1, 6), yaw_ref
+        (N+1)), the yaw unwrapped next to the shifted plan's first state: the controller's
+        preparation in one call (solvers that `prepares_plans`)."""
+        raise NotImplementedError(f"{type(self).__name__} does not prepare at plans")
 
     def discard(self) -> None:
         """Forget a pending preparation (the controller was reset); here nothing."""

@@ -49,7 +49,7 @@ import numpy as np
 from trq_offboard.config import ControllerConfig
 from trq_offboard.model import PredictionModel
 from trq_offboard.model.dynamics import NumpyFunction
-from trq_offboard.nmpc import feedback, hpipm
+from trq_offboard.nmpc import feedback, guess_core, hpipm
 from trq_offboard.nmpc.base import Solver, conic_line, conic_qp, plan_of
 from trq_offboard.nmpc.cache import compiled, compiled_many
 from trq_offboard.nmpc.ocp import Ocp, Stage
@@ -231,6 +231,7 @@ class RtiSolver(Solver):
         self._q2_w[self._x_pos[:N]] = q2
         self._q2_w[self._x_pos[N]] = wts.terminal_factor * q2
         self._kernel = None
+        self._guess = None
         if direct:
             # the direct interface's HPIPM QP with this solver's mode, options and Hessian, and
             # the feedback in one compiled call, which holds the QP's handles, where it can be
@@ -244,6 +245,16 @@ class RtiSolver(Solver):
                 self._kernel = feedback.FeedbackKernel(o, self._hqp, self._q2_w,
                                                        self._prep_np.results[0:4])
                 self._s0_hess = np.ascontiguousarray(self._hc[ns:, :ns])
+            if enabled and guess_core.available():
+                # the next linearisation point in one compiled call, straight into the
+                # preparation's inputs (prepare_plan)
+                args = self._prep_np.args
+                self._guess = guess_core.GuessKernel(o, args[0], args[1])
+                self.prepares_plans = True
+            # the preparation's outputs as the QP reads them: views of its buffers, made once
+            res = self._prep_np.results
+            self._prep_views = (res[0].reshape(N, nz, ns), res[1], res[2],
+                                res[3].reshape(N, 6, ns).transpose(0, 2, 1))
         self._prepared: _Prepared | None = None
         self.last_prepare_s = 0.0
         self.qp_iterations = 0
@@ -287,25 +298,53 @@ class RtiSolver(Solver):
         x_ref = np.asarray(x_ref, float).reshape(self._N + 1, self._nx)
         d = np.asarray(d, float).reshape(6)
         if self.qp_interface == "direct":
-            N, ns, nz = self._N, self._ns, self._ns + self._nv
             # x_ref (N+1, nx) row-major is the (nx, N+1) input column-major; the outputs are
             # the buffers themselves: a preparation is consumed by the feedback before the
             # next one evaluates (solve() prepares again only after its feedback)
-            out = self._prep_np.outputs_in_place(w, x_ref, self.u_trim / o.u_scale, d,
-                                                 self._lam)
-            a = out[0].reshape(N, nz, ns)            # [A_k B_k]' per stage (A_k column-major)
-            h = None
-            if self.hessian == "exact":        # (nz, nz N) column-major -> (N, nz, nz) + cost
-                h = out[4].reshape(N, nz, nz).transpose(0, 2, 1) + self._hc
+            self._prep_np.outputs_in_place(w, x_ref, self.u_trim / o.u_scale, d, self._lam)
+            xr_w = np.zeros(w.size)
+            xr_w[self._x_pos] = x_ref
+            self._prepared = self._direct_prepared(w, d, xr_w)
         else:
             out = self._prep(w, x_ref.T, self.u_trim / o.u_scale, d, self._lam)
             a, h = out[0], (out[4] if self.hessian == "exact" else self._h_const)
-        xr_w = np.zeros(w.size)
-        xr_w[self._x_pos] = x_ref
-        self._prepared = _Prepared(
-            w, a, h, np.asarray(out[1]).ravel(), np.asarray(out[2]).ravel(),
-            np.asarray(out[3]).reshape(self._N, 6, self._ns).transpose(0, 2, 1), d, xr_w)
+            xr_w = np.zeros(w.size)
+            xr_w[self._x_pos] = x_ref
+            self._prepared = _Prepared(
+                w, a, h, np.asarray(out[1]).ravel(), np.asarray(out[2]).ravel(),
+                np.asarray(out[3]).reshape(self._N, 6, self._ns).transpose(0, 2, 1), d, xr_w)
         self.last_prepare_s = time.perf_counter() - t0
+
+    def prepare_plan(self, plan, elapsed_s, h_s, pv, yaw_ref, d, u_prev, y0=None) -> None:
+        """Solver.prepare_plan: the next linearisation point and the reference states formed
+        by the compiled guess (guess_core.py) in the preparation's input buffers, then the
+        preparation evaluated there; the same preparation as the controller's NumPy path
+        (Controller._prepare) to the bit (tests/consistency/test_rti_guess.py)."""
+        t0 = time.perf_counter()
+        g = self._guess
+        if g is None:
+            raise RuntimeError("this RTI solver has no compiled guess (prepares_plans False)")
+        g(plan, elapsed_s, h_s, pv, yaw_ref, u_prev, y0)
+        d = np.asarray(d, float).reshape(6)
+        args = self._prep_np.args
+        args[2][:] = self.u_trim / self.ocp.u_scale
+        args[3][:] = d
+        args[4][:] = self._lam
+        self._prep_np.evaluate()
+        self._prepared = self._direct_prepared(g.w, d, g.xr_w)
+        self.last_prepare_s = time.perf_counter() - t0
+
+    def _direct_prepared(self, w, d, xr_w) -> _Prepared:
+        """The direct interface's preparation, its outputs where it evaluated them: [A_k B_k]'
+        per stage (N, nz, ns; A_k column-major), the gaps, the gradient, dF/dd (N, ns, 6) and
+        (exact Hessian) the stage blocks, (nz, nz N) column-major read as (N, nz, nz), plus the
+        cost's."""
+        a, gaps, grad, jd = self._prep_views
+        h = None
+        if self.hessian == "exact":
+            N, nz = self._N, self._ns + self._nv
+            h = self._prep_np.results[4].reshape(N, nz, nz).transpose(0, 2, 1) + self._hc
+        return _Prepared(w, a, h, gaps, grad, jd, d, xr_w)
 
     def discard(self) -> None:
         """Forget a pending preparation (the controller was reset)."""
