@@ -124,6 +124,23 @@ def test_the_compiled_guess_prepares_as_numpy(name, hessian, actuator_states):
         assert kernel[0] == numpy_path[0]
 
 
+@pytest.mark.parametrize("name,actuator_states", [
+    ("trq_nmpc_eso", "off"), ("trq_nmpc_eso", "on"), ("quad_nmpc", "off"), ("quad_nmpc", "on")])
+def test_the_compiled_unpack_is_the_ocps(name, actuator_states):
+    ctl, _ = _controller(name, actuator_states=actuator_states)
+    ocp, kernel = ctl.solver.ocp, ctl.solver._guess
+    rng = np.random.default_rng(11)
+    for _ in range(5):
+        w = rng.normal(0.0, 3.0, ocp.lbw.size)
+        w[rng.integers(0, w.size, 3)] = (np.nan, np.inf, -0.0)
+        u_np, x_np = ocp.unpack(w)
+        u_k, x_k = kernel.unpack(w)
+        assert u_k.shape == u_np.shape and x_k.shape == x_np.shape
+        assert u_k.tobytes() == u_np.tobytes() and x_k.tobytes() == x_np.tobytes()
+        u_k[0, 0] = 123.0                           # new arrays: the next unpack's are its own
+        assert kernel.unpack(w)[0][0, 0] == u_np[0, 0]
+
+
 def test_the_unwrapped_yaw_is_pythons_remainder():
     """The reference's yaw next to the plan's across the seam, as Python's float remainder
     puts it (the sign of the divisor), including at exact multiples of pi; a plan's yaw of

@@ -152,3 +152,30 @@ void trq_guess(const int *dims, const double *sc, void *const *st)
             rw[j] = r[j];
     }
 }
+
+/* Ocp.unpack: the plan (u (N nu) physical [alpha, zeta] or [zeta], x ((N+1) nx)) of w. dims
+   as trq_guess's; st: [0] w (nw), [1] u_scale (nu), out: [2] u, [3] x. */
+void trq_unpack(const int *dims, void *const *st)
+{
+    const int N = dims[G_N], nx = dims[G_NX], nu = dims[G_NU], ns = dims[G_NS];
+    const int nv = dims[G_NV], tilting = dims[G_TILTING], nz = ns + nv;
+    const double *w = st[0], *u_scale = st[1];
+    double *u = st[2], *x = st[3];
+    int k, j;
+
+    for (k = 0; k <= N; ++k)
+        for (j = 0; j < nx; ++j)
+            x[k * nx + j] = w[k * nz + j];
+    for (k = 0; k < N; ++k) {
+        const double *s1 = w + (k + 1) * nz, *v = w + k * nz + ns;
+        if (tilting) {                    /* the plan's tilts are s_1..s_N's */
+            for (j = 0; j < 4; ++j)
+                u[k * nu + j] = s1[nx + j];
+            for (j = 4; j < 8; ++j)
+                u[k * nu + j] = 100.0 * v[j];
+        } else {
+            for (j = 0; j < nu; ++j)
+                u[k * nu + j] = v[j] * u_scale[j];
+        }
+    }
+}

@@ -33,9 +33,9 @@ SOURCE = Path(__file__).with_name("guess_core.c")
 FLAGS = ("-ffp-contract=off", "-fno-fast-math", "-lm")
 
 
-def _function():
-    """trq_guess of the built library, or None without a C compiler (or when the build
-    fails)."""
+def _functions():
+    """(trq_guess, trq_unpack) of the built library, or None without a C compiler (or when
+    the build fails)."""
     from trq_offboard.nmpc.cache import compiled_c, find_compiler
     from trq_wire.cache import built_once
 
@@ -52,7 +52,10 @@ def _function():
         fn = lib.trq_guess
         fn.argtypes = (ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p)
         fn.restype = None
-        return fn
+        unpack = lib.trq_unpack
+        unpack.argtypes = (ctypes.c_void_p, ctypes.c_void_p)
+        unpack.restype = None
+        return fn, unpack
 
     return built_once(("guess core",), build)[0]
 
@@ -62,7 +65,7 @@ _DIMS = ("N", "nx", "nu", "ns", "nv", "n_lag", "tilting")     # guess_core.c's e
 
 def available() -> bool:
     """The kernel could be built and loaded here (a C compiler)."""
-    return _function() is not None
+    return _functions() is not None
 
 
 class GuessKernel:
@@ -73,8 +76,8 @@ class GuessKernel:
     ValueError when a buffer or the OCP's layout is not what it writes."""
 
     def __init__(self, ocp, w: np.ndarray, x_ref: np.ndarray) -> None:
-        fn = _function()
-        if fn is None:
+        fns = _functions()
+        if fns is None:
             raise RuntimeError("the compiled RTI guess is not available (no C compiler)")
         if not ocp.stage_major():
             raise ValueError("the OCP's decision vector is not stage-major [s_0, v_0, ..., s_N]")
@@ -88,7 +91,7 @@ class GuessKernel:
             if buf.size != size or buf.dtype != np.float64 or not buf.flags.c_contiguous:
                 raise ValueError(f"compiled RTI guess: {name} must be {size} float64, "
                                  f"C-contiguous (got {buf.size} {buf.dtype})")
-        self._fn, self.ocp = fn, ocp
+        (self._fn, self._unpack), self.ocp = fns, ocp
         self.N, self.nx, self.nu = N, nx, nu
         self.w, self.x_ref = w, x_ref
         self.xr_w = np.zeros(nw)
@@ -114,6 +117,12 @@ class GuessKernel:
             self._ys)]
         self._st = (ctypes.c_void_p * len(ptrs))(*ptrs)
         self._dims_ptr, self._sc_ptr = self._dims.ctypes.data, self._sc.ctypes.data
+        # unpack's: w in, the plan out
+        self._w_in = np.zeros(nw)
+        self._u_out = np.zeros((N, nu))
+        self._x_out = np.zeros((N + 1, nx))
+        ptrs = [a.ctypes.data for a in (self._w_in, self._u_scale, self._u_out, self._x_out)]
+        self._st_unpack = (ctypes.c_void_p * len(ptrs))(*ptrs)
         self._keep = (ocp.lbw, ocp.ubw)              # C reads them where they are
 
     def __call__(self, plan, elapsed_s: float, h_s: float, pv, yaw_ref, u_prev, y0=None
@@ -136,3 +145,10 @@ class GuessKernel:
         self._sc[0] = elapsed_s
         self._sc[1] = h_s
         self._fn(self._dims_ptr, self._sc_ptr, self._st)
+
+    def unpack(self, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Ocp.unpack in one call: (u_plan (N, nu) physical, x_plan (N+1, nx)) of w (nw), new
+        arrays."""
+        self._w_in[...] = w
+        self._unpack(self._dims_ptr, self._st_unpack)
+        return self._u_out.copy(), self._x_out.copy()

@@ -227,6 +227,10 @@ class RtiSolver(Solver):
         wts = cfg.weights
         q2 = 2.0 * np.array([*wts.position, *wts.velocity, *wts.euler, *wts.rates])
         self._x_pos = s_idx[:, 0:nx]                                # (N+1, nx)
+        # x_0's places in w: a slice where w is stage-major (a view, no fancy index a period)
+        x0p = self._x_pos[0]
+        self._x0_pos = (slice(int(x0p[0]), int(x0p[0]) + nx)
+                        if np.array_equal(x0p, np.arange(x0p[0], x0p[0] + nx)) else x0p)
         self._q2_w = np.zeros(nw)
         self._q2_w[self._x_pos[:N]] = q2
         self._q2_w[self._x_pos[N]] = wts.terminal_factor * q2
@@ -361,7 +365,7 @@ class RtiSolver(Solver):
             it = 0
             P = self._prepared
             if P is not None and np.abs(np.asarray(x0, float).reshape(12)
-                                        - P.w[self._x_pos[0]]).max() > 2.0:
+                                        - P.w[self._x0_pos]).max() > 2.0:
                 self._prepared = None      # stale: the state is far from the linearisation
             for it in range(1, self.max_iterations + 1):
                 if self._prepared is None or it > 1:
@@ -370,7 +374,7 @@ class RtiSolver(Solver):
                 w, status = self._feedback(x0, x_ref, d, u_prev, y0)
                 if w is None:
                     return self._failed(plan_of(guess), t0, it, status)
-                guess = self.ocp.unpack(w)
+                guess = self._guess.unpack(w) if self._guess is not None else self.ocp.unpack(w)
         except RuntimeError as exc:      # casadi evaluation errors
             self._prepared = None
             return self._failed(plan_of(guess), t0, 0, f"exception: {exc}")
