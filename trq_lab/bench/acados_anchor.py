@@ -381,39 +381,50 @@ def _shift(s, v, h: float, dt: float, a_sent) -> tuple[np.ndarray, np.ndarray]:
 class Recorder:
     """Wraps a Controller's RTI solver to record what each solve was handed and returned, and
     each preparation's own time: per step, copies of the solve's arguments and of the bounds
-    (the effectiveness observer changes them in place), a few microseconds outside the solver's
-    own timing (inside the controller's step and period); `arrays` packs them."""
+    (the effectiveness observer changes them in place) and the linearisation point the step's
+    preparation made (w, clipped to the bounds it had), a few microseconds outside the solver's
+    own timing (inside the controller's step and period); `arrays` packs them. Both ways of
+    preparing are recorded: `prepare` (at a guess) and `prepare_plan` (the compiled guess)."""
 
     def __init__(self, ctl):
         self.ctl = ctl
         self.rows: list[tuple] = []
         self.prep_s: list[float] = []
-        self._pending = None           # the guess of the last preparation (its linearisation)
+        self._pending = None           # the last preparation's linearisation point (w)
         solver = ctl.solver
         self._solve, self._prepare = solver.solve, solver.prepare
         solver.solve = self._rec_solve
         solver.prepare = self._rec_prepare
+        if solver.prepares_plans:
+            self._prepare_plan = solver.prepare_plan
+            solver.prepare_plan = self._rec_prepare_plan
 
     def _rec_solve(self, x0, x_ref, d, u_prev, guess, y0=None):
         o, c = self.ctl.solver.ocp, np.array
-        lin = self._pending
-        if lin is None:                # not prepared: the solve linearises at its guess
+        w = self._pending
+        if w is None:                  # not prepared: the solve linearises at its guess
             from trq_offboard.nmpc.base import plan_of
             guess = plan_of(guess)
-            lin = (c(guess[0], float), c(guess[1], float), c(u_prev, float))
+            w = np.clip(o.pack(c(guess[1], float), c(guess[0], float),
+                               c(u_prev, float)[0:4]), o.lbw, o.ubw)   # as rti.prepare
         self._pending = None
-        row = [c(x0, float), c(x_ref, float), c(d, float), c(u_prev, float), lin,
+        row = [c(x0, float), c(x_ref, float), c(d, float), c(u_prev, float), w,
                o.lbw.copy(), o.ubw.copy()]
         out = self._solve(x0, x_ref, d, u_prev, guess, y0=y0)
         self.rows.append((*row, c(out[0][0], float), out[2].status, out[2].solve_time_s))
         return out
 
-    def _rec_prepare(self, x_ref, d, u_prev, guess, y0=None):
-        c = np.array
-        self._pending = (c(guess[0], float), c(guess[1], float), c(u_prev, float))
-        out = self._prepare(x_ref, d, u_prev, guess, y0=y0)
-        self.prep_s.append(self.ctl.solver.last_prepare_s)
+    def _prepared(self, out):
+        solver = self.ctl.solver
+        self._pending = solver._prepared.w.copy() if solver._prepared is not None else None
+        self.prep_s.append(solver.last_prepare_s)
         return out
+
+    def _rec_prepare(self, x_ref, d, u_prev, guess, y0=None):
+        return self._prepared(self._prepare(x_ref, d, u_prev, guess, y0=y0))
+
+    def _rec_prepare_plan(self, *args, **kwargs):
+        return self._prepared(self._prepare_plan(*args, **kwargs))
 
     def arrays(self) -> dict:
         """The recording as arrays, one row a step (see `replay`)."""
@@ -422,9 +433,8 @@ class Recorder:
         o = self.ctl.solver.ocp
         out = {k: [] for k in ("x0", "alpha_prev", "x_ref", "d", "v_lo", "v_hi", "guess_s",
                                "guess_v", "u0", "ok")}
-        for x0, x_ref, d, u_prev, lin, lbw, ubw, u_plan, status, _ in self.rows:
+        for x0, x_ref, d, u_prev, w, lbw, ubw, u_plan, status, _ in self.rows:
             a_prev = np.array(u_prev, float)[0:4]
-            w = np.clip(o.pack(lin[1], lin[0], lin[2][0:4]), lbw, ubw)   # as rti.prepare
             for key, val in (("x0", x0), ("alpha_prev", a_prev), ("x_ref", x_ref), ("d", d),
                              ("v_lo", lbw[o.v_index]), ("v_hi", ubw[o.v_index]),
                              ("guess_s", w[o.s_index]), ("guess_v", w[o.v_index]),

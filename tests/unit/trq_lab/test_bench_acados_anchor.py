@@ -84,10 +84,16 @@ def test_shift_is_the_controllers_shift():
 
 
 class _FakeSolver:
+    """An RTI solver's recorded surface: its preparation leaves the linearisation point in
+    `_prepared.w` (packed, clipped), as RtiSolver's does."""
+
+    prepares_plans = False
+
     def __init__(self, ocp):
         self.ocp = ocp
         self.last_prepare_s = 0.25
         self.prepared = []
+        self._prepared = None
 
     def solve(self, x0, x_ref, d, u_prev, guess, y0=None):
         u, x = plan_of(guess)
@@ -95,6 +101,19 @@ class _FakeSolver:
 
     def prepare(self, x_ref, d, u_prev, guess, y0=None):
         self.prepared.append(guess)
+        o = self.ocp
+        w = np.clip(o.pack(guess[1], guess[0], np.asarray(u_prev)[0:4]), o.lbw, o.ubw)
+        self._prepared = types.SimpleNamespace(w=w)
+
+
+class _FakePlanSolver(_FakeSolver):
+    """The same, preparing at plans (the compiled guess): its point is whatever it made."""
+
+    prepares_plans = True
+
+    def prepare_plan(self, plan, elapsed_s, h_s, pv, yaw_ref, d, u_prev, y0=None):
+        self.last_prepare_s = 0.125
+        self._prepared = types.SimpleNamespace(w=np.full(self.ocp.lbw.size, elapsed_s))
 
 
 def test_recorder_keeps_the_solves_and_the_linearisation_points(setup):
@@ -129,6 +148,26 @@ def test_recorder_keeps_the_solves_and_the_linearisation_points(setup):
     w1 = np.clip(ocp.pack(guesses[0][1][1], guesses[0][1][0], (u_trim + 1.0)[0:4]),
                  ocp.lbw, ocp.ubw)
     np.testing.assert_allclose(a["guess_v"][1], w1[ocp.v_index])
+
+
+def test_recorder_keeps_the_compiled_guess_linearisation_points(setup):
+    from trq_offboard.nmpc.ocp import Ocp
+
+    cfg, model, u_trim = setup
+    ocp = Ocp.build(cfg, model)
+    ctl = types.SimpleNamespace(solver=_FakePlanSolver(ocp), u_trim=u_trim)
+    rec = aa.Recorder(ctl)
+    N = cfg.horizon_steps
+    guess = (np.tile(u_trim, (N, 1)), np.zeros((N + 1, 12)))
+    for k in range(2):
+        u, x, _ = ctl.solver.solve(np.zeros(12), np.zeros((N + 1, 12)), np.zeros(6), u_trim,
+                                   guess)
+        ctl.solver.prepare_plan((u, x), 0.5 + k, 0.05, np.zeros((N + 1, 6)), np.zeros(N + 1),
+                                np.zeros(6), u[0])
+    a = rec.arrays()
+    assert a["solver_prep_s"].tolist() == [0.125, 0.125]
+    # step 1 at the preparation's own point, as the compiled guess left it
+    np.testing.assert_array_equal(a["guess_v"][1], np.full(ocp.v_index.shape, 0.5))
 
 
 def test_the_problem_is_ours(setup):
