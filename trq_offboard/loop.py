@@ -169,6 +169,12 @@ def _msg_id(name: str) -> int:
     return getattr(mavlink, f"MAVLINK_MSG_ID_{name}")
 
 
+def _time_out(waiter: asyncio.Future) -> None:
+    """A wait for the next state is over without one (`_next_odometry`'s timer)."""
+    if not waiter.done():
+        waiter.set_result(False)
+
+
 def read_ids(streams, output_status: bool = False) -> frozenset[int]:
     """The ids of the messages on_message reads for a controller's sensor streams; once
     ACTUATOR_OUTPUT_STATUS has been seen (`output_status`) not SERVO_OUTPUT_RAW, which it
@@ -214,6 +220,7 @@ class OffboardFlight:
         self.odometry: wire.Odometry | None = None
         self.applied: ActuatorCommand | None = None
         self._new_odometry = asyncio.Event()
+        self._odometry_waiters: list[asyncio.Future] = []   # `_next_odometry`'s, woken by one
         self._heartbeat_seen = asyncio.Event()
         self._acks: dict[int, asyncio.Future] = {}
         self._answered_stamp: int | None = None
@@ -267,6 +274,9 @@ class OffboardFlight:
             if self.odometry is None or odo.stamp_us > self.odometry.stamp_us:
                 self.odometry = odo
                 self._new_odometry.set()
+                for waiter in self._odometry_waiters:
+                    if not waiter.done():
+                        waiter.set_result(True)
         elif kind in ("ACTUATOR_OUTPUT_STATUS", "SERVO_OUTPUT_RAW"):
             if kind == "SERVO_OUTPUT_RAW" and self._have_output_status:
                 return
@@ -337,12 +347,21 @@ class OffboardFlight:
                 return odo
             if silent_s >= self.telemetry_lost_s:
                 raise FlightError(f"no new ODOMETRY for {silent_s:g} s: telemetry lost")
-            self._new_odometry.clear()
             wait_s = min(self.telemetry_timeout_s, self.telemetry_lost_s - silent_s)
-            try:       # asyncio.timeout: wait_for can swallow a cancellation (CPython gh-86296)
-                async with asyncio.timeout(wait_s):
-                    await self._new_odometry.wait()
-            except TimeoutError:
+            # a future the next ODOMETRY sets (True) or a timer does (False), once a control
+            # period: cheaper than asyncio.timeout around Event.wait. A cancellation of the
+            # waiting task goes through the await as it is (wait_for could swallow one:
+            # CPython gh-86296); the timer never outlives the wait
+            loop = asyncio.get_running_loop()
+            waiter = loop.create_future()
+            timer = loop.call_later(wait_s, _time_out, waiter)
+            self._odometry_waiters.append(waiter)
+            try:
+                arrived = await waiter
+            finally:
+                timer.cancel()
+                self._odometry_waiters.remove(waiter)
+            if not arrived:
                 silent_s += wait_s
                 log.warning("no telemetry for %.1f s: not commanding", silent_s)
 

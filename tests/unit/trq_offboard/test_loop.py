@@ -319,6 +319,33 @@ def test_telemetry_lost_for_good_is_a_flight_error():
     asyncio.run(scenario())
 
 
+def test_a_wait_for_the_next_state_wakes_every_waiter_and_leaves_nothing_behind():
+    """One ODOMETRY wakes each task waiting for a new state; a cancelled wait raises
+    CancelledError through (never swallowed) and leaves no waiter and no live timer."""
+    async def scenario():
+        flight, _, _ = make_flight(telemetry_timeout_s=5.0, telemetry_lost_s=10.0)
+        loop = asyncio.get_running_loop()
+        waits = [asyncio.create_task(flight._next_odometry()) for _ in range(2)]
+        await asyncio.sleep(0)
+        assert len(flight._odometry_waiters) == 2
+        flight.on_message(odometry(1_000))
+        got = await asyncio.wait_for(asyncio.gather(*waits), WAIT_S)
+        assert [o.stamp_us for o in got] == [1_000, 1_000]
+        assert flight._odometry_waiters == []
+        flight._answered_stamp = 1_000                  # answered: the next call waits again
+        timers_before = len(loop._scheduled)
+        wait = asyncio.create_task(flight._next_odometry())
+        await asyncio.sleep(0)
+        assert len(flight._odometry_waiters) == 1
+        wait.cancel()
+        with pytest.raises(asyncio.CancelledError):
+            await wait
+        assert flight._odometry_waiters == []
+        assert all(h.cancelled() for h in loop._scheduled[timers_before:])
+
+    asyncio.run(scenario())
+
+
 def test_plan_without_landing_never_idles_the_motors_in_the_air():
     async def scenario():
         flight, link, ctl = make_flight(FakeReference(done_at_s=0.01, land=False))
