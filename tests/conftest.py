@@ -305,3 +305,9 @@ def module_daemons(tmp_path_factory):
         yield manager
     finally:
         manager.close()
+
+
+@pytest.fixture
+def temporary_cache(tmp_path_factory, monkeypatch):
+    """Compiled kernels built into a temporary cache ($TRQ_CACHE_DIR), never the user's."""
+    monkeypatch.setenv("TRQ_CACHE_DIR", str(tmp_path_factory.getbasetemp() / "trq-cache"))

@@ -35,23 +35,14 @@ KINDS = ("hover", "step", "circle", "helix", "figure8")
 def grid_kernel():
     """trq_reference_grid(params, t0, step, n, out) of the built library, or None without a C
     compiler (or when the build fails)."""
-    from trq_offboard.nmpc.cache import compiled_c, find_compiler
+    from trq_offboard.nmpc.cache import loaded_c
     from trq_wire.cache import built_once
 
     def build():
-        if find_compiler() is None:
-            return None
-        path = compiled_c("trq_reference", SOURCE.read_text(), FLAGS)
-        if path is None:
-            return None
-        lib = ctypes.CDLL(str(path))
-        if lib.trq_reference_params() != len(PARAMS):
-            raise RuntimeError(f"{SOURCE.name} reads {lib.trq_reference_params()} figures, "
-                               f"reference_core.PARAMS names {len(PARAMS)}")
-        fn = lib.trq_reference_grid
-        fn.argtypes = (ctypes.c_void_p, ctypes.c_double, ctypes.c_double, ctypes.c_int,
-                       ctypes.c_void_p)
-        fn.restype = None
-        return fn
+        fns = loaded_c("trq_reference", SOURCE.read_text(), FLAGS,
+                       ("trq_reference_params", len(PARAMS), "figures"),
+                       {"trq_reference_grid": (ctypes.c_void_p, ctypes.c_double,
+                                               ctypes.c_double, ctypes.c_int, ctypes.c_void_p)})
+        return fns[0] if fns else None
 
     return built_once(("reference core",), build)[0]

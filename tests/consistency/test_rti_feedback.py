@@ -11,34 +11,19 @@ import dataclasses
 
 import numpy as np
 import pytest
-import trq_params
-from ocp_problem import ocp_problem
+from ocp_problem import TWIN_MARKS, interpreted_rti
 
-from trq_offboard.config import load_controller
-from trq_offboard.nmpc import feedback, hpipm
-from trq_offboard.nmpc.rti import RtiSolver
+from trq_offboard.nmpc import feedback
 
-pytestmark = pytest.mark.skipif(not hpipm.available()[0], reason="no libhpipm in casadi")
-CTRL = trq_params.DIR / "controller"
-
-
-@pytest.fixture(autouse=True)
-def _cache(tmp_path_factory, monkeypatch):
-    monkeypatch.setenv("TRQ_CACHE_DIR", str(tmp_path_factory.getbasetemp() / "trq-cache"))
+pytestmark = TWIN_MARKS
 
 
 def _solver(name, hessian="gauss_newton", actuator_states="off"):
-    cfg = load_controller(CTRL / f"{name}.yaml")
-    cfg = dataclasses.replace(cfg, actuator_states=actuator_states, solver=dataclasses.replace(
-        cfg.solver, kind="rti", codegen="off", hpipm_interface="direct"))
-    model, u_trim, x0, x_ref, d, guess = ocp_problem(cfg)
-    rti = RtiSolver(cfg, model, u_trim, hessian)
-    if not feedback.available():
-        pytest.skip("the compiled feedback cannot be built here (no C compiler)")
+    _, rti, problem = interpreted_rti(name, hessian, actuator_states, feedback)
     assert rti._kernel is None                   # codegen off: the NumPy feedback
     kernel = feedback.FeedbackKernel(rti.ocp, rti._hqp, rti._q2_w, rti._prep_np.results[0:4])
     rti._s0_hess = np.ascontiguousarray(rti._hc[rti._ns:, :rti._ns])
-    return rti, kernel, (u_trim, x0, x_ref, d, guess)
+    return rti, kernel, problem
 
 
 def _both(rti, kernel, prepared, x0, x_ref, d, u_prev, y0):

@@ -14,38 +14,23 @@ import math
 
 import numpy as np
 import pytest
-import trq_params
-from ocp_problem import ocp_problem
+from ocp_problem import TWIN_MARKS, interpreted_rti
 
-from trq_offboard.config import load_controller
 from trq_offboard.controller import Controller
-from trq_offboard.nmpc import guess_core, hpipm
-from trq_offboard.nmpc.rti import RtiSolver
+from trq_offboard.nmpc import guess_core
 from trq_offboard.reference import Reference
 
-pytestmark = pytest.mark.skipif(not hpipm.available()[0], reason="no libhpipm in casadi")
-CTRL = trq_params.DIR / "controller"
-
-
-@pytest.fixture(autouse=True)
-def _cache(tmp_path_factory, monkeypatch):
-    monkeypatch.setenv("TRQ_CACHE_DIR", str(tmp_path_factory.getbasetemp() / "trq-cache"))
+pytestmark = TWIN_MARKS
 
 
 def _controller(name, hessian="gauss_newton", actuator_states="off"):
-    cfg = load_controller(CTRL / f"{name}.yaml")
-    cfg = dataclasses.replace(cfg, actuator_states=actuator_states, solver=dataclasses.replace(
-        cfg.solver, kind="rti", codegen="off", hpipm_interface="direct"))
-    model, u_trim, x0, x_ref, d, guess = ocp_problem(cfg)
-    rti = RtiSolver(cfg, model, u_trim, hessian)
-    if not guess_core.available():
-        pytest.skip("the compiled guess cannot be built here (no C compiler)")
+    cfg, rti, problem = interpreted_rti(name, hessian, actuator_states, guess_core)
     assert rti._guess is None and not rti.prepares_plans   # codegen off: the NumPy path
     args = rti._prep_np.args
     rti._guess = guess_core.GuessKernel(rti.ocp, args[0], args[1])
     rti.prepares_plans = True
     ctl = Controller(cfg, solver=rti)
-    return ctl, (u_trim, x0, x_ref, d, guess)
+    return ctl, problem
 
 
 def _fields(p):

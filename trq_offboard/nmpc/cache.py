@@ -18,6 +18,7 @@ returned as it is (CasADi's interpreter, the pure-Python path) with a RuntimeWar
 
 from __future__ import annotations
 
+import ctypes
 import hashlib
 import os
 import warnings
@@ -119,3 +120,28 @@ def compiled_c(name: str, source: str, link_args: tuple[str, ...] = ()) -> Path 
         return None
     COUNTS["compiled"] += 1
     return lib
+
+
+def loaded_c(name: str, source: str, link_args: tuple[str, ...], count: tuple[str, int, str],
+             functions: dict[str, tuple]) -> list | None:
+    """The functions (their argtypes as given, no result) of the library `compiled_c` builds
+    from `source`, in `functions`' order; None without a compiler or when the build fails.
+    `count`: (the library's function that returns how many items its source reads, how many
+    the Python side names, what they are): a library that reads another number is a
+    RuntimeError naming both, before anything calls it."""
+    if find_compiler() is None:
+        return None
+    path = compiled_c(name, source, link_args)
+    if path is None:
+        return None
+    lib = ctypes.CDLL(str(path))
+    symbol, expected, what = count
+    got = getattr(lib, symbol)()
+    if got != expected:
+        raise RuntimeError(f"{name}: its C reads {got} {what}, its Python names {expected}")
+    out = []
+    for fn_name, argtypes in functions.items():
+        fn = getattr(lib, fn_name)
+        fn.argtypes, fn.restype = argtypes, None
+        out.append(fn)
+    return out

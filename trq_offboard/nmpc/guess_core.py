@@ -36,26 +36,14 @@ FLAGS = ("-ffp-contract=off", "-fno-fast-math", "-lm")
 def _functions():
     """(trq_guess, trq_unpack) of the built library, or None without a C compiler (or when
     the build fails)."""
-    from trq_offboard.nmpc.cache import compiled_c, find_compiler
+    from trq_offboard.nmpc.cache import loaded_c
     from trq_wire.cache import built_once
 
     def build():
-        if find_compiler() is None:
-            return None
-        path = compiled_c("trq_guess", SOURCE.read_text(), FLAGS)
-        if path is None:
-            return None
-        lib = ctypes.CDLL(str(path))
-        if lib.trq_guess_ndims() != len(_DIMS):
-            raise RuntimeError(f"{SOURCE.name} reads {lib.trq_guess_ndims()} dimensions, "
-                               f"guess_core names {len(_DIMS)}")
-        fn = lib.trq_guess
-        fn.argtypes = (ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p)
-        fn.restype = None
-        unpack = lib.trq_unpack
-        unpack.argtypes = (ctypes.c_void_p, ctypes.c_void_p)
-        unpack.restype = None
-        return fn, unpack
+        p = ctypes.c_void_p
+        return loaded_c("trq_guess", SOURCE.read_text(), FLAGS,
+                        ("trq_guess_ndims", len(_DIMS), "dimensions"),
+                        {"trq_guess": (p, p, p), "trq_unpack": (p, p)})
 
     return built_once(("guess core",), build)[0]
 

@@ -116,13 +116,19 @@ class _FakePlanSolver(_FakeSolver):
         self._prepared = types.SimpleNamespace(w=np.full(self.ocp.lbw.size, elapsed_s))
 
 
-def test_recorder_keeps_the_solves_and_the_linearisation_points(setup):
+def _recording(setup, solver_class):
+    """(cfg, u_trim, the OCP, a controller with a fake solver of `solver_class`, its
+    Recorder)."""
     from trq_offboard.nmpc.ocp import Ocp
 
     cfg, model, u_trim = setup
     ocp = Ocp.build(cfg, model)
-    ctl = types.SimpleNamespace(solver=_FakeSolver(ocp), u_trim=u_trim)
-    rec = aa.Recorder(ctl)
+    ctl = types.SimpleNamespace(solver=solver_class(ocp), u_trim=u_trim)
+    return cfg, u_trim, ocp, ctl, aa.Recorder(ctl)
+
+
+def test_recorder_keeps_the_solves_and_the_linearisation_points(setup):
+    cfg, u_trim, ocp, ctl, rec = _recording(setup, _FakeSolver)
     N = cfg.horizon_steps
     rng = np.random.default_rng(3)
     u_prev = u_trim.copy()
@@ -151,12 +157,7 @@ def test_recorder_keeps_the_solves_and_the_linearisation_points(setup):
 
 
 def test_recorder_keeps_the_compiled_guess_linearisation_points(setup):
-    from trq_offboard.nmpc.ocp import Ocp
-
-    cfg, model, u_trim = setup
-    ocp = Ocp.build(cfg, model)
-    ctl = types.SimpleNamespace(solver=_FakePlanSolver(ocp), u_trim=u_trim)
-    rec = aa.Recorder(ctl)
+    cfg, u_trim, ocp, ctl, rec = _recording(setup, _FakePlanSolver)
     N = cfg.horizon_steps
     guess = (np.tile(u_trim, (N, 1)), np.zeros((N + 1, 12)))
     for k in range(2):
