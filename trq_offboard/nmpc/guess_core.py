@@ -8,7 +8,8 @@ all packed into the OCP's decision vector and clipped to its bounds (Ocp.pack, R
 prepare). In NumPy that is some forty small array operations a control period, each costing
 more in the interpreter than in arithmetic (issue 39, item 5: the whole period's target);
 `GuessKernel` does it in one ctypes call, writing the decision vector and the reference
-straight into the compiled preparation's input buffers.
+straight into the compiled preparation's input buffers. Its `unpack`, the solve's Ocp.unpack
+of its step (the plan's copies and scalings), is a second function of the same library.
 
 The same figures to the bit: guess_core.c repeats the NumPy operations in their order, built
 without fused multiply-adds; tests/consistency/test_rti_guess.py holds the preparation it leads

@@ -301,19 +301,17 @@ class RtiSolver(Solver):
         w = o.pack(guess[1], guess[0], a_prev, y0).clip(o.lbw, o.ubw)     # np.clip's ufunc
         x_ref = np.asarray(x_ref, float).reshape(self._N + 1, self._nx)
         d = np.asarray(d, float).reshape(6)
+        xr_w = np.zeros(w.size)
+        xr_w[self._x_pos] = x_ref
         if self.qp_interface == "direct":
             # x_ref (N+1, nx) row-major is the (nx, N+1) input column-major; the outputs are
             # the buffers themselves: a preparation is consumed by the feedback before the
             # next one evaluates (solve() prepares again only after its feedback)
             self._prep_np.outputs_in_place(w, x_ref, self.u_trim / o.u_scale, d, self._lam)
-            xr_w = np.zeros(w.size)
-            xr_w[self._x_pos] = x_ref
             self._prepared = self._direct_prepared(w, d, xr_w)
         else:
             out = self._prep(w, x_ref.T, self.u_trim / o.u_scale, d, self._lam)
             a, h = out[0], (out[4] if self.hessian == "exact" else self._h_const)
-            xr_w = np.zeros(w.size)
-            xr_w[self._x_pos] = x_ref
             self._prepared = _Prepared(
                 w, a, h, np.asarray(out[1]).ravel(), np.asarray(out[2]).ravel(),
                 np.asarray(out[3]).reshape(self._N, 6, self._ns).transpose(0, 2, 1), d, xr_w)
