@@ -36,6 +36,16 @@ static double wrap(double a)
     return m - pi;
 }
 
+/* _shift's input row k of a plan made `elapsed` ago, its rows h apart: (elapsed + k h) / h +
+   1e-9, truncated, at most N - 1 */
+static const double *input_row(const double *u_old, int nu, int N, double elapsed, double h,
+                               int k)
+{
+    const double t = elapsed + h * (double) k;
+    const int r = (int) (t / h + 1e-9);
+    return u_old + (r < N - 1 ? r : N - 1) * nu;
+}
+
 int trq_guess_ndims(void)
 {
     return G_NDIMS;
@@ -94,10 +104,7 @@ void trq_guess(const int *dims, const double *sc, void *const *st)
             s[j] = xs[k * nx + j];
     }
     for (k = 0; k < N; ++k) {
-        /* _shift's input row: (elapsed + k h) / h + 1e-9, truncated, at most N - 1 */
-        const double t = elapsed + h * (double) k;
-        int r = (int) (t / h + 1e-9);
-        const double *u = u_old + (r < N - 1 ? r : N - 1) * nu;
+        const double *u = input_row(u_old, nu, N, elapsed, h, k);
         double *s = w + k * nz, *v = s + ns, *s1 = s + nz;
         if (tilting) {
             /* s_k's tilts: the applied one, then the plan's; the servos' rates between */
@@ -126,9 +133,7 @@ void trq_guess(const int *dims, const double *sc, void *const *st)
             if (k == N)
                 break;
             {
-                const double t = elapsed + h * (double) k;
-                int r = (int) (t / h + 1e-9);
-                const double *u = u_old + (r < N - 1 ? r : N - 1) * nu;
+                const double *u = input_row(u_old, nu, N, elapsed, h, k);
                 for (j = 0; j < nu; ++j)
                     ys[j] = ys[j] + lag_gain[j] * (u[j] / u_scale[j] - ys[j]);
             }

@@ -81,8 +81,7 @@ class GuessKernel:
                 raise ValueError(f"compiled RTI guess: {name} must be {size} float64, "
                                  f"C-contiguous (got {buf.size} {buf.dtype})")
         (self._fn, self._unpack), self.ocp = fns, ocp
-        self.N, self.nx, self.nu = N, nx, nu
-        self.w, self.x_ref = w, x_ref
+        self.w = w
         self.xr_w = np.zeros(nw)
         self._dims = np.array([N, nx, nu, ns, nv, n_lag, int(ocp.tilting)], np.intc)
         self._sc = np.zeros(3)
