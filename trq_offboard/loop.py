@@ -163,6 +163,11 @@ class FlightController(Protocol):
 _READS = ("ODOMETRY", "ACTUATOR_OUTPUT_STATUS", "SERVO_OUTPUT_RAW", "ATT_POS_MOCAP",
           "EXTENDED_SYS_STATE", "HEARTBEAT", "COMMAND_ACK", "STATUSTEXT")
 _SENSOR_READS = ("HIGHRES_IMU", "GPS_RAW_INT", "HOME_POSITION")
+# streams an autopilot sends a companion's link by default (this vehicle's PROTOCOL.md) that
+# on_message never reads: turned off once the controller's own are asked for, as a companion
+# sets its link's streams, so that no period checks and logs frames nobody reads; and
+# SERVO_OUTPUT_RAW once ACTUATOR_OUTPUT_STATUS (the same outputs at full resolution) flows
+_UNREAD_DEFAULTS = ("ATTITUDE", "LOCAL_POSITION_NED")
 
 
 def _msg_id(name: str) -> int:
@@ -375,7 +380,7 @@ class OffboardFlight:
             return None
 
     async def _command(self, msg, command_id: int, retries: int = COMMAND_TRIES,
-                       hold: ActuatorCommand | None = None) -> int:
+                       hold: ActuatorCommand | None = None, also: list = ()) -> int:
         """Send a command and wait for its COMMAND_ACK (retries on silence). With `hold` (only
         when the control loop is not running), every new state that arrives meanwhile is
         answered with that command: in lockstep the vehicle's time, and with it a delayed
@@ -385,12 +390,15 @@ class OffboardFlight:
         far is) and leaves before that state's answer: in lockstep the vehicle takes it at that
         state's time, whatever the wall clock does. Sent after the answer, it would race the
         vehicle's next period (taken at one state's time or the next's by which datagram the
-        vehicle reads first)."""
+        vehicle reads first). `also`: messages sent just before the first try, with it."""
         loop = asyncio.get_running_loop()
         for _ in range(retries):
             fut = loop.create_future()
             self._acks[command_id] = fut
             sent = await self._unanswered_state(self.ack_timeout_s) if hold is not None else None
+            for extra in also:
+                self.link.send(extra)
+            also = ()
             self.link.send(msg)
             if sent is not None:
                 self._answer(sent.stamp_us, hold)
@@ -436,11 +444,22 @@ class OffboardFlight:
             else:
                 self.link.send(msg)
 
-    async def _arm(self) -> bool:
+    def _streams_off(self) -> list:
+        """MAV_CMD_SET_MESSAGE_INTERVAL -1 for each default stream the controller does not read
+        (_UNREAD_DEFAULTS; SERVO_OUTPUT_RAW once ACTUATOR_OUTPUT_STATUS has come), sent once and
+        never waited for: an autopilot that refuses keeps sending them and the link only checks
+        and logs their frames, as it would anyway. Their answers find no command waiting (a
+        COMMAND_ACK names only its command), so they go after the stream requests, with the
+        arming where there is one (the same state as it, in lockstep)."""
+        unread = _UNREAD_DEFAULTS + (("SERVO_OUTPUT_RAW",) if self._have_output_status else ())
+        return [wire.stream_off(_msg_id(name)) for name in unread]
+
+    async def _arm(self, also: list = ()) -> bool:
         """Arm; while the vehicle answers MAV_RESULT_TEMPORARILY_REJECTED (an autopilot's
         preflight check: its estimator not aligned yet) try again every ARM_RETRY_US of vehicle
         time, answering its states with IDLE meanwhile, for at most ARM_WAIT_US. Returns whether
-        it had to wait; FlightError if arming is refused or never allowed."""
+        it had to wait; FlightError if arming is refused or never allowed. `also`: messages
+        sent once, just before the first try (with its state)."""
         start = self.odometry.stamp_us if self.odometry is not None else 0
         waited = False
         while True:
@@ -449,7 +468,9 @@ class OffboardFlight:
             # does (a flight replays bit for bit)
             issued = (await self._next_odometry()).stamp_us
             result = await self._command(wire.arm_command(True),
-                                         mavlink.MAV_CMD_COMPONENT_ARM_DISARM, hold=IDLE)
+                                         mavlink.MAV_CMD_COMPONENT_ARM_DISARM, hold=IDLE,
+                                         also=also)
+            also = ()
             if result == mavlink.MAV_RESULT_ACCEPTED:
                 return waited
             if result != mavlink.MAV_RESULT_TEMPORARILY_REJECTED \
@@ -506,10 +527,14 @@ class OffboardFlight:
         self.summary.took_over = airborne
         ground_z = wire.HOME_GROUND_DOWN_M if airborne else first.state.pos_ned_m[2]
         await self._request_streams(hold=not airborne)
+        quiet = self._streams_off()
+        if airborne or wire.is_armed(self.heartbeat):
+            for msg in quiet:             # no arming to go with
+                self.link.send(msg)
         if airborne:
             log.info("taking over a flying vehicle at %.2f m", -first.state.pos_ned_m[2])
         elif not wire.is_armed(self.heartbeat):
-            waited = await self._arm()
+            waited = await self._arm(also=quiet)
             # the plan's clock starts with the first state after arming (which may have
             # taken a few control periods, or retries, of vehicle time on a lossy link)
             first = await self._next_odometry()

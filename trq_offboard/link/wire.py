@@ -102,6 +102,13 @@ def message_interval(msg_id: int, rate_hz: float):
         float(msg_id), float(round(1e6 / rate_hz)), 0, 0, 0, 0, 0)
 
 
+def stream_off(msg_id: int):
+    """MAV_CMD_SET_MESSAGE_INTERVAL with the interval -1: the vehicle stops sending `msg_id`."""
+    return mavlink.MAVLink_command_long_message(
+        VEHICLE_SYSTEM, VEHICLE_COMPONENT, mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, 0,
+        float(msg_id), -1.0, 0, 0, 0, 0, 0)
+
+
 def request_message(msg_id: int):
     """MAV_CMD_REQUEST_MESSAGE: the vehicle sends message `msg_id` once (HOME_POSITION)."""
     return mavlink.MAVLink_command_long_message(

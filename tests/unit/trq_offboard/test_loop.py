@@ -737,6 +737,7 @@ class LockstepVehicle(FakeLink):
         super().__init__()
         self.t_us, self.apart = 0, apart
         self.taken: list[tuple[int, float, int]] = []     # (command, param1, stamp)
+        self.off: list[tuple[int, int]] = []   # streams turned off (interval -1): (id, stamp)
         self.late: list[int] = []          # commands sent after their state's answer
         self.newest = None                 # the newest state delivered to the controller
         self.answered: set[int] = set()
@@ -764,7 +765,10 @@ class LockstepVehicle(FakeLink):
         if msg.get_type() == "COMMAND_LONG":
             if self.newest in self.answered:
                 self.late.append(msg.command)
-            self.taken.append((msg.command, msg.param1, self.t_us))
+            if msg.command == mavlink.MAV_CMD_SET_MESSAGE_INTERVAL and msg.param2 == -1:
+                self.off.append((int(msg.param1), self.t_us))
+            else:
+                self.taken.append((msg.command, msg.param1, self.t_us))
             self._out(from_vehicle(mavlink.MAVLink_command_ack_message(
                 msg.command, mavlink.MAV_RESULT_ACCEPTED)))
         elif msg.get_type() == "SET_ACTUATOR_CONTROL_TARGET":
@@ -807,3 +811,31 @@ def test_commands_on_hold_leave_before_their_states_answer(apart):
         (interval, float(mavlink.MAVLINK_MSG_ID_HIGHRES_IMU), 0),
         (interval, float(mavlink.MAVLINK_MSG_ID_ATT_POS_MOCAP), 10_000),
         (ARM, 1.0, 20_000)]
+
+
+@pytest.mark.parametrize("output_status", [False, True])
+def test_streams_nobody_reads_are_turned_off_without_holding_the_flight(output_status):
+    """After its own streams, the flight turns off the vehicle's default streams it never
+    reads (ATTITUDE, LOCAL_POSITION_NED), and SERVO_OUTPUT_RAW only where ACTUATOR_OUTPUT_STATUS
+    (the same outputs) flows: once, with the arming's state, none of them waited for (the
+    arming goes with the same state as without them) and none racing the vehicle's step."""
+    async def scenario():
+        flight, link, _ = make_flight(link=LockstepVehicle(False), ctl=SensorsController())
+        flight.streams = {"HIGHRES_IMU": 125}
+        task = asyncio.create_task(flight.run())
+        link.deliver(heartbeat())
+        if output_status:
+            link.deliver(from_vehicle(mavlink.MAVLink_actuator_output_status_message(
+                0, 8, [0.0] * 32)))
+        link.deliver(odometry(0))
+        await until(lambda: link.commands(1.0) and link.t_us >= 20_000, "the arming")
+        await cancelled(task)
+        return link
+
+    link = asyncio.run(scenario())
+    off = [mavlink.MAVLINK_MSG_ID_ATTITUDE, mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED]
+    if output_status:
+        off.append(mavlink.MAVLINK_MSG_ID_SERVO_OUTPUT_RAW)
+    assert link.off == [(i, 10_000) for i in off]
+    assert [t for t in link.taken if t[0] == ARM] == [(ARM, 1.0, 10_000)]
+    assert link.late == []
