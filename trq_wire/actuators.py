@@ -47,8 +47,10 @@ def from_normalised(values: Sequence[float], limit_rad: float
 
 def clip_controls(values: Sequence[float]) -> list[float]:
     """Throttles (values[0..3]) clipped to 0..1, tilts (the rest) to -1..1."""
-    return ([min(max(v, 0.0), 1.0) for v in values[:N_MOTORS]]
-            + [min(max(v, -1.0), 1.0) for v in values[N_MOTORS:]])
+    # min(max(v, lo), hi)'s results, a NaN and a -0.0 passed through as they pass it, without
+    # its two calls a value (the controller's answer every period)
+    return ([0.0 if v < 0.0 else 1.0 if v > 1.0 else v for v in values[:N_MOTORS]]
+            + [-1.0 if v < -1.0 else 1.0 if v > 1.0 else v for v in values[N_MOTORS:]])
 
 
 def controls_in_range(values: Sequence[float]) -> bool:

@@ -105,7 +105,7 @@ class Tlog(FlushedFile):
 
     def __call__(self, frame: bytes) -> None:
         """A frame stamped with the log's clock now (the wall clock unless given another)."""
-        self.write(self._clock(), frame)
+        self._put(_pack_stamp(self._clock()) + frame)       # `write`'s, a call less a frame
 
 
 MAGIC_V2 = 0xFD

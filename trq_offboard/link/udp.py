@@ -66,20 +66,28 @@ class MavlinkUdp(MavlinkEndpoint, asyncio.DatagramProtocol):
 
     def datagram_received(self, data: bytes, addr) -> None:
         self.stats.datagrams += 1
+        # the fast path's messages are whole, checked frames of the dialect; pymavlink's may be
+        # garbage or unknown ids
         msgs, done = frames.decode_leading(data, self.wanted) if self.fast_path else ([], 0)
         if done < len(data):
             try:
-                msgs += parse_datagram(data[done:] if done else data)
+                parsed = parse_datagram(data[done:] if done else data)
             except Exception:  # malformed traffic never stops the controller
                 self.stats.bad += 1
                 return
+            for msg in parsed:
+                if isinstance(msg, mavlink.MAVLink_bad_data) or msg.get_type() == "UNKNOWN":
+                    self.stats.bad += 1
+                else:
+                    msgs.append(msg)
+        # whether the sender is the peer: asked once a datagram, at its first trusted message
+        peer = None if self.connection.mode == "udpin" else True
         for msg in msgs:
-            if isinstance(msg, mavlink.MAVLink_bad_data) or msg.get_type() == "UNKNOWN":
-                self.stats.bad += 1
-                continue
             if not self._trusted(msg):
                 continue
-            if self.connection.mode == "udpin" and not self._from_peer(tuple(addr[:2])):
+            if peer is None:
+                peer = self._from_peer(tuple(addr[:2]))
+            if not peer:
                 self.stats.other_peer += 1
                 continue
             self._deliver(msg)

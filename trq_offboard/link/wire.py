@@ -68,7 +68,7 @@ def actuator_target(stamp_us: int, cmd: ActuatorCommand, tilt_limit_rad: float):
     trq_wire.frames.ActuatorTarget). Raises ValueError on a non-finite value: the caller must
     never get that far (the controller clips), this is the last check."""
     # check before clipping: min/max would turn an infinity into a limit (and may hide a NaN)
-    if not all(math.isfinite(v) for v in (*cmd.throttle_pct, *cmd.tilt_rad)):
+    if not all(map(math.isfinite, (*cmd.throttle_pct, *cmd.tilt_rad))):
         raise ValueError(f"non-finite actuator command {cmd}")
     controls = actuators.clip_controls(
         actuators.to_normalised(cmd.throttle_pct, cmd.tilt_rad, tilt_limit_rad))

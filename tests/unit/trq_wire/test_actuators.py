@@ -57,6 +57,17 @@ def test_clip_controls():
         [0.0, 1.0, 0.3, 0.7, -1.0, 1.0, -0.3, 0.3]               # in range: untouched
 
 
+@given(st.lists(st.floats(allow_nan=True, allow_infinity=True), min_size=8, max_size=8))
+def test_clip_controls_is_min_of_max_to_the_bit(values):
+    """Each value as min(max(v, lo), hi) gives it (a NaN and a -0.0 as they come through)."""
+    want = [min(max(v, 0.0), 1.0) for v in values[:4]] + \
+        [min(max(v, -1.0), 1.0) for v in values[4:]]
+    assert [repr(v) for v in act.clip_controls(values)] == [repr(v) for v in want]
+    edges = [-0.0, math.nan, -math.inf, math.inf, -0.0, math.nan, -math.inf, math.inf]
+    want = [min(max(v, 0.0), 1.0) for v in edges[:4]] + [min(max(v, -1.0), 1.0) for v in edges[4:]]
+    assert [repr(v) for v in act.clip_controls(edges)] == [repr(v) for v in want]
+
+
 def test_controls_in_range_accepts_the_edges():
     assert act.controls_in_range([0.0, 1.0, 0.5, 0.5, -1.0, 1.0, 0.0, 0.2])
 
