@@ -110,6 +110,7 @@ class Tlog(FlushedFile):
 
 MAGIC_V2 = 0xFD
 ODOMETRY_ID = 331
+_ODOMETRY_LOW = ODOMETRY_ID & 0xFF
 VEHICLE = (1, 1)              # the autopilot: system 1, component 1 (PROTOCOL.md)
 RESTART_US = 1_000_000        # the vehicle's time going back further than this: it restarted
 
@@ -131,8 +132,9 @@ class VehicleTimeline:
         self._latest = 0
 
     def heard(self, frame: bytes) -> None:
-        # the message id first: most frames are not ODOMETRY
-        if len(frame) < 12 or frame[7] | frame[8] << 8 | frame[9] << 16 != ODOMETRY_ID \
+        # the message id's low byte first: most frames are not ODOMETRY
+        if len(frame) < 12 or frame[7] != _ODOMETRY_LOW \
+                or frame[7] | frame[8] << 8 | frame[9] << 16 != ODOMETRY_ID \
                 or frame[0] != MAGIC_V2 or (frame[5], frame[6]) != VEHICLE:
             return
         # time_usec leads ODOMETRY's payload; MAVLink 2 drops trailing zero bytes
