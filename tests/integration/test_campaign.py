@@ -362,8 +362,10 @@ def test_inprocess_flight_reproduces_the_udp_flight(tmp_path, daemons):
     assert not udp_thread.is_alive() and not errors, errors
     assert res.status == "done", res.summary
     # the link carried the traffic: a target per controller step (plus heartbeats and
-    # commands) one way, at least an ODOMETRY and more per step the other
-    assert res.steps > 500 and res.messages[0] > res.steps and res.messages[1] > 2 * res.steps
+    # commands) one way; the other an ODOMETRY per step and the actuators' outputs (50 Hz:
+    # every other step), the streams the controller does not read turned off
+    assert res.steps > 500 and res.messages[0] > res.steps \
+        and res.messages[1] > 1.5 * res.steps
 
     onset = events[0].at_us
     udp = tmp_path / "udp"
