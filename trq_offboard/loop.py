@@ -28,7 +28,7 @@ import math
 import os
 import time
 from dataclasses import dataclass, field
-from typing import Callable, Protocol
+from typing import Callable, Protocol, Sequence
 
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
@@ -380,7 +380,7 @@ class OffboardFlight:
             return None
 
     async def _command(self, msg, command_id: int, retries: int = COMMAND_TRIES,
-                       hold: ActuatorCommand | None = None, also: list = ()) -> int:
+                       hold: ActuatorCommand | None = None, also: Sequence = ()) -> int:
         """Send a command and wait for its COMMAND_ACK (retries on silence). With `hold` (only
         when the control loop is not running), every new state that arrives meanwhile is
         answered with that command: in lockstep the vehicle's time, and with it a delayed
@@ -454,7 +454,7 @@ class OffboardFlight:
         unread = _UNREAD_DEFAULTS + (("SERVO_OUTPUT_RAW",) if self._have_output_status else ())
         return [wire.stream_off(_msg_id(name)) for name in unread]
 
-    async def _arm(self, also: list = ()) -> bool:
+    async def _arm(self, also: Sequence = ()) -> bool:
         """Arm; while the vehicle answers MAV_RESULT_TEMPORARILY_REJECTED (an autopilot's
         preflight check: its estimator not aligned yet) try again every ARM_RETRY_US of vehicle
         time, answering its states with IDLE meanwhile, for at most ARM_WAIT_US. Returns whether
