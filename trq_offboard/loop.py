@@ -528,12 +528,13 @@ class OffboardFlight:
         ground_z = wire.HOME_GROUND_DOWN_M if airborne else first.state.pos_ned_m[2]
         await self._request_streams(hold=not airborne)
         quiet = self._streams_off()
-        if airborne or wire.is_armed(self.heartbeat):
+        arming = not airborne and not wire.is_armed(self.heartbeat)
+        if not arming:
             for msg in quiet:             # no arming to go with
                 self.link.send(msg)
         if airborne:
             log.info("taking over a flying vehicle at %.2f m", -first.state.pos_ned_m[2])
-        elif not wire.is_armed(self.heartbeat):
+        elif arming:
             waited = await self._arm(also=quiet)
             # the plan's clock starts with the first state after arming (which may have
             # taken a few control periods, or retries, of vehicle time on a lossy link)
